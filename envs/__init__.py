@@ -1,0 +1,60 @@
+"""hintsjax.envs: pure-JAX environments whose pictures and hints are computed in the graph.
+
+    from hintsjax import envs
+    env = envs.make("pendulum", hint="composite")
+    params = envs.make_params("pendulum", variant="swingto")
+    ts = env.reset(key, params)
+
+A new env is one module (dynamics, reward, picture and hints beside each other) plus one line
+in `REGISTRY`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from hintsjax.envs import pendulum
+from hintsjax.envs.core import OBS_KEYS, AutoReset, Env, Step, Timestep
+from hintsjax.envs.errors import ChoiceError, choose
+from hintsjax.envs.hints import NO_HINT, Hint, hint_names, make_hint, register_composite, register_hint
+
+
+@dataclass(frozen=True)
+class EnvEntry:
+    """A registered env: its class and its named params variants (the first is the default)."""
+
+    cls: type[Env]
+    variants: dict[str, Any]
+
+
+REGISTRY: dict[str, EnvEntry] = {
+    "pendulum": EnvEntry(pendulum.Pendulum, pendulum.VARIANTS),
+}
+
+
+def env_names() -> list[str]:
+    return sorted(REGISTRY)
+
+
+def make(name: str, hint: str = NO_HINT, observe: tuple[str, ...] = OBS_KEYS) -> Env:
+    """The env `name` observing `observe`, with hint `hint` (see `hints.make_hint`)."""
+    entry = choose("env", name, REGISTRY)
+    return entry.cls(make_hint(name, hint), observe)
+
+
+def variant_names(name: str) -> list[str]:
+    return list(choose("env", name, REGISTRY).variants)
+
+
+def make_params(name: str, variant: str | None = None) -> Any:
+    """The params pytree of `name`'s variant (its default variant if None)."""
+    variants = choose("env", name, REGISTRY).variants
+    return variants[next(iter(variants))] if variant is None else choose("variant", variant, variants, name)
+
+
+__all__ = [
+    "OBS_KEYS", "AutoReset", "ChoiceError", "Env", "EnvEntry", "Hint", "NO_HINT", "REGISTRY", "Step",
+    "Timestep", "choose", "env_names", "hint_names", "make", "make_hint", "make_params",
+    "register_composite", "register_hint", "variant_names",
+]

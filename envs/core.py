@@ -1,0 +1,177 @@
+"""The environment protocol: pure `reset(key, params)` / `step(key, state, action, params)`.
+
+Every env in the suite subclasses `Env` and supplies four pure pieces: how a fresh state is
+drawn, how a state advances under an action, how it is drawn as a picture, and its state
+observation. `Env` adds the time limit, the dictionary observation and the hint; `AutoReset`
+adds fresh episodes on `terminated | truncated` and keeps the pre-reset observation so that a
+learner can bootstrap on truncation.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from hintsjax.envs.hints import Hint
+
+OBS_KEYS = ("pixels", "state", "hint")
+
+
+@struct.dataclass
+class Timestep:
+    """What `reset` and `step` return: the new state, what the agent sees and the outcome."""
+
+    state: Any
+    obs: dict[str, jax.Array]
+    reward: jax.Array
+    terminated: jax.Array
+    truncated: jax.Array
+    # Observation of the state an episode ended in; set by AutoReset, where `obs` is the next
+    # episode's first observation. Equal to `obs` on steps where nothing ended.
+    final_obs: dict[str, jax.Array] | None = None
+    # Logged statistics (dicts only for metrics).
+    info: dict[str, jax.Array] = struct.field(default_factory=dict)
+
+
+@struct.dataclass
+class Step:
+    """What an env's `transition` returns: the next state and the task's outcome."""
+
+    state: Any
+    reward: jax.Array
+    terminated: jax.Array
+
+
+class Env:
+    """Base class of every env. Subclasses set the class attributes and the four pure pieces.
+
+    Instances are static configuration (which hint, which observations are built); everything
+    that varies per episode lives in the state, everything a sweep may vary lives in params.
+    """
+
+    name: str = ""
+    max_steps: int = 0
+    action_size: int = 0
+    image_size: int = 64
+
+    def __init__(self, hint: Hint, observe: tuple[str, ...] = OBS_KEYS):
+        unknown = set(observe) - set(OBS_KEYS)
+        if unknown:
+            raise ValueError(f"unknown observation keys {sorted(unknown)}; valid: {OBS_KEYS}")
+        self.hint = hint
+        self.observe = tuple(observe)
+
+    # -- the four pieces each env supplies ---------------------------------------------------
+    def default_params(self) -> Any:
+        raise NotImplementedError
+
+    def initial_state(self, key: jax.Array, params: Any) -> Any:
+        """A fresh episode's state (with `t = 0`), drawn from the start distribution."""
+        raise NotImplementedError
+
+    def transition(self, key: jax.Array, state: Any, action: jax.Array, params: Any) -> Step:
+        """Advance one control step: dynamics, reward and termination (not the time limit)."""
+        raise NotImplementedError
+
+    def render(self, state: Any, params: Any) -> jax.Array:
+        """uint8[S, S, 3] picture of the state."""
+        raise NotImplementedError
+
+    def state_obs(self, state: Any, params: Any) -> jax.Array:
+        """float32[n] state observation, as the Gymnasium reference env returns it."""
+        raise NotImplementedError
+
+    # -- the protocol -------------------------------------------------------------------------
+    @property
+    def state_size(self) -> int:
+        params = self.default_params()
+        shape = jax.eval_shape(
+            lambda k: self.state_obs(self.initial_state(k, params), params), jax.random.key(0)
+        )
+        return int(shape.shape[0])
+
+    def observation(self, state: Any, params: Any) -> dict[str, jax.Array]:
+        """The dictionary observation, with only the keys in `self.observe`."""
+        build: dict[str, Callable[[], jax.Array]] = {
+            "pixels": lambda: self.render(state, params),
+            "state": lambda: self.state_obs(state, params),
+            "hint": lambda: self.hint(state, params),
+        }
+        return {k: build[k]() for k in self.observe}
+
+    def reset(self, key: jax.Array, params: Any) -> Timestep:
+        """Start an episode."""
+        state = self.initial_state(key, params)
+        zero = jnp.zeros((), jnp.float32)
+        false = jnp.zeros((), bool)
+        return Timestep(state, self.observation(state, params), zero, false, false)
+
+    def step(self, key: jax.Array, state: Any, action: jax.Array, params: Any) -> Timestep:
+        """Advance one step; `truncated` is set when the time limit is reached."""
+        out = self.transition(key, state, action, params)
+        next_state = out.state.replace(t=state.t + 1)
+        truncated = (next_state.t >= self.max_steps) & ~out.terminated
+        return Timestep(
+            next_state,
+            self.observation(next_state, params),
+            out.reward.astype(jnp.float32),
+            out.terminated,
+            truncated,
+        )
+
+
+@struct.dataclass
+class EpisodeState:
+    """AutoReset's state: the env's state plus the running episode statistics."""
+
+    env_state: Any
+    episode_return: jax.Array
+    episode_length: jax.Array
+
+
+class AutoReset:
+    """Wraps an Env so that `step` starts a fresh episode whenever one ends.
+
+    On the step that ends an episode `obs` is the new episode's first observation and
+    `final_obs` the observation of the state it ended in; `info` carries the finished
+    episode's return and length (valid where `terminated | truncated`).
+    """
+
+    def __init__(self, env: Env):
+        self.env = env
+
+    def __getattr__(self, name):
+        return getattr(self.env, name)
+
+    def reset(self, key: jax.Array, params: Any) -> Timestep:
+        ts = self.env.reset(key, params)
+        zero = jnp.zeros((), jnp.float32)
+        state = EpisodeState(ts.state, zero, jnp.zeros((), jnp.int32))
+        return ts.replace(state=state, final_obs=ts.obs, info=_episode_info(zero, state.episode_length))
+
+    def step(self, key: jax.Array, state: EpisodeState, action: jax.Array, params: Any) -> Timestep:
+        step_key, reset_key = jax.random.split(key)
+        ts = self.env.step(step_key, state.env_state, action, params)
+        done = ts.terminated | ts.truncated
+        episode_return = state.episode_return + ts.reward
+        episode_length = state.episode_length + 1
+        fresh = self.env.reset(reset_key, params)
+        pick = lambda a, b: jax.tree.map(lambda x, y: jnp.where(done, x, y), a, b)  # noqa: E731
+        next_state = EpisodeState(
+            pick(fresh.state, ts.state),
+            jnp.where(done, 0.0, episode_return),
+            jnp.where(done, 0, episode_length),
+        )
+        return ts.replace(
+            state=next_state,
+            obs=pick(fresh.obs, ts.obs),
+            final_obs=ts.obs,
+            info=_episode_info(episode_return, episode_length),
+        )
+
+
+def _episode_info(episode_return: jax.Array, episode_length: jax.Array) -> dict[str, jax.Array]:
+    return {"episode_return": episode_return, "episode_length": episode_length}

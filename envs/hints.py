@@ -1,0 +1,106 @@
+"""The hint registry: a hint is a pure function `(env_state, env_params) -> float32[d]`.
+
+Each env module registers its hints with `register_hint` beside its dynamics; a composite is
+a registered list of other hints' names. Any `+`-joined list of registered names is a hint
+too, so `make_hint("pendulum", "angular_velocity+goal_distance")` needs no new code.
+
+To add a hint of your own, write the function and register it:
+
+    @register_hint("pendulum", "height", dim=1, unit="m")
+    def height(state, params):
+        return jnp.cos(state.theta)[None]
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+
+from hintsjax.envs.errors import ChoiceError, choose
+
+HintFn = Callable[[Any, Any], jax.Array]
+
+
+@dataclass(frozen=True)
+class HintSpec:
+    """One registered hint: its function, width and unit."""
+
+    name: str
+    fn: HintFn
+    dim: int
+    unit: str
+    doc: str = ""
+
+
+_HINTS: dict[str, dict[str, HintSpec]] = {}
+_COMPOSITES: dict[str, dict[str, tuple[str, ...]]] = {}
+
+
+def register_hint(env: str, name: str, dim: int, unit: str) -> Callable[[HintFn], HintFn]:
+    """Decorator: register `fn(state, params) -> float32[dim]` as hint `name` of `env`."""
+
+    def wrap(fn: HintFn) -> HintFn:
+        doc = (fn.__doc__ or "").strip().splitlines()[0] if fn.__doc__ else ""
+        _HINTS.setdefault(env, {})[name] = HintSpec(name, fn, dim, unit, doc)
+        return fn
+
+    return wrap
+
+
+def register_composite(env: str, name: str, parts: tuple[str, ...]) -> None:
+    """Register `name` as the concatenation of already registered hints `parts`."""
+    for part in parts:
+        choose("hint", part, _HINTS.get(env, {}), where=env)
+    _COMPOSITES.setdefault(env, {})[name] = tuple(parts)
+
+
+def hint_names(env: str) -> list[str]:
+    """Every hint name registered for `env`, composites included."""
+    return sorted({*_HINTS.get(env, {}), *_COMPOSITES.get(env, {})})
+
+
+@dataclass(frozen=True)
+class Hint:
+    """A resolved hint: the concatenation of registered hints, callable as a pure function."""
+
+    env: str
+    name: str
+    parts: tuple[HintSpec, ...]
+
+    @property
+    def dim(self) -> int:
+        return sum(p.dim for p in self.parts)
+
+    @property
+    def units(self) -> dict[str, str]:
+        return {p.name: p.unit for p in self.parts}
+
+    def __call__(self, state: Any, params: Any) -> jax.Array:
+        """float32[dim] hint of one (unbatched) state."""
+        if not self.parts:
+            return jnp.zeros((0,), jnp.float32)
+        return jnp.concatenate(
+            [jnp.asarray(p.fn(state, params), jnp.float32).reshape(p.dim) for p in self.parts]
+        )
+
+
+NO_HINT = "none"
+
+
+def make_hint(env: str, spec: str) -> Hint:
+    """Resolve `spec` (a registered name, a composite, or names joined by '+') for `env`."""
+    if spec == NO_HINT:
+        return Hint(env, spec, ())
+    names: list[str] = []
+    for token in spec.split("+"):
+        token = token.strip()
+        if token in _COMPOSITES.get(env, {}):
+            names.extend(_COMPOSITES[env][token])
+        elif token in _HINTS.get(env, {}):
+            names.append(token)
+        else:
+            raise ChoiceError("hint", token, hint_names(env), where=f"env '{env}'")
+    return Hint(env, spec, tuple(_HINTS[env][n] for n in names))

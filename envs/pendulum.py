@@ -1,0 +1,201 @@
+"""Pendulum swing-up on MJX: Gymnasium `Pendulum-v1`'s dynamics and reward, drawn at 64x64.
+
+The model is a uniform rod (mass m, length l) on a hinge, upright at theta = 0. MJX computes the
+joint acceleration (gravity and motor torque through the rod's inertia m l^2 / 3 about the
+pivot); the step integrates it as Gymnasium does, semi-implicit Euler with the velocity clipped
+to `max_speed` *before* the position update, which MuJoCo's own Euler step cannot reproduce.
+
+Deploy variant `swingto`: the goal angle is drawn per episode from [-pi/2, pi/2]. The paper's
+swing-to reward sum_t log(|theta_t| - |theta*|) is undefined whenever |theta_t| <= |theta*|, so we
+make it finite by keeping the swing-up cost about the goal:
+r = -(wrap(theta - theta*)^2 + 0.1 dtheta^2 + 0.001 u^2), which equals `Pendulum-v1`'s reward
+when theta* = 0. The goal is drawn in the picture as a grey line, in both variants.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import mujoco
+from flax import struct
+from mujoco import mjx
+
+from hintsjax.envs import raster
+from hintsjax.envs.core import Env, Step
+from hintsjax.envs.hints import register_composite, register_hint
+
+NAME = "pendulum"
+
+# Gymnasium Pendulum-v1's constants; they define the MJCF below, so they are not params.
+GRAVITY, MASS, LENGTH = 10.0, 1.0, 1.0
+
+MJCF = f"""
+<mujoco model="pendulum">
+  <option timestep="0.05" gravity="0 0 -{GRAVITY}" integrator="Euler"/>
+  <worldbody>
+    <body name="pole">
+      <joint name="hinge" type="hinge" axis="0 1 0"/>
+      <geom type="capsule" fromto="0 0 0 0 0 {LENGTH}" size="0.05" contype="0" conaffinity="0"/>
+      <inertial pos="0 0 {LENGTH / 2}" mass="{MASS}"
+                diaginertia="{MASS * LENGTH**2 / 12} {MASS * LENGTH**2 / 12} 1e-6"/>
+      <site name="tip" pos="0 0 {LENGTH}"/>
+    </body>
+  </worldbody>
+  <actuator><motor joint="hinge" gear="1"/></actuator>
+</mujoco>
+"""
+
+
+@struct.dataclass
+class PendulumParams:
+    """Per-task constants; the goal range is what the swingto variant changes."""
+
+    max_speed: float = 8.0
+    max_torque: float = 2.0
+    dt: float = 0.05
+    init_angle: float = jnp.pi
+    init_speed: float = 1.0
+    goal_low: float = 0.0
+    goal_high: float = 0.0
+
+
+@struct.dataclass
+class PendulumState:
+    """theta (rad, 0 upright, unwrapped), dtheta (rad/s), the episode's goal angle, step count."""
+
+    theta: jax.Array
+    dtheta: jax.Array
+    goal: jax.Array
+    t: jax.Array
+
+
+VARIANTS = {
+    "swingup": PendulumParams(),
+    "swingto": PendulumParams(goal_low=-jnp.pi / 2, goal_high=jnp.pi / 2),
+}
+
+# Colours of Gymnasium's pendulum render: red-brown rod, black pivot, white ground.
+ROD, PIVOT, GOAL, BACKGROUND = (0.8, 0.3, 0.3), (0.0, 0.0, 0.0), (0.75, 0.75, 0.75), (1.0, 1.0, 1.0)
+HALF_EXTENT = 2.2  # world units from the centre to the picture's edge, as in Gymnasium
+ROD_RADIUS, PIVOT_RADIUS, GOAL_RADIUS = 0.1, 0.06, 0.03
+
+
+def wrap_angle(x: jax.Array) -> jax.Array:
+    """Angle mapped into [-pi, pi), as Gymnasium's `angle_normalize`."""
+    return ((x + jnp.pi) % (2 * jnp.pi)) - jnp.pi
+
+
+class Pendulum(Env):
+    name = NAME
+    max_steps = 200
+    action_size = 1
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.mj_model = mujoco.MjModel.from_xml_string(MJCF)
+        self.model = mjx.put_model(self.mj_model)
+        self._tip = self.mj_model.site("tip").id
+
+    def default_params(self) -> PendulumParams:
+        return VARIANTS["swingup"]
+
+    def initial_state(self, key: jax.Array, params: PendulumParams) -> PendulumState:
+        k_theta, k_speed, k_goal = jax.random.split(key, 3)
+        u = lambda k, lo, hi: jax.random.uniform(k, (), jnp.float32, lo, hi)  # noqa: E731
+        return PendulumState(
+            theta=u(k_theta, -params.init_angle, params.init_angle),
+            dtheta=u(k_speed, -params.init_speed, params.init_speed),
+            goal=u(k_goal, params.goal_low, params.goal_high),
+            t=jnp.zeros((), jnp.int32),
+        )
+
+    def _mjx_data(self, state: PendulumState, torque: jax.Array) -> mjx.Data:
+        data = mjx.make_data(self.model)
+        data = data.replace(qpos=state.theta[None], qvel=state.dtheta[None], ctrl=torque[None])
+        return mjx.forward(self.model, data)
+
+    def transition(self, key, state: PendulumState, action, params: PendulumParams) -> Step:
+        torque = jnp.clip(jnp.reshape(action, ()), -params.max_torque, params.max_torque)
+        cost = (
+            wrap_angle(state.theta - state.goal) ** 2
+            + 0.1 * state.dtheta**2
+            + 0.001 * torque**2
+        )
+        qacc = self._mjx_data(state, torque).qacc[0]
+        dtheta = jnp.clip(state.dtheta + qacc * params.dt, -params.max_speed, params.max_speed)
+        theta = state.theta + dtheta * params.dt
+        return Step(state.replace(theta=theta, dtheta=dtheta), -cost, jnp.zeros((), bool))
+
+    def tip(self, state: PendulumState) -> jax.Array:
+        """float32[2] world (x, z) of the rod's tip, from MJX's kinematics."""
+        data = self._mjx_data(state, jnp.zeros(()))
+        return data.site_xpos[self._tip][jnp.array([0, 2])]
+
+    def render(self, state: PendulumState, params: PendulumParams) -> jax.Array:
+        """uint8[64, 64, 3]: white ground, grey goal line, red rod, black pivot."""
+        size = self.image_size
+        pixel = 2 * HALF_EXTENT / size
+        points = raster.pixel_centres(size, HALF_EXTENT)
+        origin = jnp.zeros(2, jnp.float32)
+        goal_tip = LENGTH * jnp.stack([jnp.sin(state.goal), jnp.cos(state.goal)])
+        image = raster.canvas(size, BACKGROUND)
+        image = raster.paint(
+            image, raster.coverage(raster.segment_distance(points, origin, goal_tip), GOAL_RADIUS, pixel), GOAL
+        )
+        image = raster.paint(
+            image, raster.coverage(raster.segment_distance(points, origin, self.tip(state)), ROD_RADIUS, pixel), ROD
+        )
+        image = raster.paint(image, raster.coverage(raster.point_distance(points, origin), PIVOT_RADIUS, pixel), PIVOT)
+        return raster.to_uint8(image)
+
+    def state_obs(self, state: PendulumState, params: PendulumParams) -> jax.Array:
+        """float32[3] = [cos theta, sin theta, dtheta], Pendulum-v1's observation."""
+        return jnp.stack([jnp.cos(state.theta), jnp.sin(state.theta), state.dtheta])
+
+
+# -- hints (SPEC section 3) ---------------------------------------------------------------------
+
+
+@register_hint(NAME, "goal_distance", dim=1, unit="m")
+def goal_distance(state: PendulumState, params: PendulumParams) -> jax.Array:
+    """D_goal = l cos(theta*) - l cos(theta): tip height below the goal's (0 upright, 2 hanging)."""
+    return LENGTH * (jnp.cos(state.goal) - jnp.cos(state.theta))
+
+
+@register_hint(NAME, "angular_velocity", dim=1, unit="rad/s")
+def angular_velocity(state: PendulumState, params: PendulumParams) -> jax.Array:
+    """dtheta/dt."""
+    return state.dtheta
+
+
+@register_hint(NAME, "torque", dim=1, unit="N m")
+def torque(state: PendulumState, params: PendulumParams) -> jax.Array:
+    """Hand-written swing-up torque: energy pumping far from the goal, PD control near it.
+
+    Energy E = I dtheta^2 / 2 + m g (l/2) cos(theta) with I = m l^2 / 3; the goal's energy is
+    m g l / 2 (at rest, upright). Far from the goal the torque k (E* - E) sign(dtheta) pumps
+    energy in or out; within 20 degrees a PD law -(10 err + 2 dtheta) holds the rod, which is
+    stable for these constants (the linearised closed loop is err'' = -15 err - 6 err').
+    """
+    inertia = MASS * LENGTH**2 / 3
+    energy = 0.5 * inertia * state.dtheta**2 + MASS * GRAVITY * LENGTH / 2 * jnp.cos(state.theta)
+    target = MASS * GRAVITY * LENGTH / 2
+    pump = 2.0 * (target - energy) * jnp.where(state.dtheta >= 0, 1.0, -1.0)
+    err = wrap_angle(state.theta - state.goal)
+    hold = -(10.0 * err + 2.0 * state.dtheta)
+    return jnp.clip(jnp.where(jnp.abs(err) < 0.35, hold, pump), -params.max_torque, params.max_torque)
+
+
+@register_hint(NAME, "partial_state", dim=2, unit="1")
+def partial_state(state: PendulumState, params: PendulumParams) -> jax.Array:
+    """[cos theta, sin theta]: the state without its velocity."""
+    return jnp.stack([jnp.cos(state.theta), jnp.sin(state.theta)])
+
+
+@register_hint(NAME, "state", dim=3, unit="1, 1, rad/s")
+def full_state(state: PendulumState, params: PendulumParams) -> jax.Array:
+    """[cos theta, sin theta, dtheta]: the full state observation."""
+    return jnp.stack([jnp.cos(state.theta), jnp.sin(state.theta), state.dtheta])
+
+
+register_composite(NAME, "composite", ("angular_velocity", "goal_distance"))

@@ -1,0 +1,284 @@
+"""PPO as one jittable `train(key)`: rollout, GAE, clipped-surrogate loss and updates.
+
+`make_trainer(cfg)` returns a `Trainer` whose `init(key)` builds the runner state and whose
+`run(state, n)` advances it by `n` updates in one `lax.scan`; `train(key)` is both together.
+All three are pure, so `jax.jit(jax.vmap(trainer.train))(keys)` trains many seeds at once, and
+chunking `run` between checkpoints gives the same result as one call.
+
+Episodes carry `terminated` and `truncated` separately: GAE bootstraps a truncated episode from
+the value of the state it was cut off in (the env's `final_obs`) and a terminated one from 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+import optax
+from flax import struct
+
+from hintsjax import envs
+from hintsjax.config import PPOConfig, RunConfig
+from hintsjax.networks import ActorCritic, lr_labels
+
+
+@struct.dataclass
+class Transition:
+    """One rollout step of every env; arrays are [T, N, ...] once stacked by the scan."""
+
+    obs: dict[str, jax.Array]
+    action: jax.Array
+    log_prob: jax.Array
+    value: jax.Array
+    reward: jax.Array
+    terminated: jax.Array
+    truncated: jax.Array
+    final_value: jax.Array  # value of the pre-reset observation; used where truncated
+    episode_return: jax.Array  # return of the episode that ended here (valid where done)
+
+
+@struct.dataclass
+class RunnerState:
+    """Everything a run carries between updates; a checkpoint saves all of it."""
+
+    params: Any
+    opt_state: Any
+    env_state: Any  # AutoReset's EpisodeState, batched [N]
+    obs: dict[str, jax.Array]  # current observation, batched [N]
+    key: jax.Array
+    update: jax.Array  # updates done so far
+
+
+@struct.dataclass
+class Batch:
+    """Flattened training samples [M, ...] with their advantage and value target."""
+
+    obs: dict[str, jax.Array]
+    action: jax.Array
+    log_prob: jax.Array
+    advantage: jax.Array
+    target: jax.Array
+
+
+# -- the pieces with hand-checkable arithmetic ----------------------------------------------------
+
+
+def gaussian_log_prob(action: jax.Array, mean: jax.Array, log_std: jax.Array) -> jax.Array:
+    """Log density of a diagonal Gaussian, summed over the last axis: [..., A] -> [...]."""
+    z = (action - mean) * jnp.exp(-log_std)
+    return jnp.sum(-0.5 * z**2 - log_std - 0.5 * jnp.log(2 * jnp.pi), axis=-1)
+
+
+def gaussian_entropy(log_std: jax.Array) -> jax.Array:
+    """Entropy of a diagonal Gaussian: [A] -> []."""
+    return jnp.sum(log_std + 0.5 * (1.0 + jnp.log(2 * jnp.pi)), axis=-1)
+
+
+def gae(
+    reward: jax.Array,
+    value: jax.Array,
+    terminated: jax.Array,
+    truncated: jax.Array,
+    final_value: jax.Array,
+    last_value: jax.Array,
+    gamma: float,
+    lam: float,
+) -> tuple[jax.Array, jax.Array]:
+    """Generalised advantage estimates and value targets, both [T, N].
+
+    reward, value, terminated, truncated, final_value: [T, N]; last_value: [N], the value of
+    the observation after the last step. The step after t is the next row unless an episode
+    ended at t: then the bootstrap is final_value[t] if it was truncated and 0 if terminated,
+    and no advantage flows back across the boundary.
+    """
+    next_value = jnp.concatenate([value[1:], last_value[None]], axis=0)
+    next_value = jnp.where(truncated, final_value, next_value)
+    next_value = jnp.where(terminated, 0.0, next_value)
+    delta = reward + gamma * next_value - value
+    carry_on = 1.0 - (terminated | truncated).astype(jnp.float32)
+
+    def back(acc, x):
+        d, c = x
+        acc = d + gamma * lam * c * acc
+        return acc, acc
+
+    _, advantage = jax.lax.scan(back, jnp.zeros_like(last_value), (delta, carry_on), reverse=True)
+    return advantage, advantage + value
+
+
+def clipped_surrogate_loss(
+    log_prob: jax.Array,
+    old_log_prob: jax.Array,
+    advantage: jax.Array,
+    value: jax.Array,
+    target: jax.Array,
+    entropy: jax.Array,
+    clip_eps: float,
+    vf_coef: float,
+    ent_coef: float,
+) -> tuple[jax.Array, dict[str, jax.Array]]:
+    """PPO's loss (paper eq. 5, with the entropy bonus subtracted so it is maximised).
+
+    log_prob, old_log_prob, advantage, value, target: [M]; entropy: []. Advantages are used
+    as given (normalise before calling). Returns the scalar loss and its parts.
+    """
+    ratio = jnp.exp(log_prob - old_log_prob)
+    clipped = jnp.clip(ratio, 1.0 - clip_eps, 1.0 + clip_eps)
+    policy_loss = -jnp.mean(jnp.minimum(ratio * advantage, clipped * advantage))
+    value_loss = jnp.mean((value - target) ** 2)
+    loss = policy_loss + vf_coef * value_loss - ent_coef * entropy
+    parts = {
+        "policy_loss": policy_loss,
+        "value_loss": value_loss,
+        "entropy": entropy,
+        "approx_kl": jnp.mean((ratio - 1.0) - jnp.log(ratio)),
+        "clip_fraction": jnp.mean((jnp.abs(ratio - 1.0) > clip_eps).astype(jnp.float32)),
+    }
+    return loss, parts
+
+
+# -- the trainer ---------------------------------------------------------------------------------
+
+
+def make_network(cfg: RunConfig, env: envs.Env) -> ActorCritic:
+    return ActorCritic(cfg.agent_spec, cfg.scheme, env.action_size, cfg.ppo.hint_width, cfg.ppo.hidden)
+
+
+def make_optimizer(ppo: PPOConfig, params: Any) -> optax.GradientTransformation:
+    """Adam with the paper's per-part learning rates, after global-norm gradient clipping."""
+    rates = {"encoder": ppo.encoder_lr, "actor": ppo.actor_lr, "critic": ppo.critic_lr}
+    return optax.chain(
+        optax.clip_by_global_norm(ppo.max_grad_norm),
+        optax.multi_transform({g: optax.adam(lr, eps=1e-5) for g, lr in rates.items()}, lr_labels(params)),
+    )
+
+
+def observe_with_noise(obs: dict[str, jax.Array], key: jax.Array, noise: float) -> dict[str, jax.Array]:
+    """The agent's view of obs: the state plus N(0, noise^2) for PPO-x+N(0,1)."""
+    if noise <= 0.0 or "state" not in obs:
+        return obs
+    return {**obs, "state": obs["state"] + noise * jax.random.normal(key, obs["state"].shape)}
+
+
+@dataclass(frozen=True)
+class Trainer:
+    """The pure functions of one configuration's training run."""
+
+    cfg: RunConfig
+    env: Any  # AutoReset(Env)
+    network: ActorCritic
+    init: Callable[[jax.Array], RunnerState]
+    update: Callable[[RunnerState], tuple[RunnerState, dict[str, jax.Array]]]
+
+    def run(self, state: RunnerState, num_updates: int) -> tuple[RunnerState, dict[str, jax.Array]]:
+        """Advance `num_updates` updates; metrics are [num_updates]-stacked."""
+        return jax.lax.scan(lambda s, _: self.update(s), state, None, length=num_updates)
+
+    def train(self, key: jax.Array) -> tuple[RunnerState, dict[str, jax.Array]]:
+        """The whole run from a seed key: the function that is vmapped over seeds."""
+        return self.run(self.init(key), self.cfg.ppo.num_updates)
+
+
+def make_trainer(cfg: RunConfig) -> Trainer:
+    """Build the trainer of a validated RunConfig."""
+    ppo = cfg.ppo
+    env = envs.AutoReset(cfg.make_env())
+    env_params = envs.make_params(cfg.env, cfg.variant)
+    network = make_network(cfg, env)
+    noise = cfg.agent_spec.state_noise
+    T, N = ppo.rollout_length, ppo.num_envs
+
+    def init(key: jax.Array) -> RunnerState:
+        k_net, k_env, k_run = jax.random.split(key, 3)
+        ts = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_env, N), env_params)
+        params = network.init(k_net, jax.tree.map(lambda x: x[:1], ts.obs))
+        opt_state = make_optimizer(ppo, params).init(params)
+        return RunnerState(params, opt_state, ts.state, ts.obs, k_run, jnp.zeros((), jnp.int32))
+
+    def rollout(state: RunnerState, key: jax.Array) -> tuple[RunnerState, Transition, jax.Array]:
+        def step(carry, key):
+            env_state, obs = carry
+            k_noise, k_act, k_env, k_final = jax.random.split(key, 4)
+            seen = observe_with_noise(obs, k_noise, noise)
+            mean, log_std, value = network.apply(state.params, seen)
+            action = mean + jnp.exp(log_std) * jax.random.normal(k_act, mean.shape)
+            ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(jax.random.split(k_env, N), env_state, action, env_params)
+            final_value = network.apply(state.params, observe_with_noise(ts.final_obs, k_final, noise))[2]
+            transition = Transition(
+                seen,
+                action,
+                gaussian_log_prob(action, mean, log_std),
+                value,
+                ts.reward,
+                ts.terminated,
+                ts.truncated,
+                final_value,
+                ts.info["episode_return"],
+            )
+            return (ts.state, ts.obs), transition
+
+        k_steps, k_last = jax.random.split(key)
+        (env_state, obs), traj = jax.lax.scan(step, (state.env_state, state.obs), jax.random.split(k_steps, T))
+        last_value = network.apply(state.params, observe_with_noise(obs, k_last, noise))[2]
+        return state.replace(env_state=env_state, obs=obs), traj, last_value
+
+    def loss_fn(params, batch: Batch):
+        mean, log_std, value = network.apply(params, batch.obs)
+        advantage = (batch.advantage - batch.advantage.mean()) / (batch.advantage.std() + 1e-8)
+        return clipped_surrogate_loss(
+            gaussian_log_prob(batch.action, mean, log_std),
+            batch.log_prob,
+            advantage,
+            value,
+            batch.target,
+            gaussian_entropy(log_std),
+            ppo.clip_eps,
+            ppo.vf_coef,
+            ppo.ent_coef,
+        )
+
+    def update(state: RunnerState) -> tuple[RunnerState, dict[str, jax.Array]]:
+        key, k_roll, k_epochs = jax.random.split(state.key, 3)
+        state, traj, last_value = rollout(state, k_roll)
+        advantage, target = gae(
+            ppo.reward_scale * traj.reward,
+            traj.value,
+            traj.terminated,
+            traj.truncated,
+            traj.final_value,
+            last_value,
+            ppo.gamma,
+            ppo.gae_lambda,
+        )
+        flat = lambda x: x.reshape((T * N,) + x.shape[2:])  # noqa: E731
+        batch = jax.tree.map(flat, Batch(traj.obs, traj.action, traj.log_prob, advantage, target))
+        optimizer = make_optimizer(ppo, state.params)
+
+        def minibatch_step(carry, mb: Batch):
+            params, opt_state = carry
+            (_, parts), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, mb)
+            updates, opt_state = optimizer.update(grads, opt_state, params)
+            return (optax.apply_updates(params, updates), opt_state), parts
+
+        def epoch(carry, key):
+            order = jax.random.permutation(key, T * N)
+            shaped = lambda x: x[order].reshape((ppo.num_minibatches, ppo.minibatch_size) + x.shape[1:])  # noqa: E731
+            return jax.lax.scan(minibatch_step, carry, jax.tree.map(shaped, batch))
+
+        (params, opt_state), parts = jax.lax.scan(
+            epoch, (state.params, state.opt_state), jax.random.split(k_epochs, ppo.epochs)
+        )
+        done = traj.terminated | traj.truncated
+        episodes = done.sum()
+        metrics = {
+            **jax.tree.map(jnp.mean, parts),
+            "episode_return": jnp.where(episodes > 0, (traj.episode_return * done).sum() / jnp.maximum(episodes, 1), jnp.nan),
+            "episodes": episodes,
+            "env_steps": (state.update + 1) * ppo.batch_size,
+        }
+        new_state = state.replace(params=params, opt_state=opt_state, key=key, update=state.update + 1)
+        return new_state, metrics
+
+    return Trainer(cfg, env, network, init, update)
