@@ -14,7 +14,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from hintsjax.envs import pendulum
+import contextlib
+import io
+
+with contextlib.redirect_stdout(io.StringIO()):  # mjx prints a notice when its optional warp backend is absent
+    from mujoco import mjx  # noqa: F401
+
+from hintsjax.envs import pendulum  # noqa: E402
 from hintsjax.envs.core import OBS_KEYS, AutoReset, Env, Step, Timestep
 from hintsjax.envs.errors import ChoiceError, choose
 from hintsjax.envs.hints import NO_HINT, Hint, hint_names, make_hint, register_composite, register_hint

@@ -174,6 +174,8 @@ def run_config(values: Mapping[str, Any]) -> RunConfig:
         ppo = PPOConfig(**ppo_values)
         cfg = RunConfig(**{**top, "ppo": ppo})
         _check_types(cfg)
+    except UsageError:
+        raise
     except (TypeError, ValueError) as e:
         raise UsageError(f"bad config value: {e}") from None
     return cfg.validate()

@@ -1,0 +1,62 @@
+"""Orbax checkpoints of the full runner state (params, optimiser state, env state, RNG, step)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import jax
+import orbax.checkpoint as ocp
+
+from hintsjax.config import RunConfig, UsageError
+
+CHECKPOINTS = "checkpoints"
+
+
+def _manager(run_dir: Path, create: bool) -> ocp.CheckpointManager:
+    options = ocp.CheckpointManagerOptions(max_to_keep=2, create=create)
+    return ocp.CheckpointManager((Path(run_dir) / CHECKPOINTS).absolute(), options=options)
+
+
+def _raw_keys(state):
+    """Typed PRNG keys as their uint32 data: what orbax can store."""
+    return jax.tree.map(lambda x: jax.random.key_data(x) if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key) else x, state)
+
+
+def save(run_dir: Path, state, update: int) -> None:
+    """Save the seed-batched runner state after `update` updates (blocking)."""
+    with _manager(run_dir, create=True) as manager:
+        manager.save(update, args=ocp.args.StandardSave(_raw_keys(state)))
+        manager.wait_until_finished()
+
+
+def latest_update(run_dir: Path) -> int | None:
+    path = Path(run_dir) / CHECKPOINTS
+    if not path.is_dir():
+        return None
+    with _manager(run_dir, create=False) as manager:
+        return manager.latest_step()
+
+
+def restore_latest(run_dir: Path, cfg: RunConfig):
+    """(runner state, update) of the newest checkpoint; UsageError if missing, corrupt or mismatched."""
+    from hintsjax.ppo import make_trainer
+
+    update = latest_update(run_dir)
+    if update is None:
+        raise UsageError(f"no checkpoint in {Path(run_dir) / CHECKPOINTS}")
+    trainer = make_trainer(cfg)
+    keys = jax.random.split(jax.random.key(0), cfg.seeds)
+    abstract = jax.eval_shape(jax.vmap(trainer.init), keys)
+    try:
+        with _manager(run_dir, create=False) as manager:
+            raw = manager.restore(update, args=ocp.args.StandardRestore(jax.eval_shape(_raw_keys, abstract)))
+    except Exception as e:  # orbax raises many types for unreadable or mismatched files
+        reason = str(e).strip().splitlines()[0][:200] if str(e).strip() else type(e).__name__
+        raise UsageError(
+            f"checkpoint {update} in {run_dir} is corrupt or does not match its config.yaml: {reason}"
+        ) from None
+    state = jax.tree.map(
+        lambda a, r: jax.random.wrap_key_data(r) if jax.dtypes.issubdtype(a.dtype, jax.dtypes.prng_key) else r,
+        abstract, raw,
+    )
+    return state, update

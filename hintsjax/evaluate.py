@@ -1,0 +1,133 @@
+"""Evaluation: every training seed times N fresh episodes in one jitted call.
+
+Each episode stops at its own end (rewards after `terminated | truncated` are not counted),
+actions are the policy's mean unless `stochastic`, and deploy variants (e.g. pendulum's
+swingto) evaluate an agent trained on the standard task. Also a command:
+
+    python -m hintsjax.evaluate runs/<run folder> [--variant swingto] [--episodes 50] [--stochastic]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import struct
+
+from hintsjax import envs
+from hintsjax.config import RunConfig, UsageError
+from hintsjax.ppo import make_network
+
+EVAL_TAG = 0xE7A1  # folded into a seed's key so evaluation draws differ from training's
+
+
+@struct.dataclass
+class EvalResult:
+    """Per-episode outcome, [E] for one seed or [S, E] once vmapped over seeds."""
+
+    episode_return: jax.Array
+    episode_length: jax.Array
+
+
+def make_evaluator(
+    cfg: RunConfig, variant: str | None, num_episodes: int, stochastic: bool = False
+) -> Callable[[Any, jax.Array], EvalResult]:
+    """`evaluate(params, key) -> EvalResult[E]` for one seed's params; vmap it over seeds."""
+    env = cfg.make_env()
+    env_params = envs.make_params(cfg.env, variant)
+    network = make_network(cfg, env)
+
+    def evaluate(params: Any, key: jax.Array) -> EvalResult:
+        k_reset, k_run = jax.random.split(key)
+        ts = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_reset, num_episodes), env_params)
+
+        def step(carry, key):
+            state, obs, ret, length, alive = carry
+            k_act, k_env = jax.random.split(key)
+            mean, log_std, _ = network.apply(params, obs)
+            action = mean + stochastic * jnp.exp(log_std) * jax.random.normal(k_act, mean.shape)
+            ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
+                jax.random.split(k_env, num_episodes), state, action, env_params
+            )
+            ret = ret + jnp.where(alive, ts.reward, 0.0)
+            length = length + alive
+            alive = alive & ~(ts.terminated | ts.truncated)
+            return (ts.state, ts.obs, ret, length, alive), None
+
+        zeros = jnp.zeros(num_episodes)
+        init = (ts.state, ts.obs, zeros, zeros.astype(jnp.int32), jnp.ones(num_episodes, bool))
+        (_, _, ret, length, _), _ = jax.lax.scan(step, init, jax.random.split(k_run, env.max_steps))
+        return EvalResult(ret, length)
+
+    return evaluate
+
+
+def eval_keys(cfg: RunConfig) -> jax.Array:
+    """[S] evaluation keys, one per training seed."""
+    return jnp.stack([jax.random.fold_in(jax.random.key(cfg.seed + i), EVAL_TAG) for i in range(cfg.seeds)])
+
+
+def summarize(result: EvalResult) -> dict[str, Any]:
+    """Mean and std over all seeds x episodes, and per seed, as plain JSON-able values."""
+    returns = np.asarray(result.episode_return, dtype=np.float64)
+    seed_means = returns.mean(axis=1)
+    return {
+        "mean": float(returns.mean()),
+        "std": float(returns.std()),
+        "seed_means": seed_means.tolist(),
+        "seed_std": float(seed_means.std()),
+        "seeds": int(returns.shape[0]),
+        "episodes_per_seed": int(returns.shape[1]),
+        "mean_length": float(np.asarray(result.episode_length).mean()),
+        "returns": returns.tolist(),
+    }
+
+
+def evaluate_params(cfg: RunConfig, params: Any, variant: str | None, episodes: int, stochastic: bool) -> dict:
+    """Evaluate seed-batched params on one variant: all seeds x episodes in one jitted call."""
+    evaluate = jax.jit(jax.vmap(make_evaluator(cfg, variant, episodes, stochastic)))
+    summary = summarize(evaluate(params, eval_keys(cfg)))
+    return {"variant": variant or envs.variant_names(cfg.env)[0], "stochastic": stochastic, **summary}
+
+
+def main(argv: list[str] | None = None) -> int:
+    from hintsjax import checkpoint
+    from hintsjax.run import fail, load_run_config
+
+    parser = argparse.ArgumentParser(prog="python -m hintsjax.evaluate", description=__doc__.splitlines()[0])
+    parser.add_argument("run", type=Path, help="a run folder written by python -m hintsjax.run")
+    parser.add_argument("--variant", default=None, help="env variant to evaluate on (default: the training one)")
+    parser.add_argument("--episodes", type=int, default=None, help="episodes per seed (default: the run's)")
+    parser.add_argument("--stochastic", action="store_true", help="sample actions instead of the mean")
+    args = parser.parse_args(argv)
+    try:
+        cfg = load_run_config(args.run)
+        variant = args.variant or cfg.variant
+        if variant is not None:
+            try:
+                envs.make_params(cfg.env, variant)
+            except envs.ChoiceError as e:
+                raise UsageError(str(e)) from None
+        episodes = cfg.eval_episodes if args.episodes is None else args.episodes
+        if episodes <= 0:
+            raise UsageError(f"--episodes must be positive, got {episodes}")
+        state, _ = checkpoint.restore_latest(args.run, cfg)
+    except UsageError as e:
+        return fail(e)
+    result = evaluate_params(cfg, state.params, variant, episodes, args.stochastic)
+    mode = "stochastic" if args.stochastic else "deterministic"
+    out = args.run / f"eval-{result['variant']}-{mode}-{episodes}.json"
+    out.write_text(json.dumps({"label": cfg.label, "env": cfg.env, **result}, indent=1))
+    print(f"{cfg.label} on {cfg.env}/{result['variant']} ({mode}, {cfg.seeds} seeds x {episodes} episodes): "
+          f"{result['mean']:.2f} +- {result['std']:.2f}  -> {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,106 @@
+"""A run's written record: metrics as CSV and TensorBoard events, and the learning-curve PNG."""
+
+from __future__ import annotations
+
+import csv
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+METRICS_CSV = "metrics.csv"
+CURVE_PNG = "learning_curve.png"
+
+
+class RunLog:
+    """Appends per-update, per-seed metric rows to metrics.csv and means to TensorBoard."""
+
+    def __init__(self, run_dir: Path, resume_update: int = 0):
+        from tensorboardX import SummaryWriter
+
+        self.path = Path(run_dir) / METRICS_CSV
+        self.columns: list[str] | None = None
+        if resume_update and self.path.exists():
+            self._truncate(resume_update)
+        self.tb = SummaryWriter(str(Path(run_dir) / "tb"))
+
+    def _truncate(self, update: int) -> None:
+        """Drop rows written after the checkpoint being resumed from."""
+        with self.path.open() as f:
+            rows = list(csv.DictReader(f))
+        if not rows:
+            return
+        self.columns = list(rows[0])
+        with self.path.open("w", newline="") as f:
+            writer = csv.DictWriter(f, self.columns)
+            writer.writeheader()
+            writer.writerows(r for r in rows if int(r["update"]) <= update)
+
+    def write(self, metrics: dict[str, np.ndarray], first_update: int) -> None:
+        """metrics: name -> [S, n] for n updates starting after `first_update` updates."""
+        names = sorted(metrics)
+        seeds, n = np.asarray(metrics[names[0]]).shape
+        new = not self.path.exists()
+        if self.columns is None:
+            self.columns = ["update", "seed", *names]
+        with self.path.open("a", newline="") as f:
+            writer = csv.DictWriter(f, self.columns)
+            if new:
+                writer.writeheader()
+            for i in range(n):
+                for s in range(seeds):
+                    writer.writerow({"update": first_update + i + 1, "seed": s, **{k: float(metrics[k][s, i]) for k in names}})
+        for i in range(n):
+            step = int(np.asarray(metrics["env_steps"])[0, i])
+            for k in names:
+                column = np.asarray(metrics[k])[:, i]
+                if not np.all(np.isnan(column)):
+                    self.tb.add_scalar(f"train/{k}", float(np.nanmean(column)), step)
+        self.tb.flush()
+
+    def close(self) -> None:
+        self.tb.close()
+
+
+def read_curves(path: Path, metric: str = "episode_return") -> tuple[np.ndarray, np.ndarray]:
+    """(env_steps [U], values [S, U]) from a metrics.csv, NaNs carried forward per seed."""
+    with Path(path).open() as f:
+        rows = list(csv.DictReader(f))
+    updates = sorted({int(r["update"]) for r in rows})
+    seeds = sorted({int(r["seed"]) for r in rows})
+    index = {u: i for i, u in enumerate(updates)}
+    steps = np.zeros(len(updates))
+    values = np.full((len(seeds), len(updates)), np.nan)
+    for r in rows:
+        i = index[int(r["update"])]
+        steps[i] = float(r["env_steps"])
+        values[int(r["seed"]), i] = float(r[metric])
+    for s in range(len(seeds)):
+        for i in range(1, len(updates)):
+            if np.isnan(values[s, i]):
+                values[s, i] = values[s, i - 1]
+    return steps, values
+
+
+def plot_curves(curves: dict[str, tuple[np.ndarray, np.ndarray]], out: Path, title: str = "") -> None:
+    """One line per label (mean over seeds) with a +-1 std band; x is environment steps."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4), dpi=120)
+    for label, (steps, values) in curves.items():
+        with warnings.catch_warnings():  # updates before any episode ended are all-NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mean, std = np.nanmean(values, axis=0), np.nanstd(values, axis=0)
+        ax.plot(steps, mean, label=f"{label} (n={values.shape[0]})")
+        ax.fill_between(steps, mean - std, mean + std, alpha=0.2)
+    ax.set_xlabel("environment steps")
+    ax.set_ylabel("training episode return")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out)
+    plt.close(fig)
