@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import logging
 from pathlib import Path
 
 import jax
@@ -15,6 +17,18 @@ CHECKPOINTS = "checkpoints"
 def _manager(run_dir: Path, create: bool) -> ocp.CheckpointManager:
     options = ocp.CheckpointManagerOptions(max_to_keep=2, create=create)
     return ocp.CheckpointManager((Path(run_dir) / CHECKPOINTS).absolute(), options=options)
+
+
+@contextlib.contextmanager
+def _quiet():
+    """Hold back orbax's own log lines about unreadable files: our error is the one line."""
+    logger = logging.getLogger("absl")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
 
 
 def _raw_keys(state):
@@ -33,7 +47,7 @@ def latest_update(run_dir: Path) -> int | None:
     path = Path(run_dir) / CHECKPOINTS
     if not path.is_dir():
         return None
-    with _manager(run_dir, create=False) as manager:
+    with _quiet(), _manager(run_dir, create=False) as manager:
         return manager.latest_step()
 
 
@@ -48,7 +62,7 @@ def restore_latest(run_dir: Path, cfg: RunConfig):
     keys = jax.random.split(jax.random.key(0), cfg.seeds)
     abstract = jax.eval_shape(jax.vmap(trainer.init), keys)
     try:
-        with _manager(run_dir, create=False) as manager:
+        with _quiet(), _manager(run_dir, create=False) as manager:
             raw = manager.restore(update, args=ocp.args.StandardRestore(jax.eval_shape(_raw_keys, abstract)))
     except Exception as e:  # orbax raises many types for unreadable or mismatched files
         reason = str(e).strip().splitlines()[0][:200] if str(e).strip() else type(e).__name__

@@ -1,0 +1,168 @@
+"""The command line: bad input through the real entry points, run folders, resume, evaluate."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import numpy as np
+import pytest
+import yaml
+
+from hintsjax import checkpoint, run
+from hintsjax.config import UsageError
+from hintsjax.evaluate import main as evaluate_main
+
+TINY = [
+    "agent=ppo_state", "seeds=2", "eval_episodes=3", "checkpoint_every=2",
+    "ppo.total_env_steps=256", "ppo.num_envs=4", "ppo.batch_size=64", "ppo.minibatch_size=32", "ppo.epochs=1",
+]
+
+
+def tiny_values(**extra) -> dict:
+    values = {"env": "pendulum", "out_dir": "runs"}
+    for item in TINY:
+        key, value = item.split("=")
+        target = values
+        if key.startswith("ppo."):
+            target = values.setdefault("ppo", {})
+            key = key[4:]
+        target[key] = int(value) if value.isdigit() else value
+    return {**values, **extra}
+
+
+def cli(*args: str, cwd: Path, module: str = "hintsjax.run") -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", module, *args], cwd=cwd, capture_output=True, text=True, timeout=300)
+
+
+BAD_RUN_ARGS = {
+    "env=nope": "valid choices: pendulum",
+    "agent=nope": "valid choices: hints, hints_blind, hints_state, ppo_noisy_state, ppo_rgb, ppo_state",
+    "scheme=nope": "valid choices: ac, fc, lc, mc",
+    "hint=nope": "valid choices: angular_velocity, composite, goal_distance, partial_state, state, torque",
+    "hint=angular_velocity+nope": "unknown hint 'nope'",
+    "variant=nope": "valid choices: swingto, swingup",
+    "seeds=0": "seeds must be positive",
+    "ppo.num_envs=-4": "ppo.num_envs must be positive",
+    "ppo.minibatch_size=300": "multiple of ppo.minibatch_size",
+    "resume=no/such/run": "no run folder",
+}
+
+
+@pytest.mark.parametrize("arg", list(BAD_RUN_ARGS))
+def test_bad_input_exits_2_with_one_line_and_writes_nothing(arg, tmp_path):
+    out = cli(arg, "out_dir=runs", cwd=tmp_path)
+    assert out.returncode == 2, out.stderr
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), out.stderr
+    assert BAD_RUN_ARGS[arg] in lines[0]
+    assert "Traceback" not in out.stderr + out.stdout
+    assert list(tmp_path.iterdir()) == []  # no run folder, no Hydra outputs
+
+
+@pytest.fixture(scope="module")
+def finished_run(tmp_path_factory) -> Path:
+    """A complete tiny run (4 updates, checkpoints at 2 and 4), made in-process."""
+    root = tmp_path_factory.mktemp("cli")
+    values = tiny_values(out_dir=str(root / "runs"), name="full")
+    assert run.main_from_values(values) == 0
+    return root / "runs" / "full"
+
+
+def test_run_folder_holds_everything(finished_run):
+    names = {p.name for p in finished_run.iterdir()}
+    assert {"config.yaml", "metrics.csv", "tb", "checkpoints", "eval.json", "learning_curve.png"} <= names
+    assert any(p.name.startswith("events") for p in (finished_run / "tb").iterdir())
+    config = yaml.safe_load((finished_run / "config.yaml").read_text())
+    assert config["agent"] == "ppo_state" and config["ppo"]["total_env_steps"] == 256
+    results = json.loads((finished_run / "eval.json").read_text())
+    variants = [e["variant"] for e in results["evaluations"]]
+    assert variants == ["swingup", "swingto"]  # the training task, then pendulum's deploy variant
+    for e in results["evaluations"]:
+        returns = np.array(e["returns"])
+        assert returns.shape == (2, 3)
+        assert np.isclose(e["mean"], returns.mean()) and np.all(returns < 0)
+    rows = (finished_run / "metrics.csv").read_text().strip().splitlines()
+    assert len(rows) == 1 + 4 * 2  # header + 4 updates x 2 seeds
+    assert checkpoint.latest_update(finished_run) == 4
+
+
+def test_interrupted_then_resumed_run_ends_where_the_uninterrupted_one_ends(finished_run, tmp_path, monkeypatch):
+    values = tiny_values(out_dir=str(tmp_path), name="interrupted")
+    real_save = checkpoint.save
+
+    def save_then_crash(run_dir, state, update):
+        real_save(run_dir, state, update)
+        raise KeyboardInterrupt  # the process dies right after its first checkpoint
+
+    monkeypatch.setattr(checkpoint, "save", save_then_crash)
+    with pytest.raises(KeyboardInterrupt):
+        run.main_from_values(dict(values))
+    monkeypatch.setattr(checkpoint, "save", real_save)
+    interrupted = tmp_path / "interrupted"
+    assert checkpoint.latest_update(interrupted) == 2
+
+    assert run.main_from_values({"resume": str(interrupted)}) == 0
+    cfg = run.load_run_config(interrupted)
+    resumed, step = checkpoint.restore_latest(interrupted, cfg)
+    full, full_step = checkpoint.restore_latest(finished_run, cfg)
+    assert step == full_step == 4
+    for a, b in zip(jax.tree.leaves(resumed.params), jax.tree.leaves(full.params)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-6, atol=1e-7)
+    np.testing.assert_array_equal(jax.random.key_data(resumed.key), jax.random.key_data(full.key))
+    # the metrics file has each update exactly once
+    rows = (interrupted / "metrics.csv").read_text().strip().splitlines()
+    assert len(rows) == 1 + 4 * 2
+    full_eval = json.loads((finished_run / "eval.json").read_text())["evaluations"][0]["mean"]
+    resumed_eval = json.loads((interrupted / "eval.json").read_text())["evaluations"][0]["mean"]
+    assert np.isclose(full_eval, resumed_eval, rtol=1e-5)
+
+
+def test_evaluate_command_on_a_deploy_variant(finished_run, capsys):
+    assert evaluate_main([str(finished_run), "--variant", "swingto", "--episodes", "4"]) == 0
+    written = json.loads((finished_run / "eval-swingto-deterministic-4.json").read_text())
+    assert written["variant"] == "swingto" and np.array(written["returns"]).shape == (2, 4)
+    assert "swingto" in capsys.readouterr().out
+
+
+def test_evaluate_bad_inputs(finished_run, tmp_path, capsys):
+    assert evaluate_main([str(tmp_path / "missing")]) == 2
+    assert evaluate_main([str(finished_run), "--variant", "nope"]) == 2
+    assert "valid choices: swingto, swingup" in capsys.readouterr().err
+    assert evaluate_main([str(finished_run), "--episodes", "0"]) == 2
+    empty = tmp_path / "no_checkpoint"
+    empty.mkdir()
+    shutil.copy(finished_run / "config.yaml", empty / "config.yaml")
+    assert evaluate_main([str(empty)]) == 2
+    assert "no checkpoint" in capsys.readouterr().err
+
+
+def test_mismatched_checkpoint_is_refused(finished_run, tmp_path):
+    copy = tmp_path / "mismatched"
+    shutil.copytree(finished_run, copy)
+    config = yaml.safe_load((copy / "config.yaml").read_text())
+    config["ppo"]["hidden"] = [32, 32]  # the saved params are 256 wide
+    (copy / "config.yaml").write_text(yaml.safe_dump(config))
+    before = sorted(p.name for p in copy.rglob("*"))
+    with pytest.raises(UsageError, match="does not match"):
+        checkpoint.restore_latest(copy, run.load_run_config(copy))
+    assert sorted(p.name for p in copy.rglob("*")) == before  # nothing written or removed
+
+
+def test_corrupt_checkpoint_is_refused_through_the_command_line(finished_run, tmp_path):
+    copy = tmp_path / "corrupt"
+    shutil.copytree(finished_run, copy)
+    for f in (copy / "checkpoints" / "4").rglob("*"):
+        if f.is_file():
+            f.write_bytes(b"\0garbage")
+    metrics_before = (copy / "metrics.csv").read_text()
+    out = cli(str(copy), cwd=tmp_path, module="hintsjax.evaluate")
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert out.stderr.strip().startswith("error: checkpoint 4") and len(out.stderr.strip().splitlines()) == 1
+    out = cli(f"resume={copy}", cwd=tmp_path)
+    assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
+    assert (copy / "metrics.csv").read_text() == metrics_before
