@@ -1,0 +1,133 @@
+"""Throughput of the pendulum env (with its picture), of training end to end, and the ceiling.
+
+    python experiments/bench.py [--quick] [--out results.json]
+
+Measures, in one process on whatever device JAX sees:
+  env      pendulum env steps/s including the 64x64 picture (AutoReset, vmapped, in a scan)
+  ceiling  the encoder + heads' own update rate: samples/s of one forward+backward+Adam step
+           of the hints/fc network at batch 8192 (nothing else in the graph)
+  train    end-to-end training (rollout, GAE, epochs of minibatch updates), seed-vmapped:
+           env steps/s, and gradient samples/s = env steps/s x epochs, as a fraction of the
+           ceiling (1.0 would mean the GPU did nothing but full-batch updates)
+Each timing is the best of a few repetitions after a compile-and-warm-up call.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import time
+
+import jax
+import jax.numpy as jnp
+import optax
+
+from hintsjax import envs
+from hintsjax.config import run_config
+from hintsjax.ppo import gaussian_log_prob, make_network, make_optimizer, make_trainer
+
+
+def best_time(fn, *args, repeats: int = 3) -> float:
+    jax.block_until_ready(fn(*args))
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        times.append(time.perf_counter() - t)
+    return min(times)
+
+
+def bench_env(num_envs: int, steps: int) -> dict:
+    env = envs.AutoReset(envs.make("pendulum", "composite"))
+    params = envs.make_params("pendulum")
+    ts = jax.jit(jax.vmap(env.reset, in_axes=(0, None)))(jax.random.split(jax.random.key(0), num_envs), params)
+
+    @jax.jit
+    def roll(state, key):
+        def step(state, key):
+            k_act, k_env = jax.random.split(key)
+            action = jax.random.uniform(k_act, (num_envs, 1), minval=-2, maxval=2)
+            out = jax.vmap(env.step, in_axes=(0, 0, 0, None))(jax.random.split(k_env, num_envs), state, action, params)
+            return out.state, out.obs["pixels"][:, 32, 32, 0].sum() + out.reward.sum()
+
+        return jax.lax.scan(step, state, jax.random.split(key, steps))
+
+    seconds = best_time(roll, ts.state, jax.random.key(1))
+    return {"num_envs": num_envs, "steps": steps, "env_steps_per_s": num_envs * steps / seconds}
+
+
+def bench_ceiling(batch: int) -> dict:
+    cfg = run_config({"env": "pendulum", "agent": "hints", "scheme": "fc", "hint": "composite"})
+    env = cfg.make_env()
+    network = make_network(cfg, env)
+    k = jax.random.key(0)
+    obs = {
+        "pixels": jax.random.randint(k, (batch, 64, 64, 3), 0, 255).astype(jnp.uint8),
+        "hint": jax.random.normal(k, (batch, env.hint.dim)),
+    }
+    params = network.init(k, jax.tree.map(lambda x: x[:1], obs))
+    tx = make_optimizer(cfg.ppo, params)
+    opt_state = tx.init(params)
+    action = jax.random.normal(k, (batch, 1))
+
+    def loss(p):
+        mean, log_std, value = network.apply(p, obs)
+        return -gaussian_log_prob(action, mean, log_std).mean() + (value**2).mean()
+
+    @jax.jit
+    def update(p, s):
+        grads = jax.grad(loss)(p)
+        updates, s = tx.update(grads, s, p)
+        return optax.apply_updates(p, updates), s
+
+    seconds = best_time(update, params, opt_state, repeats=10)
+    return {"batch": batch, "update_samples_per_s": batch / seconds}
+
+
+def bench_train(seeds: int, updates: int, overrides: dict) -> dict:
+    values = {"env": "pendulum", "agent": "hints", "scheme": "fc", "hint": "composite", "seeds": seeds,
+              "ppo": {"total_env_steps": 10**9, **overrides}}
+    cfg = run_config(values)
+    trainer = make_trainer(cfg)
+    keys = jax.random.split(jax.random.key(0), seeds)
+    state = jax.jit(jax.vmap(trainer.init))(keys)
+    run = jax.jit(jax.vmap(trainer.run, in_axes=(0, None)), static_argnums=1)
+    seconds = best_time(lambda s: run(s, updates)[1]["env_steps"], state, repeats=2)
+    env_steps = seeds * updates * cfg.ppo.batch_size
+    return {
+        "seeds": seeds, "updates": updates, "ppo": {k: getattr(cfg.ppo, k) for k in ("num_envs", "batch_size", "epochs", "minibatch_size")},
+        "env_steps_per_s": env_steps / seconds,
+        "grad_samples_per_s": env_steps * cfg.ppo.epochs / seconds,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="small sizes (a CPU smoke run)")
+    parser.add_argument("--out", default=None, help="write the results as JSON here")
+    args = parser.parse_args()
+    q = args.quick
+    results = {"device": str(jax.devices()[0].device_kind), "platform": jax.default_backend(),
+               "jax": jax.__version__, "python": platform.python_version()}
+    results["env"] = [bench_env(n, 200 if not q else 20) for n in ((4096, 16384, 65536) if not q else (64,))]
+    for r in results["env"]:
+        print(f"env     {r['num_envs']:>6} envs: {r['env_steps_per_s']:,.0f} env steps/s (with 64x64 picture)", flush=True)
+    results["ceiling"] = bench_ceiling(8192 if not q else 64)
+    ceiling = results["ceiling"]["update_samples_per_s"]
+    print(f"ceiling batch {results['ceiling']['batch']}: {ceiling:,.0f} samples/s (fwd+bwd+Adam)", flush=True)
+    results["train"] = []
+    for seeds, overrides in (((5, {}), (32, {}), (32, {"num_envs": 64, "minibatch_size": 1024, "epochs": 8})) if not q
+                             else ((2, {"num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}),)):
+        r = bench_train(seeds, 8 if not q else 2, overrides)
+        r["fraction_of_ceiling"] = r["grad_samples_per_s"] / ceiling
+        results["train"].append(r)
+        print(f"train   {seeds:>3} seeds {r['ppo']}: {r['env_steps_per_s']:,.0f} env steps/s, "
+              f"{r['grad_samples_per_s']:,.0f} grad samples/s = {r['fraction_of_ceiling']:.0%} of ceiling", flush=True)
+    if args.out:
+        with open(args.out, "w") as f:
+            json.dump(results, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,190 @@
+"""End-to-end learning on the one-step cue task, and the trainer's invariants.
+
+The cue task (tests/cue_env.py) can only be solved by reading the hint: every `hints` scheme
+must learn it, the pixel-only `ppo_rgb` agent must not beat the best constant action (-1).
+
+Compiling one trainer costs ~10-20 s on a 2-core CPU, so each configuration is compiled once
+(module-scoped fixtures) and shared by the tests that need it.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import cue_env  # registers the "cue" env, its hint and its defaults (tests/ is on sys.path)
+from hintsjax import config, ppo
+
+# -- learning -----------------------------------------------------------------------------------
+
+# 12 updates of 256 transitions, 4 epochs of 4 minibatches: 192 gradient steps. actor_lr is
+# raised from the env default (1e-3) so that log_std can fall from 0 (std 1, return -2 even
+# with the right mean) to about -1.7 in that many Adam steps; with 1e-3 it only reaches ~-0.3.
+LEARN_PPO = dict(
+    num_envs=64, batch_size=256, minibatch_size=64, epochs=4, total_env_steps=3072, hidden=[64, 64], actor_lr=1e-2
+)
+LAST = 3  # updates averaged for the final return
+
+
+def learn(agent: str, scheme: str = "fc", seed: int = 0):
+    cfg = config.run_config(dict(env="cue", agent=agent, scheme=scheme, seeds=1, ppo=LEARN_PPO))
+    trainer = ppo.make_trainer(cfg)
+    state, metrics = jax.jit(trainer.train)(jax.random.key(seed))
+    return trainer, state, jax.tree.map(np.asarray, metrics)
+
+
+def policy_mean(trainer, params, cues):
+    """The policy's mean action for episodes with the given cues (through the env's observation)."""
+    env_params = trainer.env.default_params()
+    states = cue_env.CueState(cue=jnp.asarray(cues, jnp.float32), t=jnp.zeros(len(cues), jnp.int32))
+    obs = jax.vmap(trainer.env.observation, in_axes=(0, None))(states, env_params)
+    mean, _, _ = trainer.network.apply(params, obs)
+    return np.asarray(mean[:, 0])
+
+
+def test_cue_env_hides_the_cue_outside_the_hint():
+    from hintsjax import envs
+
+    env = envs.make("cue", "cue")
+    params = envs.make_params("cue")
+    states = [cue_env.CueState(cue=jnp.float32(c), t=jnp.int32(0)) for c in (-1.0, 1.0)]
+    obs = [env.observation(s, params) for s in states]
+    np.testing.assert_array_equal(obs[0]["pixels"], obs[1]["pixels"])
+    np.testing.assert_array_equal(obs[0]["state"], obs[1]["state"])
+    np.testing.assert_array_equal(obs[0]["hint"], [-1.0])
+    np.testing.assert_array_equal(obs[1]["hint"], [1.0])
+    assert obs[0]["pixels"].shape == (36, 36, 3) and obs[0]["pixels"].dtype == jnp.uint8
+    ts = env.step(jax.random.key(0), states[1], jnp.array([0.5]), params)
+    np.testing.assert_allclose(ts.reward, -0.25)
+    assert bool(ts.truncated) and not bool(ts.terminated)
+    ts = env.step(jax.random.key(0), states[0], jnp.array([5.0]), params)  # clipped to 2
+    np.testing.assert_allclose(ts.reward, -9.0)
+    cues = jax.vmap(lambda k: env.reset(k, params).obs["hint"][0])(jax.random.split(jax.random.key(0), 1000))
+    assert set(np.unique(np.asarray(cues)).tolist()) == {-1.0, 1.0}
+    assert abs(float(cues.mean())) < 0.1
+
+
+@pytest.mark.parametrize("scheme", ["lc", "ac", "fc", "mc"])
+def test_hints_agent_learns_the_cue(scheme):
+    trainer, state, metrics = learn("hints", scheme)
+    returns = metrics["episode_return"]
+    assert returns.shape == (trainer.cfg.ppo.num_updates,) == (12,)
+    assert np.all(metrics["episodes"] == LEARN_PPO["batch_size"])  # every step ends an episode
+    final = returns[-LAST:].mean()
+    assert final > -0.3, f"{scheme}: final return {final:.3f}, returns {np.round(returns, 2)}"
+    assert final > returns[0] + 1.0
+    # The deterministic policy follows the cue.
+    np.testing.assert_allclose(policy_mean(trainer, state.params, [-1.0, 1.0]), [-1.0, 1.0], atol=0.3)
+
+
+def test_rgb_agent_cannot_beat_the_best_constant_action():
+    trainer, state, metrics = learn("ppo_rgb")
+    returns = metrics["episode_return"]
+    assert np.all(np.isfinite(returns))
+    # E[-(a - c)^2] = -(mean^2 + std^2 + 1) <= -1 for any policy blind to c.
+    assert returns[-LAST:].mean() < -0.7, np.round(returns, 2)
+    means = policy_mean(trainer, state.params, [-1.0, 1.0])
+    assert means[0] == means[1]  # it sees the same picture for both cues
+
+
+# -- invariants (the cheap hint-only agent: no pixels, no rendering) ------------------------------
+
+SMALL_PPO = dict(num_envs=4, batch_size=32, minibatch_size=16, epochs=2, total_env_steps=160, hidden=[32, 32])
+RTOL, ATOL = 1e-5, 1e-6  # vmapped vs single runs: measured max abs diff ~1e-7 (params), ~1e-6 (metrics)
+
+
+def small_trainer(**ppo_overrides):
+    cfg = config.run_config(dict(env="cue", agent="hints_blind", seeds=2, ppo={**SMALL_PPO, **ppo_overrides}))
+    return ppo.make_trainer(cfg)
+
+
+@pytest.fixture(scope="module")
+def small():
+    trainer = small_trainer()
+    assert trainer.cfg.ppo.num_updates == 5
+    return trainer, jax.jit(trainer.train)
+
+
+@pytest.fixture(scope="module")
+def keys():
+    return jax.random.split(jax.random.key(0), 2)
+
+
+def leaves(tree):
+    """Comparable numpy leaves of a pytree (typed PRNG keys as their raw data)."""
+    out = []
+    for x in jax.tree.leaves(tree):
+        if jnp.issubdtype(x.dtype, jax.dtypes.prng_key):
+            x = jax.random.key_data(x)
+        out.append(np.asarray(x))
+    return out
+
+
+def assert_trees_close(a, b, rtol=RTOL, atol=ATOL):
+    la, lb = leaves(a), leaves(b)
+    assert len(la) == len(lb) and len(la) > 0
+    for x, y in zip(la, lb):
+        assert x.shape == y.shape and x.dtype == y.dtype
+        if np.issubdtype(x.dtype, np.floating):
+            np.testing.assert_allclose(x, y, rtol=rtol, atol=atol)
+        else:
+            np.testing.assert_array_equal(x, y)
+
+
+def assert_trees_equal(a, b):
+    la, lb = leaves(a), leaves(b)
+    assert len(la) == len(lb) and len(la) > 0
+    for x, y in zip(la, lb):
+        np.testing.assert_array_equal(x, y)
+
+
+def test_vmapped_seeds_equal_single_runs(small, keys):
+    trainer, train = small
+    v_state, v_metrics = jax.jit(jax.vmap(trainer.train))(keys)
+    assert v_metrics["episode_return"].shape == (2, 5)
+    for i in range(2):
+        state, metrics = train(keys[i])
+        pick = lambda x, i=i: x[i]  # noqa: E731
+        assert_trees_close(jax.tree.map(pick, v_state.params), state.params)
+        assert_trees_close(jax.tree.map(pick, v_metrics), metrics)
+
+
+def test_same_seed_is_deterministic_and_seeds_differ(small, keys):
+    _, train = small
+    a = train(keys[0])
+    b = train(keys[0])
+    assert_trees_equal(a, b)
+    c = train(keys[1])
+    diffs = [np.max(np.abs(x - y)) for x, y in zip(leaves(a[0].params), leaves(c[0].params))]
+    assert max(diffs) > 1e-3
+    assert not np.allclose(a[1]["episode_return"], c[1]["episode_return"])
+
+
+def test_chunked_training_equals_one_call(small, keys):
+    trainer, train = small
+    run = jax.jit(trainer.run, static_argnums=1)
+    start = jax.jit(trainer.init)(keys[0])
+    mid, first = run(start, 3)
+    end, second = run(mid, 2)
+    # train(key) is run(init(key), num_updates) with num_updates = 5: compiled once, reused.
+    whole, metrics = train(keys[0])
+    assert int(end.update) == int(whole.update) == 5
+    assert_trees_equal(end, whole)  # params, optimiser, env state, obs, key: exact
+    assert_trees_equal(jax.tree.map(lambda x, y: jnp.concatenate([x, y]), first, second), metrics)
+
+
+def test_parallel_envs_do_not_change_the_budget(small, keys):
+    trainer_a, train_a = small
+    trainer_b = small_trainer(num_envs=8)
+    pa, pb = trainer_a.cfg.ppo, trainer_b.cfg.ppo
+    assert (pa.num_envs, pa.rollout_length) == (4, 8) and (pb.num_envs, pb.rollout_length) == (8, 4)
+    assert pa.num_updates == pb.num_updates == 5
+    _, ma = train_a(keys[0])
+    _, mb = jax.jit(trainer_b.train)(keys[0])
+    for m in (ma, mb):
+        assert m["env_steps"].shape == (5,)
+        np.testing.assert_array_equal(m["env_steps"], 32 * np.arange(1, 6))
+        # Each cue episode is one step, so the episodes counted are the env steps actually taken.
+        assert int(m["episodes"].sum()) == int(m["env_steps"][-1]) == 160
