@@ -1,0 +1,71 @@
+"""Encoder implementations compared: patches x dense (ours) against nn.Conv, f32 and bf16.
+
+    python experiments/bench_encoder.py [--batch 8192] [--seeds 5]
+
+For each variant: samples/s of forward+backward+Adam for the pixel encoder plus a 256-256 head,
+once at one batch and once vmapped over `--seeds` weight copies (the seed-vmapped training case)
+with the same total batch. Informs the choice of `hintsjax.networks.PatchConv`.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+import optax
+
+from hintsjax.networks import MLP, PatchConv
+
+
+class Net(nn.Module):
+    conv: str
+    dtype: jnp.dtype
+
+    @nn.compact
+    def __call__(self, x):
+        x = x.astype(self.dtype)
+        for f, k, s in ((32, 8, 4), (64, 4, 2), (64, 3, 1)):
+            if self.conv == "patches":
+                x = nn.relu(PatchConv(f, k, s, dtype=self.dtype)(x))
+            else:
+                x = nn.relu(nn.Conv(f, (k, k), (s, s), "VALID", dtype=self.dtype)(x))
+        x = x.reshape(x.shape[:-3] + (-1,)).astype(jnp.float32)
+        return MLP((256, 256, 2))(x)
+
+
+def rate(conv: str, dtype, batch: int, seeds: int) -> float:
+    from bench import best_time
+
+    net = Net(conv, dtype)
+    per = batch // seeds
+    x = jax.random.uniform(jax.random.key(0), (seeds, per, 64, 64, 3), minval=-1, maxval=1)
+    params = jax.vmap(net.init)(jax.random.split(jax.random.key(1), seeds), x[:, :1])
+    tx = optax.adam(1e-3)
+    opt = jax.vmap(tx.init)(params)
+
+    def step(p, s, x):
+        g = jax.grad(lambda p: (net.apply(p, x) ** 2).mean())(p)
+        u, s = tx.update(g, s, p)
+        return optax.apply_updates(p, u), s
+
+    f = jax.jit(jax.vmap(step))
+    return seeds * per / best_time(f, params, opt, x, repeats=10)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--batch", type=int, default=8192)
+    parser.add_argument("--seeds", type=int, default=5)
+    args = parser.parse_args()
+    print(f"device: {jax.devices()[0].device_kind}")
+    for conv in ("patches", "conv"):
+        for dtype in (jnp.float32, jnp.bfloat16):
+            for seeds in (1, args.seeds):
+                r = rate(conv, dtype, args.batch, seeds)
+                print(f"{conv:8s} {jnp.dtype(dtype).name:8s} seeds={seeds:<3d} batch={args.batch}: {r:,.0f} samples/s", flush=True)
+
+
+if __name__ == "__main__":
+    main()

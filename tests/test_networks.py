@@ -1,0 +1,100 @@
+"""Networks and conditioning schemes: the conv as patches equals nn.Conv; each scheme's shape and use of h."""
+
+from __future__ import annotations
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from hintsjax.agents import AGENTS
+from hintsjax.conditioning import SCHEMES
+from hintsjax.networks import ActorCritic, Encoder, PatchConv, image_patches, lr_labels, scale_pixels
+
+
+@pytest.mark.parametrize("size,channels,kernel,stride", [(64, 3, 8, 4), (15, 32, 4, 2), (6, 64, 3, 1), (36, 5, 8, 4)])
+def test_patch_conv_equals_nn_conv_with_the_same_params(size, channels, kernel, stride):
+    x = jax.random.normal(jax.random.key(0), (2, size, size, channels))
+    layer = PatchConv(16, kernel, stride)
+    params = layer.init(jax.random.key(1), x)
+    params = jax.tree.map(lambda p: p + 0.1, params)  # a non-zero bias too
+    ref = nn.Conv(16, (kernel, kernel), (stride, stride), "VALID").apply(params, x)
+    np.testing.assert_allclose(layer.apply(params, x), ref, rtol=1e-5, atol=1e-5)
+
+
+def test_image_patches_order_is_row_column_channel():
+    x = jnp.arange(4 * 4 * 2, dtype=jnp.float32).reshape(1, 4, 4, 2)
+    p = image_patches(x, 2, 2)  # [1, 2, 2, 8]
+    assert p.shape == (1, 2, 2, 8)
+    # the patch at output (1, 0) covers rows 2-3, columns 0-1
+    expected = np.concatenate([x[0, 2, 0], x[0, 2, 1], x[0, 3, 0], x[0, 3, 1]])
+    np.testing.assert_array_equal(p[0, 1, 0], expected)
+
+
+def test_encoder_latent_is_1024_for_64x64():
+    x = jnp.zeros((3, 64, 64, 3))
+    z, _ = Encoder().init_with_output(jax.random.key(0), x)
+    assert z.shape == (3, 1024)
+
+
+def test_scale_pixels_maps_to_minus_one_one():
+    np.testing.assert_allclose(scale_pixels(jnp.array([0, 255], jnp.uint8)), [-1.0, 1.0])
+
+
+OBS = {
+    "pixels": jax.random.randint(jax.random.key(2), (4, 64, 64, 3), 0, 256).astype(jnp.uint8),
+    "hint": jax.random.normal(jax.random.key(3), (4, 2)),
+    "state": jax.random.normal(jax.random.key(4), (4, 3)),
+}
+
+
+class Features(nn.Module):
+    """Just the conditioned features z' of a pixel agent."""
+
+    scheme: str
+
+    @nn.compact
+    def __call__(self, obs):
+        cond = SCHEMES[self.scheme](64, name="conditioning")
+        return cond(Encoder(name="encoder"), scale_pixels(obs["pixels"]), obs["hint"])
+
+
+@pytest.mark.parametrize("scheme,width", [("lc", 1024 + 64), ("ac", 1024), ("fc", 1024), ("mc", 1024)])
+def test_scheme_feature_width_and_dependence_on_the_hint(scheme, width):
+    net = Features(scheme)
+    params = net.init(jax.random.key(0), OBS)
+    z = net.apply(params, OBS)
+    assert z.shape == (4, width)
+    other = net.apply(params, {**OBS, "hint": OBS["hint"] + 1.0})
+    assert float(jnp.abs(z - other).max()) > 1e-4  # the hint changes the features
+    if scheme == "mc":  # d extra constant input channels, one per hint entry
+        assert params["params"]["encoder"]["PatchConv_0"]["kernel"].shape == (8, 8, 3 + 2, 32)
+
+
+def test_film_with_a_zero_embedding_passes_the_latent_through():
+    net = Features("fc")
+    params = net.init(jax.random.key(0), OBS)
+    zero_out = jax.tree_util.tree_map_with_path(
+        lambda path, p: jnp.zeros_like(p) if "conditioning" in str(path) and "Dense_1" in str(path) else p, params
+    )
+    assert not np.allclose(net.apply(params, OBS), net.apply(zero_out, OBS))  # the zeroing bites
+    film = net.apply(zero_out, OBS)
+    plain = Encoder().apply({"params": params["params"]["encoder"]}, scale_pixels(OBS["pixels"]))
+    np.testing.assert_allclose(film, plain, rtol=1e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize("agent", list(AGENTS))
+def test_each_agent_reads_only_its_inputs(agent):
+    spec = AGENTS[agent]
+    net = ActorCritic(spec, "fc", 2)
+    obs = {k: OBS[k] for k in spec.observe}
+    params = net.init(jax.random.key(0), obs)
+    mean, log_std, value = net.apply(params, obs)
+    assert mean.shape == (4, 2) and log_std.shape == (2,) and value.shape == (4,)
+    assert ("encoder" in params["params"]) == spec.pixels
+    labels = lr_labels(params)["params"]
+    assert labels["actor"]["Dense_0"]["kernel"] == "actor" and labels["log_std"] == "actor"
+    assert labels["critic"]["Dense_0"]["kernel"] == "critic"
+    if spec.pixels:
+        assert labels["encoder"]["PatchConv_0"]["kernel"] == "encoder"
