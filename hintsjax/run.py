@@ -53,14 +53,14 @@ def load_run_config(run_dir: Path) -> RunConfig:
     return run_config(values)
 
 
-def seed_keys(cfg: RunConfig) -> jax.Array:
-    """[S] training keys; sharded over the seed axis when several devices divide it."""
+def seed_keys(cfg: RunConfig) -> tuple[jax.Array, int]:
+    """[S] training keys, sharded over the seed axis when several devices divide it; and how many devices."""
     keys = jax.numpy.stack([jax.random.key(cfg.seed + i) for i in range(cfg.seeds)])
     devices = jax.devices()
     if len(devices) > 1 and cfg.seeds % len(devices) == 0:
         mesh = jax.sharding.Mesh(np.array(devices), ("seeds",))
-        keys = jax.device_put(keys, jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("seeds")))
-    return keys
+        return jax.device_put(keys, jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("seeds"))), len(devices)
+    return keys, 1
 
 
 def new_run_dir(out_dir: str, name: str | None, cfg: RunConfig) -> Path:
@@ -78,8 +78,10 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
     from tqdm import tqdm
 
     trainer = make_trainer(cfg)
-    keys = seed_keys(cfg)
+    keys, num_devices = seed_keys(cfg)
     total = cfg.ppo.num_updates
+    print(f"{cfg.env} {cfg.label}: {cfg.seeds} seeds x {total} updates of {cfg.ppo.batch_size} env steps "
+          f"on {num_devices} {jax.default_backend()} device(s) -> {run_dir}", flush=True)
     if resume:
         state, done = checkpoint.restore_latest(run_dir, cfg)
     else:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -166,3 +167,16 @@ def test_corrupt_checkpoint_is_refused_through_the_command_line(finished_run, tm
     out = cli(f"resume={copy}", cwd=tmp_path)
     assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
     assert (copy / "metrics.csv").read_text() == metrics_before
+
+
+def test_seeds_sharded_over_two_devices_give_the_single_device_result(finished_run, tmp_path):
+    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
+    args = [*TINY, "out_dir=runs", "name=sharded"]
+    out = subprocess.run([sys.executable, "-m", "hintsjax.run", *args], cwd=tmp_path, env=env,
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert "on 2 cpu device(s)" in out.stdout
+    sharded = json.loads((tmp_path / "runs" / "sharded" / "eval.json").read_text())["evaluations"]
+    single = json.loads((finished_run / "eval.json").read_text())["evaluations"]
+    for a, b in zip(sharded, single):
+        np.testing.assert_allclose(a["returns"], b["returns"], rtol=1e-4)
