@@ -68,6 +68,12 @@ class PendulumState:
     goal: jax.Array
     t: jax.Array
 
+    @classmethod
+    def at(cls, theta, dtheta, goal=0.0, t=0) -> "PendulumState":
+        """A hand-set state from numbers (or arrays, for a batch)."""
+        f32 = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731
+        return cls(f32(theta), f32(dtheta), f32(goal), jnp.asarray(t, jnp.int32))
+
 
 VARIANTS = {
     "swingup": PendulumParams(),

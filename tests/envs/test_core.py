@@ -12,14 +12,7 @@ from hintsjax.envs.core import EpisodeState
 from hintsjax.envs.pendulum import PendulumState
 
 
-def S(theta, dtheta, goal=0.0, t=0) -> PendulumState:
-    """A PendulumState from numbers (or arrays, for a batch)."""
-    return PendulumState(
-        theta=jnp.asarray(theta, jnp.float32),
-        dtheta=jnp.asarray(dtheta, jnp.float32),
-        goal=jnp.asarray(goal, jnp.float32),
-        t=jnp.asarray(t, jnp.int32),
-    )
+S = PendulumState.at
 
 
 @pytest.fixture(scope="module")

@@ -13,14 +13,7 @@ from hintsjax.envs import hints as hints_module
 from hintsjax.envs.pendulum import PendulumState, wrap_angle
 
 
-def S(theta, dtheta, goal=0.0, t=0) -> PendulumState:
-    """A PendulumState from numbers (or arrays, for a batch)."""
-    return PendulumState(
-        theta=jnp.asarray(theta, jnp.float32),
-        dtheta=jnp.asarray(dtheta, jnp.float32),
-        goal=jnp.asarray(goal, jnp.float32),
-        t=jnp.asarray(t, jnp.int32),
-    )
+S = PendulumState.at
 
 
 SPEC_DIMS = {"goal_distance": 1, "angular_velocity": 1, "torque": 1, "composite": 2, "partial_state": 2, "state": 3}
