@@ -9,13 +9,20 @@ live in `ENV_DEFAULTS`; a config value of `None` means "the env's default".
 from __future__ import annotations
 
 import dataclasses
+import sys
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Mapping
+
+import yaml
 
 from hintsjax import envs
 from hintsjax.agents import AGENTS, AgentSpec
 from hintsjax.conditioning import SCHEMES
 from hintsjax.envs.errors import ChoiceError, choose
+
+
+CONFIG_YAML = "config.yaml"  # a run folder's resolved config
 
 
 class UsageError(ValueError):
@@ -201,3 +208,23 @@ def to_dict(cfg: RunConfig) -> dict[str, Any]:
         return x
 
     return plain(dataclasses.asdict(cfg))
+
+
+def fail(error: Exception) -> int:
+    """Report bad input in one line; the exit status for it."""
+    print(f"error: {error}", file=sys.stderr)
+    return 2
+
+
+def load_run_config(run_dir: Path) -> RunConfig:
+    """The validated config a run folder was trained with."""
+    path = Path(run_dir) / CONFIG_YAML
+    if not Path(run_dir).is_dir():
+        raise UsageError(f"no run folder at {run_dir}")
+    try:
+        values = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as e:
+        raise UsageError(f"cannot read {path}: {type(e).__name__}") from None
+    if not isinstance(values, dict):
+        raise UsageError(f"{path} is not a run config")
+    return run_config(values)

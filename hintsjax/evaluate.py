@@ -21,7 +21,7 @@ import numpy as np
 from flax import struct
 
 from hintsjax import envs
-from hintsjax.config import RunConfig, UsageError
+from hintsjax.config import RunConfig, UsageError, fail, load_run_config
 from hintsjax.ppo import make_network
 
 EVAL_TAG = 0xE7A1  # folded into a seed's key so evaluation draws differ from training's
@@ -98,7 +98,6 @@ def evaluate_params(cfg: RunConfig, params: Any, variant: str | None, episodes: 
 
 def main(argv: list[str] | None = None) -> int:
     from hintsjax import checkpoint
-    from hintsjax.run import fail, load_run_config
 
     parser = argparse.ArgumentParser(prog="python -m hintsjax.evaluate", description=__doc__.splitlines()[0])
     parser.add_argument("run", type=Path, help="a run folder written by python -m hintsjax.run")

@@ -24,33 +24,12 @@ import yaml
 from omegaconf import DictConfig, OmegaConf
 
 from hintsjax import checkpoint
-from hintsjax.config import RunConfig, UsageError, run_config, to_dict
+from hintsjax.config import CONFIG_YAML, RunConfig, UsageError, fail, load_run_config, run_config, to_dict
 from hintsjax.evaluate import evaluate_params
 from hintsjax.ppo import make_trainer
 from hintsjax.runlog import CURVE_PNG, METRICS_CSV, RunLog, plot_curves, read_curves
 
-CONFIG_YAML = "config.yaml"
 EVAL_JSON = "eval.json"
-
-
-def fail(error: Exception) -> int:
-    """Report bad input in one line; the exit status for it."""
-    print(f"error: {error}", file=sys.stderr)
-    return 2
-
-
-def load_run_config(run_dir: Path) -> RunConfig:
-    """The validated config a run folder was trained with."""
-    path = Path(run_dir) / CONFIG_YAML
-    if not Path(run_dir).is_dir():
-        raise UsageError(f"no run folder at {run_dir}")
-    try:
-        values = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as e:
-        raise UsageError(f"cannot read {path}: {type(e).__name__}") from None
-    if not isinstance(values, dict):
-        raise UsageError(f"{path} is not a run config")
-    return run_config(values)
 
 
 def seed_keys(cfg: RunConfig) -> tuple[jax.Array, int]:
