@@ -51,14 +51,17 @@ def latest_update(run_dir: Path) -> int | None:
         return manager.latest_step()
 
 
-def restore_latest(run_dir: Path, cfg: RunConfig):
-    """(runner state, update) of the newest checkpoint; UsageError if missing, corrupt or mismatched."""
+def restore_latest(run_dir: Path, cfg: RunConfig, trainer=None):
+    """(runner state, update) of the newest checkpoint; UsageError if missing, corrupt or mismatched.
+
+    `trainer` (cfg's, built if not given) supplies the state's expected shapes.
+    """
     from hintsjax.ppo import make_trainer
 
     update = latest_update(run_dir)
     if update is None:
         raise UsageError(f"no checkpoint in {Path(run_dir) / CHECKPOINTS}")
-    trainer = make_trainer(cfg)
+    trainer = trainer or make_trainer(cfg)
     keys = jax.random.split(jax.random.key(0), cfg.seeds)
     abstract = jax.eval_shape(jax.vmap(trainer.init), keys)
     try:

@@ -62,7 +62,7 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
     print(f"{cfg.env} {cfg.label}: {cfg.seeds} seeds x {total} updates of {cfg.ppo.batch_size} env steps "
           f"on {num_devices} {jax.default_backend()} device(s) -> {run_dir}", flush=True)
     if resume:
-        state, done = checkpoint.restore_latest(run_dir, cfg)
+        state, done = checkpoint.restore_latest(run_dir, cfg, trainer)
     else:
         state, done = jax.jit(jax.vmap(trainer.init))(keys), 0
     run_chunk = jax.jit(jax.vmap(trainer.run, in_axes=(0, None)), static_argnums=1)
@@ -97,6 +97,7 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
 
 def main_from_values(values: dict[str, Any]) -> int:
     """Run from plain config values (what Hydra resolved); returns the exit status."""
+    values = dict(values)
     try:
         resume = values.pop("resume", None)
         out_dir, name = values.pop("out_dir", "runs"), values.pop("name", None)
