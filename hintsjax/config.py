@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
+import jax
+import jax.numpy as jnp
 import yaml
 
 from hintsjax import envs
@@ -81,6 +83,14 @@ class PPOConfig:
             raise UsageError(f"ppo.hidden widths must be positive, got {list(self.hidden)}")
 
 
+def env_params(env: str, variant: str | None) -> Any:
+    """The params of `env`'s `variant` (None: its default); UsageError naming the valid variants."""
+    try:
+        return envs.make_params(env, variant)
+    except ChoiceError as e:
+        raise UsageError(str(e)) from None
+
+
 # Per-env defaults, overriding PPOConfig's: the paper's budgets and Table 5's actor rates.
 ENV_DEFAULTS: dict[str, dict[str, Any]] = {
     "pendulum": dict(
@@ -131,6 +141,10 @@ class RunConfig:
             parts.append(self.hint)
         return "-".join(parts)
 
+    def seed_keys(self) -> jax.Array:
+        """[S] PRNG keys of the run's seeds: seed i is key(seed + i)."""
+        return jnp.stack([jax.random.key(self.seed + i) for i in range(self.seeds)])
+
     def make_env(self, observe: tuple[str, ...] | None = None) -> envs.Env:
         return envs.make(self.env, self.effective_hint, self.agent_spec.observe if observe is None else observe)
 
@@ -140,11 +154,10 @@ class RunConfig:
             choose("agent", self.agent, AGENTS)
             choose("scheme", self.scheme, SCHEMES)
             envs.make_hint(self.env, self.effective_hint)
-            for v in (self.variant, *self.eval_variants):
-                if v is not None:
-                    envs.make_params(self.env, v)
         except ChoiceError as e:
             raise UsageError(str(e)) from None
+        for v in (self.variant, *self.eval_variants):
+            env_params(self.env, v)
         for name in ("seeds", "eval_episodes", "checkpoint_every"):
             if getattr(self, name) <= 0:
                 raise UsageError(f"{name} must be positive, got {getattr(self, name)}")

@@ -21,7 +21,7 @@ import numpy as np
 from flax import struct
 
 from hintsjax import envs
-from hintsjax.config import RunConfig, UsageError, fail, load_run_config
+from hintsjax.config import RunConfig, UsageError, env_params, fail, load_run_config
 from hintsjax.ppo import make_network
 
 EVAL_TAG = 0xE7A1  # folded into a seed's key so evaluation draws differ from training's
@@ -40,12 +40,12 @@ def make_evaluator(
 ) -> Callable[[Any, jax.Array], EvalResult]:
     """`evaluate(params, key) -> EvalResult[E]` for one seed's params; vmap it over seeds."""
     env = cfg.make_env()
-    env_params = envs.make_params(cfg.env, variant)
+    task_params = envs.make_params(cfg.env, variant)
     network = make_network(cfg, env)
 
     def evaluate(params: Any, key: jax.Array) -> EvalResult:
         k_reset, k_run = jax.random.split(key)
-        ts = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_reset, num_episodes), env_params)
+        ts = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_reset, num_episodes), task_params)
 
         def step(carry, key):
             state, obs, ret, length, alive = carry
@@ -53,7 +53,7 @@ def make_evaluator(
             mean, log_std, _ = network.apply(params, obs)
             action = mean + stochastic * jnp.exp(log_std) * jax.random.normal(k_act, mean.shape)
             ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
-                jax.random.split(k_env, num_episodes), state, action, env_params
+                jax.random.split(k_env, num_episodes), state, action, task_params
             )
             ret = ret + jnp.where(alive, ts.reward, 0.0)
             length = length + alive
@@ -70,7 +70,7 @@ def make_evaluator(
 
 def eval_keys(cfg: RunConfig) -> jax.Array:
     """[S] evaluation keys, one per training seed."""
-    return jnp.stack([jax.random.fold_in(jax.random.key(cfg.seed + i), EVAL_TAG) for i in range(cfg.seeds)])
+    return jax.vmap(jax.random.fold_in, in_axes=(0, None))(cfg.seed_keys(), EVAL_TAG)
 
 
 def summarize(result: EvalResult) -> dict[str, Any]:
@@ -108,11 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         cfg = load_run_config(args.run)
         variant = args.variant or cfg.variant
-        if variant is not None:
-            try:
-                envs.make_params(cfg.env, variant)
-            except envs.ChoiceError as e:
-                raise UsageError(str(e)) from None
+        env_params(cfg.env, variant)
         episodes = cfg.eval_episodes if args.episodes is None else args.episodes
         if episodes <= 0:
             raise UsageError(f"--episodes must be positive, got {episodes}")

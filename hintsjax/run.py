@@ -34,7 +34,7 @@ EVAL_JSON = "eval.json"
 
 def seed_keys(cfg: RunConfig) -> tuple[jax.Array, int]:
     """[S] training keys, sharded over the seed axis when several devices divide it; and how many devices."""
-    keys = jax.numpy.stack([jax.random.key(cfg.seed + i) for i in range(cfg.seeds)])
+    keys = cfg.seed_keys()
     devices = jax.devices()
     if len(devices) > 1 and cfg.seeds % len(devices) == 0:
         mesh = jax.sharding.Mesh(np.array(devices), ("seeds",))
@@ -59,12 +59,12 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
     trainer = make_trainer(cfg)
     keys, num_devices = seed_keys(cfg)
     total = cfg.ppo.num_updates
-    print(f"{cfg.env} {cfg.label}: {cfg.seeds} seeds x {total} updates of {cfg.ppo.batch_size} env steps "
-          f"on {num_devices} {jax.default_backend()} device(s) -> {run_dir}", flush=True)
     if resume:
         state, done = checkpoint.restore_latest(run_dir, cfg, trainer)
     else:
         state, done = jax.jit(jax.vmap(trainer.init))(keys), 0
+    print(f"{cfg.env} {cfg.label}: {cfg.seeds} seeds x {total} updates of {cfg.ppo.batch_size} env steps "
+          f"on {num_devices} {jax.default_backend()} device(s) -> {run_dir}", flush=True)
     run_chunk = jax.jit(jax.vmap(trainer.run, in_axes=(0, None)), static_argnums=1)
     log = RunLog(run_dir, resume_update=done)
     bar = tqdm(total=total, initial=done, unit="upd", disable=not progress, desc=f"{cfg.env} {cfg.label}")
@@ -103,9 +103,7 @@ def main_from_values(values: dict[str, Any]) -> int:
         out_dir, name = values.pop("out_dir", "runs"), values.pop("name", None)
         if resume is not None:
             run_dir = Path(resume)
-            cfg = load_run_config(run_dir)
-            if checkpoint.latest_update(run_dir) is None:
-                raise UsageError(f"no checkpoint in {run_dir / checkpoint.CHECKPOINTS}")
+            cfg = load_run_config(run_dir)  # a missing or bad checkpoint is reported by train's restore
         else:
             cfg = run_config(values)
             run_dir = None
