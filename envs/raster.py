@@ -11,12 +11,13 @@ import jax
 import jax.numpy as jnp
 
 
-def pixel_centres(size: int, half_extent: float) -> jax.Array:
-    """float32[S, S, 2] world (x, y) of each pixel centre; row 0 is the top (largest y)."""
+def pixel_centres(size: int, half_extent: float, centre: tuple[float, float] = (0.0, 0.0)) -> jax.Array:
+    """float32[S, S, 2] world (x, y) of each pixel centre of a square view of half-width
+    `half_extent` around `centre`; row 0 is the top (largest y)."""
     edge = jnp.linspace(-half_extent, half_extent, size + 1, dtype=jnp.float32)
-    centre = 0.5 * (edge[1:] + edge[:-1])
-    x = jnp.broadcast_to(centre[None, :], (size, size))
-    y = jnp.broadcast_to(centre[::-1, None], (size, size))
+    mid = 0.5 * (edge[1:] + edge[:-1])
+    x = jnp.broadcast_to(centre[0] + mid[None, :], (size, size))
+    y = jnp.broadcast_to(centre[1] + mid[::-1, None], (size, size))
     return jnp.stack([x, y], axis=-1)
 
 

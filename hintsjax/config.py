@@ -98,6 +98,11 @@ ENV_DEFAULTS: dict[str, dict[str, Any]] = {
         eval_variants=("swingto",),
         ppo=dict(total_env_steps=200_000, actor_lr=1e-3, reward_scale=0.1),
     ),
+    # 700 episodes of at most 500 steps (the paper's 700 episodes, counted at their length).
+    "acrobot": dict(hint="composite", ppo=dict(total_env_steps=350_000, reward_scale=0.1)),
+    # Early IDP episodes last ~10 steps, so an episode count would be a tiny budget: we count
+    # 200 full-length episodes (200 K steps), the pendulum's budget.
+    "idp": dict(hint="composite", ppo=dict(total_env_steps=200_000, reward_scale=0.1)),
 }
 
 

@@ -41,3 +41,32 @@ def vstep(env):
 @pytest.fixture(scope="session")
 def render(env):
     return jax.jit(env.render)
+
+
+# -- acrobot and idp: one env and one jitted step each, shared by their test files ------------
+
+
+@pytest.fixture(scope="session")
+def acrobot_env():
+    return envs.make("acrobot", hint="composite")
+
+
+@pytest.fixture(scope="session")
+def acrobot_step(acrobot_env):
+    return jax.jit(acrobot_env.step)
+
+
+@pytest.fixture(scope="session")
+def idp_env():
+    return envs.make("idp", hint="composite")
+
+
+@pytest.fixture(scope="session")
+def idp_step(idp_env):
+    return jax.jit(idp_env.step)
+
+
+@pytest.fixture(scope="session")
+def idp_state_at(idp_env):
+    """jitted (qpos, qvel) -> IDPState with MuJoCo's kinematics and constraint force."""
+    return jax.jit(idp_env.state_at)
