@@ -1,9 +1,10 @@
-"""Throughput of the pendulum env (with its picture), of training end to end, and the ceiling.
+"""Throughput of each env (with its picture), of training end to end, and the ceiling.
 
-    python experiments/bench.py [--quick] [--out results.json]
+    python experiments/bench.py [--envs pendulum,acrobot,idp] [--quick] [--out results.json]
 
 Measures, in one process on whatever device JAX sees:
-  env      pendulum env steps/s including the 64x64 picture (AutoReset, vmapped, in a scan)
+  env      env steps/s including the 64x64 picture (AutoReset, vmapped, in a scan), beside the
+           same loop without the picture (physics, reward and hint only)
   ceiling  the encoder + heads' own update rate: samples/s of one forward+backward+Adam step
            of the hints/fc network at batch 8192 (nothing else in the graph)
   train    end-to-end training (rollout, GAE, epochs of minibatch updates), seed-vmapped:
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import time
 
@@ -38,23 +40,26 @@ def best_time(fn, *args, repeats: int = 3) -> float:
     return min(times)
 
 
-def bench_env(num_envs: int, steps: int) -> dict:
-    env = envs.AutoReset(envs.make("pendulum", "composite"))
-    params = envs.make_params("pendulum")
+def bench_env(name: str, num_envs: int, steps: int, pixels: bool = True) -> dict:
+    observe = ("pixels", "hint") if pixels else ("hint",)
+    env = envs.AutoReset(envs.make(name, "composite", observe))
+    params = envs.make_params(name)
     ts = jax.jit(jax.vmap(env.reset, in_axes=(0, None)))(jax.random.split(jax.random.key(0), num_envs), params)
 
     @jax.jit
     def roll(state, key):
         def step(state, key):
             k_act, k_env = jax.random.split(key)
-            action = jax.random.uniform(k_act, (num_envs, 1), minval=-2, maxval=2)
+            action = jax.random.uniform(k_act, (num_envs, env.action_size), minval=-1, maxval=1)
             out = jax.vmap(env.step, in_axes=(0, 0, 0, None))(jax.random.split(k_env, num_envs), state, action, params)
-            return out.state, out.obs["pixels"][:, 32, 32, 0].sum() + out.reward.sum()
+            seen = out.obs["pixels"][:, 32, 32, 0].sum() if pixels else out.obs["hint"].sum()
+            return out.state, seen + out.reward.sum()
 
         return jax.lax.scan(step, state, jax.random.split(key, steps))
 
     seconds = best_time(roll, ts.state, jax.random.key(1))
-    return {"num_envs": num_envs, "steps": steps, "env_steps_per_s": num_envs * steps / seconds}
+    return {"env": name, "pixels": pixels, "num_envs": num_envs, "steps": steps,
+            "env_steps_per_s": num_envs * steps / seconds}
 
 
 def bench_ceiling(batch: int) -> dict:
@@ -85,8 +90,8 @@ def bench_ceiling(batch: int) -> dict:
     return {"batch": batch, "update_samples_per_s": batch / seconds}
 
 
-def bench_train(seeds: int, updates: int, overrides: dict) -> dict:
-    values = {"env": "pendulum", "agent": "hints", "scheme": "fc", "hint": "composite", "seeds": seeds,
+def bench_train(name: str, seeds: int, updates: int, overrides: dict) -> dict:
+    values = {"env": name, "agent": "hints", "scheme": "fc", "hint": "composite", "seeds": seeds,
               "ppo": {"total_env_steps": 10**9, **overrides}}
     cfg = run_config(values)
     trainer = make_trainer(cfg)
@@ -96,7 +101,7 @@ def bench_train(seeds: int, updates: int, overrides: dict) -> dict:
     seconds = best_time(lambda s: run(s, updates)[1]["env_steps"], state, repeats=2)
     env_steps = seeds * updates * cfg.ppo.batch_size
     return {
-        "seeds": seeds, "updates": updates, "ppo": {k: getattr(cfg.ppo, k) for k in ("num_envs", "batch_size", "epochs", "minibatch_size")},
+        "env": name, "seeds": seeds, "updates": updates, "ppo": {k: getattr(cfg.ppo, k) for k in ("num_envs", "batch_size", "epochs", "minibatch_size")},
         "env_steps_per_s": env_steps / seconds,
         "grad_samples_per_s": env_steps * cfg.ppo.epochs / seconds,
     }
@@ -104,26 +109,36 @@ def bench_train(seeds: int, updates: int, overrides: dict) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--envs", default="pendulum", help=f"comma-separated subset of {envs.env_names()}")
     parser.add_argument("--quick", action="store_true", help="small sizes (a CPU smoke run)")
     parser.add_argument("--out", default=None, help="write the results as JSON here")
     args = parser.parse_args()
+    names = [n.strip() for n in args.envs.split(",") if n.strip()]
+    unknown = [n for n in names if n not in envs.REGISTRY]
+    if unknown:
+        parser.exit(2, f"error: unknown env {unknown}; valid choices: {', '.join(envs.env_names())}\n")
     q = args.quick
     results = {"device": str(jax.devices()[0].device_kind), "platform": jax.default_backend(),
-               "jax": jax.__version__, "python": platform.python_version()}
-    results["env"] = [bench_env(n, 200 if not q else 20) for n in ((4096, 16384, 65536) if not q else (64,))]
-    for r in results["env"]:
-        print(f"env     {r['num_envs']:>6} envs: {r['env_steps_per_s']:,.0f} env steps/s (with 64x64 picture)", flush=True)
+               "jax": jax.__version__, "python": platform.python_version(), "xla_flags": os.environ.get("XLA_FLAGS", "")}
     results["ceiling"] = bench_ceiling(8192 if not q else 64)
     ceiling = results["ceiling"]["update_samples_per_s"]
     print(f"ceiling batch {results['ceiling']['batch']}: {ceiling:,.0f} samples/s (fwd+bwd+Adam)", flush=True)
-    results["train"] = []
-    for seeds, overrides in (((5, {}), (32, {}), (32, {"num_envs": 64, "minibatch_size": 1024, "epochs": 8})) if not q
-                             else ((2, {"num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}),)):
-        r = bench_train(seeds, 8 if not q else 2, overrides)
-        r["fraction_of_ceiling"] = r["grad_samples_per_s"] / ceiling
-        results["train"].append(r)
-        print(f"train   {seeds:>3} seeds {r['ppo']}: {r['env_steps_per_s']:,.0f} env steps/s, "
-              f"{r['grad_samples_per_s']:,.0f} grad samples/s = {r['fraction_of_ceiling']:.0%} of ceiling", flush=True)
+    results["env"], results["train"] = [], []
+    for name in names:
+        for n in ((4096, 65536) if not q else (64,)):
+            for pixels in (False, True):
+                r = bench_env(name, n, 100 if not q else 10, pixels)
+                results["env"].append(r)
+                print(f"env     {name:>9} {n:>6} envs: {r['env_steps_per_s']:>14,.0f} env steps/s "
+                      f"({'with 64x64 picture' if pixels else 'physics, reward, hint'})", flush=True)
+        settings = (((5, {}), (5, {"num_envs": 64}), (32, {}), (32, {"num_envs": 64, "minibatch_size": 1024}))
+                    if not q else ((2, {"num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}),))
+        for seeds, overrides in settings:
+            r = bench_train(name, seeds, 8 if not q else 2, overrides)
+            r["fraction_of_ceiling"] = r["grad_samples_per_s"] / ceiling
+            results["train"].append(r)
+            print(f"train   {name:>9} {seeds:>3} seeds {r['ppo']}: {r['env_steps_per_s']:,.0f} env steps/s, "
+                  f"{r['grad_samples_per_s']:,.0f} grad samples/s = {r['fraction_of_ceiling']:.0%} of ceiling", flush=True)
     if args.out:
         with open(args.out, "w") as f:
             json.dump(results, f, indent=1)

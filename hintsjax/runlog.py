@@ -82,8 +82,23 @@ def read_curves(path: Path, metric: str = "episode_return") -> tuple[np.ndarray,
     return steps, values
 
 
+def mean_confidence_band(values: np.ndarray, level: float = 0.95, resamples: int = 1000,
+                         seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(mean, low, high) over seeds (axis 0) per column, with a percentile-bootstrap confidence
+    band for the mean (seeds resampled with replacement). NaN seeds are ignored per column."""
+    rng = np.random.default_rng(seed)
+    picks = rng.integers(0, values.shape[0], (resamples, values.shape[0]))
+    with warnings.catch_warnings():  # columns before any episode ended are all-NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        means = np.nanmean(values[picks], axis=1)  # [resamples, U]
+        tail = 100 * (1 - level) / 2
+        low, high = np.nanpercentile(means, [tail, 100 - tail], axis=0)
+        return np.nanmean(values, axis=0), low, high
+
+
 def plot_curves(curves: dict[str, tuple[np.ndarray, np.ndarray]], out: Path, title: str = "") -> None:
-    """One line per label (mean over seeds) with a +-1 std band; x is environment steps."""
+    """One line per label (mean over seeds) with a 95% bootstrap confidence band for the mean;
+    x is environment steps."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -91,13 +106,11 @@ def plot_curves(curves: dict[str, tuple[np.ndarray, np.ndarray]], out: Path, tit
 
     fig, ax = plt.subplots(figsize=(6, 4), dpi=120)
     for label, (steps, values) in curves.items():
-        with warnings.catch_warnings():  # updates before any episode ended are all-NaN
-            warnings.simplefilter("ignore", RuntimeWarning)
-            mean, std = np.nanmean(values, axis=0), np.nanstd(values, axis=0)
+        mean, low, high = mean_confidence_band(values)
         ax.plot(steps, mean, label=f"{label} (n={values.shape[0]})")
-        ax.fill_between(steps, mean - std, mean + std, alpha=0.2)
+        ax.fill_between(steps, low, high, alpha=0.2)
     ax.set_xlabel("environment steps")
-    ax.set_ylabel("training episode return")
+    ax.set_ylabel("training episode return (mean, 95% CI)")
     ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
