@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -147,7 +148,7 @@ def budget(run_id: str) -> float:
 
     env, label = run_id.split("/")
     cfg = run_config(run_values(env, label, 1))
-    return cfg.ppo.total_env_steps * (3.0 if env == "idp" else 1.0) * (1.0 if cfg.agent_spec.pixels else 0.3)
+    return cfg.ppo.total_env_steps * (1.0 if cfg.agent_spec.pixels else 0.3)
 
 
 def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int, smoke: bool) -> None:
@@ -160,30 +161,35 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int, 
     start = time.time()
     active: list[tuple[str, subprocess.Popen]] = []
     failed: list[str] = []
-    while todo or active:
-        while todo and len(active) < workers:
-            run_id = todo.pop(0)
-            (runs / run_id).mkdir(parents=True, exist_ok=True)
-            log = open(runs / run_id / "train.log", "w")
-            cmd = [sys.executable, __file__, "--runs", str(runs), "--seeds", str(seeds), "--one", run_id,
-                   *(["--smoke"] if smoke else [])]
-            active.append((run_id, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env)))
-        time.sleep(2)
-        for run_id, proc in list(active):
-            if proc.poll() is None:
-                continue
-            active.remove((run_id, proc))
-            ok = proc.returncode == 0
-            if not ok:
-                failed.append(run_id)
-            print(f"[{time.time() - start:6.0f} s] {run_id}: {'done' if ok else f'FAILED (see {runs / run_id}/train.log)'}",
-                  flush=True)
-    seconds = time.time() - start
-    record = {"table": table, "runs": len(run_ids), "trained": len(todo_count) - len(failed), "failed": failed,
-              "workers": workers, "seconds": seconds, "finished": time.strftime("%Y-%m-%d %H:%M:%S")}
-    with open(runs / "sweeps.jsonl", "a") as f:
-        f.write(json.dumps(record) + "\n")
-    print(f"table {table}: {seconds:.0f} s wall-clock", flush=True)
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # `timeout` stops the sweep: record it below
+    try:
+        while todo or active:
+            while todo and len(active) < workers:
+                run_id = todo.pop(0)
+                (runs / run_id).mkdir(parents=True, exist_ok=True)
+                log = open(runs / run_id / "train.log", "w")
+                cmd = [sys.executable, __file__, "--runs", str(runs), "--seeds", str(seeds), "--one", run_id,
+                       *(["--smoke"] if smoke else [])]
+                active.append((run_id, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env)))
+            time.sleep(2)
+            for run_id, proc in list(active):
+                if proc.poll() is None:
+                    continue
+                active.remove((run_id, proc))
+                if proc.returncode:
+                    failed.append(run_id)
+                print(f"[{time.time() - start:6.0f} s] {run_id}: "
+                      f"{'FAILED (see ' + str(runs / run_id / 'train.log') + ')' if proc.returncode else 'done'}", flush=True)
+    finally:
+        for _, proc in active:  # interrupted: these runs are retrained by the next sweep
+            proc.terminate()
+        seconds = time.time() - start
+        record = {"table": table, "runs": len(run_ids), "trained": len(todo_count) - len(failed) - len(active) - len(todo),
+                  "failed": failed, "interrupted": [r for r, _ in active], "workers": workers, "seconds": seconds,
+                  "finished": time.strftime("%Y-%m-%d %H:%M:%S")}
+        with open(runs / "sweeps.jsonl", "a") as f:
+            f.write(json.dumps(record) + "\n")
+        print(f"table {table}: {seconds:.0f} s wall-clock" + (f", {len(active)} runs interrupted" if active else ""), flush=True)
     if failed:
         sys.exit(1)
 
