@@ -47,9 +47,9 @@ def make_evaluator(
         k_reset, k_run = jax.random.split(key)
         ts = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_reset, num_episodes), task_params)
 
-        def step(carry, key):
-            state, obs, ret, length, alive = carry
-            k_act, k_env = jax.random.split(key)
+        def step(carry):
+            t, state, obs, ret, length, alive = carry
+            k_act, k_env = jax.random.split(jax.random.fold_in(k_run, t))
             mean, log_std, _ = network.apply(params, obs)
             action = mean + stochastic * jnp.exp(log_std) * jax.random.normal(k_act, mean.shape)
             ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
@@ -58,11 +58,13 @@ def make_evaluator(
             ret = ret + jnp.where(alive, ts.reward, 0.0)
             length = length + alive
             alive = alive & ~(ts.terminated | ts.truncated)
-            return (ts.state, ts.obs, ret, length, alive), None
+            return t + 1, ts.state, ts.obs, ret, length, alive
 
+        # Stop as soon as every episode has ended (early terminations make this much shorter
+        # than max_steps); episodes never run past the time limit, which ends them all.
         zeros = jnp.zeros(num_episodes)
-        init = (ts.state, ts.obs, zeros, zeros.astype(jnp.int32), jnp.ones(num_episodes, bool))
-        (_, _, ret, length, _), _ = jax.lax.scan(step, init, jax.random.split(k_run, env.max_steps))
+        init = (jnp.zeros((), jnp.int32), ts.state, ts.obs, zeros, zeros.astype(jnp.int32), jnp.ones(num_episodes, bool))
+        _, _, _, ret, length, _ = jax.lax.while_loop(lambda c: c[-1].any(), step, init)
         return EvalResult(ret, length)
 
     return evaluate
