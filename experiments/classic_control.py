@@ -246,7 +246,10 @@ def report(runs: Path) -> None:
         "(deterministic policy); in brackets the std of the 5 per-seed means, which is the honest",
         "error bar for comparing agents. Budgets (env steps per seed): pendulum 200 K (1000 episodes),",
         "acrobot 350 K (700 episodes of 500 steps), idp 200 K (see hintsjax/config.py ENV_DEFAULTS).",
-        "The paper's cells are mean ± std over n=50; where the paper has no cell, '-'.",
+        "The paper's cells are mean ± std over n=50; where the paper has no cell, '-'; where we have",
+        "not run a configuration yet, '-'. Per-run wall-clock (one H100) includes compilation and",
+        "evaluation, with 3 to 6 runs sharing the GPU (time-sliced) in the sweeps of 2026-11-22 05:30-06:05;",
+        "the pendulum rows trained before then (all but torque and ppo_noisy_state) ran one at a time.",
         "",
     ]
     lines = ["# Classic control: the paper's Table 2, reproduced", "", *head]
@@ -267,7 +270,8 @@ def report(runs: Path) -> None:
                   if (runs / env / label / "metrics.csv").exists()}
         if curves:
             plot_curves(curves, RESULTS / f"classic_curves_{env}.png", f"{env}: Table 2 agents, 5 seeds")
-    lines += [f"Sweep wall-clock (all Table 2 runs, as trained by `--table 2`): {sweep_seconds(runs, 2):.0f} s.",
+    lines += [f"Sweep wall-clock recorded in {runs}/sweeps.jsonl for `--table 2`: {sweep_seconds(runs, 2):.0f} s "
+              "(it includes runs that the 10-minute limit of a GPU call interrupted and a later call retrained).",
               "expert_ppo, dagger and gail are issue 6 (not yet run)."]
     (RESULTS / "classic_table2.md").write_text("\n".join(lines) + "\n")
 

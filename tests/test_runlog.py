@@ -1,0 +1,31 @@
+"""Learning-curve statistics: the bootstrap confidence band of the mean over seeds."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hintsjax.runlog import mean_confidence_band
+
+
+def test_band_brackets_the_mean_and_shrinks_with_agreement():
+    rng = np.random.default_rng(0)
+    spread = rng.normal(0.0, 10.0, (5, 40))
+    mean, low, high = mean_confidence_band(spread)
+    np.testing.assert_allclose(mean, spread.mean(0))
+    assert np.all(low <= mean) and np.all(mean <= high)
+    # Seeds that agree give a zero-width band; a band never exceeds the seeds' own range.
+    same = np.tile(np.arange(40.0), (5, 1))
+    _, low_same, high_same = mean_confidence_band(same)
+    np.testing.assert_allclose(low_same, same[0])
+    np.testing.assert_allclose(high_same, same[0])
+    assert np.all(low >= spread.min(0)) and np.all(high <= spread.max(0))
+    # For 5 normal seeds the 95% band of the mean is about +-2 sigma/sqrt(5) wide on each side.
+    width = np.median(high - low)
+    assert 0.5 * 2 * 1.96 * 10 / np.sqrt(5) < width < 1.5 * 2 * 1.96 * 10 / np.sqrt(5)
+
+
+def test_nan_seeds_are_ignored():
+    values = np.array([[np.nan, 1.0, 2.0], [np.nan, 3.0, np.nan]])
+    mean, low, high = mean_confidence_band(values)
+    assert np.isnan(mean[0]) and mean[1] == 2.0 and mean[2] == 2.0
+    assert low[1] >= 1.0 and high[1] <= 3.0
