@@ -41,7 +41,7 @@ def cli(*args: str, cwd: Path, module: str = "hintsjax.run") -> subprocess.Compl
 
 
 BAD_RUN_ARGS = {
-    "env=nope": "valid choices: pendulum",
+    "env=nope": "valid choices: acrobot, idp, pendulum",
     "agent=nope": "valid choices: hints, hints_blind, hints_state, ppo_noisy_state, ppo_rgb, ppo_state",
     "scheme=nope": "valid choices: ac, fc, lc, mc",
     "hint=nope": "valid choices: angular_velocity, composite, goal_distance, partial_state, state, torque",
@@ -51,12 +51,14 @@ BAD_RUN_ARGS = {
     "ppo.num_envs=-4": "ppo.num_envs must be positive",
     "ppo.minibatch_size=300": "multiple of ppo.minibatch_size",
     "resume=no/such/run": "no run folder",
+    "env=acrobot hint=torque": "valid choices: angular_velocity_1, angular_velocity_2, composite, goal_distance, joint, partial_state, state",
+    "env=idp variant=swingto": "valid choices: standard",
 }
 
 
 @pytest.mark.parametrize("arg", list(BAD_RUN_ARGS))
 def test_bad_input_exits_2_with_one_line_and_writes_nothing(arg, tmp_path):
-    out = cli(arg, "out_dir=runs", cwd=tmp_path)
+    out = cli(*arg.split(), "out_dir=runs", cwd=tmp_path)
     assert out.returncode == 2, out.stderr
     lines = out.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: "), out.stderr
@@ -180,3 +182,14 @@ def test_seeds_sharded_over_two_devices_give_the_single_device_result(finished_r
     single = json.loads((finished_run / "eval.json").read_text())["evaluations"]
     for a, b in zip(sharded, single):
         np.testing.assert_allclose(a["returns"], b["returns"], rtol=1e-4)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("env", ["acrobot", "idp"])
+def test_classic_envs_train_from_the_command_line(env, tmp_path):
+    """Every env runs through the same learner: a pixel agent with the mask scheme, end to end
+    (slow: compiling an MJX env inside the trainer takes one to two minutes on 2 CPU cores)."""
+    values = tiny_values(env=env, agent="hints", scheme="mc", hint="composite", out_dir=str(tmp_path), name="r")
+    assert run.main_from_values(values) == 0
+    result = json.loads((tmp_path / "r" / "eval.json").read_text())
+    assert result["env"] == env and np.isfinite(result["evaluations"][0]["mean"])
