@@ -15,13 +15,13 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import mujoco
 from flax import struct
 from mujoco import mjx
 
 from hintsjax.envs import raster
-from hintsjax.envs.core import Env, Step
-from hintsjax.envs.hints import register_composite, register_hint
+from hintsjax.envs.core import Step
+from hintsjax.envs.hints import register_hint, register_link_velocity_hints
+from hintsjax.envs.mjx_env import MjxEnv
 from hintsjax.envs.pendulum import wrap_angle
 
 NAME = "acrobot"
@@ -93,15 +93,12 @@ def link_ends(qpos: jax.Array) -> tuple[jax.Array, jax.Array]:
     return elbow, tip
 
 
-class Acrobot(Env):
+class Acrobot(MjxEnv):
     name = NAME
+    mjcf = MJCF
     max_steps = 500
     action_size = 1
 
-    def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
-        self.mj_model = mujoco.MjModel.from_xml_string(MJCF)
-        self.model = mjx.put_model(self.mj_model)
 
     def default_params(self) -> AcrobotParams:
         return VARIANTS["standard"]
@@ -155,22 +152,7 @@ def tip_height(state: AcrobotState) -> jax.Array:
 # -- hints (SPEC section 3) ---------------------------------------------------------------------
 
 
-@register_hint(NAME, "angular_velocity_1", dim=1, unit="rad/s")
-def angular_velocity_1(state: AcrobotState, params: AcrobotParams) -> jax.Array:
-    """dtheta1/dt, the shoulder's angular velocity."""
-    return state.qvel[0]
-
-
-@register_hint(NAME, "angular_velocity_2", dim=1, unit="rad/s")
-def angular_velocity_2(state: AcrobotState, params: AcrobotParams) -> jax.Array:
-    """dtheta2/dt, the elbow's angular velocity (relative to the first link)."""
-    return state.qvel[1]
-
-
-@register_hint(NAME, "joint", dim=1, unit="rad/s")
-def joint(state: AcrobotState, params: AcrobotParams) -> jax.Array:
-    """dtheta1/dt + dtheta2/dt: the second link's absolute angular velocity."""
-    return state.qvel[0] + state.qvel[1]
+register_link_velocity_hints(NAME, lambda state: state.qvel)
 
 
 @register_hint(NAME, "goal_distance", dim=1, unit="m")
@@ -191,5 +173,3 @@ def full_state(state: AcrobotState, params: AcrobotParams) -> jax.Array:
     """[cos t1, sin t1, cos t2, sin t2, dt1, dt2]: the full state observation."""
     return observation(state)
 
-
-register_composite(NAME, "composite", ("angular_velocity_1", "angular_velocity_2"))

@@ -57,6 +57,29 @@ def register_composite(env: str, name: str, parts: tuple[str, ...]) -> None:
     _COMPOSITES.setdefault(env, {})[name] = tuple(parts)
 
 
+def register_link_velocity_hints(env: str, link_velocities: Callable[[Any], jax.Array]) -> None:
+    """The hints that acrobot and idp share (SPEC section 3), from `link_velocities(state)`, the
+    float32[2] speeds (rad/s) of the two hinges, the second relative to the first:
+    `angular_velocity_1`, `angular_velocity_2`, `joint` (their sum, the second link's absolute
+    angular velocity) and `composite` = [angular_velocity_1, angular_velocity_2]."""
+
+    def angular_velocity_1(state, params):
+        """The first hinge's angular velocity."""
+        return link_velocities(state)[0]
+
+    def angular_velocity_2(state, params):
+        """The second hinge's angular velocity, relative to the first link."""
+        return link_velocities(state)[1]
+
+    def joint(state, params):
+        """The sum of both: the second link's absolute angular velocity."""
+        return link_velocities(state).sum()
+
+    for fn in (angular_velocity_1, angular_velocity_2, joint):
+        register_hint(env, fn.__name__, dim=1, unit="rad/s")(fn)
+    register_composite(env, "composite", ("angular_velocity_1", "angular_velocity_2"))
+
+
 def hint_names(env: str) -> list[str]:
     """Every hint name registered for `env`, composites included."""
     return sorted({*_HINTS.get(env, {}), *_COMPOSITES.get(env, {})})

@@ -21,13 +21,13 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import mujoco
 from flax import struct
 from mujoco import mjx
 
 from hintsjax.envs import raster
-from hintsjax.envs.core import Env, Step
-from hintsjax.envs.hints import register_composite, register_hint
+from hintsjax.envs.core import Step
+from hintsjax.envs.hints import register_hint, register_link_velocity_hints
+from hintsjax.envs.mjx_env import MjxEnv
 
 NAME = "idp"
 
@@ -104,22 +104,18 @@ def pole_ends(qpos: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
     return cart, hinge, tip
 
 
-class InvertedDoublePendulum(Env):
+class InvertedDoublePendulum(MjxEnv):
     name = NAME
+    mjcf = MJCF
     max_steps = 1000
     action_size = 1
 
-    def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
-        self.mj_model = mujoco.MjModel.from_xml_string(MJCF)
-        self.model = mjx.put_model(self.mj_model)
-        self._tip = self.mj_model.site("tip").id
 
     def default_params(self) -> IDPParams:
         return VARIANTS["standard"]
 
     def _state(self, data: mjx.Data, t: jax.Array) -> IDPState:
-        tip = data.site_xpos[self._tip][jnp.array([0, 2])]
+        tip = data.site_xpos[self.site_ids["tip"]][jnp.array([0, 2])]
         return IDPState(data.qpos, data.qvel, tip, data.qfrc_constraint[0], t)
 
     def state_at(self, qpos, qvel, t=0) -> IDPState:
@@ -181,22 +177,7 @@ def observation(state: IDPState) -> jax.Array:
 # -- hints (SPEC section 3) ---------------------------------------------------------------------
 
 
-@register_hint(NAME, "angular_velocity_1", dim=1, unit="rad/s")
-def angular_velocity_1(state: IDPState, params: IDPParams) -> jax.Array:
-    """dphi1/dt, the lower pole's angular velocity."""
-    return state.qvel[1]
-
-
-@register_hint(NAME, "angular_velocity_2", dim=1, unit="rad/s")
-def angular_velocity_2(state: IDPState, params: IDPParams) -> jax.Array:
-    """dphi2/dt, the upper pole's angular velocity relative to the lower one."""
-    return state.qvel[2]
-
-
-@register_hint(NAME, "joint", dim=1, unit="rad/s")
-def joint(state: IDPState, params: IDPParams) -> jax.Array:
-    """dphi1/dt + dphi2/dt: the upper pole's absolute angular velocity."""
-    return state.qvel[1] + state.qvel[2]
+register_link_velocity_hints(NAME, lambda state: state.qvel[1:])
 
 
 @register_hint(NAME, "goal_distance", dim=1, unit="m")
@@ -217,5 +198,3 @@ def full_state(state: IDPState, params: IDPParams) -> jax.Array:
     """The full state observation."""
     return observation(state)
 
-
-register_composite(NAME, "composite", ("angular_velocity_1", "angular_velocity_2"))

@@ -16,13 +16,13 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import mujoco
 from flax import struct
 from mujoco import mjx
 
 from hintsjax.envs import raster
-from hintsjax.envs.core import Env, Step
+from hintsjax.envs.core import Step
 from hintsjax.envs.hints import register_composite, register_hint
+from hintsjax.envs.mjx_env import MjxEnv
 
 NAME = "pendulum"
 
@@ -91,16 +91,12 @@ def wrap_angle(x: jax.Array) -> jax.Array:
     return ((x + jnp.pi) % (2 * jnp.pi)) - jnp.pi
 
 
-class Pendulum(Env):
+class Pendulum(MjxEnv):
     name = NAME
+    mjcf = MJCF
     max_steps = 200
     action_size = 1
 
-    def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
-        self.mj_model = mujoco.MjModel.from_xml_string(MJCF)
-        self.model = mjx.put_model(self.mj_model)
-        self._tip = self.mj_model.site("tip").id
 
     def default_params(self) -> PendulumParams:
         return VARIANTS["swingup"]
@@ -135,7 +131,7 @@ class Pendulum(Env):
     def tip(self, state: PendulumState) -> jax.Array:
         """float32[2] world (x, z) of the rod's tip, from MJX's kinematics."""
         data = self._mjx_data(state, jnp.zeros(()))
-        return data.site_xpos[self._tip][jnp.array([0, 2])]
+        return data.site_xpos[self.site_ids["tip"]][jnp.array([0, 2])]
 
     def render(self, state: PendulumState, params: PendulumParams) -> jax.Array:
         """uint8[64, 64, 3]: white ground, grey goal line, red rod, black pivot."""
