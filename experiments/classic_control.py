@@ -156,7 +156,7 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int, 
     todo = sorted((r for r in run_ids if not (runs / r / "eval.json").exists()), key=budget, reverse=True)
     print(f"table {table}: {len(run_ids) - len(todo)} of {len(run_ids)} runs done already; "
           f"training {len(todo)} with {workers} worker(s)", flush=True)
-    todo_count = list(todo)
+    pending = list(todo)
     env = {**CHILD_ENVIRON, "XLA_PYTHON_CLIENT_MEM_FRACTION": f"{0.9 / workers:.3f}"}
     start = time.time()
     active: list[tuple[str, subprocess.Popen]] = []
@@ -184,7 +184,7 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int, 
         for _, proc in active:  # interrupted: these runs are retrained by the next sweep
             proc.terminate()
         seconds = time.time() - start
-        record = {"table": table, "runs": len(run_ids), "trained": len(todo_count) - len(failed) - len(active) - len(todo),
+        record = {"table": table, "runs": len(run_ids), "trained": len(pending) - len(failed) - len(active) - len(todo),
                   "failed": failed, "interrupted": [r for r, _ in active], "workers": workers, "seconds": seconds,
                   "finished": time.strftime("%Y-%m-%d %H:%M:%S")}
         with open(runs / "sweeps.jsonl", "a") as f:
@@ -212,6 +212,14 @@ def cell(result: dict | None, variant: int = 0) -> str:
 
 def mean_of(result: dict | None) -> float | None:
     return None if result is None else result["evaluations"][0]["mean"]
+
+
+def wall_clock(result: dict | None) -> str:
+    """A run's wall-clock in seconds, marked when it ran on a CPU rather than the GPU."""
+    if result is None:
+        return "-"
+    on_cpu = result.get("device", "").lower() == "cpu"
+    return f"{result['wall_seconds']:.0f}" + (" (CPU)" if on_cpu else "")
 
 
 def sweep_seconds(runs: Path, table: int) -> float:
@@ -263,7 +271,7 @@ def report(runs: Path) -> None:
             row = f"| {label} | {cell(result)} | {PAPER_TABLE2[env].get(label, '-')} |"
             if deploy:
                 row += f" {cell(result, 1)} | {PAPER_SWINGTO.get(label, '-')} |"
-            row += f" {result['wall_seconds']:.0f} |" if result else " - |"
+            row += f" {wall_clock(result)} |"
             lines.append(row)
         lines += ["", findings(runs, env), "", f"![{env} learning curves](classic_curves_{env}.png)", ""]
         curves = {label: read_curves(runs / env / label / "metrics.csv") for label in table_runs(2, env)

@@ -104,7 +104,7 @@ def plot_curves(curves: dict[str, tuple[np.ndarray, np.ndarray]], out: Path, tit
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6, 4), dpi=120)
+    fig, ax = plt.subplots(figsize=(8.5, 4), dpi=120)
     for label, (steps, values) in curves.items():
         mean, low, high = mean_confidence_band(values)
         ax.plot(steps, mean, label=f"{label} (n={values.shape[0]})")
@@ -113,7 +113,7 @@ def plot_curves(curves: dict[str, tuple[np.ndarray, np.ndarray]], out: Path, tit
     ax.set_ylabel("training episode return (mean, 95% CI)")
     ax.set_title(title)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))  # beside the axes, off the curves
     fig.tight_layout()
     fig.savefig(out)
     plt.close(fig)
