@@ -27,8 +27,9 @@ test: setup
 test-slow: setup
 	$(BIN)/python -m pytest -q -m slow
 
+BENCH_ENVS ?= pendulum,acrobot,idp
 bench: setup
-	$(BIN)/python experiments/bench.py
+	$(BIN)/python experiments/bench.py --envs $(BENCH_ENVS)
 
 clean:
 	rm -rf $(VENV) runs

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import optax
 
 from hintsjax import envs
-from hintsjax.config import run_config
+from hintsjax.config import ENV_DEFAULTS, run_config
 from hintsjax.ppo import gaussian_log_prob, make_network, make_optimizer, make_trainer
 
 
@@ -42,7 +42,7 @@ def best_time(fn, *args, repeats: int = 3) -> float:
 
 def bench_env(name: str, num_envs: int, steps: int, pixels: bool = True) -> dict:
     observe = ("pixels", "hint") if pixels else ("hint",)
-    env = envs.AutoReset(envs.make(name, "composite", observe))
+    env = envs.AutoReset(envs.make(name, ENV_DEFAULTS[name].get("hint", envs.NO_HINT), observe))
     params = envs.make_params(name)
     ts = jax.jit(jax.vmap(env.reset, in_axes=(0, None)))(jax.random.split(jax.random.key(0), num_envs), params)
 
@@ -91,7 +91,7 @@ def bench_ceiling(batch: int) -> dict:
 
 
 def bench_train(name: str, seeds: int, updates: int, overrides: dict) -> dict:
-    values = {"env": name, "agent": "hints", "scheme": "fc", "hint": "composite", "seeds": seeds,
+    values = {"env": name, "agent": "hints", "scheme": "fc", "seeds": seeds,  # the env's default hint
               "ppo": {"total_env_steps": 10**9, **overrides}}
     cfg = run_config(values)
     trainer = make_trainer(cfg)
