@@ -1,7 +1,7 @@
 """The paper's classic control tables (pendulum, acrobot, idp): Table 2 and Table 4, reproduced.
 
     python experiments/classic_control.py --table 2 [--envs acrobot,idp] [--workers 4]
-    python experiments/classic_control.py --table 4 [--workers 4]
+    python experiments/classic_control.py --table 4 [--workers 4] [--launch-until 300]
     python experiments/classic_control.py --report       # markdown tables and learning curves
 
 Table 2: per env PPO-RGB, PPO-x, PPO-x+N(0,1) and HINTS-FC with every hint the env registers.
@@ -151,12 +151,15 @@ def budget(run_id: str) -> float:
     return cfg.ppo.total_env_steps * (1.0 if cfg.agent_spec.pixels else 0.3)
 
 
-def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int, smoke: bool) -> None:
-    """Train every unfinished run, `workers` processes at a time; append the sweep's wall-clock."""
+def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int, smoke: bool,
+          launch_until: float = float("inf")) -> None:
+    """Train every unfinished run, `workers` processes at a time, starting none after
+    `launch_until` seconds (so that a time-limited call ends with finished runs, not killed
+    ones); append the sweep's wall-clock to runs/sweeps.jsonl."""
     todo = sorted((r for r in run_ids if not (runs / r / "eval.json").exists()), key=budget, reverse=True)
     print(f"table {table}: {len(run_ids) - len(todo)} of {len(run_ids)} runs done already; "
           f"training {len(todo)} with {workers} worker(s)", flush=True)
-    pending = list(todo)
+    launched = 0
     env = {**CHILD_ENVIRON, "XLA_PYTHON_CLIENT_MEM_FRACTION": f"{0.9 / workers:.3f}"}
     start = time.time()
     active: list[tuple[str, subprocess.Popen]] = []
@@ -164,6 +167,10 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int, 
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # `timeout` stops the sweep: record it below
     try:
         while todo or active:
+            if todo and time.time() - start > launch_until:
+                print(f"[{time.time() - start:6.0f} s] --launch-until reached: {len(todo)} runs left for the next sweep",
+                      flush=True)
+                todo = []
             while todo and len(active) < workers:
                 run_id = todo.pop(0)
                 (runs / run_id).mkdir(parents=True, exist_ok=True)
@@ -171,6 +178,7 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int, 
                 cmd = [sys.executable, __file__, "--runs", str(runs), "--seeds", str(seeds), "--one", run_id,
                        *(["--smoke"] if smoke else [])]
                 active.append((run_id, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env)))
+                launched += 1
             time.sleep(2)
             for run_id, proc in list(active):
                 if proc.poll() is None:
@@ -184,7 +192,7 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int, 
         for _, proc in active:  # interrupted: these runs are retrained by the next sweep
             proc.terminate()
         seconds = time.time() - start
-        record = {"table": table, "runs": len(run_ids), "trained": len(pending) - len(failed) - len(active) - len(todo),
+        record = {"table": table, "runs": len(run_ids), "trained": launched - len(failed) - len(active),
                   "failed": failed, "interrupted": [r for r, _ in active], "workers": workers, "seconds": seconds,
                   "finished": time.strftime("%Y-%m-%d %H:%M:%S")}
         with open(runs / "sweeps.jsonl", "a") as f:
@@ -309,6 +317,8 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=1, help="configurations trained at once")
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--smoke", action="store_true", help="tiny budgets: check the plumbing on a CPU")
+    parser.add_argument("--launch-until", type=float, default=float("inf"), metavar="SECONDS",
+                        help="start no run after this many seconds; running ones finish (for time-limited machines)")
     parser.add_argument("--one", help=argparse.SUPPRESS)  # env/label: one run, in a worker process
     args = parser.parse_args()
     if args.one:
@@ -328,7 +338,7 @@ def main() -> None:
     run_ids = [f"{env}/{label}" for env in names for label in table_runs(args.table, env)]
     if args.table == 4:  # the fc row is Table 2's
         run_ids = [r for r in run_ids if "-fc-" not in r or not (args.runs / r / "eval.json").exists()]
-    sweep(args.runs, run_ids, args.workers, args.seeds, args.table, args.smoke)
+    sweep(args.runs, run_ids, args.workers, args.seeds, args.table, args.smoke, args.launch_until)
 
 
 if __name__ == "__main__":
