@@ -125,16 +125,14 @@ def train_one(runs: Path, run_id: str, seeds: int, smoke: bool) -> None:
     import jax
 
     from hintsjax import run
-    from hintsjax.config import CONFIG_YAML, run_config, to_dict
-
-    import yaml
+    from hintsjax.config import run_config, save_run_config
 
     env, label = run_id.split("/")
     cfg = run_config(run_values(env, label, seeds, smoke))
     assert cfg.label == label, (cfg.label, label)
     folder = runs / env / label
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / CONFIG_YAML).write_text(yaml.safe_dump(to_dict(cfg), sort_keys=False))
+    save_run_config(folder, cfg)
     t = time.time()
     results = run.train(cfg, folder, progress=False)
     results["wall_seconds"] = time.time() - t
@@ -162,7 +160,7 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int, 
     launched = 0
     env = {**CHILD_ENVIRON, "XLA_PYTHON_CLIENT_MEM_FRACTION": f"{0.9 / workers:.3f}"}
     start = time.time()
-    active: list[tuple[str, subprocess.Popen]] = []
+    active: list[tuple[str, subprocess.Popen]] = []  # each worker writes its own train.log
     failed: list[str] = []
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # `timeout` stops the sweep: record it below
     try:
@@ -174,10 +172,10 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int, 
             while todo and len(active) < workers:
                 run_id = todo.pop(0)
                 (runs / run_id).mkdir(parents=True, exist_ok=True)
-                log = open(runs / run_id / "train.log", "w")
                 cmd = [sys.executable, __file__, "--runs", str(runs), "--seeds", str(seeds), "--one", run_id,
                        *(["--smoke"] if smoke else [])]
-                active.append((run_id, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env)))
+                with open(runs / run_id / "train.log", "w") as log:  # the child keeps its own copy
+                    active.append((run_id, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env)))
                 launched += 1
             time.sleep(2)
             for run_id, proc in list(active):

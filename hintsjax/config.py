@@ -236,6 +236,11 @@ def fail(error: Exception) -> int:
     return 2
 
 
+def save_run_config(run_dir: Path, cfg: RunConfig) -> None:
+    """Write the resolved config into a run folder (what load_run_config reads back)."""
+    (Path(run_dir) / CONFIG_YAML).write_text(yaml.safe_dump(to_dict(cfg), sort_keys=False))
+
+
 def load_run_config(run_dir: Path) -> RunConfig:
     """The validated config a run folder was trained with."""
     path = Path(run_dir) / CONFIG_YAML

@@ -20,11 +20,10 @@ from typing import Any
 import hydra
 import jax
 import numpy as np
-import yaml
 from omegaconf import DictConfig, OmegaConf
 
 from hintsjax import checkpoint
-from hintsjax.config import CONFIG_YAML, RunConfig, UsageError, fail, load_run_config, run_config, to_dict
+from hintsjax.config import RunConfig, UsageError, fail, load_run_config, run_config, save_run_config
 from hintsjax.evaluate import evaluate_params
 from hintsjax.ppo import make_trainer
 from hintsjax.runlog import CURVE_PNG, METRICS_CSV, RunLog, plot_curves, read_curves
@@ -111,7 +110,7 @@ def main_from_values(values: dict[str, Any]) -> int:
         return fail(e)
     if run_dir is None:
         run_dir = new_run_dir(out_dir, name, cfg)
-        (run_dir / CONFIG_YAML).write_text(yaml.safe_dump(to_dict(cfg), sort_keys=False))
+        save_run_config(run_dir, cfg)
     try:
         train(cfg, run_dir, resume=resume is not None)
     except UsageError as e:
