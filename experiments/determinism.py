@@ -16,7 +16,7 @@ import jax
 import numpy as np
 
 from hintsjax.config import run_config
-from hintsjax.ppo import make_trainer
+from hintsjax.algorithms import make_trainer
 
 
 def main() -> None:

@@ -56,7 +56,7 @@ def restore_latest(run_dir: Path, cfg: RunConfig, trainer=None):
 
     `trainer` (cfg's, built if not given) supplies the state's expected shapes.
     """
-    from hintsjax.ppo import make_trainer
+    from hintsjax.algorithms import make_trainer
 
     update = latest_update(run_dir)
     if update is None:

@@ -1,9 +1,7 @@
 """PPO as one jittable `train(key)`: rollout, GAE, clipped-surrogate loss and updates.
 
-`make_trainer(cfg)` returns a `Trainer` whose `init(key)` builds the runner state and whose
-`run(state, n)` advances it by `n` updates in one `lax.scan`; `train(key)` is both together.
-All three are pure, so `jax.jit(jax.vmap(trainer.train))(keys)` trains many seeds at once, and
-chunking `run` between checkpoints gives the same result as one call.
+`make_trainer(cfg)` returns PPO's `Trainer` (hintsjax.trainer); `make_ppo(cfg)` its pieces
+(init, rollout, learn), which GAIL reuses with the discriminator's reward.
 
 Episodes carry `terminated` and `truncated` separately: GAE bootstraps a truncated episode from
 the value of the state it was cut off in (the env's `final_obs`) and a terminated one from 0.
@@ -22,6 +20,7 @@ from flax import struct
 from hintsjax import envs
 from hintsjax.config import PPOConfig, RunConfig
 from hintsjax.networks import ActorCritic, lr_labels
+from hintsjax.trainer import Trainer, episode_metrics
 
 
 @struct.dataclass
@@ -163,26 +162,22 @@ def observe_with_noise(obs: dict[str, jax.Array], key: jax.Array, noise: float) 
 
 
 @dataclass(frozen=True)
-class Trainer:
-    """The pure functions of one configuration's training run."""
+class PPO:
+    """PPO's pure pieces for one configuration; `make_trainer` joins them into PPO's update, and
+    algorithms that learn from another reward (GAIL) join them around their own."""
 
-    cfg: RunConfig
     env: Any  # AutoReset(Env)
+    env_params: Any
     network: ActorCritic
     init: Callable[[jax.Array], RunnerState]
-    update: Callable[[RunnerState], tuple[RunnerState, dict[str, jax.Array]]]
-
-    def run(self, state: RunnerState, num_updates: int) -> tuple[RunnerState, dict[str, jax.Array]]:
-        """Advance `num_updates` updates; metrics are [num_updates]-stacked."""
-        return jax.lax.scan(lambda s, _: self.update(s), state, None, length=num_updates)
-
-    def train(self, key: jax.Array) -> tuple[RunnerState, dict[str, jax.Array]]:
-        """The whole run from a seed key: the function that is vmapped over seeds."""
-        return self.run(self.init(key), self.cfg.ppo.num_updates)
+    # (state, key) -> (state after T steps of N envs, [T, N] transitions, [N] value after them)
+    rollout: Callable[[RunnerState, jax.Array], tuple[RunnerState, Transition, jax.Array]]
+    # (state, transitions, last value, [T, N] reward to learn from, key) -> (state one update on, metrics)
+    learn: Callable[[RunnerState, Transition, jax.Array, jax.Array, jax.Array], tuple[RunnerState, dict[str, jax.Array]]]
 
 
-def make_trainer(cfg: RunConfig) -> Trainer:
-    """Build the trainer of a validated RunConfig."""
+def make_ppo(cfg: RunConfig) -> PPO:
+    """PPO's pieces for a validated RunConfig."""
     ppo = cfg.ppo
     env = envs.AutoReset(cfg.make_env())
     env_params = envs.make_params(cfg.env, cfg.variant)
@@ -239,11 +234,9 @@ def make_trainer(cfg: RunConfig) -> Trainer:
             ppo.ent_coef,
         )
 
-    def update(state: RunnerState) -> tuple[RunnerState, dict[str, jax.Array]]:
-        key, k_roll, k_epochs = jax.random.split(state.key, 3)
-        state, traj, last_value = rollout(state, k_roll)
+    def learn(state: RunnerState, traj: Transition, last_value: jax.Array, reward: jax.Array, key: jax.Array):
         advantage, target = gae(
-            ppo.reward_scale * traj.reward,
+            reward,
             traj.value,
             traj.terminated,
             traj.truncated,
@@ -268,17 +261,26 @@ def make_trainer(cfg: RunConfig) -> Trainer:
             return jax.lax.scan(minibatch_step, carry, jax.tree.map(shaped, batch))
 
         (params, opt_state), parts = jax.lax.scan(
-            epoch, (state.params, state.opt_state), jax.random.split(k_epochs, ppo.epochs)
+            epoch, (state.params, state.opt_state), jax.random.split(key, ppo.epochs)
         )
-        done = traj.terminated | traj.truncated
-        episodes = done.sum()
         metrics = {
             **jax.tree.map(jnp.mean, parts),
-            "episode_return": jnp.where(episodes > 0, (traj.episode_return * done).sum() / jnp.maximum(episodes, 1), jnp.nan),
-            "episodes": episodes,
+            **episode_metrics(traj.terminated | traj.truncated, traj.episode_return),
             "env_steps": (state.update + 1) * ppo.batch_size,
         }
-        new_state = state.replace(params=params, opt_state=opt_state, key=key, update=state.update + 1)
-        return new_state, metrics
+        return state.replace(params=params, opt_state=opt_state, update=state.update + 1), metrics
 
-    return Trainer(cfg, env, network, init, update)
+    return PPO(env, env_params, network, init, rollout, learn)
+
+
+def make_trainer(cfg: RunConfig) -> Trainer:
+    """PPO's trainer: each update rolls out, then learns from the env's (scaled) reward."""
+    parts = make_ppo(cfg)
+
+    def update(state: RunnerState) -> tuple[RunnerState, dict[str, jax.Array]]:
+        key, k_roll, k_epochs = jax.random.split(state.key, 3)
+        state, traj, last_value = parts.rollout(state, k_roll)
+        state, metrics = parts.learn(state, traj, last_value, cfg.ppo.reward_scale * traj.reward, k_epochs)
+        return state.replace(key=key), metrics
+
+    return Trainer(cfg, parts.env, parts.network, parts.init, update)

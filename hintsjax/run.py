@@ -22,10 +22,10 @@ import jax
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from hintsjax import checkpoint
+from hintsjax import checkpoint, expert
 from hintsjax.config import RunConfig, UsageError, fail, load_run_config, run_config, save_run_config
 from hintsjax.evaluate import evaluate_params
-from hintsjax.ppo import make_trainer
+from hintsjax.algorithms import make_trainer
 from hintsjax.runlog import CURVE_PNG, METRICS_CSV, RunLog, plot_curves, read_curves
 
 EVAL_JSON = "eval.json"
@@ -106,6 +106,8 @@ def main_from_values(values: dict[str, Any]) -> int:
         else:
             cfg = run_config(values)
             run_dir = None
+        if cfg.agent_spec.imitates:
+            expert.describe(cfg.env, cfg.expert)  # a missing or foreign expert fails before any folder is made
     except UsageError as e:
         return fail(e)
     if run_dir is None:
