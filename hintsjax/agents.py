@@ -1,4 +1,5 @@
-"""The agents of the paper's Table 1 as registry entries: which inputs each one sees."""
+"""The agents of the paper's Table 1 as registry entries: which inputs each one sees and which
+algorithm trains it (hintsjax.algorithms: "ppo", "dagger" or "gail")."""
 
 from __future__ import annotations
 
@@ -14,6 +15,12 @@ class AgentSpec:
     hint: bool = False
     state_noise: float = 0.0  # std of N(0, s^2) added to the state in training rollouts
     hint_override: str | None = None
+    algorithm: str = "ppo"
+
+    @property
+    def imitates(self) -> bool:
+        """True when the agent learns from a trained expert (hintsjax.expert)."""
+        return self.algorithm in ("dagger", "gail")
 
     @property
     def observe(self) -> tuple[str, ...]:
@@ -33,4 +40,9 @@ AGENTS: dict[str, AgentSpec] = {
     "hints_blind": AgentSpec(hint=True),
     "hints_state": AgentSpec(pixels=True, hint=True, hint_override="state"),
     "hints": AgentSpec(pixels=True, hint=True),
+    # The converged references (tier 3). expert_ppo is PPO on the state at the env's expert
+    # budget (config.ENV_DEFAULTS[env]["agents"]); dagger and gail learn from its exported policy.
+    "expert_ppo": AgentSpec(state=True),
+    "dagger": AgentSpec(state=True, algorithm="dagger"),
+    "gail": AgentSpec(state=True, algorithm="gail"),
 }

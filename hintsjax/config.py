@@ -83,6 +83,56 @@ class PPOConfig:
             raise UsageError(f"ppo.hidden widths must be positive, got {list(self.hidden)}")
 
 
+@dataclass(frozen=True)
+class DaggerConfig:
+    """DAgger (Ross et al. 2011). Each round rolls out ppo.batch_size steps (ppo.num_envs envs)
+    with the beta-mixture of expert and student, labels every visited state with the expert's
+    action, adds them to the aggregated dataset and regresses the student on it."""
+
+    beta_decay: float = 0.5  # beta_i = beta_decay ** i: round 0 acts as the expert alone
+    buffer_size: int = 200_000  # the aggregated dataset's capacity; the oldest rows go first when full
+    grad_steps: int = 32  # student minibatch steps per round (minibatches of ppo.minibatch_size)
+    lr: float = 1e-3
+
+    def validate(self) -> None:
+        if not 0.0 <= self.beta_decay <= 1.0:
+            raise UsageError(f"dagger.beta_decay must be in [0, 1], got {self.beta_decay}")
+        for name in ("buffer_size", "grad_steps"):
+            if getattr(self, name) <= 0:
+                raise UsageError(f"dagger.{name} must be positive, got {getattr(self, name)}")
+        if self.lr <= 0:
+            raise UsageError(f"dagger.lr must be positive, got {self.lr}")
+
+
+GAIL_REWARDS = ("logit", "original")
+
+
+@dataclass(frozen=True)
+class GailConfig:
+    """GAIL (Ho and Ermon 2016): PPO on the reward of a discriminator D(s, a) trained to tell
+    the expert's (state, action) pairs from the policy's."""
+
+    demonstrations: int = 16  # expert episodes, rolled out once at the start of training
+    disc_hidden: tuple[int, ...] = (256, 256)
+    disc_lr: float = 3e-4
+    disc_steps: int = 4  # discriminator minibatch steps per PPO update (minibatches of ppo.minibatch_size)
+    # "logit": log D - log(1 - D), signed, so it neither rewards nor punishes living longer;
+    # "original": -log(1 - D) > 0, Ho and Ermon's, which pays for every step alive (an agent
+    # then avoids a task's terminating goal, e.g. acrobot's).
+    reward: str = "logit"
+
+    def validate(self) -> None:
+        for name in ("demonstrations", "disc_steps"):
+            if getattr(self, name) <= 0:
+                raise UsageError(f"gail.{name} must be positive, got {getattr(self, name)}")
+        if self.disc_lr <= 0:
+            raise UsageError(f"gail.disc_lr must be positive, got {self.disc_lr}")
+        if not all(w > 0 for w in self.disc_hidden):
+            raise UsageError(f"gail.disc_hidden widths must be positive, got {list(self.disc_hidden)}")
+        if self.reward not in GAIL_REWARDS:
+            raise UsageError(f"unknown gail.reward {self.reward!r}; valid: {', '.join(GAIL_REWARDS)}")
+
+
 def env_params(env: str, variant: str | None) -> Any:
     """The params of `env`'s `variant` (None: its default); UsageError naming the valid variants."""
     try:
@@ -92,19 +142,33 @@ def env_params(env: str, variant: str | None) -> Any:
 
 
 # Per-env defaults, overriding PPOConfig's: the paper's budgets and Table 5's actor rates.
+# "agents" holds per-agent overrides on top, for the converged references (tier 3): the expert
+# trains PPO on the state for 5x the hint agents' budget; DAgger's rounds of 1024 steps
+# aggregate every visited state (buffer = budget); GAIL gets the expert's budget.
+def _references(expert_steps: int, dagger_steps: int = 100_000, **expert_ppo: Any) -> dict[str, Any]:
+    return {
+        "expert_ppo": dict(ppo=dict(total_env_steps=expert_steps, **expert_ppo)),
+        "dagger": dict(ppo=dict(total_env_steps=dagger_steps), dagger=dict(buffer_size=dagger_steps)),
+        "gail": dict(ppo=dict(total_env_steps=expert_steps, **expert_ppo)),
+    }
+
+
 ENV_DEFAULTS: dict[str, dict[str, Any]] = {
     "pendulum": dict(
         hint="composite",
         eval_variants=("swingto",),
         ppo=dict(total_env_steps=200_000, actor_lr=1e-3, reward_scale=0.1),
+        agents=_references(1_000_000),
     ),
     # 700 episodes of at most 500 steps (the paper's 700 episodes, counted at their length).
-    "acrobot": dict(hint="composite", ppo=dict(total_env_steps=350_000, reward_scale=0.1)),
+    "acrobot": dict(hint="composite", ppo=dict(total_env_steps=350_000, reward_scale=0.1), agents=_references(1_000_000)),
     # Early IDP episodes last ~10 steps, so an episode count would be a tiny budget: we count
     # 200 full-length episodes (200 K steps), the pendulum's budget. 128 envs per seed (rollouts
     # of 8 steps per 1024-transition batch): MJX's RK4 with the rail's constraint solver is
     # kernel-launch bound at small batches on a GPU (16 envs x 5 seeds ran ~6 K steps/s).
-    "idp": dict(hint="composite", ppo=dict(total_env_steps=200_000, num_envs=128, reward_scale=0.1)),
+    # Its expert and GAIL step 512 envs per seed in batches of 4096 (4x fewer sequential steps).
+    "idp": dict(hint="composite", ppo=dict(total_env_steps=200_000, num_envs=128, reward_scale=0.1),
+                agents=_references(1_000_000, num_envs=512, batch_size=4096)),
 }
 
 
@@ -123,7 +187,10 @@ class RunConfig:
     eval_variants: tuple[str, ...] = ()  # deploy variants evaluated after training
     stochastic_eval: bool = False
     checkpoint_every: int = 10  # updates between progress reports and checkpoints
+    expert: str | None = None  # dagger/gail: an exported expert folder (None: the env's packaged one)
     ppo: PPOConfig = field(default_factory=PPOConfig)
+    dagger: DaggerConfig = field(default_factory=DaggerConfig)
+    gail: GailConfig = field(default_factory=GailConfig)
 
     @property
     def agent_spec(self) -> AgentSpec:
@@ -168,7 +235,10 @@ class RunConfig:
         for name in ("seeds", "eval_episodes", "checkpoint_every"):
             if getattr(self, name) <= 0:
                 raise UsageError(f"{name} must be positive, got {getattr(self, name)}")
-        self.ppo.validate()
+        for section in SECTIONS:
+            getattr(self, section).validate()
+        if self.agent_spec.algorithm == "dagger" and self.dagger.buffer_size < self.ppo.batch_size:
+            raise UsageError(f"dagger.buffer_size ({self.dagger.buffer_size}) must hold one round, ppo.batch_size ({self.ppo.batch_size})")
         return self
 
 
@@ -176,30 +246,49 @@ def _fields(cls) -> set[str]:
     return {f.name for f in dataclasses.fields(cls)}
 
 
+SECTIONS = {"ppo": PPOConfig, "dagger": DaggerConfig, "gail": GailConfig}  # RunConfig's nested settings
+TUPLES = {"hidden", "disc_hidden", "eval_variants"}  # list-valued keys (YAML and Hydra give lists)
+
+
+def _merge(*layers: Mapping[str, Any]) -> dict[str, Any]:
+    """Later layers override earlier ones, key by key and section by section; None is no value."""
+    merged: dict[str, Any] = {}
+    for layer in layers:
+        for k, v in layer.items():
+            if v is None:
+                continue
+            if k in SECTIONS:
+                merged[k] = {**merged.get(k, {}), **{sk: sv for sk, sv in dict(v).items() if sv is not None}}
+            else:
+                merged[k] = v
+    return merged
+
+
 def run_config(values: Mapping[str, Any]) -> RunConfig:
     """Build and validate a RunConfig from plain values (e.g. Hydra's), applying env defaults.
 
-    Keys whose value is None take the env's default, then the dataclass default.
+    Layers, later winning: the dataclass defaults, the env's defaults (ENV_DEFAULTS[env]), the
+    env's defaults for this agent (ENV_DEFAULTS[env]["agents"][agent]), then `values`. A value of
+    None takes the layer below.
     """
-    values = {k: v for k, v in values.items() if v is not None}
-    env = values.get("env", RunConfig.env)
+    values = dict(values)
+    env = values.get("env") or RunConfig.env
     try:
-        defaults = choose("env", env, ENV_DEFAULTS)
+        defaults = dict(choose("env", env, ENV_DEFAULTS))
     except ChoiceError as e:
         raise UsageError(str(e)) from None
-    ppo_values = {**defaults.get("ppo", {}), **{k: v for k, v in dict(values.get("ppo", {})).items() if v is not None}}
-    top = {**{k: v for k, v in defaults.items() if k != "ppo"}, **values}
-    unknown = (set(top) - _fields(RunConfig)) | (set(ppo_values) - _fields(PPOConfig))
+    per_agent = defaults.pop("agents", {})
+    merged = _merge(defaults, per_agent.get(values.get("agent") or RunConfig.agent, {}), values)
+    unknown = {k for k in merged if k not in SECTIONS} - _fields(RunConfig)
+    unknown |= {f"{name}.{k}" for name, cls in SECTIONS.items() for k in merged.get(name, {}) if k not in _fields(cls)}
     if unknown:
         raise UsageError(f"unknown config keys {sorted(unknown)}")
     try:
-        if "hidden" in ppo_values:
-            ppo_values["hidden"] = tuple(int(w) for w in ppo_values["hidden"])
-        for k in ("eval_variants",):
-            if k in top:
-                top[k] = tuple(top[k])
-        ppo = PPOConfig(**ppo_values)
-        cfg = RunConfig(**{**top, "ppo": ppo})
+        for section in [merged, *(merged.get(name, {}) for name in SECTIONS)]:
+            for k in TUPLES & set(section):
+                section[k] = tuple(int(w) if k != "eval_variants" else w for w in section[k])
+        sections = {name: cls(**merged.pop(name, {})) for name, cls in SECTIONS.items()}
+        cfg = RunConfig(**merged, **sections)
         _check_types(cfg)
     except UsageError:
         raise
@@ -209,7 +298,7 @@ def run_config(values: Mapping[str, Any]) -> RunConfig:
 
 
 def _check_types(cfg: RunConfig) -> None:
-    for obj in (cfg, cfg.ppo):
+    for obj in (cfg, *(getattr(cfg, name) for name in SECTIONS)):
         for f in dataclasses.fields(obj):
             value = getattr(obj, f.name)
             kind = {"int": int, "float": (int, float), "bool": bool, "str": str}.get(str(f.type))

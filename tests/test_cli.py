@@ -42,7 +42,7 @@ def cli(*args: str, cwd: Path, module: str = "hintsjax.run") -> subprocess.Compl
 
 BAD_RUN_ARGS = {
     "env=nope": "valid choices: acrobot, idp, pendulum",
-    "agent=nope": "valid choices: hints, hints_blind, hints_state, ppo_noisy_state, ppo_rgb, ppo_state",
+    "agent=nope": "valid choices: dagger, expert_ppo, gail, hints, hints_blind, hints_state, ppo_noisy_state, ppo_rgb, ppo_state",
     "scheme=nope": "valid choices: ac, fc, lc, mc",
     "hint=nope": "valid choices: angular_velocity, composite, goal_distance, partial_state, state, torque",
     "hint=angular_velocity+nope": "unknown hint 'nope'",
@@ -65,6 +65,31 @@ def test_bad_input_exits_2_with_one_line_and_writes_nothing(arg, tmp_path):
     assert BAD_RUN_ARGS[arg] in lines[0]
     assert "Traceback" not in out.stderr + out.stdout
     assert list(tmp_path.iterdir()) == []  # no run folder, no Hydra outputs
+
+
+# The same checks in-process (no interpreter start): the imitation agents' own settings.
+BAD_IMITATION_VALUES = {
+    "expert=no/such/expert": "no expert for pendulum at no/such/expert (packaged: acrobot, idp, pendulum)",
+    "gail.reward=nope": "unknown gail.reward 'nope'; valid: logit, original",
+    "dagger.buffer_size=16": "dagger.buffer_size (16) must hold one round",
+    "gail.demonstrations=0": "gail.demonstrations must be positive",
+    "dagger.nope=1": "unknown config keys ['dagger.nope']",
+}
+
+
+@pytest.mark.parametrize("arg", list(BAD_IMITATION_VALUES))
+def test_bad_imitation_settings_exit_2_with_one_line_and_write_nothing(arg, tmp_path, capsys):
+    key, value = arg.split("=")
+    values = {"env": "pendulum", "agent": "gail" if key.startswith("gail") else "dagger", "out_dir": str(tmp_path / "runs")}
+    if "." in key:
+        section, key = key.split(".")
+        values[section] = {key: int(value) if value.isdigit() else value}
+    else:
+        values[key] = value
+    assert run.main_from_values(values) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and BAD_IMITATION_VALUES[arg] in lines[0], lines
+    assert not (tmp_path / "runs").exists()
 
 
 @pytest.fixture(scope="module")

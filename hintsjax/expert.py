@@ -1,0 +1,156 @@
+"""Trained experts: the policy of an `expert_ppo` run, exported for DAgger and GAIL to learn from.
+
+    python -m hintsjax.run env=pendulum agent=expert_ppo name=expert-pendulum   # train (5 seeds)
+    python -m hintsjax.expert runs/expert-pendulum                             # -> hintsjax/experts/pendulum
+
+Export keeps the seed with the best evaluation (eval.json's 50-episode mean, not a training
+episode) and only what acting needs: the actor MLP's parameters and the learnt log std, as an
+orbax checkpoint beside `expert.json` (env, sizes, scores, the run's config). `load(env)` gives
+the packaged expert of an env; DAgger and GAIL take any object with the same two methods
+(`mean`, `sample`), which is how the tests give them a known linear expert.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import orbax.checkpoint as ocp
+from flax import struct
+
+from hintsjax.config import RunConfig, UsageError, fail, load_run_config, to_dict
+from hintsjax.networks import MLP
+
+EXPERTS_DIR = Path(__file__).resolve().parent / "experts"  # the packaged experts, one folder per env
+EXPERT_JSON = "expert.json"
+POLICY = "policy"  # the orbax checkpoint inside an expert folder
+
+
+@struct.dataclass
+class Expert:
+    """A state-based Gaussian policy: mean = actor(state), std = exp(log_std)."""
+
+    actor: Any  # the MLP's parameters
+    log_std: jax.Array  # [A]
+    hidden: tuple[int, ...] = struct.field(pytree_node=False)
+
+    def mean(self, state: jax.Array) -> jax.Array:
+        """The expert's action (its Gaussian's mean) for a state [..., n] -> [..., A]."""
+        return _actor(self.hidden, self.log_std.shape[-1]).apply({"params": self.actor}, state)
+
+    def sample(self, key: jax.Array, state: jax.Array) -> jax.Array:
+        """An action drawn from the expert's Gaussian."""
+        mean = self.mean(state)
+        return mean + jnp.exp(self.log_std) * jax.random.normal(key, mean.shape)
+
+
+def _actor(hidden: tuple[int, ...], action_size: int) -> MLP:
+    return MLP((*hidden, action_size), out_scale=0.01)  # ActorCritic's actor, parameter for parameter
+
+
+def packaged() -> list[str]:
+    """The envs that have a packaged expert."""
+    return sorted(p.name for p in EXPERTS_DIR.iterdir() if (p / EXPERT_JSON).is_file()) if EXPERTS_DIR.is_dir() else []
+
+
+def export(run_dir: Path, out_dir: Path | None = None) -> Path:
+    """Export the best seed of a finished state-based run as an expert folder; returns its path."""
+    from hintsjax import checkpoint
+
+    cfg = load_run_config(run_dir)
+    if cfg.agent_spec.observe != ("state",) or cfg.agent_spec.algorithm != "ppo":
+        raise UsageError(f"{run_dir} trained {cfg.agent}; an expert comes from a state PPO run (agent=expert_ppo)")
+    eval_json = Path(run_dir) / "eval.json"
+    if not eval_json.is_file():
+        raise UsageError(f"{run_dir} has no eval.json: let the run finish (or resume it) before exporting")
+    evaluation = json.loads(eval_json.read_text())["evaluations"][0]
+    best = max(range(len(evaluation["seed_means"])), key=lambda i: evaluation["seed_means"][i])
+    state, update = checkpoint.restore_latest(run_dir, cfg)
+    params = jax.tree.map(lambda x: x[best], state.params["params"])
+    out = Path(out_dir or EXPERTS_DIR / cfg.env).absolute()
+    out.mkdir(parents=True, exist_ok=True)
+    with ocp.StandardCheckpointer() as saver:
+        saver.save(out / POLICY, {"actor": params["actor"], "log_std": params["log_std"]}, force=True)
+    meta = {
+        "env": cfg.env,
+        "state_size": int(params["actor"]["Dense_0"]["kernel"].shape[0]),
+        "action_size": int(params["log_std"].shape[0]),
+        "hidden": list(cfg.ppo.hidden),
+        "seed_index": best,
+        "seed_eval_mean": evaluation["seed_means"][best],
+        "run_eval_mean": evaluation["mean"],
+        "run_eval_std": evaluation["std"],
+        "episodes_per_seed": evaluation["episodes_per_seed"],
+        "env_steps": update * cfg.ppo.batch_size,
+        "source_run": Path(run_dir).name,
+        "config": to_dict(cfg),
+    }
+    (out / EXPERT_JSON).write_text(json.dumps(meta, indent=1))
+    return out
+
+
+def describe(env: str, path: str | Path | None = None) -> tuple[Path, dict]:
+    """The folder and expert.json of `env`'s expert at `path` (None: the packaged one);
+    UsageError if it is missing, unreadable or for another env."""
+    folder = Path(path) if path is not None else EXPERTS_DIR / env
+    retrain = (f"train one with: python -m hintsjax.run env={env} agent=expert_ppo name=expert-{env} "
+               f"&& python -m hintsjax.expert runs/expert-{env}")
+    if not (folder / EXPERT_JSON).is_file():
+        raise UsageError(f"no expert for {env} at {folder} (packaged: {', '.join(packaged()) or 'none'}); {retrain}")
+    try:
+        meta = json.loads((folder / EXPERT_JSON).read_text())
+        meta["hidden"], meta["state_size"], meta["action_size"] = tuple(meta["hidden"]), int(meta["state_size"]), int(meta["action_size"])
+    except (ValueError, KeyError, TypeError) as e:
+        raise UsageError(f"{folder / EXPERT_JSON} is not an expert's description: {type(e).__name__}") from None
+    if meta.get("env") != env:
+        raise UsageError(f"the expert at {folder} is for {meta.get('env')}, not {env}; {retrain}")
+    return folder, meta
+
+
+def load(env: str, path: str | Path | None = None) -> Expert:
+    """The expert at `path` (None: the env's packaged one); UsageError if missing, foreign or corrupt."""
+    folder, meta = describe(env, path)
+    hidden, sizes = meta["hidden"], (meta["state_size"], meta["action_size"])
+    abstract = {
+        "actor": jax.eval_shape(lambda: _actor(hidden, sizes[1]).init(jax.random.key(0), jnp.zeros((1, sizes[0])))["params"]),
+        "log_std": jax.ShapeDtypeStruct((sizes[1],), jnp.float32),
+    }
+    try:
+        with ocp.StandardCheckpointer() as loader:
+            params = loader.restore((folder / POLICY).absolute(), abstract)
+    except Exception as e:  # orbax raises many types for unreadable or mismatched files
+        reason = str(e).strip().splitlines()[0][:200] if str(e).strip() else type(e).__name__
+        raise UsageError(f"the expert checkpoint in {folder} is corrupt or does not match {EXPERT_JSON}: {reason}") from None
+    return Expert(params["actor"], params["log_std"], hidden)
+
+
+def check_state_size(expert: Any, cfg: RunConfig, state_size: int) -> None:
+    """UsageError unless a loaded expert reads states of the env's size."""
+    if isinstance(expert, Expert):
+        n = expert.actor["Dense_0"]["kernel"].shape[0]
+        if n != state_size:
+            raise UsageError(f"the expert reads {n} state numbers but {cfg.env} has {state_size}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m hintsjax.expert", description=__doc__.splitlines()[0])
+    parser.add_argument("run", type=Path, help="a finished run folder of agent=expert_ppo")
+    parser.add_argument("--out", type=Path, default=None, help="expert folder (default: hintsjax/experts/<env>)")
+    args = parser.parse_args(argv)
+    try:
+        out = export(args.run, args.out)
+    except UsageError as e:
+        return fail(e)
+    meta = json.loads((out / EXPERT_JSON).read_text())
+    print(f"expert for {meta['env']}: seed {meta['seed_index']} of {args.run} "
+          f"({meta['seed_eval_mean']:.2f} over {meta['episodes_per_seed']} episodes) -> {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

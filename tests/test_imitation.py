@@ -1,0 +1,235 @@
+"""The converged references: DAgger and GAIL on a linear system with a known linear expert
+(tests/linear_env.py), the expert's export and loading, and the seed-vmap invariant.
+
+Each configuration is compiled once per module (fixtures) and shared by the tests that need it.
+"""
+
+from __future__ import annotations
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import pytest
+
+import linear_env  # registers the "linear" env (tests/ is on sys.path)
+from hintsjax import config, dagger, expert, gail
+from hintsjax.algorithms import make_trainer
+
+# 24 rounds of 128 steps (8 envs x 16) and 64 student steps per round on minibatches of 64.
+DAGGER = dict(env="linear", agent="dagger", seeds=1,
+              ppo=dict(num_envs=8, batch_size=128, minibatch_size=64, total_env_steps=24 * 128),
+              dagger=dict(grad_steps=64, lr=3e-3, buffer_size=1024))
+GAIL = dict(env="linear", agent="gail", seeds=1,
+            ppo=dict(num_envs=8, batch_size=128, minibatch_size=64, epochs=2, total_env_steps=4 * 128),
+            gail=dict(demonstrations=4, disc_hidden=[32, 32], disc_steps=2))
+
+
+def trained(values: dict):
+    """Train 2 seeds vmapped, and seed 1 alone: (trainer, batched state, batched metrics, seed 1's state)."""
+    cfg = config.run_config({**values, "seeds": 2})
+    trainer = make_trainer(cfg, expert=linear_env.EXPERT)
+    keys = cfg.seed_keys()
+    state, metrics = jax.jit(jax.vmap(trainer.train))(keys)
+    alone, _ = jax.jit(trainer.train)(keys[1])
+    return trainer, state, jax.tree.map(np.asarray, metrics), alone
+
+
+def seed(tree, i: int):
+    return jax.tree.map(lambda x: x[i], tree)
+
+
+@pytest.fixture(scope="module")
+def dagger_run():
+    return trained(DAGGER)
+
+
+@pytest.fixture(scope="module")
+def gail_run():
+    return trained(GAIL)
+
+
+@pytest.mark.parametrize("agent", ["dagger", "gail"])
+def test_vmap_over_two_seeds_equals_two_single_runs(agent, request):
+    """(expert_ppo is PPO, whose invariant test_learning checks.)"""
+    _, state, _, alone = request.getfixturevalue(f"{agent}_run")
+    jax.tree.map(lambda b, s: np.testing.assert_allclose(b, s, rtol=2e-5, atol=2e-6), seed(state.params, 1), alone.params)
+    assert not np.allclose(seed(state.params, 0)["params"]["actor"]["Dense_0"]["kernel"],
+                           alone.params["params"]["actor"]["Dense_0"]["kernel"])  # the seeds differ
+
+
+def test_dagger_student_recovers_the_linear_expert(dagger_run):
+    trainer, state, metrics, _ = dagger_run
+    states = jax.random.uniform(jax.random.key(7), (256, 2), minval=-1.0, maxval=1.0)
+    for i in range(2):
+        student = trainer.network.apply(seed(state.params, i), {"state": states})[0]
+        error = np.abs(np.asarray(student - linear_env.EXPERT.mean(states)))
+        assert error.max() < 0.1, error.max()
+    assert (metrics["imitation_loss"][:, -1] < 0.01 * metrics["imitation_loss"][:, 0]).all()
+
+
+def test_dagger_mixes_expert_and_student_as_scheduled(dagger_run):
+    _, state, metrics, _ = dagger_run
+    metrics = seed(metrics, 0)
+    np.testing.assert_allclose(metrics["beta"], 0.5 ** np.arange(24), rtol=1e-6)
+    assert metrics["expert_steps"][0] == 1.0  # round 0 is the expert alone
+    assert metrics["expert_steps"][-1] == 0.0  # beta_23 = 1.2e-7: the student alone
+    # The aggregated dataset grows by one round (128 rows) until its 1024 rows are full.
+    np.testing.assert_array_equal(metrics["dataset_size"], np.minimum(128 * np.arange(1, 25), 1024))
+    assert int(state.data.head[0]) == (24 * 128) % 1024
+
+
+def test_dataset_ring_buffer_overwrites_the_oldest_rows():
+    data = dagger.Dataset.empty(capacity=5, state_size=1, action_size=1)
+    for start in (0, 3, 6):  # rows 0..8 in three appends of 3
+        rows = jnp.arange(start, start + 3, dtype=jnp.float32)[:, None]
+        data = data.add(rows, -rows)
+    np.testing.assert_array_equal(data.state[:, 0], [5, 6, 7, 8, 4])  # 0..3 overwritten in order
+    np.testing.assert_array_equal(data.action[:, 0], -data.state[:, 0])
+    assert int(data.size) == 5 and int(data.head) == 4
+    s, a = data.sample(jax.random.key(0), 100)
+    assert set(np.asarray(s[:, 0]).tolist()) <= {4.0, 5.0, 6.0, 7.0, 8.0}
+    np.testing.assert_array_equal(a, -s)
+
+
+def test_gail_discriminator_separates_expert_from_random_pairs():
+    cfg = config.run_config(GAIL)
+    disc = gail.make_discriminator(cfg.gail)
+    k_init, k_s, k_test = jax.random.split(jax.random.key(0), 3)
+
+    def batch(key, n=256):
+        k_s, k_a = jax.random.split(key)
+        s = jax.random.uniform(k_s, (n, 2), minval=-1.0, maxval=1.0)
+        return gail.pairs(s, linear_env.EXPERT.mean(s)), gail.pairs(s, jax.random.uniform(k_a, (n, 1), minval=-2.0, maxval=2.0))
+
+    params = disc.init(k_init, jnp.zeros((1, 3)))
+    opt = optax.adam(3e-3)
+    opt_state = opt.init(params)
+
+    def step(carry, key):
+        params, opt_state = carry
+        expert_pairs, random_pairs = batch(key)
+        grads, _ = jax.grad(lambda p: gail.discriminator_loss(disc, p, expert_pairs, random_pairs), has_aux=True)(params)
+        updates, opt_state = opt.update(grads, opt_state, params)
+        return (optax.apply_updates(params, updates), opt_state), None
+
+    expert_pairs, random_pairs = batch(k_test, 1024)
+    _, before = gail.discriminator_loss(disc, params, expert_pairs, random_pairs)
+    (params, _), _ = jax.jit(lambda c, k: jax.lax.scan(step, c, k))((params, opt_state), jax.random.split(k_s, 300))
+    _, after = gail.discriminator_loss(disc, params, expert_pairs, random_pairs)
+    assert after["disc_loss"] < 0.5 * before["disc_loss"]
+    assert after["disc_expert_acc"] > 0.9 and after["disc_policy_acc"] > 0.9
+    for kind in config.GAIL_REWARDS:
+        r_expert = gail.gail_reward(disc.apply(params, expert_pairs)[..., 0], kind)
+        r_random = gail.gail_reward(disc.apply(params, random_pairs)[..., 0], kind)
+        assert r_expert.mean() > r_random.mean() + 1.0, kind
+
+
+def test_gail_rewards_are_the_log_odds_and_the_original():
+    x = jnp.array([-3.0, 0.0, 2.0])
+    d = jax.nn.sigmoid(x)
+    np.testing.assert_allclose(gail.gail_reward(x, "logit"), jnp.log(d) - jnp.log(1 - d), atol=1e-5)
+    np.testing.assert_allclose(gail.gail_reward(x, "original"), -jnp.log(1 - d), atol=1e-5)
+
+
+def test_demonstrations_mask_the_steps_after_an_episode_ended():
+    from hintsjax import envs
+
+    env = envs.make("linear", observe=("state",))
+    params = envs.make_params("linear", "terminating")
+    demos = gail.demonstrate(env, params, linear_env.EXPERT, jax.random.key(3), episodes=6)
+    valid = np.asarray(demos.valid).reshape(env.max_steps, 6)
+    lengths = valid.sum(axis=0)
+    assert (lengths >= 1).all() and (lengths < env.max_steps).any()  # some episodes terminated early
+    assert (np.diff(valid.astype(int), axis=0) <= 0).all()  # once ended, never valid again
+    s, a = demos.sample(jax.random.key(0), 512)
+    np.testing.assert_allclose(a, linear_env.EXPERT.mean(s), atol=4 * np.exp(-2.0) + 1e-6)  # expert pairs only
+    assert np.all(np.asarray(demos.episode_return) < 0)
+
+
+def test_gail_trains_ppo_on_the_discriminator_reward(gail_run):
+    _, state, metrics, _ = gail_run
+    assert np.isfinite(metrics["gail_reward"]).all() and np.isfinite(metrics["disc_loss"]).all()
+    assert (metrics["disc_loss"] > 0).all()
+    assert (np.asarray(state.update) == 4).all()
+    assert state.demos.state.shape == (2, 4 * linear_env.LinearEnv.max_steps, 2)
+    assert np.isfinite(metrics["episode_return"][:, -1]).all()  # env returns are logged, not D's
+
+
+# -- the expert's export and loading ------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def expert_run(tmp_path_factory):
+    from hintsjax import run
+
+    values = dict(env="linear", agent="expert_ppo", seeds=2, eval_episodes=4, checkpoint_every=2,
+                  ppo=dict(num_envs=8, batch_size=128, minibatch_size=64, epochs=2, total_env_steps=2 * 128))
+    run_dir = tmp_path_factory.mktemp("runs") / "expert-linear"
+    run_dir.mkdir()
+    cfg = config.run_config(values)
+    config.save_run_config(run_dir, cfg)
+    run.train(cfg, run_dir, progress=False)
+    return cfg, run_dir
+
+
+def test_export_keeps_the_best_seed_and_load_acts_like_it(expert_run, tmp_path):
+    from hintsjax import checkpoint
+
+    cfg, run_dir = expert_run
+    out = expert.export(run_dir, tmp_path / "expert")
+    meta = json.loads((out / expert.EXPERT_JSON).read_text())
+    seed_means = json.loads((run_dir / "eval.json").read_text())["evaluations"][0]["seed_means"]
+    assert meta["seed_index"] == int(np.argmax(seed_means)) and meta["env"] == "linear"
+    loaded = expert.load("linear", out)
+    state, _ = checkpoint.restore_latest(run_dir, cfg)
+    best = jax.tree.map(lambda x: x[meta["seed_index"]], state.params)
+    states = jax.random.normal(jax.random.key(1), (32, 2))
+    network = make_trainer(cfg).network
+    np.testing.assert_allclose(loaded.mean(states), network.apply(best, {"state": states})[0], rtol=1e-6, atol=1e-7)
+    np.testing.assert_array_equal(loaded.log_std, best["params"]["log_std"])
+
+
+def test_expert_errors_name_the_problem(expert_run, tmp_path):
+    _, run_dir = expert_run
+    out = expert.export(run_dir, tmp_path / "expert")
+    with pytest.raises(config.UsageError, match="is for linear, not pendulum"):
+        expert.load("pendulum", out)
+    with pytest.raises(config.UsageError, match="no expert for linear at .*packaged: .*pendulum"):
+        expert.load("linear", tmp_path / "nowhere")
+    for f in (out / expert.POLICY).rglob("*"):
+        if f.is_file():
+            f.write_bytes(b"garbage")
+    with pytest.raises(config.UsageError, match="corrupt"):
+        expert.load("linear", out)
+
+
+@pytest.mark.parametrize("env", ["pendulum", "acrobot", "idp"])
+def test_packaged_experts_load_and_act(env):
+    from hintsjax import envs
+
+    e = expert.load(env)
+    meta = expert.describe(env)[1]
+    sim = envs.make(env, observe=("state",))
+    assert meta["env"] == env and meta["state_size"] == sim.state_size and meta["action_size"] == sim.action_size
+    action = e.mean(jax.random.normal(jax.random.key(0), (4, sim.state_size)))
+    assert action.shape == (4, sim.action_size) and np.isfinite(action).all()
+    assert meta["seed_eval_mean"] >= meta["run_eval_mean"]  # the best seed of its run
+
+
+@pytest.mark.slow
+def test_expert_ppo_learns_the_state_pendulum():
+    """Our PPO at the pendulum's hint budget (200 K steps; the expert gets 1 M): a known-good,
+    tuned PPO (gSDE, rl-zoo) reaches about -200 at 100 K; ours is noisier across seeds, so the
+    test asks for one of 3 seeds at -300 or better and the mean well clear of a random policy's
+    (about -1200). ~3.5 minutes on 2 CPU cores."""
+    from hintsjax.evaluate import evaluate_params
+
+    cfg = config.run_config(dict(env="pendulum", agent="expert_ppo", seeds=3, ppo=dict(total_env_steps=200_000)))
+    trainer = make_trainer(cfg)
+    state, _ = jax.jit(jax.vmap(trainer.train))(cfg.seed_keys())
+    result = evaluate_params(cfg, state.params, None, 20, False)
+    assert max(result["seed_means"]) > -300, result["seed_means"]
+    assert result["mean"] > -700, result["seed_means"]
