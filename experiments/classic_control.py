@@ -4,7 +4,10 @@
     python experiments/classic_control.py --table 4 [--workers 4] [--launch-until 300]
     python experiments/classic_control.py --report       # markdown tables and learning curves
 
-Table 2: per env PPO-RGB, PPO-x, PPO-x+N(0,1) and HINTS-FC with every hint the env registers.
+Table 2: per env the converged references (expert PPO, DAgger, GAIL), PPO-RGB, PPO-x,
+PPO-x+N(0,1) and HINTS-FC with every hint the env registers. The expert's run exports its best
+seed as the env's expert (--experts, default the package's hintsjax/experts/<env>) when it
+finishes; that env's dagger and gail runs start only then.
 Table 4: HINTS with each scheme (fc, lc, ac, mc) times the table's hint columns.
 Every configuration is trained at the env's default budget (config.ENV_DEFAULTS) with 5 seeds
 vmapped in one call, then evaluated on 50 episodes per seed; its folder under --runs holds
@@ -30,6 +33,10 @@ RESULTS = Path(__file__).resolve().parent / "results"
 CHILD_ENVIRON = dict(os.environ)  # the workers' environment: the parent itself keeps off the GPU
 ENVS = ("pendulum", "acrobot", "idp")
 BASELINES = ("ppo_rgb", "ppo_state", "ppo_noisy_state")
+# The converged references: the expert's run is exported (its best seed) to --experts/<env>
+# as soon as it finishes, and dagger and gail of that env start only then and learn from it.
+REFERENCES = ("expert_ppo", "dagger", "gail")
+EXPERT_RUN = "expert_ppo"
 SCHEMES = ("fc", "lc", "ac", "mc")
 
 # The hint columns of each table, per env (Table 2: every registered hint; Table 4: the paper's).
@@ -102,7 +109,7 @@ def hints_run(scheme: str, hint: str) -> str:
 def table_runs(table: int, env: str) -> list[str]:
     """The run labels a table needs for one env (labels are RunConfig.label)."""
     if table == 2:
-        return [*BASELINES, *(hints_run("fc", h) for h in TABLE2_HINTS[env])]
+        return [*REFERENCES, *BASELINES, *(hints_run("fc", h) for h in TABLE2_HINTS[env])]
     return [hints_run(s, h) for s in SCHEMES for h in TABLE4_HINTS[env]]
 
 
@@ -111,24 +118,26 @@ SMOKE = {"eval_episodes": 2, "ppo": {"total_env_steps": 1024, "num_envs": 8, "ba
                                      "minibatch_size": 256, "epochs": 1}}
 
 
-def run_values(env: str, label: str, seeds: int, smoke: bool = False) -> dict:
+def run_values(env: str, label: str, seeds: int, smoke: bool = False, experts: Path | None = None) -> dict:
     """Config values of a run label (the inverse of RunConfig.label)."""
     values = {"env": env, "seeds": seeds, "checkpoint_every": 50, **(SMOKE if smoke else {})}
-    if label in BASELINES:
+    if label in REFERENCES[1:]:
+        return {**values, "agent": label, "expert": None if experts is None else str(experts / env)}
+    if label in (*BASELINES, EXPERT_RUN):
         return {**values, "agent": label}
     _, scheme, hint = label.split("-", 2)
     return {**values, "agent": "hints", "scheme": scheme, "hint": hint}
 
 
-def train_one(runs: Path, run_id: str, seeds: int, smoke: bool) -> None:
-    """Train and evaluate one configuration `env/label` into runs/env/label."""
+def train_one(runs: Path, run_id: str, seeds: int, smoke: bool, experts: Path | None) -> None:
+    """Train and evaluate one configuration `env/label` into runs/env/label; export an expert's."""
     import jax
 
-    from hintsjax import run
+    from hintsjax import expert, run
     from hintsjax.config import run_config, save_run_config
 
     env, label = run_id.split("/")
-    cfg = run_config(run_values(env, label, seeds, smoke))
+    cfg = run_config(run_values(env, label, seeds, smoke, experts))
     assert cfg.label == label, (cfg.label, label)
     folder = runs / env / label
     folder.mkdir(parents=True, exist_ok=True)
@@ -138,6 +147,14 @@ def train_one(runs: Path, run_id: str, seeds: int, smoke: bool) -> None:
     results["wall_seconds"] = time.time() - t
     results["device"] = jax.devices()[0].device_kind
     (folder / "eval.json").write_text(json.dumps(results, indent=1))
+    if label == EXPERT_RUN:
+        print(f"exported the expert to {expert.export(folder, None if experts is None else experts / env)}", flush=True)
+
+
+def prerequisite(run_id: str) -> str | None:
+    """The run that must finish before this one starts: an env's expert, for its dagger and gail."""
+    env, label = run_id.split("/")
+    return f"{env}/{EXPERT_RUN}" if label in REFERENCES[1:] else None
 
 
 def budget(run_id: str) -> float:
@@ -150,7 +167,7 @@ def budget(run_id: str) -> float:
 
 
 def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int, smoke: bool,
-          launch_until: float = float("inf")) -> None:
+          launch_until: float = float("inf"), experts: Path | None = None) -> None:
     """Train every unfinished run, `workers` processes at a time, starting none after
     `launch_until` seconds (so that a time-limited call ends with finished runs, not killed
     ones); append the sweep's wall-clock to runs/sweeps.jsonl."""
@@ -169,11 +186,15 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int, 
                 print(f"[{time.time() - start:6.0f} s] --launch-until reached: {len(todo)} runs left for the next sweep",
                       flush=True)
                 todo = []
-            while todo and len(active) < workers:
-                run_id = todo.pop(0)
+            waiting = {r for r in todo} | {r for r, _ in active}
+            todo = [r for r in todo if prerequisite(r) not in failed]
+            ready = [r for r in todo if prerequisite(r) not in waiting]
+            while ready and len(active) < workers:
+                run_id = ready.pop(0)
+                todo.remove(run_id)
                 (runs / run_id).mkdir(parents=True, exist_ok=True)
                 cmd = [sys.executable, __file__, "--runs", str(runs), "--seeds", str(seeds), "--one", run_id,
-                       *(["--smoke"] if smoke else [])]
+                       *(["--smoke"] if smoke else []), *(["--experts", str(experts)] if experts else [])]
                 with open(runs / run_id / "train.log", "w") as log:  # the child keeps its own copy
                     active.append((run_id, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env)))
                 launched += 1
@@ -272,7 +293,7 @@ def report(runs: Path) -> None:
         deploy = env == "pendulum"
         header = "| agent | ours | paper |" + (" swingto deploy (ours) | swingto (paper) |" if deploy else "") + " wall-clock (s) |"
         lines += [header, "|" + "---|" * (header.count("|") - 1)]
-        for label in ("expert_ppo", "dagger", "gail", *table_runs(2, env)):
+        for label in table_runs(2, env):
             result = load(runs, env, label)
             row = f"| {label} | {cell(result)} | {PAPER_TABLE2[env].get(label, '-')} |"
             if deploy:
@@ -281,12 +302,16 @@ def report(runs: Path) -> None:
             lines.append(row)
         lines += ["", findings(runs, env), "", f"![{env} learning curves](classic_curves_{env}.png)", ""]
         curves = {label: read_curves(runs / env / label / "metrics.csv") for label in table_runs(2, env)
-                  if (runs / env / label / "metrics.csv").exists()}
+                  if label not in REFERENCES and (runs / env / label / "metrics.csv").exists()}
         if curves:
             plot_curves(curves, RESULTS / f"classic_curves_{env}.png", f"{env}: Table 2 agents, 5 seeds")
     lines += [f"Sweep wall-clock recorded in {runs}/sweeps.jsonl for `--table 2`: {sweep_seconds(runs, 2):.0f} s "
               "(it includes runs that the 10-minute limit of a GPU call interrupted and a later call retrained).",
-              "expert_ppo, dagger and gail are issue 6 (not yet run)."]
+              "",
+              "The references (hintsjax/config.py ENV_DEFAULTS 'agents'): expert_ppo is PPO on the state for",
+              "1 M env steps per seed; its best seed (by its 50-episode evaluation) is the env's packaged expert",
+              "(hintsjax/experts/<env>/expert.json). dagger (100 K env steps, rounds of 1024, beta 0.5^i) and",
+              "gail (1 M env steps, 16 expert episodes, log-odds reward) learn from that expert."]
     (RESULTS / "classic_table2.md").write_text("\n".join(lines) + "\n")
 
     lines = ["# Classic control: the paper's Table 4 (conditioning schemes), reproduced", "", *head,
@@ -317,10 +342,15 @@ def main() -> None:
     parser.add_argument("--smoke", action="store_true", help="tiny budgets: check the plumbing on a CPU")
     parser.add_argument("--launch-until", type=float, default=float("inf"), metavar="SECONDS",
                         help="start no run after this many seconds; running ones finish (for time-limited machines)")
+    parser.add_argument("--experts", type=Path, default=None,
+                        help="where expert_ppo runs export their expert and dagger/gail read it "
+                             "(default: the package's hintsjax/experts/<env>)")
     parser.add_argument("--one", help=argparse.SUPPRESS)  # env/label: one run, in a worker process
     args = parser.parse_args()
+    if args.experts is not None:
+        args.experts = args.experts.absolute()
     if args.one:
-        train_one(args.runs, args.one, args.seeds, args.smoke)
+        train_one(args.runs, args.one, args.seeds, args.smoke, args.experts)
         return
     os.environ["JAX_PLATFORMS"] = "cpu"  # the parent only reads configs; workers get the devices
     if args.report:
@@ -336,7 +366,7 @@ def main() -> None:
     run_ids = [f"{env}/{label}" for env in names for label in table_runs(args.table, env)]
     if args.table == 4:  # the fc row is Table 2's
         run_ids = [r for r in run_ids if "-fc-" not in r or not (args.runs / r / "eval.json").exists()]
-    sweep(args.runs, run_ids, args.workers, args.seeds, args.table, args.smoke, args.launch_until)
+    sweep(args.runs, run_ids, args.workers, args.seeds, args.table, args.smoke, args.launch_until, args.experts)
 
 
 if __name__ == "__main__":
