@@ -253,7 +253,9 @@ def sweep_seconds(runs: Path, table: int) -> float:
     path = runs / "sweeps.jsonl"
     if not path.exists():
         return 0.0
-    return sum(r["seconds"] for r in map(json.loads, path.read_text().splitlines()) if r["table"] == table)
+    # A sweep that trained runs of both tables at once is recorded as table "2+4" and counts for each.
+    return sum(r["seconds"] for r in map(json.loads, path.read_text().splitlines())
+               if str(table) in str(r["table"]).split("+"))
 
 
 def findings(runs: Path, env: str) -> str:
