@@ -116,10 +116,14 @@ def load(env: str, path: str | Path | None = None) -> Expert:
     """The expert at `path` (None: the env's packaged one); UsageError if missing, foreign or corrupt."""
     folder, meta = describe(env, path)
     hidden, sizes = meta["hidden"], (meta["state_size"], meta["action_size"])
-    abstract = {
+    shapes = {
         "actor": jax.eval_shape(lambda: _actor(hidden, sizes[1]).init(jax.random.key(0), jnp.zeros((1, sizes[0])))["params"]),
         "log_std": jax.ShapeDtypeStruct((sizes[1],), jnp.float32),
     }
+    # Onto this machine's default device, wherever the expert was saved (a GPU's checkpoint
+    # records its device, which a CPU-only machine lacks).
+    here = jax.sharding.SingleDeviceSharding(jax.devices()[0])
+    abstract = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=here), shapes)
     try:
         with ocp.StandardCheckpointer() as loader:
             params = loader.restore((folder / POLICY).absolute(), abstract)
