@@ -274,6 +274,25 @@ def findings(runs: Path, env: str) -> str:
     return text
 
 
+def paper_mean(value: str) -> float:
+    return float(value.split("±")[0])
+
+
+def scheme_findings(runs: Path, env: str) -> str:
+    """Per hint column, the best scheme in our runs and in the paper's Table 4."""
+    parts, agree = [], 0
+    for h in TABLE4_HINTS[env]:
+        ours = {s: mean_of(load(runs, env, hints_run(s, h))) for s in SCHEMES}
+        if any(v is None for v in ours.values()):
+            return ""
+        paper = {s: paper_mean(PAPER_TABLE4[s][env][h]) for s in SCHEMES}
+        best, paper_best = max(ours, key=ours.get), max(paper, key=paper.get)
+        agree += best == paper_best
+        parts.append(f"{h}: {best} (paper {paper_best})")
+    return (f"Best scheme per hint column, ours (paper): " + "; ".join(parts)
+            + f". The best scheme agrees with the paper's in {agree} of {len(parts)} columns.")
+
+
 def report(runs: Path) -> None:
     from hintsjax.runlog import plot_curves, read_curves
 
@@ -285,8 +304,9 @@ def report(runs: Path) -> None:
         "acrobot 350 K (700 episodes of 500 steps), idp 200 K (see hintsjax/config.py ENV_DEFAULTS).",
         "The paper's cells are mean ± std over n=50; where the paper has no cell, '-'; where we have",
         "not run a configuration yet, '-'. Per-run wall-clock (one H100) includes compilation and",
-        "evaluation, with 3 to 6 runs sharing the GPU (time-sliced) in the sweeps of 2026-11-22 05:30-06:05;",
-        "the pendulum rows trained before then (all but torque and ppo_noisy_state) ran one at a time.",
+        "evaluation, with 3 to 10 runs sharing the GPU (time-sliced) in the sweeps of 2026-11-22 05:30-08:25,",
+        "so it overstates a run's cost alone; the pendulum rows trained before then (all but torque and",
+        "ppo_noisy_state) ran one at a time. '(CPU)': trained on a 2-core CPU when the GPU time was spent.",
         "",
     ]
     lines = ["# Classic control: the paper's Table 2, reproduced", "", *head]
@@ -313,7 +333,12 @@ def report(runs: Path) -> None:
               "The references (hintsjax/config.py ENV_DEFAULTS 'agents'): expert_ppo is PPO on the state for",
               "1 M env steps per seed; its best seed (by its 50-episode evaluation) is the env's packaged expert",
               "(hintsjax/experts/<env>/expert.json). dagger (100 K env steps, rounds of 1024, beta 0.5^i) and",
-              "gail (1 M env steps, 16 expert episodes, log-odds reward) learn from that expert."]
+              "gail (1 M env steps, 16 expert episodes) learn from that expert. GAIL's reward is the log odds",
+              "log D - log(1 - D) on pendulum and acrobot and Ho and Ermon's -log(1 - D) on idp: with the log",
+              "odds, mostly negative at first, ending an episode early pays, and idp's episodes end by falling",
+              f"(idp gail with the log odds: {cell(load(runs.parent / 'classic_extra', 'idp', 'gail-logit'))}, in",
+              "runs/classic_extra/idp/gail-logit); with -log(1 - D) > 0 every step alive pays, which on acrobot",
+              "keeps an agent from its terminating goal (the paper's GAIL scored -500 there)."]
     (RESULTS / "classic_table2.md").write_text("\n".join(lines) + "\n")
 
     lines = ["# Classic control: the paper's Table 4 (conditioning schemes), reproduced", "", *head,
@@ -327,7 +352,9 @@ def report(runs: Path) -> None:
             lines.append(f"| {scheme} (ours) | " + " | ".join(ours) + " |")
             lines.append(f"| {scheme} (paper) | " + " | ".join(PAPER_TABLE4[scheme][env][h] for h in cols) + " |")
         lines.append("")
-    lines.append(f"Sweep wall-clock (the Table 4 runs not already in Table 2): {sweep_seconds(runs, 4):.0f} s.")
+        lines += [scheme_findings(runs, env), ""]
+    lines.append(f"Sweep wall-clock recorded for the Table 4 runs not already in Table 2: {sweep_seconds(runs, 4):.0f} s "
+                 "over the GPU calls that trained them (one call also trained Table 2's references and counts for both).")
     (RESULTS / "classic_table4.md").write_text("\n".join(lines) + "\n")
     print((RESULTS / "classic_table2.md").read_text())
     print((RESULTS / "classic_table4.md").read_text())

@@ -145,11 +145,11 @@ def env_params(env: str, variant: str | None) -> Any:
 # "agents" holds per-agent overrides on top, for the converged references (tier 3): the expert
 # trains PPO on the state for 5x the hint agents' budget; DAgger's rounds of 1024 steps
 # aggregate every visited state (buffer = budget); GAIL gets the expert's budget.
-def _references(expert_steps: int, dagger_steps: int = 100_000, **expert_ppo: Any) -> dict[str, Any]:
+def _references(expert_steps: int, dagger_steps: int = 100_000, gail_reward: str = "logit", **expert_ppo: Any) -> dict[str, Any]:
     return {
         "expert_ppo": dict(ppo=dict(total_env_steps=expert_steps, **expert_ppo)),
         "dagger": dict(ppo=dict(total_env_steps=dagger_steps), dagger=dict(buffer_size=dagger_steps)),
-        "gail": dict(ppo=dict(total_env_steps=expert_steps, **expert_ppo)),
+        "gail": dict(ppo=dict(total_env_steps=expert_steps, **expert_ppo), gail=dict(reward=gail_reward)),
     }
 
 
@@ -167,8 +167,11 @@ ENV_DEFAULTS: dict[str, dict[str, Any]] = {
     # of 8 steps per 1024-transition batch): MJX's RK4 with the rail's constraint solver is
     # kernel-launch bound at small batches on a GPU (16 envs x 5 seeds ran ~6 K steps/s).
     # Its expert and GAIL step 512 envs per seed in batches of 4096 (4x fewer sequential steps).
+    # GAIL's reward is Ho and Ermon's -log(1 - D) > 0 here: with the signed log odds, mostly
+    # negative at first, ending an episode early pays, and idp's episodes end by falling (GAIL
+    # scored 71 that way; measured in experiments/results/classic_table2.md).
     "idp": dict(hint="composite", ppo=dict(total_env_steps=200_000, num_envs=128, reward_scale=0.1),
-                agents=_references(1_000_000, num_envs=512, batch_size=4096)),
+                agents=_references(1_000_000, gail_reward="original", num_envs=512, batch_size=4096)),
 }
 
 
