@@ -130,16 +130,16 @@ def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
             k_e, k_p = jax.random.split(key)
             expert_batch = pairs(*state.demos.sample(k_e, ppo.minibatch_size))
             policy_batch = flat_policy[jax.random.randint(k_p, (ppo.minibatch_size,), 0, flat_policy.shape[0])]
-            grads, parts_ = jax.grad(lambda p: discriminator_loss(disc, p, expert_batch, policy_batch), has_aux=True)(params)
+            grads, stats = jax.grad(lambda p: discriminator_loss(disc, p, expert_batch, policy_batch), has_aux=True)(params)
             updates, opt_state = disc_opt.update(grads, opt_state, params)
-            return (optax.apply_updates(params, updates), opt_state), parts_
+            return (optax.apply_updates(params, updates), opt_state), stats
 
-        (disc_params, disc_opt_state), disc_parts = jax.lax.scan(
+        (disc_params, disc_opt_state), disc_stats = jax.lax.scan(
             disc_step, (state.disc_params, state.disc_opt_state), jax.random.split(k_disc, gail.disc_steps)
         )
         reward = gail_reward(disc.apply(disc_params, policy_pairs)[..., 0], gail.reward)
         runner, metrics = parts.learn(runner, traj, last_value, reward, k_epochs)
-        metrics = {**metrics, **jax.tree.map(jnp.mean, disc_parts), "gail_reward": reward.mean(),
+        metrics = {**metrics, **jax.tree.map(jnp.mean, disc_stats), "gail_reward": reward.mean(),
                    "demo_return": state.demos.episode_return.mean()}
         new = GailState(runner.replace(key=key), disc_params, disc_opt_state, state.demos)
         return new, metrics
