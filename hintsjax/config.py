@@ -31,6 +31,16 @@ class UsageError(ValueError):
     """Bad input from the user: reported in one line, exit status 2."""
 
 
+def require_positive(obj: Any, names: tuple[str, ...], prefix: str = "") -> None:
+    """UsageError naming the first of `names` (numbers, or tuples of widths) that is not positive."""
+    for name in names:
+        value = getattr(obj, name)
+        if isinstance(value, tuple) and not all(w > 0 for w in value):
+            raise UsageError(f"{prefix}{name} widths must be positive, got {list(value)}")
+        if not isinstance(value, tuple) and value <= 0:
+            raise UsageError(f"{prefix}{name} must be positive, got {value}")
+
+
 @dataclass(frozen=True)
 class PPOConfig:
     """PPO settings (SPEC section 5). The budget is counted in environment steps."""
@@ -66,9 +76,7 @@ class PPOConfig:
         return self.batch_size // self.minibatch_size
 
     def validate(self) -> None:
-        for name in ("total_env_steps", "num_envs", "batch_size", "epochs", "minibatch_size", "hint_width"):
-            if getattr(self, name) <= 0:
-                raise UsageError(f"ppo.{name} must be positive, got {getattr(self, name)}")
+        require_positive(self, ("total_env_steps", "num_envs", "batch_size", "epochs", "minibatch_size", "hint_width"), "ppo.")
         if self.batch_size % self.num_envs:
             raise UsageError(f"ppo.batch_size ({self.batch_size}) must be a multiple of ppo.num_envs ({self.num_envs})")
         if self.batch_size % self.minibatch_size:
@@ -79,8 +87,7 @@ class PPOConfig:
             raise UsageError(
                 f"ppo.total_env_steps ({self.total_env_steps}) is less than one update's batch ({self.batch_size})"
             )
-        if not all(w > 0 for w in self.hidden):
-            raise UsageError(f"ppo.hidden widths must be positive, got {list(self.hidden)}")
+        require_positive(self, ("hidden",), "ppo.")
 
 
 @dataclass(frozen=True)
@@ -97,11 +104,7 @@ class DaggerConfig:
     def validate(self) -> None:
         if not 0.0 <= self.beta_decay <= 1.0:
             raise UsageError(f"dagger.beta_decay must be in [0, 1], got {self.beta_decay}")
-        for name in ("buffer_size", "grad_steps"):
-            if getattr(self, name) <= 0:
-                raise UsageError(f"dagger.{name} must be positive, got {getattr(self, name)}")
-        if self.lr <= 0:
-            raise UsageError(f"dagger.lr must be positive, got {self.lr}")
+        require_positive(self, ("buffer_size", "grad_steps", "lr"), "dagger.")
 
 
 GAIL_REWARDS = ("logit", "original")
@@ -116,19 +119,14 @@ class GailConfig:
     disc_hidden: tuple[int, ...] = (256, 256)
     disc_lr: float = 3e-4
     disc_steps: int = 4  # discriminator minibatch steps per PPO update (minibatches of ppo.minibatch_size)
-    # "logit": log D - log(1 - D), signed, so it neither rewards nor punishes living longer;
+    # "logit": log D - log(1 - D), the log odds; mostly negative while the discriminator wins, so
+    # ending an episode early pays (idp's agents learn to fall).
     # "original": -log(1 - D) > 0, Ho and Ermon's, which pays for every step alive (an agent
     # then avoids a task's terminating goal, e.g. acrobot's).
     reward: str = "logit"
 
     def validate(self) -> None:
-        for name in ("demonstrations", "disc_steps"):
-            if getattr(self, name) <= 0:
-                raise UsageError(f"gail.{name} must be positive, got {getattr(self, name)}")
-        if self.disc_lr <= 0:
-            raise UsageError(f"gail.disc_lr must be positive, got {self.disc_lr}")
-        if not all(w > 0 for w in self.disc_hidden):
-            raise UsageError(f"gail.disc_hidden widths must be positive, got {list(self.disc_hidden)}")
+        require_positive(self, ("demonstrations", "disc_steps", "disc_lr", "disc_hidden"), "gail.")
         if self.reward not in GAIL_REWARDS:
             raise UsageError(f"unknown gail.reward {self.reward!r}; valid: {', '.join(GAIL_REWARDS)}")
 
@@ -235,9 +233,7 @@ class RunConfig:
             raise UsageError(str(e)) from None
         for v in (self.variant, *self.eval_variants):
             env_params(self.env, v)
-        for name in ("seeds", "eval_episodes", "checkpoint_every"):
-            if getattr(self, name) <= 0:
-                raise UsageError(f"{name} must be positive, got {getattr(self, name)}")
+        require_positive(self, ("seeds", "eval_episodes", "checkpoint_every"))
         for section in SECTIONS:
             getattr(self, section).validate()
         if self.agent_spec.algorithm == "dagger" and self.dagger.buffer_size < self.ppo.batch_size:
