@@ -120,8 +120,10 @@ SMOKE = {"eval_episodes": 2, "ppo": {"total_env_steps": 1024, "num_envs": 8, "ba
 
 def run_values(env: str, label: str, seeds: int, smoke: bool = False, experts: Path | None = None) -> dict:
     """Config values of a run label (the inverse of RunConfig.label)."""
+    from hintsjax.agents import AGENTS
+
     values = {"env": env, "seeds": seeds, "checkpoint_every": 50, **(SMOKE if smoke else {})}
-    if label in REFERENCES[1:]:
+    if label in AGENTS and AGENTS[label].imitates:
         return {**values, "agent": label, "expert": None if experts is None else str(experts / env)}
     if label in (*BASELINES, EXPERT_RUN):
         return {**values, "agent": label}
@@ -153,8 +155,10 @@ def train_one(runs: Path, run_id: str, seeds: int, smoke: bool, experts: Path | 
 
 def prerequisite(run_id: str) -> str | None:
     """The run that must finish before this one starts: an env's expert, for its dagger and gail."""
+    from hintsjax.agents import AGENTS
+
     env, label = run_id.split("/")
-    return f"{env}/{EXPERT_RUN}" if label in REFERENCES[1:] else None
+    return f"{env}/{EXPERT_RUN}" if label in AGENTS and AGENTS[label].imitates else None
 
 
 def budget(run_id: str) -> float:

@@ -23,7 +23,7 @@ from flax import struct
 
 from hintsjax import envs
 from hintsjax.config import RunConfig
-from hintsjax.ppo import make_network
+from hintsjax.ppo import RunnerState, make_network, start_runner
 from hintsjax.trainer import Trainer, episode_metrics
 
 
@@ -62,13 +62,17 @@ class Dataset:
 class DaggerState:
     """Everything a DAgger run carries between rounds; a checkpoint saves all of it."""
 
-    params: Any  # the student's ActorCritic parameters
-    opt_state: Any
-    env_state: Any  # AutoReset's EpisodeState, batched [N]
-    obs: dict[str, jax.Array]  # current observation, batched [N]
-    key: jax.Array
-    update: jax.Array  # rounds done so far
+    runner: RunnerState  # the student's params and optimiser state, the envs, the key, rounds done
     data: Dataset
+
+    @property
+    def params(self) -> Any:
+        """The student's ActorCritic parameters (what evaluation uses)."""
+        return self.runner.params
+
+    @property
+    def update(self) -> jax.Array:
+        return self.runner.update
 
 
 def imitation_loss(predicted: jax.Array, label: jax.Array) -> jax.Array:
@@ -90,17 +94,15 @@ def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
     T, N = ppo.rollout_length, ppo.num_envs
 
     def init(key: jax.Array) -> DaggerState:
-        k_net, k_env, k_run = jax.random.split(key, 3)
-        ts = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_env, N), env_params)
-        params = network.init(k_net, jax.tree.map(lambda x: x[:1], ts.obs))
-        data = Dataset.empty(dagger.buffer_size, env.state_size, env.action_size)
-        return DaggerState(params, optimizer.init(params), ts.state, ts.obs, k_run, jnp.zeros((), jnp.int32), data)
+        runner = start_runner(key, env, env_params, network, N, optimizer.init)
+        return DaggerState(runner, Dataset.empty(dagger.buffer_size, env.state_size, env.action_size))
 
     def student(params: Any, obs: dict[str, jax.Array]) -> jax.Array:
         return network.apply(params, obs)[0]
 
     def update(state: DaggerState) -> tuple[DaggerState, dict[str, jax.Array]]:
-        key, k_roll, k_fit = jax.random.split(state.key, 3)
+        runner = state.runner
+        key, k_roll, k_fit = jax.random.split(runner.key, 3)
         beta = jnp.power(dagger.beta_decay, state.update.astype(jnp.float32))
 
         def step(carry, key):
@@ -114,7 +116,7 @@ def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
             return (ts.state, ts.obs), visited
 
         (env_state, obs), (states, labels, done, returns, by_expert) = jax.lax.scan(
-            step, (state.env_state, state.obs), jax.random.split(k_roll, T)
+            step, (runner.env_state, runner.obs), jax.random.split(k_roll, T)
         )
         data = state.data.add(states.reshape(T * N, -1), labels.reshape(T * N, -1))
 
@@ -125,7 +127,7 @@ def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
             updates, opt_state = optimizer.update(grads, opt_state, params)
             return (optax.apply_updates(params, updates), opt_state), loss
 
-        (params, opt_state), losses = jax.lax.scan(fit, (state.params, state.opt_state), jax.random.split(k_fit, dagger.grad_steps))
+        (params, opt_state), losses = jax.lax.scan(fit, (runner.params, runner.opt_state), jax.random.split(k_fit, dagger.grad_steps))
         metrics = {
             **episode_metrics(done, returns),
             "imitation_loss": losses.mean(),
@@ -134,7 +136,7 @@ def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
             "dataset_size": data.size,
             "env_steps": (state.update + 1) * ppo.batch_size,
         }
-        new = DaggerState(params, opt_state, env_state, obs, key, state.update + 1, data)
-        return new, metrics
+        runner = RunnerState(params, opt_state, env_state, obs, key, runner.update + 1)
+        return DaggerState(runner, data), metrics
 
     return Trainer(cfg, env, network, init, update)

@@ -161,6 +161,16 @@ def observe_with_noise(obs: dict[str, jax.Array], key: jax.Array, noise: float) 
     return {**obs, "state": obs["state"] + noise * jax.random.normal(key, obs["state"].shape)}
 
 
+def start_runner(
+    key: jax.Array, env: Any, env_params: Any, network: ActorCritic, num_envs: int, init_opt: Callable[[Any], Any]
+) -> RunnerState:
+    """A run's start: `num_envs` fresh episodes, fresh network params and `init_opt(params)`."""
+    k_net, k_env, k_run = jax.random.split(key, 3)
+    ts = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_env, num_envs), env_params)
+    params = network.init(k_net, jax.tree.map(lambda x: x[:1], ts.obs))
+    return RunnerState(params, init_opt(params), ts.state, ts.obs, k_run, jnp.zeros((), jnp.int32))
+
+
 @dataclass(frozen=True)
 class PPO:
     """PPO's pure pieces for one configuration; `make_trainer` joins them into PPO's update, and
@@ -186,11 +196,7 @@ def make_ppo(cfg: RunConfig) -> PPO:
     T, N = ppo.rollout_length, ppo.num_envs
 
     def init(key: jax.Array) -> RunnerState:
-        k_net, k_env, k_run = jax.random.split(key, 3)
-        ts = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_env, N), env_params)
-        params = network.init(k_net, jax.tree.map(lambda x: x[:1], ts.obs))
-        opt_state = make_optimizer(ppo, params).init(params)
-        return RunnerState(params, opt_state, ts.state, ts.obs, k_run, jnp.zeros((), jnp.int32))
+        return start_runner(key, env, env_params, network, N, lambda params: make_optimizer(ppo, params).init(params))
 
     def rollout(state: RunnerState, key: jax.Array) -> tuple[RunnerState, Transition, jax.Array]:
         def step(carry, key):
