@@ -21,22 +21,17 @@ folders and writes experiments/results/classic_table{2,4}.md and classic_curves_
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import signal
-import subprocess
-import sys
-import time
 from pathlib import Path
 
+from sweep import cell, hints_run, load, mean_of, sweep, sweep_seconds, wall_clock
+
 RESULTS = Path(__file__).resolve().parent / "results"
-CHILD_ENVIRON = dict(os.environ)  # the workers' environment: the parent itself keeps off the GPU
 ENVS = ("pendulum", "acrobot", "idp")
 BASELINES = ("ppo_rgb", "ppo_state", "ppo_noisy_state")
 # The converged references: the expert's run is exported (its best seed) to --experts/<env>
 # as soon as it finishes, and dagger and gail of that env start only then and learn from it.
 REFERENCES = ("expert_ppo", "dagger", "gail")
-EXPERT_RUN = "expert_ppo"
 SCHEMES = ("fc", "lc", "ac", "mc")
 
 # The hint columns of each table, per env (Table 2: every registered hint; Table 4: the paper's).
@@ -102,10 +97,6 @@ PAPER_TABLE4 = {
 }
 
 
-def hints_run(scheme: str, hint: str) -> str:
-    return f"hints-{scheme}-{hint}"
-
-
 def table_runs(table: int, env: str) -> list[str]:
     """The run labels a table needs for one env (labels are RunConfig.label)."""
     if table == 2:
@@ -113,154 +104,7 @@ def table_runs(table: int, env: str) -> list[str]:
     return [hints_run(s, h) for s in SCHEMES for h in TABLE4_HINTS[env]]
 
 
-# --smoke: a tiny budget to check the sweep's plumbing on a CPU (the numbers mean nothing).
-SMOKE = {"eval_episodes": 2, "ppo": {"total_env_steps": 1024, "num_envs": 8, "batch_size": 512,
-                                     "minibatch_size": 256, "epochs": 1}}
-
-
-def run_values(env: str, label: str, seeds: int, smoke: bool = False, experts: Path | None = None) -> dict:
-    """Config values of a run label (the inverse of RunConfig.label)."""
-    from hintsjax.agents import AGENTS
-
-    values = {"env": env, "seeds": seeds, "checkpoint_every": 50, **(SMOKE if smoke else {})}
-    if label in AGENTS and AGENTS[label].imitates:
-        return {**values, "agent": label, "expert": None if experts is None else str(experts / env)}
-    if label in (*BASELINES, EXPERT_RUN):
-        return {**values, "agent": label}
-    _, scheme, hint = label.split("-", 2)
-    return {**values, "agent": "hints", "scheme": scheme, "hint": hint}
-
-
-def train_one(runs: Path, run_id: str, seeds: int, smoke: bool, experts: Path | None) -> None:
-    """Train and evaluate one configuration `env/label` into runs/env/label; export an expert's."""
-    import jax
-
-    from hintsjax import expert, run
-    from hintsjax.config import run_config, save_run_config
-
-    env, label = run_id.split("/")
-    cfg = run_config(run_values(env, label, seeds, smoke, experts))
-    assert cfg.label == label, (cfg.label, label)
-    folder = runs / env / label
-    folder.mkdir(parents=True, exist_ok=True)
-    save_run_config(folder, cfg)
-    t = time.time()
-    results = run.train(cfg, folder, progress=False)
-    results["wall_seconds"] = time.time() - t
-    results["device"] = jax.devices()[0].device_kind
-    (folder / "eval.json").write_text(json.dumps(results, indent=1))
-    if label == EXPERT_RUN:
-        print(f"exported the expert to {expert.export(folder, None if experts is None else experts / env)}", flush=True)
-
-
-def prerequisite(run_id: str) -> str | None:
-    """The run that must finish before this one starts: an env's expert, for its dagger and gail."""
-    from hintsjax.agents import AGENTS
-
-    env, label = run_id.split("/")
-    return f"{env}/{EXPERT_RUN}" if label in AGENTS and AGENTS[label].imitates else None
-
-
-def budget(run_id: str) -> float:
-    """Rough relative cost of a run, to start the longest first."""
-    from hintsjax.config import run_config
-
-    env, label = run_id.split("/")
-    cfg = run_config(run_values(env, label, 1))
-    return cfg.ppo.total_env_steps * (1.0 if cfg.agent_spec.pixels else 0.3)
-
-
-def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int, smoke: bool,
-          launch_until: float = float("inf"), experts: Path | None = None) -> None:
-    """Train every unfinished run, `workers` processes at a time, starting none after
-    `launch_until` seconds (so that a time-limited call ends with finished runs, not killed
-    ones); append the sweep's wall-clock to runs/sweeps.jsonl."""
-    todo = sorted((r for r in run_ids if not (runs / r / "eval.json").exists()), key=budget, reverse=True)
-    print(f"table {table}: {len(run_ids) - len(todo)} of {len(run_ids)} runs done already; "
-          f"training {len(todo)} with {workers} worker(s)", flush=True)
-    launched = 0
-    env = {**CHILD_ENVIRON, "XLA_PYTHON_CLIENT_MEM_FRACTION": f"{0.9 / workers:.3f}"}
-    start = time.time()
-    active: list[tuple[str, subprocess.Popen]] = []  # each worker writes its own train.log
-    failed: list[str] = []
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # `timeout` stops the sweep: record it below
-    try:
-        while todo or active:
-            if todo and time.time() - start > launch_until:
-                print(f"[{time.time() - start:6.0f} s] --launch-until reached: {len(todo)} runs left for the next sweep",
-                      flush=True)
-                todo = []
-            waiting = {r for r in todo} | {r for r, _ in active}
-            todo = [r for r in todo if prerequisite(r) not in failed]
-            ready = [r for r in todo if prerequisite(r) not in waiting]
-            while ready and len(active) < workers:
-                run_id = ready.pop(0)
-                todo.remove(run_id)
-                (runs / run_id).mkdir(parents=True, exist_ok=True)
-                cmd = [sys.executable, __file__, "--runs", str(runs), "--seeds", str(seeds), "--one", run_id,
-                       *(["--smoke"] if smoke else []), *(["--experts", str(experts)] if experts else [])]
-                with open(runs / run_id / "train.log", "w") as log:  # the child keeps its own copy
-                    active.append((run_id, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env)))
-                launched += 1
-            time.sleep(2)
-            for run_id, proc in list(active):
-                if proc.poll() is None:
-                    continue
-                active.remove((run_id, proc))
-                if proc.returncode:
-                    failed.append(run_id)
-                print(f"[{time.time() - start:6.0f} s] {run_id}: "
-                      f"{'FAILED (see ' + str(runs / run_id / 'train.log') + ')' if proc.returncode else 'done'}", flush=True)
-    finally:
-        for _, proc in active:  # interrupted: these runs are retrained by the next sweep
-            proc.terminate()
-        seconds = time.time() - start
-        record = {"table": table, "runs": len(run_ids), "trained": launched - len(failed) - len(active),
-                  "failed": failed, "interrupted": [r for r, _ in active], "workers": workers, "seconds": seconds,
-                  "finished": time.strftime("%Y-%m-%d %H:%M:%S")}
-        with open(runs / "sweeps.jsonl", "a") as f:
-            f.write(json.dumps(record) + "\n")
-        print(f"table {table}: {seconds:.0f} s wall-clock" + (f", {len(active)} runs interrupted" if active else ""), flush=True)
-    if failed:
-        sys.exit(1)
-
-
 # -- the report ----------------------------------------------------------------------------------
-
-
-def load(runs: Path, env: str, label: str) -> dict | None:
-    path = runs / env / label / "eval.json"
-    return json.loads(path.read_text()) if path.exists() else None
-
-
-def cell(result: dict | None, variant: int = 0) -> str:
-    """'mean ± std (seed std)' of one evaluation, or '-' when not run."""
-    if result is None:
-        return "-"
-    e = result["evaluations"][variant]
-    return f"{e['mean']:.1f} ± {e['std']:.1f} ({e['seed_std']:.1f})"
-
-
-def mean_of(result: dict | None) -> float | None:
-    return None if result is None else result["evaluations"][0]["mean"]
-
-
-def wall_clock(result: dict | None) -> str:
-    """A run's wall-clock in seconds, marked when it ran on a CPU rather than the GPU."""
-    if result is None:
-        return "-"
-    on_cpu = result.get("device", "").lower() == "cpu"
-    return f"{result['wall_seconds']:.0f}" + (" (CPU)" if on_cpu else "")
-
-
-def sweep_seconds(runs: Path, table: int) -> float:
-    path = runs / "sweeps.jsonl"
-    if not path.exists():
-        return 0.0
-    # A sweep that trained runs of both tables at once is recorded as table "2+4" and counts for each.
-    # Sweeps run on a CPU (recorded with "device": "cpu") are left out: their runs are marked (CPU).
-    return sum(r["seconds"] for r in map(json.loads, path.read_text().splitlines())
-               if str(table) in str(r["table"]).split("+") and r.get("device") != "cpu")
 
 
 def findings(runs: Path, env: str) -> str:
@@ -294,7 +138,7 @@ def scheme_findings(runs: Path, env: str) -> str:
         best, paper_best = max(ours, key=ours.get), max(paper, key=paper.get)
         agree += best == paper_best
         parts.append(f"{h}: {best} (paper {paper_best})")
-    return (f"Best scheme per hint column, ours (paper): " + "; ".join(parts)
+    return ("Best scheme per hint column, ours (paper): " + "; ".join(parts)
             + f". The best scheme agrees with the paper's in {agree} of {len(parts)} columns.")
 
 
@@ -380,13 +224,9 @@ def main() -> None:
     parser.add_argument("--experts", type=Path, default=None,
                         help="where expert_ppo runs export their expert and dagger/gail read it "
                              "(default: the package's hintsjax/experts/<env>)")
-    parser.add_argument("--one", help=argparse.SUPPRESS)  # env/label: one run, in a worker process
     args = parser.parse_args()
     if args.experts is not None:
         args.experts = args.experts.absolute()
-    if args.one:
-        train_one(args.runs, args.one, args.seeds, args.smoke, args.experts)
-        return
     os.environ["JAX_PLATFORMS"] = "cpu"  # the parent only reads configs; workers get the devices
     if args.report:
         report(args.runs)
