@@ -20,7 +20,7 @@ import io
 with contextlib.redirect_stdout(io.StringIO()):  # mjx prints a notice when its optional warp backend is absent
     from mujoco import mjx  # noqa: F401
 
-from hintsjax.envs import acrobot, idp, pendulum  # noqa: E402
+from hintsjax.envs import acrobot, ant, car_racing, halfcheetah, humanoid, idp, pendulum  # noqa: E402
 from hintsjax.envs.core import OBS_KEYS, AutoReset, Env, Step, Timestep
 from hintsjax.envs.errors import ChoiceError, choose
 from hintsjax.envs.hints import NO_HINT, Hint, hint_names, make_hint, register_composite, register_hint
@@ -38,6 +38,10 @@ REGISTRY: dict[str, EnvEntry] = {
     "pendulum": EnvEntry(pendulum.Pendulum, pendulum.VARIANTS),
     "acrobot": EnvEntry(acrobot.Acrobot, acrobot.VARIANTS),
     "idp": EnvEntry(idp.InvertedDoublePendulum, idp.VARIANTS),
+    "ant": EnvEntry(ant.Ant, ant.VARIANTS),
+    "halfcheetah": EnvEntry(halfcheetah.HalfCheetah, halfcheetah.VARIANTS),
+    "humanoid": EnvEntry(humanoid.Humanoid, humanoid.VARIANTS),
+    "car_racing": EnvEntry(car_racing.CarRacing, car_racing.VARIANTS),
 }
 
 

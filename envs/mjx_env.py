@@ -2,20 +2,40 @@
 
 from __future__ import annotations
 
+from importlib import resources
+from typing import Any
+
 import mujoco
 from mujoco import mjx
 
 from hintsjax.envs.core import Env
 
 
+def load_asset(name: str) -> str:
+    """The text of `envs/assets/<name>`: the Gymnasium models we build on, kept verbatim."""
+    return resources.files("hintsjax.envs").joinpath("assets", name).read_text()
+
+
 class MjxEnv(Env):
-    """An Env built from the MJCF string `mjcf`: `mj_model` (MuJoCo C, for reference and names),
-    `model` (its MJX copy, what the jitted step uses) and `site_ids` (site name -> index)."""
+    """An Env built from the MJCF string `mjcf` (or the packaged file `asset`), with the
+    `mj_model.opt` fields in `options` overridden: `mj_model` (MuJoCo C, for reference and
+    names), `model` (its MJX copy, what the jitted step uses) and `site_ids` (site name ->
+    index)."""
 
     mjcf: str = ""
+    asset: str = ""
+    options: dict[str, Any] = {}
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        self.mj_model = mujoco.MjModel.from_xml_string(self.mjcf)
+        self.mj_model = self.make_mj_model()
         self.model = mjx.put_model(self.mj_model)
         self.site_ids = {self.mj_model.site(i).name: i for i in range(self.mj_model.nsite)}
+
+    @classmethod
+    def make_mj_model(cls) -> mujoco.MjModel:
+        """The MuJoCo C model with `options` applied: what a parity test steps as the reference."""
+        model = mujoco.MjModel.from_xml_string(cls.mjcf or load_asset(cls.asset))
+        for field, value in cls.options.items():
+            setattr(model.opt, field, value)
+        return model

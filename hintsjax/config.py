@@ -170,6 +170,14 @@ ENV_DEFAULTS: dict[str, dict[str, Any]] = {
     # scored 71 that way; measured in experiments/results/classic_table2.md).
     "idp": dict(hint="composite", ppo=dict(total_env_steps=200_000, num_envs=128, reward_scale=0.1),
                 agents=_references(1_000_000, gail_reward="original", num_envs=512, batch_size=4096)),
+    # Locomotion (SPEC section 5): 1k, 5k and 10k episodes, counted at their full 1000 steps
+    # (early episodes end in a few dozen steps when the robot falls, as on idp).
+    "halfcheetah": dict(hint="velocity", ppo=dict(total_env_steps=1_000_000, num_envs=128)),
+    "ant": dict(hint="speed", ppo=dict(total_env_steps=5_000_000, num_envs=128)),
+    "humanoid": dict(hint="velocity", ppo=dict(total_env_steps=10_000_000, num_envs=128)),
+    # 1000 episodes of 1000 steps (SPEC section 5); trained on the standard track, deployed on
+    # hairpins. The paper conditions the car with scheme mc (scheme=mc).
+    "car_racing": dict(hint="composite", eval_variants=("hairpin",), ppo=dict(total_env_steps=1_000_000, num_envs=128)),
 }
 
 

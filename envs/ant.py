@@ -1,0 +1,81 @@
+"""Ant on MJX: Gymnasium `Ant-v5` (its `ant.xml`, frame skip 5, reward, health and observation).
+
+Solver override (`options`): Newton with at most 4 iterations and 8 line-search steps instead
+of MuJoCo's 100 and 50. MJX runs every iteration for every env under vmap, so the default would
+cost ~20x more; the parity test measures what the cap costs against Gymnasium. The model is
+otherwise Gymnasium's file unchanged (RK4, dt 0.01, frame skip 5: 0.05 s per step).
+
+Reward (v5): x velocity of the torso over the step + 1 while healthy - 0.5 |a|^2
+- 5e-4 |clip(cfrc_ext, -1, 1)|^2; healthy while the torso's height is in [0.2, 1] and the state
+is finite; unhealthy terminates. Observation (105): qpos[2:], qvel, clip(cfrc_ext[1:], -1, 1).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import mujoco
+from mujoco import mjx
+
+from hintsjax.envs.hints import register_hint
+from hintsjax.envs.locomotion import LocomotionEnv, LocomotionParams, LocomotionState, cfrc_ext, torso_height_above_target
+
+NAME = "ant"
+TORSO = 1  # body id of the torso, Gymnasium's `main_body`
+
+VARIANTS = {
+    "standard": LocomotionParams(
+        forward_reward_weight=1.0, ctrl_cost_weight=0.5, contact_cost_weight=5e-4, healthy_reward=1.0,
+        healthy_z_low=0.2, healthy_z_high=1.0, reset_noise_scale=0.1, target_height=0.75,
+    )
+}
+
+
+def contact_forces(data: mjx.Data) -> jax.Array:
+    """float32[nbody, 6] cfrc_ext clipped to v5's contact force range [-1, 1]."""
+    return jnp.clip(cfrc_ext(data), -1.0, 1.0)
+
+
+class Ant(LocomotionEnv):
+    name = NAME
+    asset = "ant.xml"
+    options = dict(solver=mujoco.mjtSolver.mjSOL_NEWTON, iterations=4, ls_iterations=8)
+    action_size = 8
+    camera = dict(distance=3.5, elevation_deg=-35.0, azimuth_deg=90.0)
+    camera_height = 0.4
+
+    def default_params(self) -> LocomotionParams:
+        return VARIANTS["standard"]
+
+    def position(self, data: mjx.Data) -> jax.Array:
+        return data.xpos[TORSO, :2]
+
+    def outcome(self, data, velocity, ctrl, params):
+        z = data.qpos[2]
+        finite = jnp.all(jnp.isfinite(data.qpos)) & jnp.all(jnp.isfinite(data.qvel))
+        healthy = finite & (z >= params.healthy_z_low) & (z <= params.healthy_z_high)
+        ctrl_cost = params.ctrl_cost_weight * jnp.sum(ctrl**2)
+        contact_cost = params.contact_cost_weight * jnp.sum(contact_forces(data) ** 2)
+        reward = params.forward_reward_weight * velocity[0] + params.healthy_reward * healthy - ctrl_cost - contact_cost
+        return reward, ~healthy
+
+    def observe_data(self, data: mjx.Data) -> jax.Array:
+        return jnp.concatenate([data.qpos[2:], data.qvel, contact_forces(data)[1:].ravel()])
+
+
+# -- hints (SPEC section 3) ---------------------------------------------------------------------
+
+
+@register_hint(NAME, "speed", dim=1, unit="m/s")
+def speed(state: LocomotionState, params) -> jax.Array:
+    """The torso's planar speed over the last step, |(dx, dy)| / dt."""
+    return jnp.linalg.norm(state.velocity)
+
+
+register_hint(NAME, "goal_height", dim=1, unit="m")(torso_height_above_target)
+
+
+@register_hint(NAME, "state", dim=105, unit="v5 observation")
+def full_state(state: LocomotionState, params) -> jax.Array:
+    """The full state observation."""
+    return state.obs
