@@ -29,7 +29,7 @@ test: setup
 test-slow: setup
 	$(BIN)/python -m pytest -q -m slow -n 2 --dist loadfile
 
-BENCH_ENVS ?= pendulum,acrobot,idp
+BENCH_ENVS ?= pendulum,acrobot,idp,halfcheetah,ant,humanoid,car_racing
 bench: setup
 	$(BIN)/python experiments/bench.py --envs $(BENCH_ENVS)
 

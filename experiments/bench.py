@@ -1,6 +1,7 @@
 """Throughput of each env (with its picture), of training end to end, and the ceiling.
 
-    python experiments/bench.py [--envs pendulum,acrobot,idp] [--quick] [--out results.json]
+    python experiments/bench.py [--envs pendulum,acrobot,idp] [--sizes 4096,65536] [--steps 100] [--no-train]
+                                [--quick] [--out results.json]
 
 Measures, in one process on whatever device JAX sees:
   env      env steps/s including the 64x64 picture (AutoReset, vmapped, in a scan), beside the
@@ -110,6 +111,9 @@ def bench_train(name: str, seeds: int, updates: int, overrides: dict) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--envs", default="pendulum", help=f"comma-separated subset of {envs.env_names()}")
+    parser.add_argument("--sizes", default="4096,65536", help="comma-separated numbers of envs for the env rows")
+    parser.add_argument("--steps", type=int, default=100, help="env steps per timed scan in the env rows")
+    parser.add_argument("--no-train", action="store_true", help="env rows only (no training rows)")
     parser.add_argument("--quick", action="store_true", help="small sizes (a CPU smoke run)")
     parser.add_argument("--out", default=None, help="write the results as JSON here")
     args = parser.parse_args()
@@ -125,15 +129,15 @@ def main() -> None:
     print(f"ceiling batch {results['ceiling']['batch']}: {ceiling:,.0f} samples/s (fwd+bwd+Adam)", flush=True)
     results["env"], results["train"] = [], []
     for name in names:
-        for n in ((4096, 65536) if not q else (64,)):
+        for n in ([int(n) for n in args.sizes.split(",")] if not q else (64,)):
             for pixels in (False, True):
-                r = bench_env(name, n, 100 if not q else 10, pixels)
+                r = bench_env(name, n, args.steps if not q else 10, pixels)
                 results["env"].append(r)
                 print(f"env     {name:>9} {n:>6} envs: {r['env_steps_per_s']:>14,.0f} env steps/s "
                       f"({'with 64x64 picture' if pixels else 'physics, reward, hint'})", flush=True)
         settings = (((5, {}), (5, {"num_envs": 64}), (32, {}), (32, {"num_envs": 64, "minibatch_size": 1024}))
                     if not q else ((2, {"num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}),))
-        for seeds, overrides in settings:
+        for seeds, overrides in settings if not args.no_train else ():
             r = bench_train(name, seeds, 8 if not q else 2, overrides)
             r["fraction_of_ceiling"] = r["grad_samples_per_s"] / ceiling
             results["train"].append(r)
