@@ -1,6 +1,6 @@
 """Ant on MJX: Gymnasium `Ant-v5` (its `ant.xml`, frame skip 5, reward, health and observation).
 
-Solver override (`options`): Newton with at most 4 iterations and 8 line-search steps instead
+Solver override (`locomotion.SOLVER`): Newton with at most 4 iterations and 8 line-search steps instead
 of MuJoCo's 100 and 50. MJX runs every iteration for every env under vmap, so the default would
 cost ~20x more; the parity test measures what the cap costs against Gymnasium. The model is
 otherwise Gymnasium's file unchanged (RK4, dt 0.01, frame skip 5: 0.05 s per step).
@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import mujoco
 from mujoco import mjx
 
 from hintsjax.envs.hints import register_hint
@@ -39,13 +38,10 @@ def contact_forces(data: mjx.Data) -> jax.Array:
 class Ant(LocomotionEnv):
     name = NAME
     asset = "ant.xml"
-    options = dict(solver=mujoco.mjtSolver.mjSOL_NEWTON, iterations=4, ls_iterations=8)
+    variants = VARIANTS
     action_size = 8
     camera = dict(distance=3.5, elevation_deg=-35.0, azimuth_deg=90.0)
     camera_height = 0.4
-
-    def default_params(self) -> LocomotionParams:
-        return VARIANTS["standard"]
 
     def position(self, data: mjx.Data) -> jax.Array:
         return data.xpos[TORSO, :2]

@@ -1,7 +1,7 @@
 """HalfCheetah on MJX: Gymnasium `HalfCheetah-v5` (its `half_cheetah.xml`, frame skip 5, reward
 and observation).
 
-Solver override (`options`): Newton with at most 4 iterations and 8 line-search steps instead of
+Solver override (`locomotion.SOLVER`): Newton with at most 4 iterations and 8 line-search steps instead of
 MuJoCo's 100 and 50 (MJX runs every iteration for every env under vmap). SPEC section 10's
 1 iteration is faster still but misses Gymnasium by up to 3.4 in a joint speed (2 iterations:
 1.6; 3 and more: 1.5e-4, float32 against float64); the parity test measures 4. The model is otherwise Gymnasium's file unchanged (Euler, dt
@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import mujoco
 from mujoco import mjx
 
 from hintsjax.envs.hints import register_hint
@@ -29,13 +28,10 @@ VARIANTS = {"standard": LocomotionParams(forward_reward_weight=1.0, ctrl_cost_we
 class HalfCheetah(LocomotionEnv):
     name = NAME
     asset = "half_cheetah.xml"
-    options = dict(solver=mujoco.mjtSolver.mjSOL_NEWTON, iterations=4, ls_iterations=8)
+    variants = VARIANTS
     action_size = 6
     camera = dict(distance=3.0, elevation_deg=-15.0, azimuth_deg=90.0)
     camera_height = 0.4
-
-    def default_params(self) -> LocomotionParams:
-        return VARIANTS["standard"]
 
     def position(self, data: mjx.Data) -> jax.Array:
         return jnp.stack([data.qpos[0], jnp.zeros_like(data.qpos[0])])

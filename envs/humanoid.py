@@ -1,7 +1,7 @@
 """Humanoid on MJX: Gymnasium `Humanoid-v5` (its `humanoid.xml`, frame skip 5, reward, health
 and observation).
 
-Solver override (`options`): Gymnasium's file asks for PGS with 50 iterations, which MJX does
+Solver override (`locomotion.SOLVER`): Gymnasium's file asks for PGS with 50 iterations, which MJX does
 not implement; we use Newton with at most 4 iterations and 8 line-search steps. The parity test
 measures what this costs against Gymnasium. Otherwise the file is unchanged (RK4, dt 0.003,
 frame skip 5: 0.015 s per step; self-collisions on).
@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import mujoco
 from mujoco import mjx
 
 from hintsjax.envs.hints import register_hint
@@ -37,14 +36,11 @@ VARIANTS = {
 class Humanoid(LocomotionEnv):
     name = NAME
     asset = "humanoid.xml"
-    options = dict(solver=mujoco.mjtSolver.mjSOL_NEWTON, iterations=4, ls_iterations=8)
+    variants = VARIANTS
     action_size = 17
     camera = dict(distance=3.0, elevation_deg=-15.0, azimuth_deg=90.0)
     camera_height = 1.0
     uniform_velocity_noise = True
-
-    def default_params(self) -> LocomotionParams:
-        return VARIANTS["standard"]
 
     def position(self, data: mjx.Data) -> jax.Array:
         return self.mass_centre(data)[:2]

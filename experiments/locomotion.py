@@ -16,7 +16,7 @@ import argparse
 import os
 from pathlib import Path
 
-from sweep import cell, hints_run, load, mean_of, sweep, sweep_seconds, wall_clock
+from sweep import add_arguments, cell, chosen_envs, hints_run, load, mean_of, sweep, sweep_seconds, wall_clock
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("halfcheetah", "ant", "humanoid")
@@ -91,24 +91,13 @@ def report(runs: Path) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--report", action="store_true", help="only write the markdown table and curves")
-    parser.add_argument("--envs", default=",".join(ENVS), help=f"comma-separated subset of {', '.join(ENVS)}")
-    parser.add_argument("--runs", type=Path, default=Path("runs/locomotion"))
-    parser.add_argument("--workers", type=int, default=1, help="configurations trained at once")
-    parser.add_argument("--seeds", type=int, default=5)
-    parser.add_argument("--smoke", action="store_true", help="tiny budgets: check the plumbing on a CPU")
-    parser.add_argument("--launch-until", type=float, default=float("inf"), metavar="SECONDS",
-                        help="start no run after this many seconds; running ones finish (for time-limited machines)")
+    add_arguments(parser, "runs/locomotion", ENVS)
     args = parser.parse_args()
     os.environ["JAX_PLATFORMS"] = "cpu"  # the parent only reads configs; workers get the devices
     if args.report:
         report(args.runs)
         return
-    names = [n.strip() for n in args.envs.split(",") if n.strip()]
-    unknown = [n for n in names if n not in ENVS]
-    if unknown or args.workers < 1:
-        parser.exit(2, f"error: unknown env {unknown}; valid choices: {', '.join(ENVS)}\n" if unknown
-                    else "error: --workers must be at least 1\n")
+    names = chosen_envs(parser, args, ENVS)
     run_ids = [f"{env}/{label}" for env in names for label in table_runs(env)]
     sweep(args.runs, run_ids, args.workers, args.seeds, TABLE, args.smoke, args.launch_until)
 

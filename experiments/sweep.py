@@ -141,6 +141,28 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int |
         sys.exit(1)
 
 
+def add_arguments(parser: argparse.ArgumentParser, runs: str, envs: tuple[str, ...]) -> None:
+    """The options every sweep script takes (`runs`: the default runs folder)."""
+    parser.add_argument("--report", action="store_true", help="only write the result tables and curves")
+    parser.add_argument("--envs", default=",".join(envs), help=f"comma-separated subset of {', '.join(envs)}")
+    parser.add_argument("--runs", type=Path, default=Path(runs))
+    parser.add_argument("--workers", type=int, default=1, help="configurations trained at once")
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--smoke", action="store_true", help="tiny budgets: check the plumbing on a CPU")
+    parser.add_argument("--launch-until", type=float, default=float("inf"), metavar="SECONDS",
+                        help="start no run after this many seconds; running ones finish (for time-limited machines)")
+
+
+def chosen_envs(parser: argparse.ArgumentParser, args: argparse.Namespace, envs: tuple[str, ...]) -> list[str]:
+    """The envs of --envs; exit 2 naming the valid ones on an unknown env or --workers < 1."""
+    names = [n.strip() for n in args.envs.split(",") if n.strip()]
+    unknown = [n for n in names if n not in envs]
+    if unknown or args.workers < 1:
+        parser.exit(2, f"error: unknown env {unknown}; valid choices: {', '.join(envs)}\n" if unknown
+                    else "error: --workers must be at least 1\n")
+    return names
+
+
 # -- reading finished runs ---------------------------------------------------------------------
 
 
