@@ -22,7 +22,8 @@ run: setup
 		seeds=1 eval_episodes=20 ppo.total_env_steps=51200 ppo.epochs=4 checkpoint_every=5
 
 # Two processes, one test file each at a time (module fixtures stay shared): compiling is
-# single-threaded, so this takes about 8.5 minutes on 2 cores against 10.5 in one process.
+# single-threaded, so this takes 9 to 11 minutes on 2 cores (before the locomotion and car
+# tests it was 8.5 against 10.5 minutes in one process).
 test: setup
 	$(BIN)/python -m pytest -q -n 2 --dist loadfile
 
