@@ -51,7 +51,7 @@ def train_one(runs: Path, run_id: str, seeds: int, smoke: bool, experts: Path | 
     """Train and evaluate one configuration `env/label` into runs/env/label; export an expert's."""
     import jax
 
-    from hintsjax import expert, run
+    from hintsjax import checkpoint, expert, run
     from hintsjax.config import run_config, save_run_config
 
     env, label = run_id.split("/")
@@ -60,9 +60,14 @@ def train_one(runs: Path, run_id: str, seeds: int, smoke: bool, experts: Path | 
     folder = runs / env / label
     folder.mkdir(parents=True, exist_ok=True)
     save_run_config(folder, cfg)
-    t = time.time()
-    results = run.train(cfg, folder, progress=False)
-    results["wall_seconds"] = time.time() - t
+    # An interrupted run (killed by a time limit) goes on from its newest checkpoint; its
+    # wall-clock counts the kept work of earlier calls, not what was lost after their last checkpoint.
+    resume = checkpoint.latest_update(folder) is not None
+    before, t = run.seconds_trained(folder) if resume else 0.0, time.time()
+    if resume:
+        print(f"resuming {run_id} from update {checkpoint.latest_update(folder)}", flush=True)
+    results = run.train(cfg, folder, resume=resume, progress=False)
+    results["wall_seconds"] = before + time.time() - t
     results["device"] = jax.devices()[0].device_kind
     (folder / "eval.json").write_text(json.dumps(results, indent=1))
     if label == EXPERT_RUN:

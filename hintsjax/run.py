@@ -51,6 +51,15 @@ def new_run_dir(out_dir: str, name: str | None, cfg: RunConfig) -> Path:
     return run_dir
 
 
+SECONDS_JSON = "seconds.json"  # training seconds up to the newest checkpoint, summed over resumed calls
+
+
+def seconds_trained(run_dir: Path) -> float:
+    """Training seconds that the newest checkpoint of `run_dir` holds (0 for a fresh folder)."""
+    path = Path(run_dir) / SECONDS_JSON
+    return json.loads(path.read_text())["seconds"] if path.exists() else 0.0
+
+
 def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = True) -> dict[str, Any]:
     """Train all seeds (in chunks, with checkpoints), evaluate, plot; returns eval results."""
     from tqdm import tqdm
@@ -66,6 +75,7 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
           f"on {num_devices} {jax.default_backend()} device(s) -> {run_dir}", flush=True)
     run_chunk = jax.jit(jax.vmap(trainer.run, in_axes=(0, None)), static_argnums=1)
     log = RunLog(run_dir, resume_update=done)
+    before = seconds_trained(run_dir) if resume else 0.0  # kept work of earlier calls
     bar = tqdm(total=total, initial=done, unit="upd", disable=not progress, desc=f"{cfg.env} {cfg.label}")
     t0 = time.time()
     while done < total:
@@ -75,6 +85,7 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
         log.write(metrics, done)
         done += n
         checkpoint.save(run_dir, state, done)
+        (run_dir / SECONDS_JSON).write_text(json.dumps({"update": done, "seconds": before + time.time() - t0}))
         returns = metrics["episode_return"][:, -1]
         bar.set_postfix(steps=int(metrics["env_steps"][0, -1]), ret=f"{np.nanmean(returns):.1f}" if not np.all(np.isnan(returns)) else "-")
         bar.update(n)
@@ -82,6 +93,7 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
     log.close()
     train_seconds = time.time() - t0
     results = {"label": cfg.label, "env": cfg.env, "train_seconds_this_call": train_seconds,
+               "train_seconds": before + train_seconds,
                "env_steps": total * cfg.ppo.batch_size, "evaluations": []}
     for variant in (cfg.variant, *cfg.eval_variants):
         results["evaluations"].append(evaluate_params(cfg, state.params, variant, cfg.eval_episodes, cfg.stochastic_eval))
