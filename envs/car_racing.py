@@ -525,6 +525,10 @@ class CarRacing(Env):
         """float32[28]: see `state_observation`."""
         return state_observation(state)
 
+    def metrics(self, state: CarRacingState, params: CarRacingParams) -> dict[str, jax.Array]:
+        """The paper's progress P (visited tiles / all tiles) of the state an episode ended in."""
+        return {"progress": progress(state)}
+
 
 def state_observation(state: CarRacingState) -> jax.Array:
     """float32[28], scaled to about [-1, 1]: forward and lateral speed /100 u/s, yaw rate /5 rad/s,

@@ -2,9 +2,10 @@
 
 Every env in the suite subclasses `Env` and supplies four pure pieces: how a fresh state is
 drawn, how a state advances under an action, how it is drawn as a picture, and its state
-observation. `Env` adds the time limit, the dictionary observation and the hint; `AutoReset`
-adds fresh episodes on `terminated | truncated` and keeps the pre-reset observation so that a
-learner can bootstrap on truncation.
+observation; optionally a fifth, `metrics`: named scalars of a state that evaluation reports
+for the state each episode ended in (the car's progress). `Env` adds the time limit, the
+dictionary observation and the hint; `AutoReset` adds fresh episodes on `terminated |
+truncated` and keeps the pre-reset observation so that a learner can bootstrap on truncation.
 """
 
 from __future__ import annotations
@@ -46,7 +47,9 @@ class Step:
 
 
 class Env:
-    """Base class of every env. Subclasses set the class attributes and the four pure pieces.
+    """Base class of every env. Subclasses set the class attributes, `default_params` and the
+    four pure pieces (`initial_state`, `transition`, `render`, `state_obs`); optionally
+    `metrics`, scalars of a state reported at each evaluation episode's end (default: none).
 
     Instances are static configuration (which hint, which observations are built); everything
     that varies per episode lives in the state, everything a sweep may vary lives in params.
@@ -83,6 +86,12 @@ class Env:
     def state_obs(self, state: Any, params: Any) -> jax.Array:
         """float32[n] state observation, as the Gymnasium reference env returns it."""
         raise NotImplementedError
+
+    # -- optional ----------------------------------------------------------------------------
+    def metrics(self, state: Any, params: Any) -> dict[str, jax.Array]:
+        """Named float scalars of a state, reported by evaluation for the state each episode
+        ended in (e.g. the car's progress); {} (the default) adds nothing to the report."""
+        return {}
 
     # -- the protocol -------------------------------------------------------------------------
     @property

@@ -230,7 +230,7 @@ def main() -> None:
     run_ids = [f"{env}/{label}" for env in names for label in table_runs(args.table, env)]
     if args.table == 4:  # the fc row is Table 2's
         run_ids = [r for r in run_ids if "-fc-" not in r or not (args.runs / r / "eval.json").exists()]
-    sweep(args.runs, run_ids, args.workers, args.seeds, args.table, args.smoke, args.launch_until, args.experts)
+    sweep(args.runs, run_ids, args.workers, args.seeds, args.table, args.smoke, args.launch_until, args.experts, args.gpus)
 
 
 if __name__ == "__main__":

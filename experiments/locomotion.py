@@ -99,7 +99,7 @@ def main() -> None:
         return
     names = chosen_envs(parser, args, ENVS)
     run_ids = [f"{env}/{label}" for env in names for label in table_runs(env)]
-    sweep(args.runs, run_ids, args.workers, args.seeds, TABLE, args.smoke, args.launch_until)
+    sweep(args.runs, run_ids, args.workers, args.seeds, TABLE, args.smoke, args.launch_until, gpus=args.gpus)
 
 
 if __name__ == "__main__":

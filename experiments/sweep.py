@@ -1,4 +1,4 @@
-"""The machinery that the reproduction sweeps share (classic_control.py, locomotion.py).
+"""The machinery that the reproduction sweeps share (classic_control.py, locomotion.py, car_racing.py).
 
 A run is named `env/label`, where the label is `RunConfig.label` (an agent's name, or
 hints-<scheme>-<hint>); its folder runs/<sweep>/env/label holds config.yaml, metrics.csv,
@@ -7,7 +7,7 @@ train.log and, once finished, eval.json. `sweep` trains every unfinished run of 
 
     python experiments/sweep.py --runs runs/classic --seeds 5 --one idp/ppo_rgb [--smoke]
 
-The readers below (`load`, `cell`, `wall_clock`, `sweep_seconds`) build the result tables.
+The readers below (`load`, `cell`, `metric_cell`, `wall_clock`, `sweep_seconds`) build the result tables.
 """
 
 from __future__ import annotations
@@ -92,17 +92,21 @@ def budget(run_id: str) -> float:
 
 
 def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int | str, smoke: bool,
-          launch_until: float = float("inf"), experts: Path | None = None) -> None:
+          launch_until: float = float("inf"), experts: Path | None = None, gpus: tuple[str, ...] = ()) -> None:
     """Train every unfinished run, `workers` processes at a time, starting none after
     `launch_until` seconds (so that a time-limited call ends with finished runs, not killed
-    ones); append the sweep's wall-clock to runs/sweeps.jsonl."""
+    ones); append the sweep's wall-clock to runs/sweeps.jsonl. With `gpus` (CUDA device ids),
+    each worker gets the least busy of them to itself (CUDA_VISIBLE_DEVICES); without, all
+    workers share the visible devices."""
     todo = sorted((r for r in run_ids if not (runs / r / "eval.json").exists()), key=budget, reverse=True)
     print(f"table {table}: {len(run_ids) - len(todo)} of {len(run_ids)} runs done already; "
           f"training {len(todo)} with {workers} worker(s)", flush=True)
     launched = 0
-    env = {**CHILD_ENVIRON, "XLA_PYTHON_CLIENT_MEM_FRACTION": f"{0.9 / workers:.3f}"}
+    per_gpu = -(-workers // max(len(gpus), 1))  # workers sharing one device
+    env = {**CHILD_ENVIRON, "XLA_PYTHON_CLIENT_MEM_FRACTION": f"{0.9 / per_gpu:.3f}"}
     start = time.time()
     active: list[tuple[str, subprocess.Popen]] = []  # each worker writes its own train.log
+    gpu_of: dict[str, str] = {}
     failed: list[str] = []
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # `timeout` stops the sweep: record it below
     try:
@@ -120,8 +124,12 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int |
                 (runs / run_id).mkdir(parents=True, exist_ok=True)
                 cmd = [sys.executable, str(Path(__file__).resolve()), "--runs", str(runs), "--seeds", str(seeds), "--one", run_id,
                        *(["--smoke"] if smoke else []), *(["--experts", str(experts)] if experts else [])]
+                if gpus:
+                    busy = [gpu_of[r] for r, _ in active]
+                    gpu_of[run_id] = min(gpus, key=busy.count)
+                child_env = {**env, "CUDA_VISIBLE_DEVICES": gpu_of[run_id]} if gpus else env
                 with open(runs / run_id / "train.log", "w") as log:  # the child keeps its own copy
-                    active.append((run_id, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env)))
+                    active.append((run_id, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=child_env)))
                 launched += 1
             time.sleep(2)
             for run_id, proc in list(active):
@@ -139,6 +147,9 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int |
         record = {"table": table, "runs": len(run_ids), "trained": launched - len(failed) - len(active),
                   "failed": failed, "interrupted": [r for r, _ in active], "workers": workers, "seconds": seconds,
                   "finished": time.strftime("%Y-%m-%d %H:%M:%S")}
+        devices = {(load(runs, *r.split("/")) or {}).get("device", "").lower() for r in run_ids} - {""}
+        if devices == {"cpu"}:  # the workers' device (the parent keeps off it): CPU sweeps leave the GPU totals
+            record["device"] = "cpu"
         with open(runs / "sweeps.jsonl", "a") as f:
             f.write(json.dumps(record) + "\n")
         print(f"table {table}: {seconds:.0f} s wall-clock" + (f", {len(active)} runs interrupted" if active else ""), flush=True)
@@ -154,6 +165,8 @@ def add_arguments(parser: argparse.ArgumentParser, runs: str, envs: tuple[str, .
     parser.add_argument("--workers", type=int, default=1, help="configurations trained at once")
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--smoke", action="store_true", help="tiny budgets: check the plumbing on a CPU")
+    parser.add_argument("--gpus", type=lambda s: tuple(g for g in s.split(",") if g), default=(), metavar="IDS",
+                        help="comma-separated CUDA device ids; each worker gets the least busy one to itself")
     parser.add_argument("--launch-until", type=float, default=float("inf"), metavar="SECONDS",
                         help="start no run after this many seconds; running ones finish (for time-limited machines)")
 
@@ -182,6 +195,19 @@ def cell(result: dict | None, variant: int = 0) -> str:
         return "-"
     e = result["evaluations"][variant]
     return f"{e['mean']:.1f} ± {e['std']:.1f} ({e['seed_std']:.1f})"
+
+
+def metric_cell(result: dict | None, name: str, variant: int = 0, percent: bool = False) -> str:
+    """'mean ± std (seed std)' of an env metric (e.g. progress) of one evaluation, as `cell`;
+    '-' when not run or not recorded."""
+    e = None if result is None else result["evaluations"][variant]
+    if e is None or f"{name}_mean" not in e:
+        return "-"
+    seed_means = e[f"{name}_seed_means"]
+    seed_std = (sum((m - sum(seed_means) / len(seed_means)) ** 2 for m in seed_means) / len(seed_means)) ** 0.5
+    if percent:
+        return f"{100 * e[name + '_mean']:.0f}% ± {100 * e[name + '_std']:.0f} ({100 * seed_std:.0f})"
+    return f"{e[name + '_mean']:.2f} ± {e[name + '_std']:.2f} ({seed_std:.2f})"
 
 
 def mean_of(result: dict | None) -> float | None:

@@ -2,7 +2,8 @@
 
 Each episode stops at its own end (rewards after `terminated | truncated` are not counted),
 actions are the policy's mean unless `stochastic`, and deploy variants (e.g. pendulum's
-swingto) evaluate an agent trained on the standard task. Also a command:
+swingto) evaluate an agent trained on the standard task. An env's `metrics` (the car's
+progress) are kept from the state each episode ended in. Also a command:
 
     python -m hintsjax.evaluate runs/<run folder> [--variant swingto] [--episodes 50] [--stochastic]
 """
@@ -29,10 +30,12 @@ EVAL_TAG = 0xE7A1  # folded into a seed's key so evaluation draws differ from tr
 
 @struct.dataclass
 class EvalResult:
-    """Per-episode outcome, [E] for one seed or [S, E] once vmapped over seeds."""
+    """Per-episode outcome, [E] for one seed or [S, E] once vmapped over seeds; `metrics` are
+    the env's `metrics` of the state each episode ended in ({} for envs without any)."""
 
     episode_return: jax.Array
     episode_length: jax.Array
+    metrics: dict[str, jax.Array] = struct.field(default_factory=dict)
 
 
 def make_evaluator(
@@ -42,13 +45,14 @@ def make_evaluator(
     env = cfg.make_env()
     task_params = envs.make_params(cfg.env, variant)
     network = make_network(cfg, env)
+    metrics_of = jax.vmap(env.metrics, in_axes=(0, None))
 
     def evaluate(params: Any, key: jax.Array) -> EvalResult:
         k_reset, k_run = jax.random.split(key)
         ts = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_reset, num_episodes), task_params)
 
         def step(carry):
-            t, state, obs, ret, length, alive = carry
+            t, state, obs, ret, length, metrics, alive = carry
             k_act, k_env = jax.random.split(jax.random.fold_in(k_run, t))
             mean, log_std, _ = network.apply(params, obs)
             action = mean + stochastic * jnp.exp(log_std) * jax.random.normal(k_act, mean.shape)
@@ -57,15 +61,20 @@ def make_evaluator(
             )
             ret = ret + jnp.where(alive, ts.reward, 0.0)
             length = length + alive
+            # kept while alive, so the step that ends an episode counts (its state is the one
+            # the episode ended in) and later steps do not
+            reached = metrics_of(ts.state, task_params)
+            metrics = jax.tree.map(lambda new, old: jnp.where(alive, new, old), reached, metrics)
             alive = alive & ~(ts.terminated | ts.truncated)
-            return t + 1, ts.state, ts.obs, ret, length, alive
+            return t + 1, ts.state, ts.obs, ret, length, metrics, alive
 
         # Stop as soon as every episode has ended (early terminations make this much shorter
         # than max_steps); episodes never run past the time limit, which ends them all.
         zeros = jnp.zeros(num_episodes)
-        init = (jnp.zeros((), jnp.int32), ts.state, ts.obs, zeros, zeros.astype(jnp.int32), jnp.ones(num_episodes, bool))
-        _, _, _, ret, length, _ = jax.lax.while_loop(lambda c: c[-1].any(), step, init)
-        return EvalResult(ret, length)
+        init = (jnp.zeros((), jnp.int32), ts.state, ts.obs, zeros, zeros.astype(jnp.int32),
+                metrics_of(ts.state, task_params), jnp.ones(num_episodes, bool))
+        _, _, _, ret, length, metrics, _ = jax.lax.while_loop(lambda c: c[-1].any(), step, init)
+        return EvalResult(ret, length, metrics)
 
     return evaluate
 
@@ -76,10 +85,11 @@ def eval_keys(cfg: RunConfig) -> jax.Array:
 
 
 def summarize(result: EvalResult) -> dict[str, Any]:
-    """Mean and std over all seeds x episodes, and per seed, as plain JSON-able values."""
+    """Mean and std over all seeds x episodes, and per seed, as plain JSON-able values; for each
+    env metric (e.g. progress) `<name>_mean`, `<name>_std` and `<name>_seed_means`."""
     returns = np.asarray(result.episode_return, dtype=np.float64)
     seed_means = returns.mean(axis=1)
-    return {
+    summary = {
         "mean": float(returns.mean()),
         "std": float(returns.std()),
         "seed_means": seed_means.tolist(),
@@ -87,8 +97,18 @@ def summarize(result: EvalResult) -> dict[str, Any]:
         "seeds": int(returns.shape[0]),
         "episodes_per_seed": int(returns.shape[1]),
         "mean_length": float(np.asarray(result.episode_length).mean()),
-        "returns": returns.tolist(),
     }
+    for name, value in sorted(result.metrics.items()):
+        value = np.asarray(value, dtype=np.float64)
+        summary.update({f"{name}_mean": float(value.mean()), f"{name}_std": float(value.std()),
+                        f"{name}_seed_means": value.mean(axis=1).tolist()})
+    return {**summary, "returns": returns.tolist()}
+
+
+def metrics_text(summary: dict[str, Any]) -> str:
+    """'  progress 0.78 +- 0.20' for each env metric of a summary ('' for envs without any)."""
+    names = [k[: -len("_seed_means")] for k in summary if k.endswith("_seed_means")]
+    return "".join(f"  {n} {summary[n + '_mean']:.2f} +- {summary[n + '_std']:.2f}" for n in names)
 
 
 def evaluate_params(cfg: RunConfig, params: Any, variant: str | None, episodes: int, stochastic: bool) -> dict:
@@ -122,7 +142,7 @@ def main(argv: list[str] | None = None) -> int:
     out = args.run / f"eval-{result['variant']}-{mode}-{episodes}.json"
     out.write_text(json.dumps({"label": cfg.label, "env": cfg.env, **result}, indent=1))
     print(f"{cfg.label} on {cfg.env}/{result['variant']} ({mode}, {cfg.seeds} seeds x {episodes} episodes): "
-          f"{result['mean']:.2f} +- {result['std']:.2f}  -> {out}")
+          f"{result['mean']:.2f} +- {result['std']:.2f}{metrics_text(result)}  -> {out}")
     return 0
 
 

@@ -24,7 +24,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from hintsjax import checkpoint, expert
 from hintsjax.config import RunConfig, UsageError, fail, load_run_config, run_config, save_run_config
-from hintsjax.evaluate import evaluate_params
+from hintsjax.evaluate import evaluate_params, metrics_text
 from hintsjax.algorithms import make_trainer
 from hintsjax.runlog import CURVE_PNG, METRICS_CSV, RunLog, plot_curves, read_curves
 
@@ -101,7 +101,7 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
     if (run_dir / METRICS_CSV).exists():
         plot_curves({cfg.label: read_curves(run_dir / METRICS_CSV)}, run_dir / CURVE_PNG, f"{cfg.env}: {cfg.label}")
     for ev in results["evaluations"]:
-        print(f"{cfg.env}/{ev['variant']} {cfg.label}: {ev['mean']:.2f} +- {ev['std']:.2f} "
+        print(f"{cfg.env}/{ev['variant']} {cfg.label}: {ev['mean']:.2f} +- {ev['std']:.2f}{metrics_text(ev)} "
               f"({ev['seeds']} seeds x {ev['episodes_per_seed']} episodes)  -> {run_dir}")
     return results
 

@@ -3,7 +3,8 @@
 At reset a length L is drawn uniformly from 1..15; every step pays reward 1 whatever the action,
 and the episode terminates on step L. The time limit is 10 steps, so episodes with L > 10 are
 truncated there. An episode's return is therefore min(L, 10), and so is its length; an evaluator
-that kept counting after an episode's end would report more.
+that kept counting after an episode's end would report more. Its metric `steps_left` = L - t is
+max(L - 10, 0) in the state an episode ends in, and keeps falling on steps past the end.
 
 Importing this module registers the env (`envs.REGISTRY["countdown"]`) and its defaults.
 """
@@ -48,6 +49,9 @@ class CountdownEnv(Env):
 
     def state_obs(self, state: CountdownState, params) -> jax.Array:
         return state.t[None].astype(jnp.float32)
+
+    def metrics(self, state: CountdownState, params) -> dict[str, jax.Array]:
+        return {"steps_left": (state.length - state.t).astype(jnp.float32)}
 
 
 envs.REGISTRY[NAME] = envs.EnvEntry(CountdownEnv, {"default": ()})

@@ -303,7 +303,8 @@ def test_pure_pursuit_laps(env, tracks):
     np.testing.assert_allclose(ret, 1000 - 0.1 * frames, atol=0.05)
 
 
-def test_a_tile_is_paid_once(step, tracks):
+def test_a_tile_is_paid_once(env, step, tracks):
+    """Also: the evaluation metric progress is P = visited / all tiles, here 1 / n."""
     track = one(tracks["standard"][0], 0)
     n = int(track.n_tiles)
     centre = 0.5 * (track.xy[5] + track.xy[4])
@@ -315,6 +316,7 @@ def test_a_tile_is_paid_once(step, tracks):
         rewards.append(float(ts.reward))
     np.testing.assert_allclose(rewards, [1000 / n - 0.1] + [-0.1] * 4, rtol=1e-5)
     assert int(state.visited.sum()) == 1 and bool(state.visited[5])
+    assert env.metrics(state, STANDARD)["progress"] == progress(state) == np.float32(1 / n)
 
 
 def test_leaving_the_playfield_costs_100_and_ends(step):
