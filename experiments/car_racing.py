@@ -18,8 +18,8 @@ import argparse
 import os
 from pathlib import Path
 
-from sweep import (add_arguments, cell, chosen_envs, hints_run, load, metric_cell, sweep, sweep_seconds,
-                   wall_clock)
+from sweep import (add_arguments, cell, chosen_envs, hints_run, load, metric_cell, sweep, sweep_hardware, sweep_seconds,
+                   training_cell, wall_clock)
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("car_racing",)
@@ -38,6 +38,10 @@ PAPER = {
                            "P hairpin": "78%"},
 }
 TABLE = "3-car"  # the sweep's name in runs/<...>/sweeps.jsonl
+
+
+def run_ids(names) -> list[str]:
+    return [f"{env}/{label}" for env in names for label in table_runs(env)]
 
 
 def table_runs(env: str) -> list[str]:
@@ -80,14 +84,15 @@ def report(runs: Path) -> None:
         "tiles / all tiles of the state an episode ended in. Agents train on standard tracks and are",
         "deployed on hairpin ones (first corner at most 45 degrees). The paper's cells are mean ± std",
         "over n=50; its P values are section 5's (O3); it gives no DAgger or PPO-x car numbers (N/A).",
-        "Wall-clock per run (one H100) includes compilation and both evaluations. '-': not run yet",
-        "(or not given by the paper).", "",
+        "Wall-clock per run (hardware at the end) includes compilation and both evaluations. '-': not run yet",
+        "(or not given by the paper). Training return: the training episodes (sampled actions, standard",
+        "tracks) that ended in the last 10% of updates, mean ± std over the seeds.", "",
     ]
     for env in ENVS:
         steps = run_config({"env": env}).ppo.total_env_steps
         lines += [f"## {env} ({steps / 1e6:g} M env steps per seed)", "",
                   "| agent | return standard | paper | return hairpin | paper | P standard | paper | P hairpin | paper "
-                  "| wall-clock (s) |", "|---|---|---|---|---|---|---|---|---|---|"]
+                  "| training return, last 10% | wall-clock (s) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
         for label in table_runs(env):
             result, paper = load(runs, env, label), PAPER.get(label, {})
             row = [label]
@@ -95,14 +100,15 @@ def report(runs: Path) -> None:
                 row += [cell(result, i), paper.get(variant, "-")]
             for i, variant in enumerate(VARIANTS):
                 row += [metric_cell(result, "progress", i, percent=True), paper.get(f"P {variant}", "-")]
-            lines.append(f"| {' | '.join(row)} | {wall_clock(result)} |")
+            lines.append(f"| {' | '.join(row)} | {training_cell(runs, env, label)} | {wall_clock(result)} |")
         lines += ["", findings(runs, env), ""]
         curves = {label: read_curves(runs / env / label / "metrics.csv") for label in table_runs(env)
                   if (runs / env / label / "metrics.csv").exists()}
         if curves:
             plot_curves(curves, RESULTS / f"car_curves_{env}.png", f"{env} (standard tracks): Table 3 agents, 5 seeds")
             lines += [f"![{env} learning curves](car_curves_{env}.png)", ""]
-    lines.append(f"Sweep wall-clock recorded in {runs}/sweeps.jsonl on the GPU: {sweep_seconds(runs, TABLE):.0f} s.")
+    lines.append(f"Sweep wall-clock recorded in {runs}/sweeps.jsonl on the GPU: {sweep_seconds(runs, TABLE):.0f} s"
+                 f" ({sweep_hardware(runs, TABLE, run_ids(ENVS)) or 'none yet'}).")
     (RESULTS / "car_table3.md").write_text("\n".join(lines) + "\n")
     print((RESULTS / "car_table3.md").read_text())
 
@@ -116,8 +122,7 @@ def main() -> None:
         report(args.runs)
         return
     names = chosen_envs(parser, args, ENVS)
-    run_ids = [f"{env}/{label}" for env in names for label in table_runs(env)]
-    sweep(args.runs, run_ids, args.workers, args.seeds, TABLE, args.smoke, args.launch_until, gpus=args.gpus)
+    sweep(args.runs, run_ids(names), args.workers, args.seeds, TABLE, args.smoke, args.launch_until, gpus=args.gpus)
 
 
 if __name__ == "__main__":

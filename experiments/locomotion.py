@@ -16,7 +16,7 @@ import argparse
 import os
 from pathlib import Path
 
-from sweep import add_arguments, cell, chosen_envs, hints_run, load, mean_of, sweep, sweep_seconds, wall_clock
+from sweep import add_arguments, cell, chosen_envs, hints_run, load, mean_of, sweep, sweep_hardware, sweep_seconds, training_cell, wall_clock
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("halfcheetah", "ant", "humanoid")
@@ -37,6 +37,10 @@ PAPER = {
                  "hints-fc-velocity": "455.95 ± 94.5", "hints-fc-goal_height": "306.14 ± 52.5"},
 }
 TABLE = "3-locomotion"  # the sweep's name in runs/<...>/sweeps.jsonl
+
+
+def run_ids(names) -> list[str]:
+    return [f"{env}/{label}" for env in names for label in table_runs(env)]
 
 
 def table_runs(env: str) -> list[str]:
@@ -66,25 +70,29 @@ def report(runs: Path) -> None:
         "# Locomotion: the paper's Table 3 (Ant, Cheetah, Humanoid rows), reproduced", "",
         "Each cell: mean ± std of the episode return over 5 training seeds x 50 evaluation episodes",
         "(deterministic policy); in brackets the std of the 5 per-seed means. The paper's cells are",
-        "mean ± std over n=50. Wall-clock per run (one H100) includes compilation and evaluation.",
+        "mean ± std over n=50. Wall-clock per run (hardware at the end) includes compilation and evaluation.",
         "The envs are Gymnasium v5's tasks on MJX (envs/ant.py, halfcheetah.py, humanoid.py), seen",
-        "as 64x64 renders from a camera that follows the robot (envs/render3d.py). '-': not run yet.", "",
+        "as 64x64 renders from a camera that follows the robot (envs/render3d.py). '-': not run yet.",
+        "Training return: the training episodes (sampled actions) that ended in the last 10% of",
+        "updates, mean ± std over the seeds.", "",
     ]
     for env in ENVS:
         steps = run_config({"env": env}).ppo.total_env_steps
         lines += [f"## {env} ({steps / 1e6:g} M env steps per seed)", "",
-                  "| agent | ours | paper | wall-clock (s) |", "|---|---|---|---|",
-                  f"| dagger | - | {PAPER[env]['dagger']} | - |"]
+                  "| agent | ours | paper | training return, last 10% | wall-clock (s) |", "|---|---|---|---|---|",
+                  f"| dagger | - | {PAPER[env]['dagger']} | - | - |"]
         for label in table_runs(env):
             result = load(runs, env, label)
-            lines.append(f"| {label} | {cell(result)} | {PAPER[env].get(label, '-')} | {wall_clock(result)} |")
+            lines.append(f"| {label} | {cell(result)} | {PAPER[env].get(label, '-')} | {training_cell(runs, env, label)} "
+                         f"| {wall_clock(result)} |")
         lines += ["", findings(runs, env), ""]
         curves = {label: read_curves(runs / env / label / "metrics.csv") for label in table_runs(env)
                   if (runs / env / label / "metrics.csv").exists()}
         if curves:
             plot_curves(curves, RESULTS / f"locomotion_curves_{env}.png", f"{env}: Table 3 agents, 5 seeds")
             lines += [f"![{env} learning curves](locomotion_curves_{env}.png)", ""]
-    lines.append(f"Sweep wall-clock recorded in {runs}/sweeps.jsonl on the GPU: {sweep_seconds(runs, TABLE):.0f} s.")
+    lines.append(f"Sweep wall-clock recorded in {runs}/sweeps.jsonl on the GPU: {sweep_seconds(runs, TABLE):.0f} s"
+                 f" ({sweep_hardware(runs, TABLE, run_ids(ENVS)) or 'none yet'}).")
     (RESULTS / "locomotion_table3.md").write_text("\n".join(lines) + "\n")
     print((RESULTS / "locomotion_table3.md").read_text())
 
@@ -98,8 +106,7 @@ def main() -> None:
         report(args.runs)
         return
     names = chosen_envs(parser, args, ENVS)
-    run_ids = [f"{env}/{label}" for env in names for label in table_runs(env)]
-    sweep(args.runs, run_ids, args.workers, args.seeds, TABLE, args.smoke, args.launch_until, gpus=args.gpus)
+    sweep(args.runs, run_ids(names), args.workers, args.seeds, TABLE, args.smoke, args.launch_until, gpus=args.gpus)
 
 
 if __name__ == "__main__":

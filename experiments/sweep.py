@@ -146,7 +146,7 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int |
         seconds = time.time() - start
         record = {"table": table, "runs": len(run_ids), "trained": launched - len(failed) - len(active),
                   "failed": failed, "interrupted": [r for r, _ in active], "workers": workers, "seconds": seconds,
-                  "finished": time.strftime("%Y-%m-%d %H:%M:%S")}
+                  "finished": time.strftime("%Y-%m-%d %H:%M:%S"), "gpus": list(gpus)}
         devices = {(load(runs, *r.split("/")) or {}).get("device", "").lower() for r in run_ids} - {""}
         if devices == {"cpu"}:  # the workers' device (the parent keeps off it): CPU sweeps leave the GPU totals
             record["device"] = "cpu"
@@ -210,6 +210,24 @@ def metric_cell(result: dict | None, name: str, variant: int = 0, percent: bool 
     return f"{e[name + '_mean']:.2f} ± {e[name + '_std']:.2f} ({seed_std:.2f})"
 
 
+def training_cell(runs: Path, env: str, label: str, last: float = 0.1) -> str:
+    """Mean ± std over seeds of the training episodes' return (sampled actions) in the last
+    `last` of a run's updates: beside `cell`'s deterministic evaluation; '-' when not run."""
+    import numpy as np
+
+    from hintsjax.runlog import read_curves
+
+    path = runs / env / label / "metrics.csv"
+    if not path.exists():
+        return "-"
+    _, values = read_curves(path)
+    tail = values[:, -max(1, int(last * values.shape[1])):]
+    if np.isnan(tail).all():
+        return "-"
+    per_seed = np.nanmean(tail, axis=1)
+    return f"{np.nanmean(per_seed):.1f} ± {np.nanstd(per_seed):.1f}"
+
+
 def mean_of(result: dict | None) -> float | None:
     return None if result is None else result["evaluations"][0]["mean"]
 
@@ -230,6 +248,20 @@ def sweep_seconds(runs: Path, table: int) -> float:
     # Sweeps run on a CPU (recorded with "device": "cpu") are left out: their runs are marked (CPU).
     return sum(r["seconds"] for r in map(json.loads, path.read_text().splitlines())
                if str(table) in str(r["table"]).split("+") and r.get("device") != "cpu")
+
+
+def sweep_hardware(runs: Path, table: str, run_ids: list[str]) -> str:
+    """'NVIDIA H200; 6 runs at once over 2 GPUs' for the GPU sweeps of `table` (from sweeps.jsonl
+    and the runs' eval.json), or '' when none ran on a GPU."""
+    path = runs / "sweeps.jsonl"
+    records = [r for r in map(json.loads, path.read_text().splitlines()) if str(table) in str(r["table"]).split("+")
+               and r.get("device") != "cpu"] if path.exists() else []
+    devices = sorted({(load(runs, *r.split("/")) or {}).get("device", "") for r in run_ids} - {"", "cpu", "Cpu"})
+    if not records or not devices:
+        return ""
+    setups = sorted({f"{r['workers']} runs at once" + (f" over {len(r['gpus'])} GPUs" if r.get("gpus") else " on one GPU")
+                     for r in records})
+    return f"{', '.join(devices)}; {'; '.join(setups)}"
 
 
 def main() -> None:
