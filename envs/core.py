@@ -161,13 +161,25 @@ class AutoReset:
         state = EpisodeState(ts.state, zero, jnp.zeros((), jnp.int32))
         return ts.replace(state=state, final_obs=ts.obs, info=_episode_info(zero, state.episode_length))
 
-    def step(self, key: jax.Array, state: EpisodeState, action: jax.Array, params: Any) -> Timestep:
+    def fresh_start(self, key: jax.Array, params: Any) -> Timestep:
+        """A start for `step`'s `fresh`: the wrapped env's reset."""
+        return self.env.reset(key, params)
+
+    def step(self, key: jax.Array, state: EpisodeState, action: jax.Array, params: Any,
+             fresh: Timestep | None = None) -> Timestep:
+        """One step; where the episode ends, the next one starts from `fresh` (a `fresh_start`).
+
+        Without `fresh` a start is drawn here, on every step: vmapped code computes it whether or
+        not an episode ended, a whole reset (and picture) per step. A rollout may instead draw
+        one start per env up front and pass it to each of its steps (an env whose episodes end
+        twice in one rollout then starts both from it).
+        """
         step_key, reset_key = jax.random.split(key)
         ts = self.env.step(step_key, state.env_state, action, params)
         done = ts.terminated | ts.truncated
         episode_return = state.episode_return + ts.reward
         episode_length = state.episode_length + 1
-        fresh = self.env.reset(reset_key, params)
+        fresh = self.env.reset(reset_key, params) if fresh is None else fresh
         pick = lambda a, b: jax.tree.map(lambda x, y: jnp.where(done, x, y), a, b)  # noqa: E731
         next_state = EpisodeState(
             pick(fresh.state, ts.state),

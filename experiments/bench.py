@@ -1,11 +1,13 @@
 """Throughput of each env (with its picture), of training end to end, and the ceiling.
 
     python experiments/bench.py [--envs pendulum,acrobot,idp] [--sizes 4096,65536] [--steps 100] [--no-train]
-                                [--quick] [--out results.json]
+                                [--reset-cost] [--quick] [--out results.json]
 
 Measures, in one process on whatever device JAX sees:
-  env      env steps/s including the 64x64 picture (AutoReset, vmapped, in a scan), beside the
-           same loop without the picture (physics, reward and hint only)
+  env      env steps/s including the env's picture (AutoReset, vmapped, in a scan), beside the
+           same loop without the picture (physics, reward and hint only); --reset-cost adds the
+           picture loop with next starts drawn once per rollout of 8 steps (ppo.starts_per_rollout)
+           and without AutoReset (which otherwise draws a start, picture and all, every step)
   ceiling  the encoder + heads' own update rate: samples/s of one forward+backward+Adam step
            of the hints/fc network at batch 8192 (nothing else in the graph)
   train    end-to-end training (rollout, GAE, epochs of minibatch updates), seed-vmapped:
@@ -41,26 +43,45 @@ def best_time(fn, *args, repeats: int = 3) -> float:
     return min(times)
 
 
-def bench_env(name: str, num_envs: int, steps: int, pixels: bool = True) -> dict:
+RESETS = {  # how AutoReset gets the next start: the --reset-cost rows compare them
+    "step": "AutoReset",  # drawn on every step (AutoReset's default)
+    "rollout": "AutoReset, starts per rollout of 8",  # drawn once per 8 steps (ppo.starts_per_rollout)
+    "none": "no AutoReset",  # episodes run on past their end
+}
+
+
+def bench_env(name: str, num_envs: int, steps: int, pixels: bool = True, reset: str = "step", rollout: int = 8) -> dict:
     observe = ("pixels", "hint") if pixels else ("hint",)
-    env = envs.AutoReset(envs.make(name, ENV_DEFAULTS[name].get("hint", envs.NO_HINT), observe))
+    env = envs.make(name, ENV_DEFAULTS[name].get("hint", envs.NO_HINT), observe)
+    env = env if reset == "none" else envs.AutoReset(env)
     params = envs.make_params(name)
     ts = jax.jit(jax.vmap(env.reset, in_axes=(0, None)))(jax.random.split(jax.random.key(0), num_envs), params)
 
     @jax.jit
     def roll(state, key):
-        def step(state, key):
+        def step(state, key, starts):
             k_act, k_env = jax.random.split(key)
             action = jax.random.uniform(k_act, (num_envs, env.action_size), minval=-1, maxval=1)
-            out = jax.vmap(env.step, in_axes=(0, 0, 0, None))(jax.random.split(k_env, num_envs), state, action, params)
+            fresh = () if starts is None else (starts,)
+            out = jax.vmap(env.step, in_axes=(0, 0, 0, None, *(0,) * len(fresh)))(
+                jax.random.split(k_env, num_envs), state, action, params, *fresh)
             seen = out.obs["pixels"][:, 32, 32, 0].sum() if pixels else out.obs["hint"].sum()
             return out.state, seen + out.reward.sum()
 
-        return jax.lax.scan(step, state, jax.random.split(key, steps))
+        if reset != "rollout":
+            return jax.lax.scan(lambda s, k: step(s, k, None), state, jax.random.split(key, steps))
+
+        def chunk(state, key):
+            k_starts, k_steps = jax.random.split(key)
+            starts = jax.vmap(env.fresh_start, in_axes=(0, None))(jax.random.split(k_starts, num_envs), params)
+            return jax.lax.scan(lambda s, k: step(s, k, starts), state, jax.random.split(k_steps, rollout))
+
+        return jax.lax.scan(chunk, state, jax.random.split(key, steps // rollout))
 
     seconds = best_time(roll, ts.state, jax.random.key(1))
-    return {"env": name, "pixels": pixels, "num_envs": num_envs, "steps": steps,
-            "env_steps_per_s": num_envs * steps / seconds}
+    done = steps if reset != "rollout" else steps // rollout * rollout
+    return {"env": name, "pixels": pixels, "reset": reset, "num_envs": num_envs, "steps": done,
+            "env_steps_per_s": num_envs * done / seconds}
 
 
 def bench_ceiling(batch: int) -> dict:
@@ -114,6 +135,8 @@ def main() -> None:
     parser.add_argument("--sizes", default="4096,65536", help="comma-separated numbers of envs for the env rows")
     parser.add_argument("--steps", type=int, default=100, help="env steps per timed scan in the env rows")
     parser.add_argument("--no-train", action="store_true", help="env rows only (no training rows)")
+    parser.add_argument("--reset-cost", action="store_true",
+                        help="add rows with starts drawn once per rollout of 8 steps, and without AutoReset")
     parser.add_argument("--quick", action="store_true", help="small sizes (a CPU smoke run)")
     parser.add_argument("--out", default=None, help="write the results as JSON here")
     args = parser.parse_args()
@@ -130,11 +153,13 @@ def main() -> None:
     results["env"], results["train"] = [], []
     for name in names:
         for n in ([int(n) for n in args.sizes.split(",")] if not q else (64,)):
-            for pixels in (False, True):
-                r = bench_env(name, n, args.steps if not q else 10, pixels)
+            size = envs.make(name).image_size
+            for pixels, reset in ((False, "step"), (True, "step"), *(((True, "rollout"), (True, "none")) if args.reset_cost else ())):
+                r = bench_env(name, n, args.steps if not q else 16, pixels, reset)
                 results["env"].append(r)
+                what = f"with {size}x{size} picture" if pixels else "physics, reward, hint"
                 print(f"env     {name:>9} {n:>6} envs: {r['env_steps_per_s']:>14,.0f} env steps/s "
-                      f"({'with 64x64 picture' if pixels else 'physics, reward, hint'})", flush=True)
+                      f"({what}; {RESETS[reset]})", flush=True)
         settings = (((5, {}), (5, {"num_envs": 64}), (32, {}), (32, {"num_envs": 64, "minibatch_size": 1024}))
                     if not q else ((2, {"num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}),))
         for seeds, overrides in settings if not args.no_train else ():

@@ -161,6 +161,9 @@ def observe_with_noise(obs: dict[str, jax.Array], key: jax.Array, noise: float) 
     return {**obs, "state": obs["state"] + noise * jax.random.normal(key, obs["state"].shape)}
 
 
+STARTS_TAG = 0x57A7  # folded into a rollout's key for its per-rollout starts (leaves the step keys as they were)
+
+
 def start_runner(
     key: jax.Array, env: Any, env_params: Any, network: ActorCritic, num_envs: int, init_opt: Callable[[Any], Any]
 ) -> RunnerState:
@@ -199,13 +202,18 @@ def make_ppo(cfg: RunConfig) -> PPO:
         return start_runner(key, env, env_params, network, N, lambda params: make_optimizer(ppo, params).init(params))
 
     def rollout(state: RunnerState, key: jax.Array) -> tuple[RunnerState, Transition, jax.Array]:
+        starts = None
+        if ppo.starts_per_rollout:  # one next start per env for the whole rollout (its own key)
+            k_starts = jax.random.fold_in(key, STARTS_TAG)
+            starts = jax.vmap(env.fresh_start, in_axes=(0, None))(jax.random.split(k_starts, N), env_params)
+
         def step(carry, key):
             env_state, obs = carry
             k_noise, k_act, k_env, k_final = jax.random.split(key, 4)
             seen = observe_with_noise(obs, k_noise, noise)
             mean, log_std, value = network.apply(state.params, seen)
             action = mean + jnp.exp(log_std) * jax.random.normal(k_act, mean.shape)
-            ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(jax.random.split(k_env, N), env_state, action, env_params)
+            ts = jax.vmap(env.step, in_axes=(0, 0, 0, None, 0))(jax.random.split(k_env, N), env_state, action, env_params, starts)
             final_value = network.apply(state.params, observe_with_noise(ts.final_obs, k_final, noise))[2]
             transition = Transition(
                 seen,

@@ -188,3 +188,21 @@ def test_parallel_envs_do_not_change_the_budget(small, keys):
         np.testing.assert_array_equal(m["env_steps"], 32 * np.arange(1, 6))
         # Each cue episode is one step, so the episodes counted are the env steps actually taken.
         assert int(m["episodes"].sum()) == int(m["env_steps"][-1]) == 160
+
+
+@pytest.mark.parametrize("per_rollout", [False, True])
+def test_starts_per_rollout_draw_one_start_per_env_and_rollout(per_rollout):
+    """Cue episodes last one step, so every step starts a new one. With `starts_per_rollout`
+    every env starts them all from the one start drawn for the rollout (its cue is constant over
+    the rollout); without, each step draws its own (cues vary within an env)."""
+    cfg = config.run_config(dict(env="cue", agent="hints_blind", seeds=1, ppo={
+        **SMALL_PPO, "num_envs": 16, "batch_size": 128, "minibatch_size": 64, "starts_per_rollout": per_rollout}))
+    parts = ppo.make_ppo(cfg)
+    state = jax.jit(parts.init)(jax.random.key(0))
+    _, traj, _ = jax.jit(parts.rollout)(state, jax.random.key(1))
+    cues = np.asarray(traj.obs["hint"][1:, :, 0])  # [T - 1, N]: observations of fresh episodes
+    constant = (cues == cues[:1]).all(axis=0)
+    if per_rollout:
+        assert constant.all() and len(set(cues[0])) == 2, cues
+    else:
+        assert not constant.any(), cues

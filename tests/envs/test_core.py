@@ -152,6 +152,24 @@ def test_autoreset_fresh_start_depends_on_reset_key(auto, swingto_params):
         np.testing.assert_allclose(float(o.obs["hint"][1]), np.cos(g) - np.cos(th), atol=1e-6)
 
 
+def test_autoreset_starts_from_a_given_fresh_start(auto, swingto_params):
+    """`fresh` (AutoReset.fresh_start) is where an ending episode goes on; other steps ignore it."""
+    wrapped, _, _ = auto
+    step = jax.jit(wrapped.step)
+    fresh = wrapped.fresh_start(jax.random.key(7), swingto_params)
+    key, action = jax.random.key(3), jnp.array([1.0])
+    ended = step(key, ending_state(goal=0.7), action, swingto_params, fresh)
+    assert bool(ended.truncated) and int(ended.info["episode_length"]) == 200
+    assert_obs_equal(ended.obs, fresh.obs, atol=0)
+    for a, b in zip(jax.tree.leaves(ended.state.env_state), jax.tree.leaves(fresh.state)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    assert_obs_equal(ended.final_obs, step(key, ending_state(goal=0.7), action, swingto_params).final_obs, atol=0)
+    running = EpisodeState(S(0.3, 0.5, goal=0.7, t=50), jnp.float32(-5.0), jnp.int32(50))
+    given, drawn = step(key, running, action, swingto_params, fresh), step(key, running, action, swingto_params)
+    assert_obs_equal(given.obs, drawn.obs, atol=0)
+    assert int(given.state.env_state.t) == 51
+
+
 def test_autoreset_swingup_fresh_goal_is_upright(auto, params):
     _, _, astep = auto
     outs = [astep(jax.random.key(s), ending_state(goal=0.0), jnp.array([0.0]), params) for s in range(3)]
