@@ -14,12 +14,9 @@ it stopped (see sweep.py). The paper has no DAgger or PPO-x car numbers.
 
 from __future__ import annotations
 
-import argparse
-import os
 from pathlib import Path
 
-from sweep import (add_arguments, cell, chosen_envs, hints_run, load, metric_cell, sweep, sweep_hardware, sweep_seconds,
-                   training_cell, wall_clock)
+from sweep import cell, curve_lines, footer, hints_run, load, metric_cell, table_main, training_cell, wall_clock, write_report
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("car_racing",)
@@ -37,6 +34,7 @@ PAPER = {
     "hints-mc-composite": {"standard": "590.22 ± 261.9", "hairpin": "720.45 ± 272.1", "P standard": "-",
                            "P hairpin": "78%"},
 }
+DEFAULT_RUNS = "runs/car_racing"
 TABLE = "3-car"  # the sweep's name in runs/<...>/sweeps.jsonl
 
 
@@ -74,9 +72,7 @@ def findings(runs: Path, env: str) -> str:
 
 def report(runs: Path) -> None:
     from hintsjax.config import run_config
-    from hintsjax.runlog import plot_curves, read_curves
 
-    RESULTS.mkdir(exist_ok=True)
     lines = [
         "# Car Racing: the paper's Table 3 (CR Standard and CR Hairpin rows), reproduced", "",
         "Each cell: mean ± std over 5 training seeds x 50 evaluation episodes (deterministic policy);",
@@ -102,27 +98,13 @@ def report(runs: Path) -> None:
                 row += [metric_cell(result, "progress", i, percent=True), paper.get(f"P {variant}", "-")]
             lines.append(f"| {' | '.join(row)} | {training_cell(runs, env, label)} | {wall_clock(result)} |")
         lines += ["", findings(runs, env), ""]
-        curves = {label: read_curves(runs / env / label / "metrics.csv") for label in table_runs(env)
-                  if (runs / env / label / "metrics.csv").exists()}
-        if curves:
-            plot_curves(curves, RESULTS / f"car_curves_{env}.png", f"{env} (standard tracks): Table 3 agents, 5 seeds")
-            lines += [f"![{env} learning curves](car_curves_{env}.png)", ""]
-    lines.append(f"Sweep wall-clock recorded in {runs}/sweeps.jsonl on the GPU: {sweep_seconds(runs, TABLE):.0f} s"
-                 f" ({sweep_hardware(runs, TABLE, run_ids(ENVS)) or 'none yet'}).")
-    (RESULTS / "car_table3.md").write_text("\n".join(lines) + "\n")
-    print((RESULTS / "car_table3.md").read_text())
+        lines += curve_lines(runs, env, table_runs(env), RESULTS / f"car_curves_{env}.png", f"{env} (standard tracks): Table 3 agents, 5 seeds")
+    lines.append(footer(runs, TABLE, run_ids(ENVS)))
+    write_report(RESULTS / "car_table3.md", lines)
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    add_arguments(parser, "runs/car_racing", ENVS)
-    args = parser.parse_args()
-    os.environ["JAX_PLATFORMS"] = "cpu"  # the parent only reads configs; workers get the devices
-    if args.report:
-        report(args.runs)
-        return
-    names = chosen_envs(parser, args, ENVS)
-    sweep(args.runs, run_ids(names), args.workers, args.seeds, TABLE, args.smoke, args.launch_until, gpus=args.gpus)
+    table_main(__doc__.splitlines()[0], DEFAULT_RUNS, ENVS, TABLE, run_ids, report)
 
 
 if __name__ == "__main__":

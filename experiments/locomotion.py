@@ -12,11 +12,9 @@ locomotion experts (issue 6).
 
 from __future__ import annotations
 
-import argparse
-import os
 from pathlib import Path
 
-from sweep import add_arguments, cell, chosen_envs, hints_run, load, mean_of, sweep, sweep_hardware, sweep_seconds, training_cell, wall_clock
+from sweep import cell, curve_lines, footer, hints_run, load, mean_of, table_main, training_cell, wall_clock, write_report
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("halfcheetah", "ant", "humanoid")
@@ -36,6 +34,7 @@ PAPER = {
     "humanoid": {"dagger": "588.00 ± 152.4", "ppo_state": "228.30 ± 17.6", "ppo_rgb": "310.86 ± 41.7",
                  "hints-fc-velocity": "455.95 ± 94.5", "hints-fc-goal_height": "306.14 ± 52.5"},
 }
+DEFAULT_RUNS = "runs/locomotion"
 TABLE = "3-locomotion"  # the sweep's name in runs/<...>/sweeps.jsonl
 
 
@@ -63,9 +62,7 @@ def findings(runs: Path, env: str) -> str:
 
 def report(runs: Path) -> None:
     from hintsjax.config import run_config
-    from hintsjax.runlog import plot_curves, read_curves
 
-    RESULTS.mkdir(exist_ok=True)
     lines = [
         "# Locomotion: the paper's Table 3 (Ant, Cheetah, Humanoid rows), reproduced", "",
         "Each cell: mean ± std of the episode return over 5 training seeds x 50 evaluation episodes",
@@ -86,27 +83,13 @@ def report(runs: Path) -> None:
             lines.append(f"| {label} | {cell(result)} | {PAPER[env].get(label, '-')} | {training_cell(runs, env, label)} "
                          f"| {wall_clock(result)} |")
         lines += ["", findings(runs, env), ""]
-        curves = {label: read_curves(runs / env / label / "metrics.csv") for label in table_runs(env)
-                  if (runs / env / label / "metrics.csv").exists()}
-        if curves:
-            plot_curves(curves, RESULTS / f"locomotion_curves_{env}.png", f"{env}: Table 3 agents, 5 seeds")
-            lines += [f"![{env} learning curves](locomotion_curves_{env}.png)", ""]
-    lines.append(f"Sweep wall-clock recorded in {runs}/sweeps.jsonl on the GPU: {sweep_seconds(runs, TABLE):.0f} s"
-                 f" ({sweep_hardware(runs, TABLE, run_ids(ENVS)) or 'none yet'}).")
-    (RESULTS / "locomotion_table3.md").write_text("\n".join(lines) + "\n")
-    print((RESULTS / "locomotion_table3.md").read_text())
+        lines += curve_lines(runs, env, table_runs(env), RESULTS / f"locomotion_curves_{env}.png", f"{env}: Table 3 agents, 5 seeds")
+    lines.append(footer(runs, TABLE, run_ids(ENVS)))
+    write_report(RESULTS / "locomotion_table3.md", lines)
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    add_arguments(parser, "runs/locomotion", ENVS)
-    args = parser.parse_args()
-    os.environ["JAX_PLATFORMS"] = "cpu"  # the parent only reads configs; workers get the devices
-    if args.report:
-        report(args.runs)
-        return
-    names = chosen_envs(parser, args, ENVS)
-    sweep(args.runs, run_ids(names), args.workers, args.seeds, TABLE, args.smoke, args.launch_until, gpus=args.gpus)
+    table_main(__doc__.splitlines()[0], DEFAULT_RUNS, ENVS, TABLE, run_ids, report)
 
 
 if __name__ == "__main__":

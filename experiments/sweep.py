@@ -20,6 +20,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Callable
 
 CHILD_ENVIRON = dict(os.environ)  # the workers' environment: a sweep's parent process keeps off the GPU
 EXPERT_RUN = "expert_ppo"  # the run whose best seed becomes its env's expert for dagger and gail
@@ -248,6 +249,45 @@ def sweep_seconds(runs: Path, table: int) -> float:
     # Sweeps run on a CPU (recorded with "device": "cpu") are left out: their runs are marked (CPU).
     return sum(r["seconds"] for r in map(json.loads, path.read_text().splitlines())
                if str(table) in str(r["table"]).split("+") and r.get("device") != "cpu")
+
+
+def curve_lines(runs: Path, env: str, labels: list[str], out: Path, title: str) -> list[str]:
+    """Plot the learning curves of `labels`' runs (those with a metrics.csv) into `out`; the
+    report's markdown lines for it ([] when none has started)."""
+    from hintsjax.runlog import plot_curves, read_curves
+
+    paths = {label: runs / env / label / "metrics.csv" for label in labels}
+    curves = {label: read_curves(path) for label, path in paths.items() if path.exists()}
+    if not curves:
+        return []
+    plot_curves(curves, out, title)
+    return [f"![{env} learning curves]({out.name})", ""]
+
+
+def footer(runs: Path, table: str, run_ids: list[str]) -> str:
+    """The report's last line: the sweeps' GPU wall-clock and hardware."""
+    return (f"Sweep wall-clock recorded in {runs}/sweeps.jsonl on the GPU: {sweep_seconds(runs, table):.0f} s"
+            f" ({sweep_hardware(runs, table, run_ids) or 'none yet'}).")
+
+
+def write_report(path: Path, lines: list[str]) -> None:
+    path.parent.mkdir(exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
+    print(path.read_text())
+
+
+def table_main(description: str, default_runs: str, envs: tuple[str, ...], table: str,
+               run_ids: Callable[[list[str]], list[str]], report: Callable[[Path], None]) -> None:
+    """The command line of a table's sweep script: train its runs for --envs, or --report."""
+    parser = argparse.ArgumentParser(description=description)
+    add_arguments(parser, default_runs, envs)
+    args = parser.parse_args()
+    os.environ["JAX_PLATFORMS"] = "cpu"  # the parent only reads configs; workers get the devices
+    if args.report:
+        report(args.runs)
+        return
+    names = chosen_envs(parser, args, envs)
+    sweep(args.runs, run_ids(names), args.workers, args.seeds, table, args.smoke, args.launch_until, gpus=args.gpus)
 
 
 def sweep_hardware(runs: Path, table: str, run_ids: list[str]) -> str:
