@@ -1,0 +1,83 @@
+"""The sweep scripts' table cells and records (experiments/sweep.py), on hand-written run folders."""
+
+from __future__ import annotations
+
+import csv
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
+import sweep  # noqa: E402  (experiments/ is a folder of scripts, not a package)
+
+
+def write_run(runs: Path, env: str, label: str, evaluations: list[dict] | None = None, returns=None,
+              device: str = "NVIDIA H200") -> None:
+    """A run folder: eval.json with `evaluations`, metrics.csv with `returns` [seeds][updates]."""
+    folder = runs / env / label
+    folder.mkdir(parents=True)
+    if evaluations is not None:
+        (folder / "eval.json").write_text(json.dumps({"evaluations": evaluations, "wall_seconds": 61.4, "device": device}))
+    if returns is not None:
+        with open(folder / "metrics.csv", "w", newline="") as f:
+            writer = csv.DictWriter(f, ["update", "seed", "env_steps", "episode_return"])
+            writer.writeheader()
+            for seed, row in enumerate(returns):
+                for update, value in enumerate(row):
+                    writer.writerow({"update": update, "seed": seed, "env_steps": 1024 * (update + 1), "episode_return": value})
+
+
+def evaluation(mean, std, seed_means, **extra):
+    mu = sum(seed_means) / len(seed_means)
+    return {"mean": mean, "std": std, "seed_means": seed_means,
+            "seed_std": (sum((m - mu) ** 2 for m in seed_means) / len(seed_means)) ** 0.5, **extra}
+
+
+def test_cells_read_the_evaluations(tmp_path):
+    write_run(tmp_path, "car_racing", "ppo_rgb", [
+        evaluation(100.0, 20.0, [90.0, 110.0]),
+        evaluation(50.0, 5.0, [50.0, 50.0], progress_mean=0.25, progress_std=0.1, progress_seed_means=[0.2, 0.3]),
+    ])
+    result = sweep.load(tmp_path, "car_racing", "ppo_rgb")
+    assert sweep.cell(result) == "100.0 ± 20.0 (10.0)"
+    assert sweep.cell(result, 1) == "50.0 ± 5.0 (0.0)"
+    assert sweep.metric_cell(result, "progress", 1, percent=True) == "25% ± 10 (5)"
+    assert sweep.metric_cell(result, "progress", 0) == "-"  # not recorded on that variant
+    assert sweep.cell(sweep.load(tmp_path, "car_racing", "hints-mc-composite")) == "-"  # not run
+    assert sweep.wall_clock(result) == "61"
+
+
+def test_training_cell_averages_the_last_tenth_of_updates_per_seed(tmp_path):
+    # 20 updates: the last 2 count. Seed 0 ends 10, 20 -> 15; seed 1 ends NaN (no episode
+    # ended: the value before it carries forward, 30), 40 -> 35. Mean 25, std over seeds 10.
+    nan = float("nan")
+    write_run(tmp_path, "halfcheetah", "ppo_rgb", returns=[[0.0] * 18 + [10.0, 20.0], [0.0] * 17 + [30.0, nan, 40.0]])
+    assert sweep.training_cell(tmp_path, "halfcheetah", "ppo_rgb") == "25.0 ± 10.0"
+    write_run(tmp_path, "halfcheetah", "ppo_state", returns=[[nan] * 20])
+    assert sweep.training_cell(tmp_path, "halfcheetah", "ppo_state") == "-"  # no episode ended yet
+    assert sweep.training_cell(tmp_path, "halfcheetah", "hints-fc-velocity") == "-"
+
+
+def test_sweep_records_give_the_gpu_seconds_and_hardware(tmp_path):
+    write_run(tmp_path, "halfcheetah", "ppo_rgb", [evaluation(1.0, 0.0, [1.0])])
+    write_run(tmp_path, "halfcheetah", "ppo_state", [evaluation(1.0, 0.0, [1.0])], device="cpu")
+    records = [
+        {"table": "3-locomotion", "workers": 6, "seconds": 600.0, "gpus": ["0", "1"]},
+        {"table": "3-locomotion", "workers": 1, "seconds": 900.0, "device": "cpu"},  # left out
+        {"table": "3-car", "workers": 4, "seconds": 700.0, "gpus": []},
+    ]
+    (tmp_path / "sweeps.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    ids = ["halfcheetah/ppo_rgb", "halfcheetah/ppo_state"]
+    assert sweep.sweep_seconds(tmp_path, "3-locomotion") == pytest.approx(600.0)
+    assert sweep.sweep_hardware(tmp_path, "3-locomotion", ids) == "NVIDIA H200; 6 runs at once over 2 GPUs"
+    assert sweep.sweep_hardware(tmp_path, "3-car", ids) == "NVIDIA H200; 4 runs at once on one GPU"
+    assert sweep.footer(tmp_path, "3-locomotion", ids).endswith("600 s (NVIDIA H200; 6 runs at once over 2 GPUs).")
+    assert sweep.sweep_hardware(tmp_path, "2", ids) == ""
+
+
+def test_run_values_invert_the_labels():
+    assert sweep.run_values("car_racing", "hints-mc-on_track", 5) == {
+        "env": "car_racing", "seeds": 5, "checkpoint_every": 50, "agent": "hints", "scheme": "mc", "hint": "on_track"}
+    assert sweep.run_values("ant", "ppo_rgb", 2)["agent"] == "ppo_rgb"
