@@ -230,16 +230,17 @@ def pendulum_expert_returns(total_env_steps: int, seeds: int = 3) -> list[float]
 
 @pytest.mark.slow
 def test_expert_ppo_learns_the_state_pendulum():
-    """Our PPO at the hint agents' pendulum budget (200 K steps) learns the swing-up, far from a
-    random policy's -1200 (measured: seeds -666, -857, -504; 2.5 minutes on 2 CPU cores). The
-    expert itself trains 1 M steps (5 seeds -368 to -185, README)."""
+    """expert_ppo's tuned settings (config.ENV_DEFAULTS["pendulum"]) at the hint agents' pendulum
+    budget (200 K steps) swing the rod up and hold it, far from a random policy's -1200 (measured:
+    seeds -157, -179, -151). The expert itself trains 1 M steps."""
     returns = pendulum_expert_returns(200_000)
-    assert np.mean(returns) > -900 and max(returns) > -600, returns
+    assert np.mean(returns) > -250 and min(returns) > -350, returns
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="known gap: our PPO is noisier on the pendulum than a tuned one (rl-zoo's, "
-                                       "with gSDE, reaches about -200 at 100 K steps); measured seeds -723, -1012, -286")
 def test_expert_ppo_reaches_a_tuned_ppo_on_the_pendulum_at_100k():
+    """A known-good PPO reaches about -200 on the pendulum at 100 K steps; so does expert_ppo's
+    (measured: seeds -170, -257, -157; with 5 seeds vmapped, -185, -177, -155, -163, -173; about
+    1.5 minutes on 2 CPU cores). The hint agents' PPO settings scored -550, -1076, -264 here."""
     returns = pendulum_expert_returns(102_400)
-    assert max(returns) > -250, returns
+    assert np.mean(returns) > -260 and min(returns) > -350, returns
