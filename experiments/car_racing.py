@@ -16,7 +16,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sweep import cell, curve_lines, footer, hints_run, load, metric_cell, table_main, training_cell, wall_clock, write_report
+from sweep import (cell, curve_lines, footer, hints_run, load, metric_cell, metric_of, table_main, training_cell,
+                   wall_clock, write_report)
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("car_racing",)
@@ -48,12 +49,8 @@ def table_runs(env: str) -> list[str]:
 
 def hairpin_progress(result: dict | None) -> tuple[float, float] | None:
     """Mean hairpin progress and the std of its per-seed means, or None when not recorded."""
-    e = None if result is None else result["evaluations"][VARIANTS.index("hairpin")]
-    if e is None or "progress_mean" not in e:
-        return None
-    seeds = e["progress_seed_means"]
-    mean = sum(seeds) / len(seeds)
-    return e["progress_mean"], (sum((m - mean) ** 2 for m in seeds) / len(seeds)) ** 0.5
+    stats = metric_of(result, "progress", VARIANTS.index("hairpin"))
+    return None if stats is None else (stats[0], stats[2])
 
 
 def findings(runs: Path, env: str) -> str:

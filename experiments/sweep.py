@@ -198,17 +198,28 @@ def cell(result: dict | None, variant: int = 0) -> str:
     return f"{e['mean']:.1f} ± {e['std']:.1f} ({e['seed_std']:.1f})"
 
 
-def metric_cell(result: dict | None, name: str, variant: int = 0, percent: bool = False) -> str:
-    """'mean ± std (seed std)' of an env metric (e.g. progress) of one evaluation, as `cell`;
-    '-' when not run or not recorded."""
+def metric_of(result: dict | None, name: str, variant: int = 0) -> tuple[float, float, float] | None:
+    """(mean, std, std of the per-seed means) of an env metric (e.g. progress) of one
+    evaluation; None when not run or not recorded."""
     e = None if result is None else result["evaluations"][variant]
     if e is None or f"{name}_mean" not in e:
-        return "-"
+        return None
     seed_means = e[f"{name}_seed_means"]
-    seed_std = (sum((m - sum(seed_means) / len(seed_means)) ** 2 for m in seed_means) / len(seed_means)) ** 0.5
+    centre = sum(seed_means) / len(seed_means)
+    seed_std = (sum((m - centre) ** 2 for m in seed_means) / len(seed_means)) ** 0.5
+    return e[f"{name}_mean"], e[f"{name}_std"], seed_std
+
+
+def metric_cell(result: dict | None, name: str, variant: int = 0, percent: bool = False) -> str:
+    """'mean ± std (seed std)' of an env metric of one evaluation, as `cell`; '-' when not run
+    or not recorded."""
+    stats = metric_of(result, name, variant)
+    if stats is None:
+        return "-"
+    mean, std, seed_std = stats
     if percent:
-        return f"{100 * e[name + '_mean']:.0f}% ± {100 * e[name + '_std']:.0f} ({100 * seed_std:.0f})"
-    return f"{e[name + '_mean']:.2f} ± {e[name + '_std']:.2f} ({seed_std:.2f})"
+        return f"{100 * mean:.0f}% ± {100 * std:.0f} ({100 * seed_std:.0f})"
+    return f"{mean:.2f} ± {std:.2f} ({seed_std:.2f})"
 
 
 def training_cell(runs: Path, env: str, label: str, last: float = 0.1) -> str:
