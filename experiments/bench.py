@@ -1,7 +1,7 @@
 """Throughput of each env (with its picture), of training end to end, and the ceiling.
 
     python experiments/bench.py [--envs pendulum,acrobot,idp] [--sizes 4096,65536] [--steps 100] [--no-train]
-                                [--reset-cost] [--quick] [--out results.json]
+                                [--reset-cost] [--default-train-only] [--quick] [--out results.json]
 
 Measures, in one process on whatever device JAX sees:
   env      env steps/s including the env's picture (AutoReset, vmapped, in a scan), beside the
@@ -137,6 +137,8 @@ def main() -> None:
     parser.add_argument("--no-train", action="store_true", help="env rows only (no training rows)")
     parser.add_argument("--reset-cost", action="store_true",
                         help="add rows with starts drawn once per rollout of 8 steps, and without AutoReset")
+    parser.add_argument("--default-train-only", action="store_true",
+                        help="one training row per env: 5 seeds at the env's default settings")
     parser.add_argument("--quick", action="store_true", help="small sizes (a CPU smoke run)")
     parser.add_argument("--out", default=None, help="write the results as JSON here")
     args = parser.parse_args()
@@ -162,6 +164,7 @@ def main() -> None:
                       f"({what}; {RESETS[reset]})", flush=True)
         settings = (((5, {}), (5, {"num_envs": 64}), (32, {}), (32, {"num_envs": 64, "minibatch_size": 1024}))
                     if not q else ((2, {"num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}),))
+        settings = settings[:1] if args.default_train_only else settings
         for seeds, overrides in settings if not args.no_train else ():
             r = bench_train(name, seeds, 8 if not q else 2, overrides)
             r["fraction_of_ceiling"] = r["grad_samples_per_s"] / ceiling

@@ -188,7 +188,13 @@ def report(runs: Path) -> None:
               "odds, mostly negative at first, ending an episode early pays, and idp's episodes end by falling",
               f"(idp gail with the log odds: {cell(load(runs.parent / 'classic_extra', 'idp', 'gail-logit'))}, in",
               "runs/classic_extra/idp/gail-logit); with -log(1 - D) > 0 every step alive pays, which on acrobot",
-              "keeps an agent from its terminating goal (the paper's GAIL scored -500 there)."]
+              "keeps an agent from its terminating goal (the paper's GAIL scored -500 there).",
+              "",
+              "The pendulum's references were retrained on 2026-11-22 (one H100, two runs at a time, outside",
+              "the sweep) with the PPO tuned for the state pendulum (ENV_DEFAULTS: one 200-step episode per",
+              "rollout, gamma 0.95, entropy 0.01); dagger learnt from that expert. Without the entropy bonus:",
+              f"expert_ppo {cell(load(runs.parent / 'classic_extra', 'pendulum', 'expert_ppo-ent0'))}, gail "
+              f"{cell(load(runs.parent / 'classic_extra', 'pendulum', 'gail-ent0'))} (runs/classic_extra/pendulum)."]
     (RESULTS / "classic_table2.md").write_text("\n".join(lines) + "\n")
 
     lines = ["# Classic control: the paper's Table 4 (conditioning schemes), reproduced", "", *head,
@@ -214,12 +220,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--table", type=int, choices=(2, 4), help="train the runs of this table")
     add_arguments(parser, "runs/classic", ENVS)
-    parser.add_argument("--experts", type=Path, default=None,
-                        help="where expert_ppo runs export their expert and dagger/gail read it "
-                             "(default: the package's hintsjax/experts/<env>)")
     args = parser.parse_args()
-    if args.experts is not None:
-        args.experts = args.experts.absolute()
     os.environ["JAX_PLATFORMS"] = "cpu"  # the parent only reads configs; workers get the devices
     if args.report:
         report(args.runs)

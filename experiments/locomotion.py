@@ -6,8 +6,9 @@
 Per env: PPO-RGB, PPO-x (the state) and HINTS-FC with each of the paper's hint columns, at the
 paper's budgets (config.ENV_DEFAULTS: 1k, 5k and 10k episodes counted at 1000 steps), 5 seeds
 vmapped in one call, 50 evaluation episodes per seed. Finished folders are skipped, so an
-interrupted sweep resumes where it stopped (see sweep.py). The DAgger column waits for the
-locomotion experts (issue 6).
+interrupted sweep resumes where it stopped (see sweep.py). The DAgger column's expert is PPO
+on the state at the env's expert budget (config.ENV_DEFAULTS), exported to hintsjax/experts/<env>
+when it finishes; dagger starts only then.
 """
 
 from __future__ import annotations
@@ -19,6 +20,9 @@ from sweep import cell, curve_lines, footer, hints_run, load, mean_of, table_mai
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("halfcheetah", "ant", "humanoid")
 BASELINES = ("ppo_rgb", "ppo_state")
+# The converged references (issue 6): the expert's run is exported (its best seed) to the
+# package's hintsjax/experts/<env> when it finishes; the env's dagger run starts only then.
+REFERENCES = ("expert_ppo", "dagger")
 HINTS = {  # the paper's hint columns (Table 3; Table 6 names them)
     "halfcheetah": ("reward", "velocity", "max_velocity", "state"),
     "ant": ("speed", "goal_height", "state"),
@@ -43,7 +47,7 @@ def run_ids(names) -> list[str]:
 
 
 def table_runs(env: str) -> list[str]:
-    return [*BASELINES, *(hints_run("fc", h) for h in HINTS[env])]
+    return [*REFERENCES, *BASELINES, *(hints_run("fc", h) for h in HINTS[env])]
 
 
 def findings(runs: Path, env: str) -> str:
@@ -60,6 +64,22 @@ def findings(runs: Path, env: str) -> str:
             f"{'yes' if hints[best] > state else 'no'}.")
 
 
+def references_note(env: str) -> str:
+    """The references' budgets and the expert that DAgger learnt from (the packaged one)."""
+    import json
+
+    from hintsjax.config import run_config
+    from hintsjax.expert import EXPERT_JSON, EXPERTS_DIR
+
+    expert, dagger = (run_config({"env": env, "agent": a}).ppo for a in REFERENCES)
+    meta = EXPERTS_DIR / env / EXPERT_JSON
+    source = (f"its best seed (seed {m['seed_index']}, {m['seed_eval_mean']:.0f} over {m['episodes_per_seed']} episodes; "
+              f"hintsjax/experts/{env})" if meta.exists() and (m := json.loads(meta.read_text())) else "its best seed")
+    return (f"References (no budget limit): expert_ppo is PPO on the state for {expert.total_env_steps / 1e6:g} M steps "
+            f"({expert.num_envs} envs per seed, batches of {expert.batch_size}); dagger learns from {source} over "
+            f"{dagger.total_env_steps / 1e3:g} K expert-labelled steps.")
+
+
 def report(runs: Path) -> None:
     from hintsjax.config import run_config
 
@@ -74,16 +94,19 @@ def report(runs: Path) -> None:
         "updates, mean ± std over the seeds.", "",
     ]
     for env in ENVS:
-        steps = run_config({"env": env}).ppo.total_env_steps
-        lines += [f"## {env} ({steps / 1e6:g} M env steps per seed)", "",
-                  "| agent | ours | paper | training return, last 10% | wall-clock (s) |", "|---|---|---|---|---|",
-                  f"| dagger | - | {PAPER[env]['dagger']} | - | - |"]
+        ppo = run_config({"env": env}).ppo
+        lines += [f"## {env} ({ppo.total_env_steps / 1e6:g} M env steps per seed)", "",
+                  f"PPO: {ppo.num_envs} envs per seed, batches of {ppo.batch_size}, {ppo.epochs} epochs of minibatches of "
+                  f"{ppo.minibatch_size}, learning rates encoder {ppo.encoder_lr:g}, actor {ppo.actor_lr:g}, critic "
+                  f"{ppo.critic_lr:g} (config.ENV_DEFAULTS).", "",
+                  "| agent | ours | paper | training return, last 10% | wall-clock (s) |", "|---|---|---|---|---|"]
         for label in table_runs(env):
             result = load(runs, env, label)
             lines.append(f"| {label} | {cell(result)} | {PAPER[env].get(label, '-')} | {training_cell(runs, env, label)} "
                          f"| {wall_clock(result)} |")
-        lines += ["", findings(runs, env), ""]
-        lines += curve_lines(runs, env, table_runs(env), RESULTS / f"locomotion_curves_{env}.png", f"{env}: Table 3 agents, 5 seeds")
+        lines += ["", findings(runs, env), "", references_note(env), ""]
+        learners = [label for label in table_runs(env) if label not in REFERENCES]  # at the table's budget
+        lines += curve_lines(runs, env, learners, RESULTS / f"locomotion_curves_{env}.png", f"{env}: Table 3 agents, 5 seeds")
     lines.append(footer(runs, TABLE, run_ids(ENVS)))
     write_report(RESULTS / "locomotion_table3.md", lines)
 

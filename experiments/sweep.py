@@ -170,6 +170,9 @@ def add_arguments(parser: argparse.ArgumentParser, runs: str, envs: tuple[str, .
                         help="comma-separated CUDA device ids; each worker gets the least busy one to itself")
     parser.add_argument("--launch-until", type=float, default=float("inf"), metavar="SECONDS",
                         help="start no run after this many seconds; running ones finish (for time-limited machines)")
+    parser.add_argument("--experts", type=lambda s: Path(s).absolute(), default=None,
+                        help="where expert_ppo runs export their expert and dagger/gail read it "
+                             "(default: the package's hintsjax/experts/<env>)")
 
 
 def chosen_envs(parser: argparse.ArgumentParser, args: argparse.Namespace, envs: tuple[str, ...]) -> list[str]:
@@ -245,9 +248,12 @@ def mean_of(result: dict | None) -> float | None:
 
 
 def wall_clock(result: dict | None) -> str:
-    """A run's wall-clock in seconds, marked when it ran on a CPU rather than the GPU."""
+    """A run's wall-clock in seconds, marked when it ran on a CPU rather than the GPU. A run
+    trained outside a sweep (python -m hintsjax.run) recorded only its training seconds."""
     if result is None:
         return "-"
+    if "wall_seconds" not in result:
+        return f"{result['train_seconds']:.0f} (training only)"
     on_cpu = result.get("device", "").lower() == "cpu"
     return f"{result['wall_seconds']:.0f}" + (" (CPU)" if on_cpu else "")
 
@@ -298,7 +304,7 @@ def table_main(description: str, default_runs: str, envs: tuple[str, ...], table
         report(args.runs)
         return
     names = chosen_envs(parser, args, envs)
-    sweep(args.runs, run_ids(names), args.workers, args.seeds, table, args.smoke, args.launch_until, gpus=args.gpus)
+    sweep(args.runs, run_ids(names), args.workers, args.seeds, table, args.smoke, args.launch_until, args.experts, args.gpus)
 
 
 def sweep_hardware(runs: Path, table: str, run_ids: list[str]) -> str:

@@ -47,6 +47,8 @@ def test_cells_read_the_evaluations(tmp_path):
     assert sweep.metric_cell(result, "progress", 0) == "-"  # not recorded on that variant
     assert sweep.cell(sweep.load(tmp_path, "car_racing", "hints-mc-composite")) == "-"  # not run
     assert sweep.wall_clock(result) == "61"
+    trained_alone = {"evaluations": [evaluation(1.0, 0.0, [1.0])], "train_seconds": 53.7}  # by python -m hintsjax.run
+    assert sweep.wall_clock(trained_alone) == "54 (training only)"
 
 
 def test_training_cell_averages_the_last_tenth_of_updates_per_seed(tmp_path):
@@ -81,3 +83,17 @@ def test_run_values_invert_the_labels():
     assert sweep.run_values("car_racing", "hints-mc-on_track", 5) == {
         "env": "car_racing", "seeds": 5, "checkpoint_every": 50, "agent": "hints", "scheme": "mc", "hint": "on_track"}
     assert sweep.run_values("ant", "ppo_rgb", 2)["agent"] == "ppo_rgb"
+
+
+def test_locomotion_references_train_their_expert_before_dagger():
+    import locomotion
+
+    ids = locomotion.run_ids(["halfcheetah"])
+    assert ids[:2] == ["halfcheetah/expert_ppo", "halfcheetah/dagger"]
+    assert sweep.prerequisite("halfcheetah/dagger") == "halfcheetah/expert_ppo"
+    assert sweep.prerequisite("halfcheetah/ppo_rgb") is None
+    experts = Path("/somewhere/experts")
+    assert sweep.run_values("halfcheetah", "dagger", 5, experts=experts)["expert"] == str(experts / "halfcheetah")
+    # The note reads the packaged expert's seed and the references' budgets from the config.
+    note = locomotion.references_note("halfcheetah")
+    assert "5 M steps" in note and "250 K expert-labelled steps" in note and "hintsjax/experts/halfcheetah" in note
