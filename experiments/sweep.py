@@ -52,6 +52,7 @@ def train_one(runs: Path, run_id: str, seeds: int, smoke: bool, experts: Path | 
     """Train and evaluate one configuration `env/label` into runs/env/label; export an expert's."""
     import jax
 
+    import hintsjax
     from hintsjax import checkpoint, expert, run
     from hintsjax.config import run_config, save_run_config
 
@@ -70,6 +71,7 @@ def train_one(runs: Path, run_id: str, seeds: int, smoke: bool, experts: Path | 
     results = run.train(cfg, folder, resume=resume, progress=False)
     results["wall_seconds"] = before + time.time() - t
     results["device"] = jax.devices()[0].device_kind
+    results["deterministic"] = jax.default_backend() == "cpu" or hintsjax.deterministic_gpu_ops()
     (folder / "eval.json").write_text(json.dumps(results, indent=1))
     if label == EXPERT_RUN:
         print(f"exported the expert to {expert.export(folder, None if experts is None else experts / env)}", flush=True)
@@ -318,7 +320,9 @@ def sweep_hardware(runs: Path, table: str, run_ids: list[str]) -> str:
         return ""
     setups = sorted({f"{r['workers']} runs at once" + (f" over {len(r['gpus'])} GPUs" if r.get("gpus") else " on one GPU")
                      for r in records})
-    return f"{', '.join(devices)}; {'; '.join(setups)}"
+    # Runs recorded before this key existed ran with deterministic GPU ops (hintsjax's default).
+    fast = [r for r in run_ids if (load(runs, *r.split("/")) or {}).get("deterministic", True) is False]
+    return f"{', '.join(devices)}; {'; '.join(setups)}" + (f"; deterministic GPU ops off ({len(fast)} runs)" if fast else "")
 
 
 def main() -> None:

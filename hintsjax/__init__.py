@@ -5,6 +5,13 @@ import os as _os
 # Same seed, same result on a GPU too. Without this flag two processes training the same seed on
 # an H100 ended with different params (XLA autotunes GPU kernels per compile; measured with
 # experiments/determinism.py). It must be set before jax starts; to opt out, put
-# --xla_gpu_deterministic_ops=false in XLA_FLAGS yourself.
+# --xla_gpu_deterministic_ops=false in XLA_FLAGS yourself (1.5-1.7x faster training on the MJX
+# envs: experiments/results/bench_h100_determinism.txt).
 if "xla_gpu_deterministic_ops" not in _os.environ.get("XLA_FLAGS", ""):
     _os.environ["XLA_FLAGS"] = (_os.environ.get("XLA_FLAGS", "") + " --xla_gpu_deterministic_ops=true").strip()
+
+
+def deterministic_gpu_ops() -> bool:
+    """Whether XLA_FLAGS asks for deterministic GPU ops (the last setting of the flag wins)."""
+    settings = [f.split("=", 1)[-1] for f in _os.environ.get("XLA_FLAGS", "").split() if f.startswith("--xla_gpu_deterministic_ops")]
+    return bool(settings) and settings[-1].lower() in ("true", "1")

@@ -77,6 +77,22 @@ def test_sweep_records_give_the_gpu_seconds_and_hardware(tmp_path):
     assert sweep.sweep_hardware(tmp_path, "3-car", ids) == "NVIDIA H200; 4 runs at once on one GPU"
     assert sweep.footer(tmp_path, "3-locomotion", ids).endswith("600 s (NVIDIA H200; 6 runs at once over 2 GPUs).")
     assert sweep.sweep_hardware(tmp_path, "2", ids) == ""
+    write_run(tmp_path, "halfcheetah", "ppo_fast", [evaluation(1.0, 0.0, [1.0])])
+    eval_json = tmp_path / "halfcheetah" / "ppo_fast" / "eval.json"
+    eval_json.write_text(json.dumps({**json.loads(eval_json.read_text()), "deterministic": False}))
+    assert sweep.sweep_hardware(tmp_path, "3-locomotion", [*ids, "halfcheetah/ppo_fast"]).endswith(
+        "over 2 GPUs; deterministic GPU ops off (1 runs)")
+
+
+@pytest.mark.parametrize("flags, expected", [
+    ("", False), ("--xla_gpu_deterministic_ops=true", True), ("--foo --xla_gpu_deterministic_ops=false", False),
+    ("--xla_gpu_deterministic_ops=true --xla_gpu_deterministic_ops=false", False),
+])
+def test_deterministic_gpu_ops_reads_the_last_flag(monkeypatch, flags, expected):
+    import hintsjax
+
+    monkeypatch.setenv("XLA_FLAGS", flags)
+    assert hintsjax.deterministic_gpu_ops() is expected
 
 
 def test_run_values_invert_the_labels():
