@@ -24,7 +24,7 @@ import argparse
 import os
 from pathlib import Path
 
-from sweep import add_arguments, cell, chosen_envs, hints_run, load, mean_of, sweep, sweep_seconds, wall_clock
+from sweep import add_arguments, cell, chosen_envs, chosen_runs, hints_run, load, mean_of, sweep, sweep_seconds, wall_clock
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("pendulum", "acrobot", "idp")
@@ -228,7 +228,7 @@ def main() -> None:
     if args.table is None:
         parser.exit(2, "error: give --table 2, --table 4 or --report\n")
     names = chosen_envs(parser, args, ENVS)
-    run_ids = [f"{env}/{label}" for env in names for label in table_runs(args.table, env)]
+    run_ids = chosen_runs(parser, args, [f"{env}/{label}" for env in names for label in table_runs(args.table, env)])
     if args.table == 4:  # the fc row is Table 2's
         run_ids = [r for r in run_ids if "-fc-" not in r or not (args.runs / r / "eval.json").exists()]
     sweep(args.runs, run_ids, args.workers, args.seeds, args.table, args.smoke, args.launch_until, args.experts, args.gpus)

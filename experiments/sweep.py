@@ -172,6 +172,8 @@ def add_arguments(parser: argparse.ArgumentParser, runs: str, envs: tuple[str, .
                         help="comma-separated CUDA device ids; each worker gets the least busy one to itself")
     parser.add_argument("--launch-until", type=float, default=float("inf"), metavar="SECONDS",
                         help="start no run after this many seconds; running ones finish (for time-limited machines)")
+    parser.add_argument("--only", type=lambda s: tuple(x for x in s.split(",") if x), default=(), metavar="LABELS",
+                        help="comma-separated run labels (e.g. ppo_rgb,hints-fc-speed): train only these of the table's runs")
     parser.add_argument("--experts", type=lambda s: Path(s).absolute(), default=None,
                         help="where expert_ppo runs export their expert and dagger/gail read it "
                              "(default: the package's hintsjax/experts/<env>)")
@@ -185,6 +187,17 @@ def chosen_envs(parser: argparse.ArgumentParser, args: argparse.Namespace, envs:
         parser.exit(2, f"error: unknown env {unknown}; valid choices: {', '.join(envs)}\n" if unknown
                     else "error: --workers must be at least 1\n")
     return names
+
+
+def chosen_runs(parser: argparse.ArgumentParser, args: argparse.Namespace, run_ids: list[str]) -> list[str]:
+    """The runs of --only (all when not given); exit 2 naming the valid labels on an unknown one."""
+    if not args.only:
+        return run_ids
+    labels = list(dict.fromkeys(r.split("/")[1] for r in run_ids))
+    unknown = [label for label in args.only if label not in labels]
+    if unknown:
+        parser.exit(2, f"error: unknown run label {unknown}; valid choices: {', '.join(labels)}\n")
+    return [r for r in run_ids if r.split("/")[1] in args.only]
 
 
 # -- reading finished runs ---------------------------------------------------------------------
@@ -306,7 +319,8 @@ def table_main(description: str, default_runs: str, envs: tuple[str, ...], table
         report(args.runs)
         return
     names = chosen_envs(parser, args, envs)
-    sweep(args.runs, run_ids(names), args.workers, args.seeds, table, args.smoke, args.launch_until, args.experts, args.gpus)
+    ids = chosen_runs(parser, args, run_ids(names))
+    sweep(args.runs, ids, args.workers, args.seeds, table, args.smoke, args.launch_until, args.experts, args.gpus)
 
 
 def sweep_hardware(runs: Path, table: str, run_ids: list[str]) -> str:

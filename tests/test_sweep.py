@@ -113,3 +113,17 @@ def test_locomotion_references_train_their_expert_before_dagger():
     # The note reads the packaged expert's seed and the references' budgets from the config.
     note = locomotion.references_note("halfcheetah")
     assert "5 M steps" in note and "250 K expert-labelled steps" in note and "hintsjax/experts/halfcheetah" in note
+
+
+def test_only_picks_labels_and_names_the_valid_ones(capsys):
+    import argparse
+
+    parser = argparse.ArgumentParser()
+    sweep.add_arguments(parser, "runs/x", ("ant", "halfcheetah"))
+    ids = ["ant/ppo_rgb", "ant/hints-fc-speed", "halfcheetah/ppo_rgb"]
+    assert sweep.chosen_runs(parser, parser.parse_args([]), ids) == ids
+    assert sweep.chosen_runs(parser, parser.parse_args(["--only", "ppo_rgb"]), ids) == ["ant/ppo_rgb", "halfcheetah/ppo_rgb"]
+    with pytest.raises(SystemExit) as e:
+        sweep.chosen_runs(parser, parser.parse_args(["--only", "ppo_rgb,nope"]), ids)
+    assert e.value.code == 2
+    assert capsys.readouterr().err == "error: unknown run label ['nope']; valid choices: ppo_rgb, hints-fc-speed\n"
