@@ -226,6 +226,25 @@ def test_packaged_experts_load_and_act(env):
     assert meta["seed_eval_mean"] >= meta["run_eval_mean"]  # the best seed of its run
 
 
+# What 4 sampled-action episodes of each packaged expert must score on the CPU, far above a random
+# policy (pendulum about -1200, acrobot -500, idp about 100, halfcheetah about -300). Measured on
+# 2 CPU cores: -208, -67, 9356, 4478 (80 s with the compiles).
+PACKAGED_FLOORS = {"pendulum": -400.0, "acrobot": -120.0, "idp": 9000.0, "halfcheetah": 3000.0}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("env", PACKAGED)
+def test_packaged_experts_still_perform(env):
+    """An expert trained on the GPU keeps its level on this code's env (the demonstrations GAIL
+    learns from), so a change to an env's dynamics or reward that strands its expert fails here."""
+    from hintsjax import envs
+    from hintsjax.gail import demonstrate
+
+    sim, policy = envs.make(env, observe=("state",)), expert.load(env)
+    demos = jax.jit(lambda k: demonstrate(sim, sim.default_params(), policy, k, 4))(jax.random.key(0))
+    assert float(demos.episode_return.mean()) > PACKAGED_FLOORS[env], demos.episode_return
+
+
 def pendulum_expert_returns(total_env_steps: int, seeds: int = 3) -> list[float]:
     """Per-seed mean return (20 deterministic episodes) of expert_ppo's settings on the state
     pendulum, without the entropy bonus that the expert's full 1 M-step run keeps (at 102,400
