@@ -329,13 +329,14 @@ def sweep_hardware(runs: Path, table: str, run_ids: list[str]) -> str:
     path = runs / "sweeps.jsonl"
     records = [r for r in map(json.loads, path.read_text().splitlines()) if str(table) in str(r["table"]).split("+")
                and r.get("device") != "cpu"] if path.exists() else []
-    devices = sorted({(load(runs, *r.split("/")) or {}).get("device", "") for r in run_ids} - {"", "cpu", "Cpu"})
+    results = [result for r in run_ids if (result := load(runs, *r.split("/")))]
+    devices = sorted({result.get("device", "") for result in results} - {"", "cpu", "Cpu"})
     if not records or not devices:
         return ""
     setups = sorted({f"{r['workers']} runs at once" + (f" over {len(r['gpus'])} GPUs" if r.get("gpus") else " on one GPU")
                      for r in records})
     # Runs recorded before this key existed ran with deterministic GPU ops (hintsjax's default).
-    fast = [r for r in run_ids if (load(runs, *r.split("/")) or {}).get("deterministic", True) is False]
+    fast = [result for result in results if result.get("deterministic", True) is False]
     return f"{', '.join(devices)}; {'; '.join(setups)}" + (f"; deterministic GPU ops off ({len(fast)} runs)" if fast else "")
 
 

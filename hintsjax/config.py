@@ -188,7 +188,8 @@ ENV_DEFAULTS: dict[str, dict[str, Any]] = {
     # (early episodes end in a few dozen steps when the robot falls, as on idp).
     # HalfCheetah's pixel agents at Table 5's encoder rate 1e-3 and 8 epochs drifted from their
     # rollout policy as training went on (approx. KL 0.2 to 0.8 per update, PPO on the state 0.05);
-    # encoder 3e-4 and 4 epochs kept it at 0.02 (experiments/results/cheetah_ppo_stability.md).
+    # encoder 3e-4 and 4 epochs kept it near 0.02 in 250 K-step tests and below 0.1 over the full
+    # 1 M of the Table 3 runs (experiments/results/cheetah_ppo_stability.md).
     # A deviation from Table 5's encoder rate, for every cheetah agent alike.
     # Its expert: PPO on the state for 5 M steps, 512 envs per seed in batches of 4096 and 8
     # epochs; DAgger aggregates 250 K expert-labelled steps.
