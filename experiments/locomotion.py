@@ -15,7 +15,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sweep import cell, curve_lines, footer, hints_run, load, mean_of, table_main, training_cell, wall_clock, write_report
+from sweep import (cell, curve_lines, footer, hints_run, kl_cell, load, mean_of, table_main, trained_ppo, training_cell, wall_clock,
+                   write_report)
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("halfcheetah", "ant", "humanoid")
@@ -64,20 +65,44 @@ def findings(runs: Path, env: str) -> str:
             f"{'yes' if hints[best] > state else 'no'}.")
 
 
-def references_note(env: str) -> str:
-    """The references' budgets and the expert that DAgger learnt from (the packaged one)."""
+def ppo_text(ppo) -> str:
+    return (f"{ppo.num_envs} envs per seed, batches of {ppo.batch_size}, {ppo.epochs} epochs of minibatches of "
+            f"{ppo.minibatch_size}, learning rates encoder {ppo.encoder_lr:g}, actor {ppo.actor_lr:g}, critic {ppo.critic_lr:g}")
+
+
+def settings_lines(runs: Path, env: str, labels: list[str]) -> list[str]:
+    """The PPO settings the rows were trained with (each run's config.yaml), grouped when they
+    differ; rows not yet run are listed at today's defaults (config.ENV_DEFAULTS)."""
+    from hintsjax.config import run_config
+
+    default = run_config({"env": env}).ppo
+    groups: dict[str, list[str]] = {}
+    for label in labels:
+        ppo = trained_ppo(runs, env, label)
+        note = ("not run yet; config.ENV_DEFAULTS" if ppo is None else "config.ENV_DEFAULTS" if ppo == default
+                else "not today's config.ENV_DEFAULTS")
+        groups.setdefault(f"{ppo_text(ppo or default)} ({note})", []).append(label)
+    if len(groups) == 1:
+        return [f"PPO: {next(iter(groups))}."]
+    return ["PPO, as each row was trained:", "", *(f"- {', '.join(rows)}: {text}." for text, rows in groups.items())]
+
+
+def references_note(runs: Path, env: str) -> str:
+    """The references' budgets (as trained, else today's defaults) and the expert that DAgger
+    learnt from (the packaged one)."""
     import json
 
     from hintsjax.config import run_config
     from hintsjax.expert import EXPERT_JSON, EXPERTS_DIR
 
-    expert, dagger = (run_config({"env": env, "agent": a}).ppo for a in REFERENCES)
+    expert, dagger = (trained_ppo(runs, env, a) or run_config({"env": env, "agent": a}).ppo for a in REFERENCES)
     meta = EXPERTS_DIR / env / EXPERT_JSON
     source = (f"its best seed (seed {m['seed_index']}, {m['seed_eval_mean']:.0f} over {m['episodes_per_seed']} episodes; "
               f"hintsjax/experts/{env})" if meta.exists() and (m := json.loads(meta.read_text())) else "its best seed")
     return (f"References (no budget limit): expert_ppo is PPO on the state for {expert.total_env_steps / 1e6:g} M steps "
-            f"({expert.num_envs} envs per seed, batches of {expert.batch_size}); dagger learns from {source} over "
-            f"{dagger.total_env_steps / 1e3:g} K expert-labelled steps.")
+            f"({expert.num_envs} envs per seed, batches of {expert.batch_size}, {expert.epochs} epochs of minibatches of "
+            f"{expert.minibatch_size}); dagger learns from {source} over {dagger.total_env_steps / 1e3:g} K "
+            f"expert-labelled steps.")
 
 
 def report(runs: Path) -> None:
@@ -91,21 +116,22 @@ def report(runs: Path) -> None:
         "The envs are Gymnasium v5's tasks on MJX (envs/ant.py, halfcheetah.py, humanoid.py), seen",
         "as 64x64 renders from a camera that follows the robot (envs/render3d.py). '-': not run yet.",
         "Training return: the training episodes (sampled actions) that ended in the last 10% of",
-        "updates, mean ± std over the seeds.", "",
+        "updates, mean ± std over the seeds. Updates with KL > 0.5: the share of PPO updates (all",
+        "seeds) whose approx. KL from the rollout policy exceeded 0.5, a blown-up update; healthy runs",
+        "stay near 0% (experiments/results/locomotion_ppo_stability.md).", "",
     ]
     for env in ENVS:
-        ppo = run_config({"env": env}).ppo
-        lines += [f"## {env} ({ppo.total_env_steps / 1e6:g} M env steps per seed)", "",
-                  f"PPO: {ppo.num_envs} envs per seed, batches of {ppo.batch_size}, {ppo.epochs} epochs of minibatches of "
-                  f"{ppo.minibatch_size}, learning rates encoder {ppo.encoder_lr:g}, actor {ppo.actor_lr:g}, critic "
-                  f"{ppo.critic_lr:g} (config.ENV_DEFAULTS).", "",
-                  "| agent | ours | paper | training return, last 10% | wall-clock (s) |", "|---|---|---|---|---|"]
+        learners = [label for label in table_runs(env) if label not in REFERENCES]  # at the table's budget
+        lines += [f"## {env} ({run_config({'env': env}).ppo.total_env_steps / 1e6:g} M env steps per seed)", "",
+                  *settings_lines(runs, env, learners), "",
+                  "| agent | ours | paper | training return, last 10% | updates with KL > 0.5 | wall-clock (s) |",
+                  "|---|---|---|---|---|---|"]
         for label in table_runs(env):
             result = load(runs, env, label)
             lines.append(f"| {label} | {cell(result)} | {PAPER[env].get(label, '-')} | {training_cell(runs, env, label)} "
+                         f"| {kl_cell(runs, env, label)} "
                          f"| {wall_clock(result)} |")
-        lines += ["", findings(runs, env), "", references_note(env), ""]
-        learners = [label for label in table_runs(env) if label not in REFERENCES]  # at the table's budget
+        lines += ["", findings(runs, env), "", references_note(runs, env), ""]
         lines += curve_lines(runs, env, learners, RESULTS / f"locomotion_curves_{env}.png", f"{env}: Table 3 agents, 5 seeds")
     lines.append(footer(runs, TABLE, run_ids(ENVS)))
     write_report(RESULTS / "locomotion_table3.md", lines)

@@ -7,12 +7,13 @@ train.log and, once finished, eval.json. `sweep` trains every unfinished run of 
 
     python experiments/sweep.py --runs runs/classic --seeds 5 --one idp/ppo_rgb [--smoke]
 
-The readers below (`load`, `cell`, `metric_cell`, `wall_clock`, `sweep_seconds`) build the result tables.
+The readers below (`load`, `cell`, `metric_cell`, `kl_cell`, `wall_clock`, `sweep_seconds`) build the result tables.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import os
 import signal
@@ -258,6 +259,29 @@ def training_cell(runs: Path, env: str, label: str, last: float = 0.1) -> str:
     return f"{np.nanmean(per_seed):.1f} ± {np.nanstd(per_seed):.1f}"
 
 
+def kl_cell(runs: Path, env: str, label: str, above: float = 0.5) -> str:
+    """The share of a run's PPO updates (all seeds) whose approx. KL from the rollout policy
+    (last epoch) exceeds `above`: a PPO that drifts or blows up shows here (healthy runs stay
+    near 0%; inf, an overflowed log ratio, counts). '-' when not run or not trained by PPO."""
+    import numpy as np
+
+    path = runs / env / label / "metrics.csv"
+    if not path.exists() or "approx_kl" not in path.open().readline().strip().split(","):
+        return "-"
+    with path.open() as f:
+        kl = np.array([float(row["approx_kl"]) for row in csv.DictReader(f)])
+    return f"{100 * np.mean(kl > above):.1f}%"
+
+
+def trained_ppo(runs: Path, env: str, label: str):
+    """The PPOConfig a finished run was trained with (its config.yaml), or None when not run:
+    a report states the settings its rows were trained with, not today's defaults."""
+    from hintsjax.config import CONFIG_YAML, load_run_config
+
+    folder = runs / env / label
+    return load_run_config(folder).ppo if (folder / "eval.json").exists() and (folder / CONFIG_YAML).exists() else None
+
+
 def mean_of(result: dict | None) -> float | None:
     return None if result is None else result["evaluations"][0]["mean"]
 
@@ -273,14 +297,24 @@ def wall_clock(result: dict | None) -> str:
     return f"{result['wall_seconds']:.0f}" + (" (CPU)" if on_cpu else "")
 
 
-def sweep_seconds(runs: Path, table: int) -> float:
+def sweep_seconds(runs: Path, table: int | str) -> float:
+    """The GPU wall-clock of `table`'s sweeps: sweeps that ran at the same time (on one machine's
+    several GPUs) count once, as the union of their [finished - seconds, finished] spans."""
     path = runs / "sweeps.jsonl"
     if not path.exists():
         return 0.0
     # A sweep that trained runs of both tables at once is recorded as table "2+4" and counts for each.
     # Sweeps run on a CPU (recorded with "device": "cpu") are left out: their runs are marked (CPU).
-    return sum(r["seconds"] for r in map(json.loads, path.read_text().splitlines())
-               if str(table) in str(r["table"]).split("+") and r.get("device") != "cpu")
+    records = [r for r in map(json.loads, path.read_text().splitlines())
+               if str(table) in str(r["table"]).split("+") and r.get("device") != "cpu"]
+    spans = sorted((end - r["seconds"], end) for i, r in enumerate(records)
+                   for end in [time.mktime(time.strptime(r["finished"], "%Y-%m-%d %H:%M:%S")) if "finished" in r
+                               else -1e12 * (i + 1)])  # no timestamp: a span of its own
+    total, reach = 0.0, -float("inf")
+    for start, end in spans:
+        total += max(0.0, end - max(start, reach))
+        reach = max(reach, end)
+    return total
 
 
 def curve_lines(runs: Path, env: str, labels: list[str], out: Path, title: str) -> list[str]:
@@ -333,7 +367,7 @@ def sweep_hardware(runs: Path, table: str, run_ids: list[str]) -> str:
     devices = sorted({result.get("device", "") for result in results} - {"", "cpu", "Cpu"})
     if not records or not devices:
         return ""
-    setups = sorted({f"{r['workers']} runs at once" + (f" over {len(r['gpus'])} GPUs" if r.get("gpus") else " on one GPU")
+    setups = sorted({f"{r['workers']} runs at once" + (f" over {len(r['gpus'])} GPUs" if len(r.get("gpus", ())) > 1 else " on one GPU")
                      for r in records})
     # Runs recorded before this key existed ran with deterministic GPU ops (hintsjax's default).
     fast = [result for result in results if result.get("deterministic", True) is False]

@@ -82,6 +82,12 @@ def test_sweep_records_give_the_gpu_seconds_and_hardware(tmp_path):
     eval_json.write_text(json.dumps({**json.loads(eval_json.read_text()), "deterministic": False}))
     assert sweep.sweep_hardware(tmp_path, "3-locomotion", [*ids, "halfcheetah/ppo_fast"]).endswith(
         "over 2 GPUs; deterministic GPU ops off (1 runs)")
+    # Two sweeps side by side on one machine (10:00-10:20 and 10:05-10:30), then one at 11:00-11:10:
+    # the overlap counts once, 30 + 10 minutes.
+    side_by_side = [{"table": "3-locomotion", "workers": 1, "seconds": s, "finished": f"2026-11-22 {end}", "gpus": ["0"]}
+                    for s, end in ((1200.0, "10:20:00"), (1500.0, "10:30:00"), (600.0, "11:10:00"))]
+    (tmp_path / "sweeps.jsonl").write_text("".join(json.dumps(r) + "\n" for r in side_by_side))
+    assert sweep.sweep_seconds(tmp_path, "3-locomotion") == pytest.approx(2400.0)
 
 
 @pytest.mark.parametrize("flags, expected", [
@@ -111,8 +117,47 @@ def test_locomotion_references_train_their_expert_before_dagger():
     experts = Path("/somewhere/experts")
     assert sweep.run_values("halfcheetah", "dagger", 5, experts=experts)["expert"] == str(experts / "halfcheetah")
     # The note reads the packaged expert's seed and the references' budgets from the config.
-    note = locomotion.references_note("halfcheetah")
+    note = locomotion.references_note(Path("/nowhere"), "halfcheetah")
     assert "5 M steps" in note and "250 K expert-labelled steps" in note and "hintsjax/experts/halfcheetah" in note
+
+
+def test_locomotion_report_states_the_settings_each_row_was_trained_with(tmp_path):
+    import locomotion
+    from hintsjax import config
+
+    labels = ["ppo_rgb", "hints-fc-speed", "ppo_state"]
+    assert locomotion.settings_lines(tmp_path, "ant", labels) == [  # none run yet: today's defaults
+        "PPO: 256 envs per seed, batches of 1024, 4 epochs of minibatches of 256, learning rates encoder 0.0003, "
+        "actor 0.0003, critic 0.001 (not run yet; config.ENV_DEFAULTS)."]
+    for label, values in (("ppo_rgb", {}), ("hints-fc-speed", {"ppo": {"encoder_lr": 1e-3, "epochs": 8}})):
+        write_run(tmp_path, "ant", label, [evaluation(1.0, 0.0, [1.0])])
+        config.save_run_config(tmp_path / "ant" / label, config.run_config({"env": "ant", **values}))
+    assert locomotion.settings_lines(tmp_path, "ant", labels) == [
+        "PPO, as each row was trained:", "",
+        "- ppo_rgb: 256 envs per seed, batches of 1024, 4 epochs of minibatches of 256, learning rates "
+        "encoder 0.0003, actor 0.0003, critic 0.001 (config.ENV_DEFAULTS).",
+        "- hints-fc-speed: 256 envs per seed, batches of 1024, 8 epochs of minibatches of 256, learning rates "
+        "encoder 0.001, actor 0.0003, critic 0.001 (not today's config.ENV_DEFAULTS).",
+        "- ppo_state: 256 envs per seed, batches of 1024, 4 epochs of minibatches of 256, learning rates "
+        "encoder 0.0003, actor 0.0003, critic 0.001 (not run yet; config.ENV_DEFAULTS)."]
+
+
+def test_kl_cell_is_the_share_of_blown_up_updates(tmp_path):
+    folder = tmp_path / "ant" / "hints-fc-speed"
+    folder.mkdir(parents=True)
+    # 2 seeds x 10 updates: seed 0 has 3 updates at 0.6, seed 1 one overflowed (inf): 4 of 20.
+    kl = {(0, 2): 0.6, (0, 5): 0.6, (0, 9): 0.6, (1, 7): float("inf"), (1, 8): 0.5}  # 0.5 is not above
+    rows = [{"update": u, "seed": s, "env_steps": 1024 * u, "approx_kl": kl.get((s, u), 0.01)}
+            for s in range(2) for u in range(1, 11)]
+    with open(folder / "metrics.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, ["update", "seed", "env_steps", "approx_kl"])
+        writer.writeheader()
+        writer.writerows(rows)
+    assert sweep.kl_cell(tmp_path, "ant", "hints-fc-speed") == "20.0%"
+    assert sweep.kl_cell(tmp_path, "ant", "hints-fc-speed", above=0.05) == "25.0%"
+    write_run(tmp_path, "ant", "dagger", returns=[[1.0]])  # no approx_kl column: not PPO
+    assert sweep.kl_cell(tmp_path, "ant", "dagger") == "-"
+    assert sweep.kl_cell(tmp_path, "ant", "ppo_rgb") == "-"  # not run
 
 
 def test_only_picks_labels_and_names_the_valid_ones(capsys):
