@@ -266,10 +266,13 @@ def kl_cell(runs: Path, env: str, label: str, above: float = 0.5) -> str:
     import numpy as np
 
     path = runs / env / label / "metrics.csv"
-    if not path.exists() or "approx_kl" not in path.open().readline().strip().split(","):
+    if not path.exists():
         return "-"
     with path.open() as f:
-        kl = np.array([float(row["approx_kl"]) for row in csv.DictReader(f)])
+        reader = csv.DictReader(f)
+        if "approx_kl" not in (reader.fieldnames or ()):
+            return "-"
+        kl = np.array([float(row["approx_kl"]) for row in reader])
     return f"{100 * np.mean(kl > above):.1f}%"
 
 
@@ -307,11 +310,10 @@ def sweep_seconds(runs: Path, table: int | str) -> float:
     # Sweeps run on a CPU (recorded with "device": "cpu") are left out: their runs are marked (CPU).
     records = [r for r in map(json.loads, path.read_text().splitlines())
                if str(table) in str(r["table"]).split("+") and r.get("device") != "cpu"]
-    spans = sorted((end - r["seconds"], end) for i, r in enumerate(records)
-                   for end in [time.mktime(time.strptime(r["finished"], "%Y-%m-%d %H:%M:%S")) if "finished" in r
-                               else -1e12 * (i + 1)])  # no timestamp: a span of its own
-    total, reach = 0.0, -float("inf")
-    for start, end in spans:
+    total = sum(r["seconds"] for r in records if "finished" not in r)  # no timestamp: counted alone
+    reach = -float("inf")  # the end of the union so far
+    for start, end in sorted((end - r["seconds"], end) for r in records if "finished" in r
+                             for end in [time.mktime(time.strptime(r["finished"], "%Y-%m-%d %H:%M:%S"))]):
         total += max(0.0, end - max(start, reach))
         reach = max(reach, end)
     return total
