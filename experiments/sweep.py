@@ -369,8 +369,8 @@ def sweep_hardware(runs: Path, table: str, run_ids: list[str]) -> str:
     devices = sorted({result.get("device", "") for result in results} - {"", "cpu", "Cpu"})
     if not records or not devices:
         return ""
-    setups = sorted({f"{r['workers']} runs at once" + (f" over {len(r['gpus'])} GPUs" if len(r.get("gpus", ())) > 1 else " on one GPU")
-                     for r in records})
+    setups = sorted({("1 run at a time" if r["workers"] == 1 else f"{r['workers']} runs at once")
+                     + (f" over {len(r['gpus'])} GPUs" if len(r.get("gpus", ())) > 1 else " on one GPU") for r in records})
     # Runs recorded before this key existed ran with deterministic GPU ops (hintsjax's default).
     fast = [result for result in results if result.get("deterministic", True) is False]
     return f"{', '.join(devices)}; {'; '.join(setups)}" + (f"; deterministic GPU ops off ({len(fast)} runs)" if fast else "")

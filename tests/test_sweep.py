@@ -69,6 +69,7 @@ def test_sweep_records_give_the_gpu_seconds_and_hardware(tmp_path):
         {"table": "3-locomotion", "workers": 6, "seconds": 600.0, "gpus": ["0", "1"]},
         {"table": "3-locomotion", "workers": 1, "seconds": 900.0, "device": "cpu"},  # left out
         {"table": "3-car", "workers": 4, "seconds": 700.0, "gpus": []},
+        {"table": "3-ant", "workers": 1, "seconds": 900.0, "gpus": ["1"]},
     ]
     (tmp_path / "sweeps.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
     ids = ["halfcheetah/ppo_rgb", "halfcheetah/ppo_state"]
@@ -76,6 +77,7 @@ def test_sweep_records_give_the_gpu_seconds_and_hardware(tmp_path):
     assert sweep.sweep_hardware(tmp_path, "3-locomotion", ids) == "NVIDIA H200; 6 runs at once over 2 GPUs"
     assert sweep.sweep_hardware(tmp_path, "3-car", ids) == "NVIDIA H200; 4 runs at once on one GPU"
     assert sweep.footer(tmp_path, "3-locomotion", ids).endswith("600 s (NVIDIA H200; 6 runs at once over 2 GPUs).")
+    assert sweep.sweep_hardware(tmp_path, "3-ant", ids) == "NVIDIA H200; 1 run at a time on one GPU"
     assert sweep.sweep_hardware(tmp_path, "2", ids) == ""
     write_run(tmp_path, "halfcheetah", "ppo_fast", [evaluation(1.0, 0.0, [1.0])])
     eval_json = tmp_path / "halfcheetah" / "ppo_fast" / "eval.json"
