@@ -65,6 +65,10 @@ class PPOConfig:
     # Draw each env's next start once per rollout rather than on every step (AutoReset.step's
     # `fresh`): for envs whose reset is dear (the car's track is 800 sequential trace steps).
     starts_per_rollout: bool = False
+    # KL early stop (as Stable-Baselines3's target_kl): within an update, once a minibatch's approx.
+    # KL from the rollout policy exceeds 1.5 x target_kl, that minibatch and the rest of the
+    # update's epochs take no step. None: off (Table 5 has none).
+    target_kl: float | None = None
 
     @property
     def rollout_length(self) -> int:
@@ -91,6 +95,8 @@ class PPOConfig:
                 f"ppo.total_env_steps ({self.total_env_steps}) is less than one update's batch ({self.batch_size})"
             )
         require_positive(self, ("hidden",), "ppo.")
+        if self.target_kl is not None and not self.target_kl > 0:
+            raise UsageError(f"ppo.target_kl ({self.target_kl}) must be positive, or null for no KL early stop")
 
 
 @dataclass(frozen=True)

@@ -264,18 +264,23 @@ def make_ppo(cfg: RunConfig) -> PPO:
         optimizer = make_optimizer(ppo, state.params)
 
         def minibatch_step(carry, mb: Batch):
-            params, opt_state = carry
+            params, opt_state, stopped = carry
             (_, parts), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, mb)
-            updates, opt_state = optimizer.update(grads, opt_state, params)
-            return (optax.apply_updates(params, updates), opt_state), parts
+            updates, new_opt_state = optimizer.update(grads, opt_state, params)
+            new = (optax.apply_updates(params, updates), new_opt_state)
+            if ppo.target_kl is not None:  # KL early stop: no step from here to the update's end
+                stopped = stopped | (parts["approx_kl"] > 1.5 * ppo.target_kl)
+                new = jax.tree.map(lambda old, step: jnp.where(stopped, old, step), (params, opt_state), new)
+                parts = {**parts, "kl_stopped": stopped.astype(jnp.float32)}
+            return (*new, stopped), parts
 
         def epoch(carry, key):
             order = jax.random.permutation(key, T * N)
             shaped = lambda x: x[order].reshape((ppo.num_minibatches, ppo.minibatch_size) + x.shape[1:])  # noqa: E731
             return jax.lax.scan(minibatch_step, carry, jax.tree.map(shaped, batch))
 
-        (params, opt_state), parts = jax.lax.scan(
-            epoch, (state.params, state.opt_state), jax.random.split(key, ppo.epochs)
+        (params, opt_state, _), parts = jax.lax.scan(
+            epoch, (state.params, state.opt_state, jnp.zeros((), bool)), jax.random.split(key, ppo.epochs)
         )
         metrics = {
             **jax.tree.map(jnp.mean, parts),

@@ -206,3 +206,41 @@ def test_starts_per_rollout_draw_one_start_per_env_and_rollout(per_rollout):
         assert constant.all() and len(set(cues[0])) == 2, cues
     else:
         assert not constant.any(), cues
+
+
+def adam_counts(opt_state) -> list[int]:
+    """The step count of every Adam state in an optimiser state."""
+    import optax
+
+    leaves = jax.tree.leaves(opt_state, is_leaf=lambda x: isinstance(x, optax.ScaleByAdamState))
+    return [int(x.count) for x in leaves if isinstance(x, optax.ScaleByAdamState)]
+
+
+def test_target_kl_stops_an_update_after_the_first_minibatch_whose_kl_exceeds_it():
+    """One update of 2 epochs x 2 minibatches. The first minibatch meets the rollout's own policy
+    (KL 0), so it always steps; with a tiny target the second minibatch's KL (above 0 after that
+    step) stops the update: one Adam step, 3 of 4 minibatches skipped. A huge target steps every
+    minibatch and gives exactly the parameters of no early stop (target_kl None)."""
+    def make(target_kl):
+        return ppo.make_ppo(config.run_config(dict(env="cue", agent="hints_blind", seeds=1,
+                                                   ppo={**SMALL_PPO, "target_kl": target_kl})))
+
+    off = make(None)
+    state = jax.jit(off.init)(jax.random.key(0))
+    _, traj, last_value = jax.jit(off.rollout)(state, jax.random.key(1))
+    learnt = {target: jax.jit(parts.learn)(state, traj, last_value, traj.reward, jax.random.key(2))
+              for target, parts in ((None, off), (1e9, make(1e9)), (1e-12, make(1e-12)))}
+    for target, steps in ((None, 4), (1e9, 4), (1e-12, 1)):
+        after, metrics = learnt[target]
+        assert set(adam_counts(after.opt_state)) == {steps}
+        if target is None:
+            assert "kl_stopped" not in metrics
+        else:
+            np.testing.assert_allclose(metrics["kl_stopped"], 1.0 - steps / 4)
+        same = jax.tree.map(lambda a, b: bool(jnp.array_equal(a, b)), after.params, learnt[None][0].params)
+        assert all(jax.tree.leaves(same)) == (target != 1e-12)
+
+
+def test_target_kl_must_be_positive():
+    with pytest.raises(config.UsageError, match="target_kl"):
+        config.run_config(dict(env="cue", agent="hints_blind", ppo={**SMALL_PPO, "target_kl": 0.0}))
