@@ -8,20 +8,24 @@ composite), trained on the standard tracks at the paper's budget (config.ENV_DEF
 episodes of 1000 steps), 5 seeds vmapped in one call, 50 evaluation episodes per seed on the
 standard tracks and on the hairpin deploy variant (ENV_DEFAULTS' eval_variants). Besides the
 return the report gives the paper's progress P = visited tiles / all tiles, of the state each
-evaluation episode ended in. Finished folders are skipped, so an interrupted sweep resumes where
-it stopped (see sweep.py). The paper has no DAgger or PPO-x car numbers.
+evaluation episode ended in. The converged references (expert PPO on the state, DAgger and GAIL
+learning from it) come first; the paper has no car numbers for them. Finished folders are
+skipped, so an interrupted sweep resumes where it stopped (see sweep.py).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from sweep import (cell, curve_lines, footer, hints_run, load, metric_cell, metric_of, table_main, training_cell,
-                   wall_clock, write_report)
+from sweep import (cell, curve_lines, footer, hints_run, load, metric_cell, metric_of, references_note, table_main,
+                   training_cell, wall_clock, write_report)
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("car_racing",)
 BASELINES = ("ppo_rgb",)
+# The converged references (issue 6): the expert's run exports its best seed, then dagger and
+# gail learn from it (sweep.prerequisite). The paper has no car numbers for them.
+REFERENCES = ("expert_ppo", "dagger", "gail")
 HINTS = {"car_racing": ("curvature", "on_track", "composite")}  # the paper's hint columns (Table 3; Table 6)
 VARIANTS = ("standard", "hairpin")  # evaluations[0] and [1]: the training task, then eval_variants
 # The paper's Table 3 car rows (mean ± std over n=50; "CR Standard trn/evl MC", "CR Hairpin deploy
@@ -44,7 +48,7 @@ def run_ids(names) -> list[str]:
 
 
 def table_runs(env: str) -> list[str]:
-    return [*BASELINES, *(hints_run("mc", h) for h in HINTS[env])]
+    return [*REFERENCES, *BASELINES, *(hints_run("mc", h) for h in HINTS[env])]
 
 
 def hairpin_progress(result: dict | None) -> tuple[float, float] | None:
@@ -76,7 +80,7 @@ def report(runs: Path) -> None:
         "in brackets the std of the 5 per-seed means. Return: the episode return; P: progress, visited",
         "tiles / all tiles of the state an episode ended in. Agents train on standard tracks and are",
         "deployed on hairpin ones (first corner at most 45 degrees). The paper's cells are mean ± std",
-        "over n=50; its P values are section 5's (O3); it gives no DAgger or PPO-x car numbers (N/A).",
+        "over n=50; its P values are section 5's (O3); it gives no expert, DAgger, GAIL or PPO-x car numbers.",
         "Wall-clock per run (hardware at the end) includes compilation and both evaluations. '-': not run yet",
         "(or not given by the paper). Training return: the training episodes (sampled actions, standard",
         "tracks) that ended in the last 10% of updates, mean ± std over the seeds.", "",
@@ -94,8 +98,8 @@ def report(runs: Path) -> None:
             for i, variant in enumerate(VARIANTS):
                 row += [metric_cell(result, "progress", i, percent=True), paper.get(f"P {variant}", "-")]
             lines.append(f"| {' | '.join(row)} | {training_cell(runs, env, label)} | {wall_clock(result)} |")
-        lines += ["", findings(runs, env), ""]
-        lines += curve_lines(runs, env, table_runs(env), RESULTS / f"car_curves_{env}.png", f"{env} (standard tracks): Table 3 agents, 5 seeds")
+        lines += ["", findings(runs, env), "", references_note(runs, env, REFERENCES), ""]
+        lines += curve_lines(runs, env, [label for label in table_runs(env) if label not in REFERENCES], RESULTS / f"car_curves_{env}.png", f"{env} (standard tracks): Table 3 agents, 5 seeds")
     lines.append(footer(runs, TABLE, run_ids(ENVS)))
     write_report(RESULTS / "car_table3.md", lines)
 

@@ -87,24 +87,6 @@ def settings_lines(runs: Path, env: str, labels: list[str]) -> list[str]:
     return ["PPO, as each row was trained:", "", *(f"- {', '.join(rows)}: {text}." for text, rows in groups.items())]
 
 
-def references_note(runs: Path, env: str) -> str:
-    """The references' budgets (as trained, else today's defaults) and the expert that DAgger
-    learnt from (the packaged one)."""
-    import json
-
-    from hintsjax.config import run_config
-    from hintsjax.expert import EXPERT_JSON, EXPERTS_DIR
-
-    expert, dagger = (trained_ppo(runs, env, a) or run_config({"env": env, "agent": a}).ppo for a in REFERENCES)
-    meta = EXPERTS_DIR / env / EXPERT_JSON
-    source = (f"its best seed (seed {m['seed_index']}, {m['seed_eval_mean']:.0f} over {m['episodes_per_seed']} episodes; "
-              f"hintsjax/experts/{env})" if meta.exists() and (m := json.loads(meta.read_text())) else "its best seed")
-    return (f"References (no budget limit): expert_ppo is PPO on the state for {expert.total_env_steps / 1e6:g} M steps "
-            f"({expert.num_envs} envs per seed, batches of {expert.batch_size}, {expert.epochs} epochs of minibatches of "
-            f"{expert.minibatch_size}); dagger learns from {source} over {dagger.total_env_steps / 1e3:g} K "
-            f"expert-labelled steps.")
-
-
 def report(runs: Path) -> None:
     from hintsjax.config import run_config
 
@@ -131,7 +113,7 @@ def report(runs: Path) -> None:
             lines.append(f"| {label} | {cell(result)} | {PAPER[env].get(label, '-')} | {training_cell(runs, env, label)} "
                          f"| {kl_cell(runs, env, label)} "
                          f"| {wall_clock(result)} |")
-        lines += ["", findings(runs, env), "", references_note(runs, env), ""]
+        lines += ["", findings(runs, env), "", references_note(runs, env, REFERENCES), ""]
         lines += curve_lines(runs, env, learners, RESULTS / f"locomotion_curves_{env}.png", f"{env}: Table 3 agents, 5 seeds")
     lines.append(footer(runs, TABLE, run_ids(ENVS)))
     write_report(RESULTS / "locomotion_table3.md", lines)

@@ -276,13 +276,42 @@ def kl_cell(runs: Path, env: str, label: str, above: float = 0.5) -> str:
     return f"{100 * np.mean(kl > above):.1f}%"
 
 
-def trained_ppo(runs: Path, env: str, label: str):
-    """The PPOConfig a finished run was trained with (its config.yaml), or None when not run:
+def trained_config(runs: Path, env: str, label: str):
+    """The RunConfig a finished run was trained with (its config.yaml), or None when not run:
     a report states the settings its rows were trained with, not today's defaults."""
     from hintsjax.config import CONFIG_YAML, load_run_config
 
     folder = runs / env / label
-    return load_run_config(folder).ppo if (folder / "eval.json").exists() and (folder / CONFIG_YAML).exists() else None
+    return load_run_config(folder) if (folder / "eval.json").exists() and (folder / CONFIG_YAML).exists() else None
+
+
+def trained_ppo(runs: Path, env: str, label: str):
+    """The PPOConfig a finished run was trained with, or None when not run."""
+    cfg = trained_config(runs, env, label)
+    return None if cfg is None else cfg.ppo
+
+
+def references_note(runs: Path, env: str, references: tuple[str, ...]) -> str:
+    """The references' budgets (as trained, else today's defaults) and the expert that dagger
+    and gail learnt from (the packaged one)."""
+    from hintsjax.config import run_config
+    from hintsjax.expert import EXPERT_JSON, EXPERTS_DIR
+
+    cfg = {a: trained_config(runs, env, a) or run_config({"env": env, "agent": a}) for a in references}
+    expert = cfg["expert_ppo"].ppo
+    meta = EXPERTS_DIR / env / EXPERT_JSON
+    source = (f"its best seed (seed {m['seed_index']}, {m['seed_eval_mean']:.0f} over {m['episodes_per_seed']} episodes; "
+              f"hintsjax/experts/{env})" if meta.exists() and (m := json.loads(meta.read_text())) else "its best seed")
+    text = (f"References (no budget limit): expert_ppo is PPO on the state for {expert.total_env_steps / 1e6:g} M steps "
+            f"({expert.num_envs} envs per seed, batches of {expert.batch_size}, {expert.epochs} epochs of minibatches of "
+            f"{expert.minibatch_size}); dagger learns from {source} over {cfg['dagger'].ppo.total_env_steps / 1e3:g} K "
+            f"expert-labelled steps")
+    if "gail" in cfg:
+        gail = cfg["gail"]
+        reward = "-log(1 - D)" if gail.gail.reward == "original" else "the log odds log D - log(1 - D)"
+        text += (f"; gail learns from {gail.gail.demonstrations} of that expert's episodes, by PPO for "
+                 f"{gail.ppo.total_env_steps / 1e6:g} M steps on the discriminator's reward {reward}")
+    return text + "."
 
 
 def mean_of(result: dict | None) -> float | None:

@@ -119,8 +119,19 @@ def test_locomotion_references_train_their_expert_before_dagger():
     experts = Path("/somewhere/experts")
     assert sweep.run_values("halfcheetah", "dagger", 5, experts=experts)["expert"] == str(experts / "halfcheetah")
     # The note reads the packaged expert's seed and the references' budgets from the config.
-    note = locomotion.references_note(Path("/nowhere"), "halfcheetah")
+    note = sweep.references_note(Path("/nowhere"), "halfcheetah", locomotion.REFERENCES)
     assert "5 M steps" in note and "250 K expert-labelled steps" in note and "hintsjax/experts/halfcheetah" in note
+    assert "gail" not in note
+
+
+def test_car_references_come_first_and_the_note_describes_gail():
+    import car_racing
+
+    assert car_racing.run_ids(["car_racing"])[:3] == [f"car_racing/{a}" for a in ("expert_ppo", "dagger", "gail")]
+    assert sweep.prerequisite("car_racing/gail") == "car_racing/expert_ppo"
+    note = sweep.references_note(Path("/nowhere"), "car_racing", car_racing.REFERENCES)
+    assert "2 M steps" in note and "250 K expert-labelled steps" in note
+    assert "gail learns from 16 of that expert's episodes, by PPO for 2 M steps on the discriminator's reward -log(1 - D)" in note
 
 
 def test_locomotion_report_states_the_settings_each_row_was_trained_with(tmp_path):
