@@ -15,8 +15,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sweep import (cell, curve_lines, footer, hints_run, kl_cell, load, mean_of, table_main, trained_ppo, training_cell, wall_clock,
-                   write_report)
+from sweep import (cell, curve_lines, footer, hints_run, kl_cell, load, mean_of, references_note, table_main, trained_ppo,
+                   training_cell, wall_clock, write_report)
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("halfcheetah", "ant", "humanoid")

@@ -185,3 +185,19 @@ def test_only_picks_labels_and_names_the_valid_ones(capsys):
         sweep.chosen_runs(parser, parser.parse_args(["--only", "ppo_rgb,nope"]), ids)
     assert e.value.code == 2
     assert capsys.readouterr().err == "error: unknown run label ['nope']; valid choices: ppo_rgb, hints-fc-speed\n"
+
+
+@pytest.mark.parametrize("script", ["locomotion", "car_racing"])
+def test_a_table_report_runs_end_to_end(script, tmp_path, monkeypatch):
+    """The report of a table script builds every line (settings, references, findings) from a
+    runs folder with one finished row, into a results folder of its own."""
+    import importlib
+
+    module = importlib.import_module(script)
+    monkeypatch.setattr(module, "RESULTS", tmp_path / "results")
+    env = module.ENVS[0]
+    write_run(tmp_path / "runs", env, "ppo_rgb", [evaluation(1.0, 0.0, [1.0])] * 2)
+    module.report(tmp_path / "runs")
+    text = next((tmp_path / "results").glob("*.md")).read_text()
+    assert "References (no budget limit): expert_ppo is PPO on the state" in text
+    assert f"| ppo_rgb | {sweep.cell(sweep.load(tmp_path / 'runs', env, 'ppo_rgb'))} |" in text
