@@ -119,6 +119,23 @@ def test_run_folder_holds_everything(finished_run):
     assert checkpoint.latest_update(finished_run) == 4
 
 
+def test_a_saved_config_reads_back_as_trained_whatever_todays_env_defaults(tmp_path):
+    # The ant's learners take a KL early stop by default, its references do not; a run trained
+    # without the stop (null in its config.yaml) must read back without it, not with today's default.
+    from dataclasses import replace
+
+    from hintsjax.config import load_run_config, run_config, save_run_config
+
+    assert run_config({"env": "ant", "agent": "hints"}).ppo.target_kl == 0.05
+    assert run_config({"env": "ant", "agent": "expert_ppo"}).ppo.target_kl is None
+    cfg = run_config({"env": "ant", "agent": "hints"})
+    old = replace(cfg, ppo=replace(cfg.ppo, target_kl=None))
+    save_run_config(tmp_path, old)
+    assert load_run_config(tmp_path) == old
+    save_run_config(tmp_path, cfg)
+    assert load_run_config(tmp_path) == cfg
+
+
 def test_interrupted_then_resumed_run_ends_where_the_uninterrupted_one_ends(finished_run, tmp_path, monkeypatch):
     values = tiny_values(out_dir=str(tmp_path), name="interrupted")
     real_save = checkpoint.save
