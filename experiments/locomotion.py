@@ -8,7 +8,7 @@ paper's budgets (config.ENV_DEFAULTS: 1k, 5k and 10k episodes counted at 1000 st
 vmapped in one call, 50 evaluation episodes per seed. Finished folders are skipped, so an
 interrupted sweep resumes where it stopped (see sweep.py). The DAgger column's expert is PPO
 on the state at the env's expert budget (config.ENV_DEFAULTS), exported to hintsjax/experts/<env>
-when it finishes; dagger starts only then.
+when it finishes; dagger and gail start only then.
 """
 
 from __future__ import annotations
@@ -22,8 +22,9 @@ RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("halfcheetah", "ant", "humanoid")
 BASELINES = ("ppo_rgb", "ppo_state")
 # The converged references (issue 6): the expert's run is exported (its best seed) to the
-# package's hintsjax/experts/<env> when it finishes; the env's dagger run starts only then.
-REFERENCES = ("expert_ppo", "dagger")
+# package's hintsjax/experts/<env> when it finishes; the env's dagger and gail runs start only then.
+# The paper has no GAIL numbers for the locomotion envs.
+REFERENCES = ("expert_ppo", "dagger", "gail")
 HINTS = {  # the paper's hint columns (Table 3; Table 6 names them)
     "halfcheetah": ("reward", "velocity", "max_velocity", "state"),
     "ant": ("speed", "goal_height", "state"),
@@ -67,7 +68,8 @@ def findings(runs: Path, env: str) -> str:
 
 def ppo_text(ppo) -> str:
     return (f"{ppo.num_envs} envs per seed, batches of {ppo.batch_size}, {ppo.epochs} epochs of minibatches of "
-            f"{ppo.minibatch_size}, learning rates encoder {ppo.encoder_lr:g}, actor {ppo.actor_lr:g}, critic {ppo.critic_lr:g}")
+            f"{ppo.minibatch_size}, learning rates encoder {ppo.encoder_lr:g}, actor {ppo.actor_lr:g}, critic {ppo.critic_lr:g}"
+            + (f", KL early stop at {ppo.target_kl:g}" if ppo.target_kl else ""))
 
 
 def settings_lines(runs: Path, env: str, labels: list[str]) -> list[str]:
