@@ -109,19 +109,22 @@ def test_run_values_invert_the_labels():
     assert sweep.run_values("ant", "ppo_rgb", 2)["agent"] == "ppo_rgb"
 
 
-def test_locomotion_references_train_their_expert_before_dagger():
+def test_locomotion_references_train_their_expert_before_dagger_and_gail():
     import locomotion
 
     ids = locomotion.run_ids(["halfcheetah"])
-    assert ids[:2] == ["halfcheetah/expert_ppo", "halfcheetah/dagger"]
-    assert sweep.prerequisite("halfcheetah/dagger") == "halfcheetah/expert_ppo"
+    assert ids[:3] == ["halfcheetah/expert_ppo", "halfcheetah/dagger", "halfcheetah/gail"]
+    assert sweep.prerequisite("halfcheetah/dagger") == sweep.prerequisite("halfcheetah/gail") == "halfcheetah/expert_ppo"
     assert sweep.prerequisite("halfcheetah/ppo_rgb") is None
     experts = Path("/somewhere/experts")
     assert sweep.run_values("halfcheetah", "dagger", 5, experts=experts)["expert"] == str(experts / "halfcheetah")
     # The note reads the packaged expert's seed and the references' budgets from the config.
     note = sweep.references_note(Path("/nowhere"), "halfcheetah", locomotion.REFERENCES)
     assert "5 M steps" in note and "250 K expert-labelled steps" in note and "hintsjax/experts/halfcheetah" in note
-    assert "gail" not in note
+    assert "by PPO for 5 M steps on the discriminator's reward the log odds log D - log(1 - D)" in note
+    # The ant's episodes end when it falls: its GAIL is paid -log(1 - D) > 0, not the log odds.
+    assert "PPO for 10 M steps on the discriminator's reward -log(1 - D)" in sweep.references_note(
+        Path("/nowhere"), "ant", locomotion.REFERENCES)
 
 
 def test_car_references_come_first_and_the_note_describes_gail():
@@ -141,18 +144,19 @@ def test_locomotion_report_states_the_settings_each_row_was_trained_with(tmp_pat
     labels = ["ppo_rgb", "hints-fc-speed", "ppo_state"]
     assert locomotion.settings_lines(tmp_path, "ant", labels) == [  # none run yet: today's defaults
         "PPO: 256 envs per seed, batches of 1024, 4 epochs of minibatches of 256, learning rates encoder 0.0003, "
-        "actor 0.0003, critic 0.001 (not run yet; config.ENV_DEFAULTS)."]
-    for label, values in (("ppo_rgb", {}), ("hints-fc-speed", {"ppo": {"encoder_lr": 1e-3, "epochs": 8}})):
+        "actor 0.0003, critic 0.001, KL early stop at 0.05 (not run yet; config.ENV_DEFAULTS)."]
+    for label, values in (("ppo_rgb", {"agent": "ppo_rgb"}),
+                          ("hints-fc-speed", {"ppo": {"encoder_lr": 1e-3, "epochs": 8, "target_kl": 0.1}})):
         write_run(tmp_path, "ant", label, [evaluation(1.0, 0.0, [1.0])])
         config.save_run_config(tmp_path / "ant" / label, config.run_config({"env": "ant", **values}))
     assert locomotion.settings_lines(tmp_path, "ant", labels) == [
         "PPO, as each row was trained:", "",
         "- ppo_rgb: 256 envs per seed, batches of 1024, 4 epochs of minibatches of 256, learning rates "
-        "encoder 0.0003, actor 0.0003, critic 0.001 (config.ENV_DEFAULTS).",
+        "encoder 0.0003, actor 0.0003, critic 0.001, KL early stop at 0.05 (config.ENV_DEFAULTS).",
         "- hints-fc-speed: 256 envs per seed, batches of 1024, 8 epochs of minibatches of 256, learning rates "
-        "encoder 0.001, actor 0.0003, critic 0.001 (not today's config.ENV_DEFAULTS).",
+        "encoder 0.001, actor 0.0003, critic 0.001, KL early stop at 0.1 (not today's config.ENV_DEFAULTS).",
         "- ppo_state: 256 envs per seed, batches of 1024, 4 epochs of minibatches of 256, learning rates "
-        "encoder 0.0003, actor 0.0003, critic 0.001 (not run yet; config.ENV_DEFAULTS)."]
+        "encoder 0.0003, actor 0.0003, critic 0.001, KL early stop at 0.05 (not run yet; config.ENV_DEFAULTS)."]
 
 
 def test_kl_cell_is_the_share_of_blown_up_updates(tmp_path):
