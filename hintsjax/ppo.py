@@ -123,7 +123,8 @@ def clipped_surrogate_loss(
     log_prob, old_log_prob, advantage, value, target: [M]; entropy: []. Advantages are used
     as given (normalise before calling). Returns the scalar loss and its parts.
     """
-    ratio = jnp.exp(log_prob - old_log_prob)
+    log_ratio = log_prob - old_log_prob
+    ratio = jnp.exp(log_ratio)
     clipped = jnp.clip(ratio, 1.0 - clip_eps, 1.0 + clip_eps)
     policy_loss = -jnp.mean(jnp.minimum(ratio * advantage, clipped * advantage))
     value_loss = jnp.mean((value - target) ** 2)
@@ -132,7 +133,7 @@ def clipped_surrogate_loss(
         "policy_loss": policy_loss,
         "value_loss": value_loss,
         "entropy": entropy,
-        "approx_kl": jnp.mean((ratio - 1.0) - jnp.log(ratio)),
+        "approx_kl": jnp.mean((ratio - 1.0) - log_ratio),  # not ln(ratio): inf, not NaN, on overflow
         "clip_fraction": jnp.mean((jnp.abs(ratio - 1.0) > clip_eps).astype(jnp.float32)),
     }
     return loss, parts
@@ -269,7 +270,7 @@ def make_ppo(cfg: RunConfig) -> PPO:
             updates, new_opt_state = optimizer.update(grads, opt_state, params)
             new = (optax.apply_updates(params, updates), new_opt_state)
             if ppo.target_kl is not None:  # KL early stop: no step from here to the update's end
-                stopped = stopped | (parts["approx_kl"] > 1.5 * ppo.target_kl)
+                stopped = stopped | ~(parts["approx_kl"] <= 1.5 * ppo.target_kl)  # NaN stops too
                 new = jax.tree.map(lambda old, step: jnp.where(stopped, old, step), (params, opt_state), new)
                 parts = {**parts, "kl_stopped": stopped.astype(jnp.float32)}
             return (*new, stopped), parts

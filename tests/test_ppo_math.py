@@ -179,6 +179,16 @@ def test_clipped_surrogate_at_ratio_one_is_minus_mean_advantage():
     np.testing.assert_allclose(parts["clip_fraction"], 0.0, atol=0)
 
 
+def test_approx_kl_of_an_overflowing_ratio_is_inf_not_nan():
+    # A stored action hundreds of the new policy's stds away overflows the ratio (exp(100) in
+    # float32). The KL must read inf, so that the KL early stop skips that step, not NaN (which
+    # compares False and would let the step through); (r - 1) - ln r with ln(exp(100)) gives NaN.
+    log_prob = OLD_LOG_PROB.copy()
+    log_prob[0] += 100.0
+    _, parts = surrogate(log_prob=log_prob)
+    assert np.isposinf(parts["approx_kl"])
+
+
 # -- the Gaussian policy ------------------------------------------------------------------------
 
 
