@@ -229,10 +229,12 @@ ENV_DEFAULTS: dict[str, dict[str, Any]] = {
                 agents={**_learners(target_kl=0.05),
                         **_references(10_000_000, dagger_steps=250_000, gail_reward="original", num_envs=1024,
                                       batch_size=8192, minibatch_size=1024, epochs=8)}),
-    # Humanoid's references follow the cheetah's pattern (not yet run or tuned).
+    # Humanoid's learners take the ant's KL early stop and its references follow the cheetah's
+    # pattern (none of it run or tuned yet).
     "humanoid": dict(hint="velocity", ppo=dict(total_env_steps=10_000_000, num_envs=128, encoder_lr=3e-4, epochs=4),
-                     agents=_references(50_000_000, dagger_steps=250_000, gail_reward="original", num_envs=512,
-                                        batch_size=4096, epochs=8)),
+                     agents={**_learners(target_kl=0.05),
+                             **_references(50_000_000, dagger_steps=250_000, gail_reward="original", num_envs=512,
+                                           batch_size=4096, epochs=8)}),
     # 1000 episodes of 1000 steps (SPEC section 5); trained on the standard track, deployed on
     # hairpins. The paper conditions the car with scheme mc (scheme=mc).
     # The car's references run on its state (state_observation: speeds, steering, the track's
