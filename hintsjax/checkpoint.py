@@ -16,7 +16,13 @@ CHECKPOINTS = "checkpoints"
 
 def _manager(run_dir: Path, create: bool) -> ocp.CheckpointManager:
     options = ocp.CheckpointManagerOptions(max_to_keep=2, create=create)
-    return ocp.CheckpointManager((Path(run_dir) / CHECKPOINTS).absolute(), options=options)
+    return ocp.CheckpointManager((Path(run_dir) / CHECKPOINTS).absolute(), options=options,
+                                 item_handlers=ocp.StandardCheckpointHandler())
+
+
+def _arrays(tree) -> list[tuple[tuple[int, ...], str]]:
+    """The (shape, dtype) of every array in `tree`, sorted: comparable across pytree types."""
+    return sorted((tuple(x.shape), str(x.dtype)) for x in jax.tree.leaves(tree))
 
 
 @contextlib.contextmanager
@@ -64,9 +70,16 @@ def restore_latest(run_dir: Path, cfg: RunConfig, trainer=None):
     trainer = trainer or make_trainer(cfg)
     keys = jax.random.split(jax.random.key(0), cfg.seeds)
     abstract = jax.eval_shape(jax.vmap(trainer.init), keys)
+    expected = jax.eval_shape(_raw_keys, abstract)
     try:
         with _quiet(), _manager(run_dir, create=False) as manager:
-            raw = manager.restore(update, args=ocp.args.StandardRestore(jax.eval_shape(_raw_keys, abstract)))
+            # Compare the stored arrays' shapes before reading any: a mismatched restore fails
+            # part-way and leaves orbax's other reads pending (warnings at garbage collection).
+            saved = _arrays(manager.item_metadata(update))
+            if saved != _arrays(expected):
+                raise ValueError(f"its {len(saved)} arrays differ in shape or type from the {len(_arrays(expected))} "
+                                 "that the config gives")
+            raw = manager.restore(update, args=ocp.args.StandardRestore(expected))
     except Exception as e:  # orbax raises many types for unreadable or mismatched files
         reason = str(e).strip().splitlines()[0][:200] if str(e).strip() else type(e).__name__
         raise UsageError(
