@@ -216,15 +216,16 @@ ENV_DEFAULTS: dict[str, dict[str, Any]] = {
     # cheetah's had (approx. KL above 0.5 by update 115 to 360, then std runaway to saturated
     # actions; experiments/results/locomotion_ppo_stability.md), so the ant and humanoid take the
     # cheetah's encoder 3e-4 and 4 epochs, every agent alike.
+    # Even so, the ant's pixel agents blew up (approx. KL > 0.5 in 6 to 57% of updates;
+    # hints-fc-state scored -952 +- 2407). A KL early stop (ppo.target_kl 0.05, as in
+    # Stable-Baselines3) held the same run to 11% and 2318 +- 808, every seed above 1600 (the
+    # stability notes), so the ant's learners take it (its references, PPO on the state, were
+    # stable without).
     # Ant's expert: PPO on the state for 10 M steps (2x the hint agents', what fits one GPU lease
     # beside the Table 3 rows), 1024 envs per seed in batches of 8192, minibatches of 1024, 8
     # epochs. Not tuned further: it scored 5694 (5 seeds x 50 episodes).
     # Ant and Humanoid episodes end when the robot falls, so their GAIL is paid Ho and Ermon's
     # -log(1 - D) > 0, as idp's is: with the signed log odds, falling early would pay.
-    # Even so, its pixel agents blew up (approx. KL > 0.5 in 6 to 57% of updates; hints-fc-state
-    # scored -952 +- 2407). A KL early stop (ppo.target_kl 0.05, as in Stable-Baselines3) held
-    # the same run to 11% and 2318 +- 808, every seed above 1600 (the stability notes), so the
-    # ant's learners take it (its references, PPO on the state, were stable without).
     "ant": dict(hint="speed", ppo=dict(total_env_steps=5_000_000, num_envs=256, encoder_lr=3e-4, epochs=4),
                 agents={**_learners(target_kl=0.05),
                         **_references(10_000_000, dagger_steps=250_000, gail_reward="original", num_envs=1024,
