@@ -75,9 +75,9 @@ def restore_latest(run_dir: Path, cfg: RunConfig, trainer=None):
         with _quiet(), _manager(run_dir, create=False) as manager:
             # Compare the stored arrays' shapes before reading any: a mismatched restore fails
             # part-way and leaves orbax's other reads pending (warnings at garbage collection).
-            saved = _arrays(manager.item_metadata(update))
-            if saved != _arrays(expected):
-                raise ValueError(f"its {len(saved)} arrays differ in shape or type from the {len(_arrays(expected))} "
+            saved, wanted = _arrays(manager.item_metadata(update)), _arrays(expected)
+            if saved != wanted:
+                raise ValueError(f"its {len(saved)} arrays differ in shape or type from the {len(wanted)} "
                                  "that the config gives")
             raw = manager.restore(update, args=ocp.args.StandardRestore(expected))
     except Exception as e:  # orbax raises many types for unreadable or mismatched files
