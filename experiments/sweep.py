@@ -260,9 +260,10 @@ def training_cell(runs: Path, env: str, label: str, last: float = 0.1) -> str:
 
 
 def kl_cell(runs: Path, env: str, label: str, above: float = 0.5) -> str:
-    """The share of a run's PPO updates (all seeds) whose approx. KL from the rollout policy
-    (the mean over the update's minibatch steps, as logged) exceeds `above`: a PPO that drifts or blows up shows here (healthy runs stay
-    near 0%; inf, an overflowed log ratio, counts). '-' when not run or not trained by PPO."""
+    """The share of a run's PPO updates (all seeds) whose approx. KL from the rollout policy (the
+    mean over the update's minibatch steps, as logged) exceeds `above`: a PPO that drifts or blows
+    up shows here (healthy runs stay near 0%; inf, an overflowed ratio, counts). '-' when not run
+    or not trained by PPO."""
     import numpy as np
 
     path = runs / env / label / "metrics.csv"

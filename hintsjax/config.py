@@ -152,17 +152,17 @@ def env_params(env: str, variant: str | None) -> Any:
 # "agents" holds per-agent overrides on top, for the converged references (tier 3): the expert
 # trains PPO on the state for 5x the hint agents' budget; DAgger's rounds of 1024 steps
 # aggregate every visited state (buffer = budget); GAIL gets the expert's budget.
-def _learners(**ppo: Any) -> dict[str, Any]:
-    """PPO settings for every agent but the converged references (which `_references` sets)."""
-    return {name: dict(ppo=ppo) for name in AGENTS if name not in _references(0)}
-
-
 def _references(expert_steps: int, dagger_steps: int = 100_000, gail_reward: str = "logit", **expert_ppo: Any) -> dict[str, Any]:
     return {
         "expert_ppo": dict(ppo=dict(total_env_steps=expert_steps, **expert_ppo)),
         "dagger": dict(ppo=dict(total_env_steps=dagger_steps), dagger=dict(buffer_size=dagger_steps)),
         "gail": dict(ppo=dict(total_env_steps=expert_steps, **expert_ppo), gail=dict(reward=gail_reward)),
     }
+
+
+def _learners(**ppo: Any) -> dict[str, Any]:
+    """PPO settings for every agent but the converged references (which `_references` sets)."""
+    return {name: dict(ppo=ppo) for name in AGENTS if name not in _references(0)}
 
 
 ENV_DEFAULTS: dict[str, dict[str, Any]] = {
