@@ -6,9 +6,10 @@ not implement; we use Newton with at most 4 iterations and 8 line-search steps. 
 measures what this costs against Gymnasium. Otherwise the file is unchanged (RK4, dt 0.003,
 frame skip 5: 0.015 s per step; self-collisions on). Contacts are most of a step's cost: MJX
 computes all 138 candidates (111 between the robot's own geoms) in each of a step's 20 forward
-passes, and on 2 CPU cores a step without contacts ran 5.7x faster (with floor contacts alone
-2.4x). Excluding the pairs that cannot touch would save little: sampled over the joint ranges,
-all but 19 of those 111 pairs come within 1 cm.
+passes. On 2 CPU cores a step without contacts ran 3.7x faster, with floor contacts alone 2.1x
+(an earlier run: 5.7x and 2.4x). Excluding the pairs that cannot touch would save little:
+sampled over the joint ranges, all but 19 of those 111 pairs come within 1 cm. Both measured by
+`python experiments/humanoid_contacts.py`.
 
 Reward (v5): 1.25 x velocity of the centre of mass over the step + 5 while healthy
 - 0.1 |a|^2 - min(5e-7 |cfrc_ext|^2, 10); healthy while 1 < torso height < 2; unhealthy
