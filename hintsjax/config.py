@@ -69,6 +69,8 @@ class PPOConfig:
     # KL from the rollout policy exceeds 1.5 x target_kl, that minibatch and the rest of the
     # update's epochs take no step. None: off (Table 5 has none).
     target_kl: float | None = None
+    # State agents: normalise the state by its running mean and std (hintsjax.normalization).
+    normalize_state: bool = False
 
     @property
     def rollout_length(self) -> int:

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import optax
 from flax import struct
 
-from hintsjax import envs
+from hintsjax import envs, normalization
 from hintsjax.config import RunConfig
 from hintsjax.ppo import RunnerState, make_network, start_runner
 from hintsjax.trainer import Trainer, episode_metrics
@@ -128,6 +128,7 @@ def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
             return (optax.apply_updates(params, updates), opt_state), loss
 
         (params, opt_state), losses = jax.lax.scan(fit, (runner.params, runner.opt_state), jax.random.split(k_fit, dagger.grad_steps))
+        params = normalization.update(params, {"state": states})  # with ppo.normalize_state
         metrics = {
             **episode_metrics(done, returns),
             "imitation_loss": losses.mean(),

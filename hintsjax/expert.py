@@ -4,8 +4,9 @@
     python -m hintsjax.expert runs/expert-pendulum                             # -> hintsjax/experts/pendulum
 
 Export keeps the seed with the best evaluation (eval.json's 50-episode mean, not a training
-episode) and only what acting needs: the actor MLP's parameters and the learnt log std, as an
-orbax checkpoint beside `expert.json` (env, sizes, scores, the run's config). `load(env)` gives
+episode) and only what acting needs: the actor MLP's parameters, the learnt log std and, for a
+run with ppo.normalize_state, the state normaliser's mean and variance, as an orbax checkpoint
+beside `expert.json` (env, sizes, scores, the run's config). `load(env)` gives
 the packaged expert of an env; DAgger and GAIL take any object with the same two methods
 (`mean`, `sample`), which is how the tests give them a known linear expert.
 """
@@ -23,6 +24,7 @@ import jax.numpy as jnp
 import orbax.checkpoint as ocp
 from flax import struct
 
+from hintsjax import normalization
 from hintsjax.config import RunConfig, UsageError, fail, load_run_config, to_dict
 from hintsjax.networks import MLP
 
@@ -33,14 +35,17 @@ POLICY = "policy"  # the orbax checkpoint inside an expert folder
 
 @struct.dataclass
 class Expert:
-    """A state-based Gaussian policy: mean = actor(state), std = exp(log_std)."""
+    """A state-based Gaussian policy: mean = actor(normalised state), std = exp(log_std)."""
 
     actor: Any  # the MLP's parameters
     log_std: jax.Array  # [A]
     hidden: tuple[int, ...] = struct.field(pytree_node=False)
+    state_norm: Any = None  # {"mean", "var"} [n] of a run with ppo.normalize_state, else None
 
     def mean(self, state: jax.Array) -> jax.Array:
         """The expert's action (its Gaussian's mean) for a state [..., n] -> [..., A]."""
+        if self.state_norm is not None:
+            state = normalization.normalize(self.state_norm["mean"], self.state_norm["var"], state)
         return _actor(self.hidden, self.log_std.shape[-1]).apply({"params": self.actor}, state)
 
     def sample(self, key: jax.Array, state: jax.Array) -> jax.Array:
@@ -72,15 +77,20 @@ def export(run_dir: Path, out_dir: Path | None = None) -> Path:
     best = max(range(len(evaluation["seed_means"])), key=lambda i: evaluation["seed_means"][i])
     state, update = checkpoint.restore_latest(run_dir, cfg)
     params = jax.tree.map(lambda x: x[best], state.params["params"])
+    policy = {"actor": params["actor"], "log_std": params["log_std"]}
+    if normalization.COLLECTION in state.params:
+        stats = jax.tree.map(lambda x: x[best], state.params[normalization.COLLECTION][normalization.NAME])
+        policy["state_norm"] = {"mean": stats["mean"], "var": stats["var"]}
     out = Path(out_dir or EXPERTS_DIR / cfg.env).absolute()
     out.mkdir(parents=True, exist_ok=True)
     with ocp.StandardCheckpointer() as saver:
-        saver.save(out / POLICY, {"actor": params["actor"], "log_std": params["log_std"]}, force=True)
+        saver.save(out / POLICY, policy, force=True)
     meta = {
         "env": cfg.env,
         "state_size": int(params["actor"]["Dense_0"]["kernel"].shape[0]),
         "action_size": int(params["log_std"].shape[0]),
         "hidden": list(cfg.ppo.hidden),
+        "normalize_state": "state_norm" in policy,
         "seed_index": best,
         "seed_eval_mean": evaluation["seed_means"][best],
         "run_eval_mean": evaluation["mean"],
@@ -120,6 +130,8 @@ def load(env: str, path: str | Path | None = None) -> Expert:
         "actor": jax.eval_shape(lambda: _actor(hidden, sizes[1]).init(jax.random.key(0), jnp.zeros((1, sizes[0])))["params"]),
         "log_std": jax.ShapeDtypeStruct((sizes[1],), jnp.float32),
     }
+    if meta.get("normalize_state"):
+        shapes["state_norm"] = {k: jax.ShapeDtypeStruct((sizes[0],), jnp.float32) for k in ("mean", "var")}
     # Onto this machine's default device, wherever the expert was saved (a GPU's checkpoint
     # records its device, which a CPU-only machine lacks).
     here = jax.sharding.SingleDeviceSharding(jax.devices()[0])
@@ -130,7 +142,7 @@ def load(env: str, path: str | Path | None = None) -> Expert:
     except Exception as e:  # orbax raises many types for unreadable or mismatched files
         reason = str(e).strip().splitlines()[0][:200] if str(e).strip() else type(e).__name__
         raise UsageError(f"the expert checkpoint in {folder} is corrupt or does not match {EXPERT_JSON}: {reason}") from None
-    return Expert(params["actor"], params["log_std"], hidden)
+    return Expert(params["actor"], params["log_std"], hidden, params.get("state_norm"))
 
 
 def check_state_size(expert: Any, cfg: RunConfig, state_size: int) -> None:

@@ -9,7 +9,9 @@ import jax.numpy as jnp
 import flax.linen as nn
 
 from hintsjax.agents import AgentSpec
+from hintsjax import normalization
 from hintsjax.conditioning import SCHEMES, HintEmbedding
+from hintsjax.normalization import StateNorm
 
 
 def he_init(gain: float = 1.0) -> nn.initializers.Initializer:
@@ -95,7 +97,8 @@ class ActorCritic(nn.Module):
     the hint by the scheme), the state vector, or the embedded hint alone. Actor and critic are
     three-layer MLPs on z'; the policy is a Gaussian with a learnt, state-independent std.
     Top-level parameter names ("encoder", "conditioning", "actor", "log_std", "critic") are the
-    optimiser's learning-rate groups.
+    optimiser's learning-rate groups. With `normalize_state` the state passes through the running
+    normaliser first (hintsjax.normalization; its statistics are the "obs_stats" collection).
     """
 
     agent: AgentSpec
@@ -103,6 +106,7 @@ class ActorCritic(nn.Module):
     action_size: int
     hint_width: int = 64
     hidden: tuple[int, ...] = (256, 256)
+    normalize_state: bool = False
 
     def features(self, obs: dict[str, jax.Array]) -> jax.Array:
         agent = self.agent
@@ -113,7 +117,7 @@ class ActorCritic(nn.Module):
             return Encoder(name="encoder")(scale_pixels(obs["pixels"]))
         if agent.hint:
             return HintEmbedding(self.hint_width, name="conditioning")(obs["hint"])
-        return obs["state"]
+        return StateNorm(name=normalization.NAME)(obs["state"]) if self.normalize_state else obs["state"]
 
     @nn.compact
     def __call__(self, obs: dict[str, jax.Array]) -> tuple[jax.Array, jax.Array, jax.Array]:
@@ -124,7 +128,9 @@ class ActorCritic(nn.Module):
         return mean, log_std, value
 
 
-LR_GROUPS = {"encoder": "encoder", "conditioning": "encoder", "actor": "actor", "log_std": "actor", "critic": "critic"}
+# "frozen": the normaliser's statistics, which the optimiser leaves alone (normalization.update sets them).
+LR_GROUPS = {"encoder": "encoder", "conditioning": "encoder", "actor": "actor", "log_std": "actor", "critic": "critic",
+             normalization.NAME: "frozen"}
 
 
 def lr_labels(params) -> dict:

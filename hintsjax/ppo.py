@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import optax
 from flax import struct
 
-from hintsjax import envs
+from hintsjax import envs, normalization
 from hintsjax.config import PPOConfig, RunConfig
 from hintsjax.networks import ActorCritic, lr_labels
 from hintsjax.trainer import Trainer, episode_metrics
@@ -143,16 +143,16 @@ def clipped_surrogate_loss(
 
 
 def make_network(cfg: RunConfig, env: envs.Env) -> ActorCritic:
-    return ActorCritic(cfg.agent_spec, cfg.scheme, env.action_size, cfg.ppo.hint_width, cfg.ppo.hidden)
+    return ActorCritic(cfg.agent_spec, cfg.scheme, env.action_size, cfg.ppo.hint_width, cfg.ppo.hidden,
+                       cfg.ppo.normalize_state)
 
 
 def make_optimizer(ppo: PPOConfig, params: Any) -> optax.GradientTransformation:
-    """Adam with the paper's per-part learning rates, after global-norm gradient clipping."""
+    """Adam with the paper's per-part learning rates, after global-norm gradient clipping (the
+    normaliser's statistics, if any, are not trained)."""
     rates = {"encoder": ppo.encoder_lr, "actor": ppo.actor_lr, "critic": ppo.critic_lr}
-    return optax.chain(
-        optax.clip_by_global_norm(ppo.max_grad_norm),
-        optax.multi_transform({g: optax.adam(lr, eps=1e-5) for g, lr in rates.items()}, lr_labels(params)),
-    )
+    groups = {g: optax.adam(lr, eps=1e-5) for g, lr in rates.items()} | {"frozen": optax.set_to_zero()}
+    return optax.chain(optax.clip_by_global_norm(ppo.max_grad_norm), optax.multi_transform(groups, lr_labels(params)))
 
 
 def observe_with_noise(obs: dict[str, jax.Array], key: jax.Array, noise: float) -> dict[str, jax.Array]:
@@ -283,6 +283,7 @@ def make_ppo(cfg: RunConfig) -> PPO:
         (params, opt_state, _), parts = jax.lax.scan(
             epoch, (state.params, state.opt_state, jnp.zeros((), bool)), jax.random.split(key, ppo.epochs)
         )
+        params = normalization.update(params, traj.obs)  # after learning: the next rollout's statistics
         metrics = {
             **jax.tree.map(jnp.mean, parts),
             **episode_metrics(traj.terminated | traj.truncated, traj.episode_return),

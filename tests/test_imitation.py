@@ -161,12 +161,13 @@ def test_gail_trains_ppo_on_the_discriminator_reward(gail_run):
 # -- the expert's export and loading ------------------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def expert_run(tmp_path_factory):
+@pytest.fixture(scope="module", params=[False, True], ids=["raw-state", "normalized-state"])
+def expert_run(tmp_path_factory, request):
     from hintsjax import run
 
     values = dict(env="linear", agent="expert_ppo", seeds=2, eval_episodes=4, checkpoint_every=2,
-                  ppo=dict(num_envs=8, batch_size=128, minibatch_size=64, epochs=2, total_env_steps=2 * 128))
+                  ppo=dict(num_envs=8, batch_size=128, minibatch_size=64, epochs=2, total_env_steps=2 * 128,
+                           normalize_state=request.param))
     run_dir = tmp_path_factory.mktemp("runs") / "expert-linear"
     run_dir.mkdir()
     cfg = config.run_config(values)
@@ -184,9 +185,10 @@ def test_export_keeps_the_best_seed_and_load_acts_like_it(expert_run, tmp_path):
     seed_means = json.loads((run_dir / "eval.json").read_text())["evaluations"][0]["seed_means"]
     assert meta["seed_index"] == int(np.argmax(seed_means)) and meta["env"] == "linear"
     loaded = expert.load("linear", out)
+    assert meta["normalize_state"] == cfg.ppo.normalize_state == (loaded.state_norm is not None)
     state, _ = checkpoint.restore_latest(run_dir, cfg)
     best = jax.tree.map(lambda x: x[meta["seed_index"]], state.params)
-    states = jax.random.normal(jax.random.key(1), (32, 2))
+    states = 3.0 * jax.random.normal(jax.random.key(1), (32, 2))
     network = make_trainer(cfg).network
     np.testing.assert_allclose(loaded.mean(states), network.apply(best, {"state": states})[0], rtol=1e-6, atol=1e-7)
     np.testing.assert_array_equal(loaded.log_std, best["params"]["log_std"])
