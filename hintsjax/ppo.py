@@ -151,7 +151,9 @@ def make_optimizer(ppo: PPOConfig, params: Any) -> optax.GradientTransformation:
     """Adam with the paper's per-part learning rates, after global-norm gradient clipping (the
     normaliser's statistics, if any, are not trained)."""
     rates = {"encoder": ppo.encoder_lr, "actor": ppo.actor_lr, "critic": ppo.critic_lr}
-    groups = {g: optax.adam(lr, eps=1e-5) for g, lr in rates.items()} | {"frozen": optax.set_to_zero()}
+    groups = {g: optax.adam(lr, eps=1e-5) for g, lr in rates.items()}
+    if normalization.COLLECTION in params:  # only then: older checkpoints keep their optimiser state's shape
+        groups["frozen"] = optax.set_to_zero()
     return optax.chain(optax.clip_by_global_norm(ppo.max_grad_norm), optax.multi_transform(groups, lr_labels(params)))
 
 
