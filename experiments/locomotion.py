@@ -69,7 +69,9 @@ def findings(runs: Path, env: str) -> str:
 def ppo_text(ppo) -> str:
     return (f"{ppo.num_envs} envs per seed, batches of {ppo.batch_size}, {ppo.epochs} epochs of minibatches of "
             f"{ppo.minibatch_size}, learning rates encoder {ppo.encoder_lr:g}, actor {ppo.actor_lr:g}, critic {ppo.critic_lr:g}"
-            + (f", KL early stop at {ppo.target_kl:g}" if ppo.target_kl else ""))
+            + (f", KL early stop at {ppo.target_kl:g}" if ppo.target_kl else "")
+            + (f", rewards x {ppo.reward_scale:g}" if ppo.reward_scale != 1.0 else "")
+            + (", the state normalised" if ppo.normalize_state else ""))
 
 
 def settings_lines(runs: Path, env: str, labels: list[str]) -> list[str]:
