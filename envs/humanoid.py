@@ -8,7 +8,8 @@ Two overrides of Gymnasium's file (`Humanoid.options`):
 - Integrator: semi-implicit Euler instead of the file's RK4, for the GPU budget, not for MJX
   (which has RK4). RK4 evaluates the whole forward pass, contacts included, four times a
   substep; Euler once. On 2 CPU cores, 64 envs: 272 env steps/s with RK4, 1160 with Euler
-  (4.3x); a Table 3 row (5 seeds x 10 M steps) would take over an hour of GPU with RK4.
+  (4.3x) in a first run; 326 and 803 (2.5x) in `experiments/humanoid_contacts.py`'s rerun (CPU
+  timings vary). A Table 3 row (5 seeds x 10 M steps) would take over an hour of GPU with RK4.
   The parity tests measure both sides of this: against Gymnasium with the same integrator
   (the solver's share of the difference) and against Humanoid-v5 as shipped (RK4).
 Otherwise the file is unchanged (dt 0.003, frame skip 5: 0.015 s per step; self-collisions on).

@@ -7,8 +7,9 @@ pairs   the robot's self-collision candidates (contype/conaffinity compatible, d
         poses drawn in the joint ranges (30% of joints at a limit) by MuJoCo C's mj_geomDistance.
         A pair that never comes near could be excluded without changing the dynamics.
 steps   env steps/s of the jitted, vmapped transition (a scan of 5 steps, after a compile call)
-        as it is, with contacts disabled, and with floor contacts only (the last two change
-        Humanoid-v5's dynamics: they bound what contacts cost, they are not options).
+        as it is (Euler), with the file's RK4, with contacts disabled, and with floor contacts
+        only (the last two change Humanoid-v5's dynamics: they bound what contacts cost, they
+        are not options).
 """
 
 from __future__ import annotations
@@ -54,6 +55,10 @@ def closest_approach(m: mujoco.MjModel, pairs, poses: int, seed: int = 0) -> np.
     return closest
 
 
+def rk4(m: mujoco.MjModel) -> None:
+    m.opt.integrator = mujoco.mjtIntegrator.mjINT_RK4  # humanoid.xml's own (envs/humanoid.py uses Euler)
+
+
 def no_contacts(m: mujoco.MjModel) -> None:
     m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
 
@@ -97,7 +102,8 @@ def main() -> None:
               f"({args.poses} poses)", flush=True)
     if args.no_steps:
         return
-    for name, change in (("as it is", None), ("contacts off", no_contacts), ("floor contacts only", floor_only)):
+    rows = (("as it is", None), ("RK4", rk4), ("contacts off", no_contacts), ("floor contacts only", floor_only))
+    for name, change in rows:
         rate, slots = steps_per_second(change, args.envs)
         print(f"{name:>20}: {rate:8.0f} env steps/s ({args.envs} envs, {slots} contact slots, {jax.devices()[0].platform})",
               flush=True)
