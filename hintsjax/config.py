@@ -135,6 +135,8 @@ class GailConfig:
     # "original": -log(1 - D) > 0, Ho and Ermon's, which pays for every step alive (an agent
     # then avoids a task's terminating goal, e.g. acrobot's).
     reward: str = "logit"
+    # D reads the state standardised by the demonstrations' mean and variance (gail.py).
+    normalize_state: bool = False
 
     def validate(self) -> None:
         require_positive(self, ("demonstrations", "disc_steps", "disc_lr", "disc_hidden"), "gail.")
@@ -154,11 +156,13 @@ def env_params(env: str, variant: str | None) -> Any:
 # "agents" holds per-agent overrides on top, for the converged references (tier 3): the expert
 # trains PPO on the state for 5x the hint agents' budget; DAgger's rounds of 1024 steps
 # aggregate every visited state (buffer = budget); GAIL gets the expert's budget.
-def _references(expert_steps: int, dagger_steps: int = 100_000, gail_reward: str = "logit", **expert_ppo: Any) -> dict[str, Any]:
+def _references(expert_steps: int, dagger_steps: int = 100_000, gail_reward: str = "logit",
+                gail_normalize_state: bool = False, **expert_ppo: Any) -> dict[str, Any]:
     return {
         "expert_ppo": dict(ppo=dict(total_env_steps=expert_steps, **expert_ppo)),
         "dagger": dict(ppo=dict(total_env_steps=dagger_steps), dagger=dict(buffer_size=dagger_steps)),
-        "gail": dict(ppo=dict(total_env_steps=expert_steps, **expert_ppo), gail=dict(reward=gail_reward)),
+        "gail": dict(ppo=dict(total_env_steps=expert_steps, **expert_ppo),
+                     gail=dict(reward=gail_reward, normalize_state=gail_normalize_state)),
     }
 
 
@@ -233,7 +237,8 @@ ENV_DEFAULTS: dict[str, dict[str, Any]] = {
     # expert is PPO on the state for 20 M steps (2x the learners'), 1024 envs per seed in
     # batches of 8192, minibatches of 1024, 8 epochs; 50 M would take 3 h of GPU (5 seeds).
     # Every humanoid agent learns from rewards x 0.1 and normalises the state (its contact
-    # forces run to thousands). The expert's PPO at 5 M steps, 2 seeds (H200; evaluation 2 x 10
+    # forces run to thousands); GAIL's discriminator reads it standardised by the demonstrations'
+    # statistics (gail.normalize_state). The expert's PPO at 5 M steps, 2 seeds (H200; evaluation 2 x 10
     # episodes, in brackets the training return at the end): as listed 5617 (3897); without the
     # entropy bonus 4923 (4061), its approx. KL rising to 0.7; without the bonus and the
     # normaliser 513 (460); without the bonus, the normaliser and the reward scale 124 (118).
@@ -242,7 +247,8 @@ ENV_DEFAULTS: dict[str, dict[str, Any]] = {
     "humanoid": dict(hint="velocity", ppo=dict(total_env_steps=10_000_000, num_envs=128, encoder_lr=3e-4, epochs=4,
                                                reward_scale=0.1, normalize_state=True),
                      agents={**_learners(target_kl=0.05),
-                             **_references(20_000_000, dagger_steps=250_000, gail_reward="original", num_envs=1024,
+                             **_references(20_000_000, dagger_steps=250_000, gail_reward="original",
+                                           gail_normalize_state=True, num_envs=1024,
                                            batch_size=8192, minibatch_size=1024, epochs=8)}),
     # 1000 episodes of 1000 steps (SPEC section 5); trained on the standard track, deployed on
     # hairpins. The paper conditions the car with scheme mc (scheme=mc).

@@ -7,6 +7,10 @@ gail.disc_steps minibatch steps to tell expert pairs (label 1) from the rollout'
 lets PPO learn from the discriminator's reward on the rollout instead of the env's:
 `logit` gives log D - log(1 - D) (the default), `original` Ho and Ermon's -log(1 - D). The env's
 own return is still what the run logs and what evaluation reports.
+
+With gail.normalize_state, D reads the state standardised by the demonstrations' own mean and
+variance (fixed for the run, clipped as ppo.normalize_state's are): without it, a few large
+dimensions (the humanoid's contact forces, in the thousands) would dominate D's input.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from flax import struct
 
 from hintsjax.config import GailConfig, RunConfig
 from hintsjax.networks import MLP
+from hintsjax.normalization import normalize
 from hintsjax.ppo import RunnerState, make_ppo
 from hintsjax.trainer import Trainer
 
@@ -32,6 +37,8 @@ class Demonstrations:
     action: jax.Array
     valid: jax.Array
     episode_return: jax.Array  # [D]
+    state_mean: jax.Array  # [n], over the valid pairs
+    state_var: jax.Array  # [n]
 
     def sample(self, key: jax.Array, n: int) -> tuple[jax.Array, jax.Array]:
         """n valid pairs drawn uniformly with replacement."""
@@ -75,7 +82,11 @@ def demonstrate(env: Any, env_params: Any, expert: Any, key: jax.Array, episodes
     init = (ts.state, ts.obs, jnp.ones(episodes, bool), jnp.zeros(episodes))
     (_, _, _, ret), (state, action, valid) = jax.lax.scan(step, init, jax.random.split(k_run, env.max_steps))
     flat = lambda x: x.reshape((-1,) + x.shape[2:])  # noqa: E731
-    return Demonstrations(flat(state), flat(action), flat(valid), ret)
+    state, valid = flat(state), flat(valid)
+    weight = valid[:, None] / valid.sum()
+    mean = jnp.sum(weight * state, axis=0)
+    var = jnp.sum(weight * (state - mean) ** 2, axis=0)
+    return Demonstrations(state, flat(action), valid, ret, mean, var)
 
 
 def make_discriminator(gail: GailConfig) -> MLP:
@@ -112,23 +123,28 @@ def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
     disc = make_discriminator(gail)
     disc_opt = optax.chain(optax.clip_by_global_norm(ppo.max_grad_norm), optax.adam(gail.disc_lr, eps=1e-5))
 
+    def disc_input(demos: Demonstrations, state: jax.Array, action: jax.Array) -> jax.Array:
+        if gail.normalize_state:
+            state = normalize(demos.state_mean, demos.state_var, state)
+        return pairs(state, action)
+
     def init(key: jax.Array) -> GailState:
         k_ppo, k_demo, k_disc = jax.random.split(key, 3)
         runner = parts.init(k_ppo)
         demos = demonstrate(parts.env.env, parts.env_params, expert, k_demo, gail.demonstrations)
-        disc_params = disc.init(k_disc, pairs(demos.state[:1], demos.action[:1]))
+        disc_params = disc.init(k_disc, disc_input(demos, demos.state[:1], demos.action[:1]))
         return GailState(runner, disc_params, disc_opt.init(disc_params), demos)
 
     def update(state: GailState) -> tuple[GailState, dict[str, jax.Array]]:
         key, k_roll, k_disc, k_epochs = jax.random.split(state.ppo.key, 4)
         runner, traj, last_value = parts.rollout(state.ppo, k_roll)
-        policy_pairs = pairs(traj.obs["state"], traj.action)  # [T, N, n + A]
+        policy_pairs = disc_input(state.demos, traj.obs["state"], traj.action)  # [T, N, n + A]
         flat_policy = policy_pairs.reshape(-1, policy_pairs.shape[-1])
 
         def disc_step(carry, key):
             params, opt_state = carry
             k_e, k_p = jax.random.split(key)
-            expert_batch = pairs(*state.demos.sample(k_e, ppo.minibatch_size))
+            expert_batch = disc_input(state.demos, *state.demos.sample(k_e, ppo.minibatch_size))
             policy_batch = flat_policy[jax.random.randint(k_p, (ppo.minibatch_size,), 0, flat_policy.shape[0])]
             grads, stats = jax.grad(lambda p: discriminator_loss(disc, p, expert_batch, policy_batch), has_aux=True)(params)
             updates, opt_state = disc_opt.update(grads, opt_state, params)

@@ -24,7 +24,7 @@ DAGGER = dict(env="linear", agent="dagger", seeds=1,
               dagger=dict(grad_steps=64, lr=3e-3, buffer_size=1024))
 GAIL = dict(env="linear", agent="gail", seeds=1,
             ppo=dict(num_envs=8, batch_size=128, minibatch_size=64, epochs=2, total_env_steps=4 * 128),
-            gail=dict(demonstrations=4, disc_hidden=[32, 32], disc_steps=2))
+            gail=dict(demonstrations=4, disc_hidden=[32, 32], disc_steps=2, normalize_state=True))
 
 
 def trained(values: dict):
@@ -147,6 +147,9 @@ def test_demonstrations_mask_the_steps_after_an_episode_ended():
     s, a = demos.sample(jax.random.key(0), 512)
     np.testing.assert_allclose(a, linear_env.EXPERT.mean(s), atol=4 * np.exp(-2.0) + 1e-6)  # expert pairs only
     assert np.all(np.asarray(demos.episode_return) < 0)
+    kept = np.asarray(demos.state)[np.asarray(demos.valid)]  # gail.normalize_state's statistics
+    np.testing.assert_allclose(demos.state_mean, kept.mean(axis=0), rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(demos.state_var, kept.var(axis=0), rtol=1e-4, atol=1e-6)
 
 
 def test_gail_trains_ppo_on_the_discriminator_reward(gail_run):
