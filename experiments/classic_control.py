@@ -24,7 +24,8 @@ import argparse
 import os
 from pathlib import Path
 
-from sweep import add_arguments, cell, chosen_envs, chosen_runs, hints_run, load, mean_of, sweep, sweep_seconds, wall_clock
+from sweep import (add_arguments, archive_runs, cell, chosen_envs, chosen_runs, hints_run, load, mean_of, metrics_path, sweep,
+                   sweep_seconds, wall_clock)
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("pendulum", "acrobot", "idp")
@@ -172,8 +173,8 @@ def report(runs: Path) -> None:
             row += f" {wall_clock(result)} |"
             lines.append(row)
         lines += ["", findings(runs, env), "", f"![{env} learning curves](classic_curves_{env}.png)", ""]
-        curves = {label: read_curves(runs / env / label / "metrics.csv") for label in table_runs(2, env)
-                  if label not in REFERENCES and (runs / env / label / "metrics.csv").exists()}
+        curves = {label: read_curves(path) for label in table_runs(2, env)
+                  if label not in REFERENCES and (path := metrics_path(runs, env, label)) is not None}
         if curves:
             plot_curves(curves, RESULTS / f"classic_curves_{env}.png", f"{env}: Table 2 agents, 5 seeds")
     lines += [f"Sweep wall-clock recorded in {runs}/sweeps.jsonl for `--table 2` on the GPU: {sweep_seconds(runs, 2):.0f} s "
@@ -223,6 +224,7 @@ def main() -> None:
     args = parser.parse_args()
     os.environ["JAX_PLATFORMS"] = "cpu"  # the parent only reads configs; workers get the devices
     if args.report:
+        archive_runs(args.runs, [f"{env}/{label}" for env in ENVS for table in (2, 4) for label in table_runs(table, env)])
         report(args.runs)
         return
     if args.table is None:

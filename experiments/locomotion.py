@@ -15,8 +15,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sweep import (cell, curve_lines, footer, hints_run, kl_cell, load, mean_of, references_note, table_main, trained_ppo,
-                   training_cell, wall_clock, write_report)
+from sweep import (KEPT, cell, curve_lines, footer, hints_run, kept_mean, kept_rows, kl_cell, load, mean_of, metrics_path,
+                   references_note, table_main, trained_ppo, training_cell, wall_clock, write_report)
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("halfcheetah", "ant", "humanoid")
@@ -40,7 +40,20 @@ PAPER = {
     "humanoid": {"dagger": "588.00 ± 152.4", "ppo_state": "228.30 ± 17.6", "ppo_rgb": "310.86 ± 41.7",
                  "hints-fc-velocity": "455.95 ± 94.5", "hints-fc-goal_height": "306.14 ± 52.5"},
 }
+# What a row's figures alone do not say (measured; the report prints it under the env's references).
+NOTES = {
+    "humanoid": (
+        "expert_ppo and dagger trained beside two other runs on one H200 (2026-11-23; that sweep's record was "
+        "lost with the machine, so the footer counts only gail's sweep, alone on an H200). gail fails: its "
+        "discriminator told the expert's pairs from the policy's almost perfectly from update 200 on (accuracy 1.0, "
+        "reward -log(1 - D) near 0), so the entropy bonus drove the policy's entropy from 24 to 159 "
+        "(metrics.csv); the robot falls after about 78 steps."),
+}
 DEFAULT_RUNS = "runs/locomotion"
+REPORT = "locomotion_table3.md"  # under RESULTS
+# GPU wall-clock of the sweeps before the archive existed (their runs/sweeps.jsonl was lost with
+# a fresh checkout on 2026-11-23; the figure is the one the report stated then).
+UNARCHIVED_SWEEP_SECONDS = 9745
 TABLE = "3-locomotion"  # the sweep's name in runs/<...>/sweeps.jsonl
 
 
@@ -52,11 +65,15 @@ def table_runs(env: str) -> list[str]:
     return [*REFERENCES, *BASELINES, *(hints_run("fc", h) for h in HINTS[env])]
 
 
-def findings(runs: Path, env: str) -> str:
+def findings(runs: Path, env: str, kept: dict[tuple[str, str], str]) -> str:
     """The paper's claims for these rows, as numbers: hints beat vision only, and (but for the
-    cheetah) beat PPO on the state."""
-    rgb, state = mean_of(load(runs, env, "ppo_rgb")), mean_of(load(runs, env, "ppo_state"))
-    hints = {h: mean_of(load(runs, env, hints_run("fc", h))) for h in HINTS[env]}
+    cheetah) beat PPO on the state. A row kept from the previous report counts with its mean."""
+    def mean(label: str) -> float | None:
+        result = load(runs, env, label)
+        return kept_mean(kept[(env, label)]) if result is None and (env, label) in kept else mean_of(result)
+
+    rgb, state = mean("ppo_rgb"), mean("ppo_state")
+    hints = {h: mean(hints_run("fc", h)) for h in HINTS[env]}
     hints = {h: v for h, v in hints.items() if v is not None}
     if rgb is None or state is None or not hints:
         return ""
@@ -74,16 +91,18 @@ def ppo_text(ppo) -> str:
             + (", the state normalised" if ppo.normalize_state else ""))
 
 
-def settings_lines(runs: Path, env: str, labels: list[str]) -> list[str]:
+def settings_lines(runs: Path, env: str, labels: list[str], kept: dict[tuple[str, str], str] | None = None) -> list[str]:
     """The PPO settings the rows were trained with (each run's config.yaml), grouped when they
-    differ; rows not yet run are listed at today's defaults (config.ENV_DEFAULTS)."""
+    differ; rows not yet run are listed at today's defaults (config.ENV_DEFAULTS), as are kept
+    rows (the previous report listed them so)."""
     from hintsjax.config import run_config
 
-    default = run_config({"env": env}).ppo
+    default, kept = run_config({"env": env}).ppo, kept or {}
     groups: dict[str, list[str]] = {}
     for label in labels:
         ppo = trained_ppo(runs, env, label)
-        note = ("not run yet; config.ENV_DEFAULTS" if ppo is None else "config.ENV_DEFAULTS" if ppo == default
+        note = (f"kept rows {KEPT}; config.ENV_DEFAULTS when last reported" if ppo is None and (env, label) in kept
+                else "not run yet; config.ENV_DEFAULTS" if ppo is None else "config.ENV_DEFAULTS" if ppo == default
                 else "not today's config.ENV_DEFAULTS")
         groups.setdefault(f"{ppo_text(ppo or default)} ({note})", []).append(label)
     if len(groups) == 1:
@@ -94,6 +113,7 @@ def settings_lines(runs: Path, env: str, labels: list[str]) -> list[str]:
 def report(runs: Path) -> None:
     from hintsjax.config import run_config
 
+    kept = kept_rows(RESULTS / REPORT)
     lines = [
         "# Locomotion: the paper's Table 3 (Ant, Cheetah, Humanoid rows), reproduced", "",
         "Each cell: mean ± std of the episode return over 5 training seeds x 50 evaluation episodes",
@@ -109,18 +129,27 @@ def report(runs: Path) -> None:
     for env in ENVS:
         learners = [label for label in table_runs(env) if label not in REFERENCES]  # at the table's budget
         lines += [f"## {env} ({run_config({'env': env}).ppo.total_env_steps / 1e6:g} M env steps per seed)", "",
-                  *settings_lines(runs, env, learners), "",
+                  *settings_lines(runs, env, learners, kept), "",
                   "| agent | ours | paper | training return, last 10% | updates with KL > 0.5 | wall-clock (s) |",
                   "|---|---|---|---|---|---|"]
         for label in table_runs(env):
             result = load(runs, env, label)
+            if result is None and metrics_path(runs, env, label) is None and (env, label) in kept:
+                lines.append(kept[(env, label)])
+                continue
             lines.append(f"| {label} | {cell(result)} | {PAPER[env].get(label, '-')} | {training_cell(runs, env, label)} "
                          f"| {kl_cell(runs, env, label)} "
                          f"| {wall_clock(result)} |")
-        lines += ["", findings(runs, env), "", references_note(runs, env, REFERENCES), ""]
+        lines += ["", findings(runs, env, kept), "", references_note(runs, env, REFERENCES), ""]
+        lines += [NOTES[env], ""] if env in NOTES else []
         lines += curve_lines(runs, env, learners, RESULTS / f"locomotion_curves_{env}.png", f"{env}: Table 3 agents, 5 seeds")
+    if any(KEPT in line for line in lines):
+        lines.append(f"Rows marked {KEPT} are kept from the previous report: their runs predate the results archive "
+                     "(experiments/results/runs) and their run folders were lost. The sweeps before the archive took "
+                     f"{UNARCHIVED_SWEEP_SECONDS} s of GPU wall-clock, beside the footer's.")
+        lines.append("")
     lines.append(footer(runs, TABLE, run_ids(ENVS)))
-    write_report(RESULTS / "locomotion_table3.md", lines)
+    write_report(RESULTS / REPORT, lines)
 
 
 def main() -> None:

@@ -8,6 +8,14 @@ train.log and, once finished, eval.json. `sweep` trains every unfinished run of 
     python experiments/sweep.py --runs runs/classic --seeds 5 --one idp/ppo_rgb [--smoke]
 
 The readers below (`load`, `cell`, `metric_cell`, `kl_cell`, `wall_clock`, `sweep_seconds`) build the result tables.
+
+runs/ is not committed (checkpoints, full logs). What the tables need of each finished run is
+kept in the committed archive experiments/results/runs/<sweep>/<env>/<label>/ (`archive_runs`,
+which every `--report` calls first): eval.json and config.yaml as trained, summary.json (the
+training-return and KL cells, worked out from the full metrics.csv) and a metrics.csv cut to
+CURVE_POINTS updates of the learning curve; the sweeps' records go to its sweeps.jsonl. The
+readers take a run from runs/ when it finished there, else from the archive, so a report on a
+fresh checkout rebuilds the committed tables.
 """
 
 from __future__ import annotations
@@ -16,6 +24,7 @@ import argparse
 import csv
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -23,6 +32,10 @@ import time
 from pathlib import Path
 from typing import Callable
 
+ARCHIVE = Path(__file__).resolve().parent / "results" / "runs"
+CURVE_POINTS = 250  # learning-curve points per seed kept in the archive
+SUMMARY_JSON = "summary.json"
+KL_ABOVE = 0.5  # kl_cell's threshold: an update whose approx. KL exceeds it blew up
 CHILD_ENVIRON = dict(os.environ)  # the workers' environment: a sweep's parent process keeps off the GPU
 EXPERT_RUN = "expert_ppo"  # the run whose best seed becomes its env's expert for dagger and gail
 
@@ -204,8 +217,18 @@ def chosen_runs(parser: argparse.ArgumentParser, args: argparse.Namespace, run_i
 # -- reading finished runs ---------------------------------------------------------------------
 
 
+def run_folder(runs: Path, env: str, label: str) -> Path:
+    """runs/env/label when the run finished there or has begun, else its archived copy (which
+    may not exist either: then the run was never trained)."""
+    folder = runs / env / label
+    archived = ARCHIVE / runs.name / env / label
+    if (folder / "eval.json").exists() or not (archived / "eval.json").exists():
+        return folder
+    return archived
+
+
 def load(runs: Path, env: str, label: str) -> dict | None:
-    path = runs / env / label / "eval.json"
+    path = run_folder(runs, env, label) / "eval.json"
     return json.loads(path.read_text()) if path.exists() else None
 
 
@@ -241,40 +264,71 @@ def metric_cell(result: dict | None, name: str, variant: int = 0, percent: bool 
     return f"{mean:.2f} ± {std:.2f} ({seed_std:.2f})"
 
 
-def training_cell(runs: Path, env: str, label: str, last: float = 0.1) -> str:
-    """Mean ± std over seeds of the training episodes' return (sampled actions) in the last
-    `last` of a run's updates: beside `cell`'s deterministic evaluation; '-' when not run."""
+def metrics_path(runs: Path, env: str, label: str) -> Path | None:
+    """A run's metrics.csv (archived ones hold only CURVE_POINTS updates), or None when not run."""
+    path = run_folder(runs, env, label) / "metrics.csv"
+    return path if path.exists() else None
+
+
+def summary(folder: Path) -> dict | None:
+    """An archived run's summary.json (None for a run folder in runs/)."""
+    path = folder / SUMMARY_JSON
+    return json.loads(path.read_text()) if path.exists() else None
+
+
+def training_seed_means(folder: Path, last: float = 0.1) -> list[float] | None:
+    """Per seed, the mean return of the training episodes (sampled actions) that ended in the
+    last `last` of a run's updates; None when not run or no episode ended."""
     import numpy as np
 
     from hintsjax.runlog import read_curves
 
-    path = runs / env / label / "metrics.csv"
-    if not path.exists():
-        return "-"
-    _, values = read_curves(path)
+    if (kept := summary(folder)) is not None:
+        return kept["training_return_seed_means"]
+    if not (folder / "metrics.csv").exists():
+        return None
+    _, values = read_curves(folder / "metrics.csv")
     tail = values[:, -max(1, int(last * values.shape[1])):]
     if np.isnan(tail).all():
+        return None
+    return [float(x) for x in np.nanmean(tail, axis=1)]
+
+
+def training_cell(runs: Path, env: str, label: str) -> str:
+    """Mean ± std over seeds of `training_seed_means` (the last 10% of updates): beside
+    `cell`'s deterministic evaluation; '-' when not run."""
+    import numpy as np
+
+    per_seed = training_seed_means(run_folder(runs, env, label))
+    if per_seed is None:
         return "-"
-    per_seed = np.nanmean(tail, axis=1)
     return f"{np.nanmean(per_seed):.1f} ± {np.nanstd(per_seed):.1f}"
 
 
-def kl_cell(runs: Path, env: str, label: str, above: float = 0.5) -> str:
+def kl_share(folder: Path, above: float = KL_ABOVE) -> float | None:
     """The share of a run's PPO updates (all seeds) whose approx. KL from the rollout policy (the
-    mean over the update's minibatch steps, as logged) exceeds `above`: a PPO that drifts or blows
-    up shows here (healthy runs stay near 0%; inf, an overflowed ratio, counts). '-' when not run
-    or not trained by PPO."""
+    mean over the update's minibatch steps, as logged) exceeds `above`; None when not run or
+    not trained by PPO (or, for an archived run, `above` is not KL_ABOVE)."""
     import numpy as np
 
-    path = runs / env / label / "metrics.csv"
+    if (kept := summary(folder)) is not None:
+        return kept["kl_share"] if above == KL_ABOVE else None
+    path = folder / "metrics.csv"
     if not path.exists():
-        return "-"
+        return None
     with path.open() as f:
         reader = csv.DictReader(f)
         if "approx_kl" not in (reader.fieldnames or ()):
-            return "-"
+            return None
         kl = np.array([float(row["approx_kl"]) for row in reader])
-    return f"{100 * np.mean(kl > above):.1f}%"
+    return float(np.mean(kl > above))
+
+
+def kl_cell(runs: Path, env: str, label: str, above: float = KL_ABOVE) -> str:
+    """`kl_share` as a percentage: a PPO that drifts or blows up shows here (healthy runs stay
+    near 0%; inf, an overflowed ratio, counts). '-' when not run or not trained by PPO."""
+    share = kl_share(run_folder(runs, env, label), above)
+    return "-" if share is None else f"{100 * share:.1f}%"
 
 
 def trained_config(runs: Path, env: str, label: str):
@@ -282,7 +336,7 @@ def trained_config(runs: Path, env: str, label: str):
     a report states the settings its rows were trained with, not today's defaults."""
     from hintsjax.config import CONFIG_YAML, load_run_config
 
-    folder = runs / env / label
+    folder = run_folder(runs, env, label)
     return load_run_config(folder) if (folder / "eval.json").exists() and (folder / CONFIG_YAML).exists() else None
 
 
@@ -311,7 +365,9 @@ def references_note(runs: Path, env: str, references: tuple[str, ...]) -> str:
         gail = cfg["gail"]
         reward = "-log(1 - D)" if gail.gail.reward == "original" else "the log odds log D - log(1 - D)"
         text += (f"; gail learns from {gail.gail.demonstrations} of that expert's episodes, by PPO for "
-                 f"{gail.ppo.total_env_steps / 1e6:g} M steps on the discriminator's reward {reward}")
+                 f"{gail.ppo.total_env_steps / 1e6:g} M steps on the discriminator's reward {reward}"
+                 + (", the discriminator reading the state standardised by the demonstrations' statistics"
+                    if gail.gail.normalize_state else ""))
     return text + "."
 
 
@@ -330,16 +386,20 @@ def wall_clock(result: dict | None) -> str:
     return f"{result['wall_seconds']:.0f}" + (" (CPU)" if on_cpu else "")
 
 
+def sweep_records(runs: Path, table: int | str) -> list[dict]:
+    """The GPU sweeps of `table` recorded in runs/sweeps.jsonl and in the archive's copy (once
+    each). A sweep that trained runs of both tables at once is recorded as table "2+4" and counts
+    for each. Sweeps run on a CPU (recorded with "device": "cpu") are left out: their runs are
+    marked (CPU)."""
+    lines = dict.fromkeys(line for path in (runs / "sweeps.jsonl", ARCHIVE / runs.name / "sweeps.jsonl")
+                          if path.exists() for line in path.read_text().splitlines() if line.strip())
+    return [r for r in map(json.loads, lines) if str(table) in str(r["table"]).split("+") and r.get("device") != "cpu"]
+
+
 def sweep_seconds(runs: Path, table: int | str) -> float:
     """The GPU wall-clock of `table`'s sweeps: sweeps that ran at the same time (on one machine's
     several GPUs) count once, as the union of their [finished - seconds, finished] spans."""
-    path = runs / "sweeps.jsonl"
-    if not path.exists():
-        return 0.0
-    # A sweep that trained runs of both tables at once is recorded as table "2+4" and counts for each.
-    # Sweeps run on a CPU (recorded with "device": "cpu") are left out: their runs are marked (CPU).
-    records = [r for r in map(json.loads, path.read_text().splitlines())
-               if str(table) in str(r["table"]).split("+") and r.get("device") != "cpu"]
+    records = sweep_records(runs, table)
     total = sum(r["seconds"] for r in records if "finished" not in r)  # no timestamp: counted alone
     reach = -float("inf")  # the end of the union so far
     for start, end in sorted((end - r["seconds"], end) for r in records if "finished" in r
@@ -349,15 +409,58 @@ def sweep_seconds(runs: Path, table: int | str) -> float:
     return total
 
 
+def archive_run(runs: Path, env: str, label: str, archive: Path | None = None) -> Path:
+    """Copy what the tables need of the finished run runs/env/label into
+    archive (default ARCHIVE)/<runs' name>/env/label (see the module's docstring); returns that folder."""
+    import numpy as np
+
+    from hintsjax.config import CONFIG_YAML
+    from hintsjax.runlog import read_curves
+
+    src, dest = runs / env / label, (archive or ARCHIVE) / runs.name / env / label
+    dest.mkdir(parents=True, exist_ok=True)
+    for name in ("eval.json", CONFIG_YAML):
+        shutil.copyfile(src / name, dest / name)
+    (dest / "metrics.csv").unlink(missing_ok=True)
+    if not (src / "metrics.csv").exists():
+        (dest / SUMMARY_JSON).write_text(json.dumps({"training_return_seed_means": None, "kl_share": None}) + "\n")
+        return dest
+    kept = {"training_return_seed_means": training_seed_means(src), "kl_share": kl_share(src)}
+    steps, values = read_curves(src / "metrics.csv")
+    # metrics.csv's updates count from 1 without gaps (a resumed run goes on from its checkpoint)
+    picks = np.unique(np.linspace(0, len(steps) - 1, min(CURVE_POINTS, len(steps))).round().astype(int))
+    with (dest / "metrics.csv").open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["update", "seed", "env_steps", "episode_return"])
+        writer.writerows([i + 1, s, f"{steps[i]:.0f}", f"{values[s, i]:.6g}"] for i in picks for s in range(values.shape[0]))
+    (dest / SUMMARY_JSON).write_text(json.dumps(kept, indent=1) + "\n")
+    return dest
+
+
+def archive_runs(runs: Path, run_ids: list[str], archive: Path | None = None) -> list[str]:
+    """Archive every run of `run_ids` that finished in `runs` (and the sweeps' records); the
+    archived ids."""
+    done = [r for r in run_ids if (runs / r / "eval.json").exists()]
+    for r in done:
+        archive_run(runs, *r.split("/"), archive=archive)
+    if (runs / "sweeps.jsonl").exists():
+        path = (archive or ARCHIVE) / runs.name / "sweeps.jsonl"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        old = path.read_text().splitlines() if path.exists() else []
+        lines = dict.fromkeys(line for line in old + (runs / "sweeps.jsonl").read_text().splitlines() if line.strip())
+        path.write_text("".join(line + "\n" for line in lines))
+    return done
+
+
 def curve_lines(runs: Path, env: str, labels: list[str], out: Path, title: str) -> list[str]:
     """Plot the learning curves of `labels`' runs (those with a metrics.csv) into `out`; the
     report's markdown lines for it ([] when none has started)."""
     from hintsjax.runlog import plot_curves, read_curves
 
-    paths = {label: runs / env / label / "metrics.csv" for label in labels}
-    curves = {label: read_curves(path) for label, path in paths.items() if path.exists()}
-    if not curves:
-        return []
+    paths = {label: metrics_path(runs, env, label) for label in labels}
+    curves = {label: read_curves(path) for label, path in paths.items() if path is not None}
+    if not curves:  # a figure of runs that predate the archive stays, said to be theirs
+        return [f"![{env} learning curves]({out.name})", "", "(The curves of the runs kept from the previous report.)", ""] if out.exists() else []
     plot_curves(curves, out, title)
     return [f"![{env} learning curves]({out.name})", ""]
 
@@ -366,6 +469,29 @@ def footer(runs: Path, table: str, run_ids: list[str]) -> str:
     """The report's last line: the sweeps' GPU wall-clock and hardware."""
     return (f"Sweep wall-clock recorded in {runs}/sweeps.jsonl on the GPU: {sweep_seconds(runs, table):.0f} s"
             f" ({sweep_hardware(runs, table, run_ids) or 'none yet'}).")
+
+
+KEPT = "†"  # marks a row kept from the committed report: its run predates the archive
+
+
+def kept_rows(path: Path) -> dict[tuple[str, str], str]:
+    """The table rows of the committed report at `path`, by (section heading, agent label), each
+    with its label marked KEPT. A report keeps the row of a run that is neither in runs/ nor in the
+    archive (one trained before the archive existed, whose run folder was lost) instead of
+    blanking it."""
+    rows, section = {}, ""
+    for line in path.read_text().splitlines() if path.exists() else []:
+        if line.startswith("## "):
+            section = line[3:].split(" (")[0]
+        elif line.startswith("| ") and not line.startswith("| agent") and line.split("|")[2].strip() != "-":
+            label = line.split("|")[1].strip().removesuffix(KEPT).strip()
+            rows[(section, label)] = f"| {label} {KEPT} |" + line.split("|", 2)[2]
+    return rows
+
+
+def kept_mean(row: str) -> float:
+    """The mean of a kept row's 'ours' cell ('mean ± std (seed std)')."""
+    return float(row.split("|")[2].split("±")[0])
 
 
 def write_report(path: Path, lines: list[str]) -> None:
@@ -382,6 +508,7 @@ def table_main(description: str, default_runs: str, envs: tuple[str, ...], table
     args = parser.parse_args()
     os.environ["JAX_PLATFORMS"] = "cpu"  # the parent only reads configs; workers get the devices
     if args.report:
+        archive_runs(args.runs, run_ids(list(envs)))
         report(args.runs)
         return
     names = chosen_envs(parser, args, envs)
@@ -392,9 +519,7 @@ def table_main(description: str, default_runs: str, envs: tuple[str, ...], table
 def sweep_hardware(runs: Path, table: str, run_ids: list[str]) -> str:
     """'NVIDIA H200; 6 runs at once over 2 GPUs' for the GPU sweeps of `table` (from sweeps.jsonl
     and the runs' eval.json), or '' when none ran on a GPU."""
-    path = runs / "sweeps.jsonl"
-    records = [r for r in map(json.loads, path.read_text().splitlines()) if str(table) in str(r["table"]).split("+")
-               and r.get("device") != "cpu"] if path.exists() else []
+    records = sweep_records(runs, table)
     results = [result for r in run_ids if (result := load(runs, *r.split("/")))]
     devices = sorted({result.get("device", "") for result in results} - {"", "cpu", "Cpu"})
     if not records or not devices:

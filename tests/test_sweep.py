@@ -205,3 +205,67 @@ def test_a_table_report_runs_end_to_end(script, tmp_path, monkeypatch):
     text = next((tmp_path / "results").glob("*.md")).read_text()
     assert "References (no budget limit): expert_ppo is PPO on the state" in text
     assert f"| ppo_rgb | {sweep.cell(sweep.load(tmp_path / 'runs', env, 'ppo_rgb'))} |" in text
+
+
+def test_an_archived_run_reads_as_the_run_did(tmp_path, monkeypatch):
+    """archive_runs keeps what the tables need; with the run folder gone, the readers fall back
+    to the archive and give the same cells (the curve cut to CURVE_POINTS updates)."""
+    from hintsjax import config
+
+    runs, archive = tmp_path / "locomotion", tmp_path / "archive"
+    monkeypatch.setattr(sweep, "ARCHIVE", archive)
+    nan = float("nan")
+    rng = __import__("numpy").random.default_rng(0)
+    returns = [[nan] * 5 + list(rng.normal(100 * s, 10, 595)) for s in range(2)]  # 600 updates, 2 seeds
+    write_run(runs, "ant", "ppo_rgb", [evaluation(7.0, 1.0, [6.0, 8.0])], returns)
+    config.save_run_config(runs / "ant" / "ppo_rgb", config.run_config({"env": "ant", "agent": "ppo_rgb"}))
+    rows = list(csv.DictReader((runs / "ant" / "ppo_rgb" / "metrics.csv").open()))
+    for i, row in enumerate(rows):
+        row["approx_kl"] = 0.9 if i % 4 == 0 else 0.01  # a quarter of the updates blew up
+    with (runs / "ant" / "ppo_rgb" / "metrics.csv").open("w", newline="") as f:
+        writer = csv.DictWriter(f, list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    (runs / "sweeps.jsonl").write_text(json.dumps({"table": "3-locomotion", "workers": 1, "seconds": 60.0}) + "\n")
+    before = [f(runs, "ant", "ppo_rgb") for f in (lambda *a: sweep.cell(sweep.load(*a)), sweep.training_cell, sweep.kl_cell)]
+    assert before[2] == "25.0%"
+
+    assert sweep.archive_runs(runs, ["ant/ppo_rgb", "ant/ppo_state"]) == ["ant/ppo_rgb"]  # ppo_state never ran
+    import shutil
+
+    shutil.rmtree(runs)
+    assert [f(runs, "ant", "ppo_rgb") for f in (lambda *a: sweep.cell(sweep.load(*a)), sweep.training_cell, sweep.kl_cell)] == before
+    assert sweep.run_folder(runs, "ant", "ppo_rgb") == archive / "locomotion" / "ant" / "ppo_rgb"
+    assert sweep.trained_ppo(runs, "ant", "ppo_rgb") == config.run_config({"env": "ant", "agent": "ppo_rgb"}).ppo
+    from hintsjax.runlog import read_curves
+
+    steps, values = read_curves(sweep.metrics_path(runs, "ant", "ppo_rgb"))
+    assert len(steps) == sweep.CURVE_POINTS and steps[0] == 1024 and steps[-1] == 1024 * 600
+    assert sweep.sweep_seconds(runs, "3-locomotion") == pytest.approx(60.0)  # the records came along
+    assert sweep.cell(sweep.load(runs, "ant", "ppo_state")) == "-"
+
+
+def test_a_report_keeps_the_rows_of_runs_it_cannot_read(tmp_path, monkeypatch):
+    """Rows of runs in neither runs/ nor the archive stay as the committed report had them, marked;
+    rows it has runs for are rebuilt; rows that were '-' are not kept."""
+    import locomotion
+
+    monkeypatch.setattr(locomotion, "RESULTS", tmp_path / "results")
+    monkeypatch.setattr(sweep, "ARCHIVE", tmp_path / "archive")
+    (tmp_path / "results").mkdir()
+    (tmp_path / "results" / locomotion.REPORT).write_text("\n".join([
+        "## ant (5 M env steps per seed)", "",
+        "| agent | ours | paper | training return, last 10% | updates with KL > 0.5 | wall-clock (s) |",
+        "|---|---|---|---|---|---|",
+        "| ppo_rgb | 1081.5 ± 175.9 (170.2) | 1015.49 ± 3.3 | 1049.8 ± 88.7 | 0.0% | 915 |",
+        "| ppo_state | 3764.1 ± 1089.3 (729.7) | 533.77 ± 254.7 | 2531.2 ± 611.6 | 0.0% | 1226 |",
+        "| hints-fc-speed | - | 1313.57 ± 57.6 | - | - | - |", ""]))
+    write_run(tmp_path / "runs", "ant", "ppo_state", [evaluation(5.0, 1.0, [5.0])])
+    write_run(tmp_path / "runs", "ant", "hints-fc-speed", [evaluation(2000.0, 1.0, [2000.0])])
+    locomotion.report(tmp_path / "runs")
+    text = (tmp_path / "results" / locomotion.REPORT).read_text()
+    assert f"| ppo_rgb {sweep.KEPT} | 1081.5 ± 175.9 (170.2) | 1015.49 ± 3.3 | 1049.8 ± 88.7 | 0.0% | 915 |" in text
+    assert "| ppo_state | 5.0 ± 1.0 (0.0) |" in text and "3764.1" not in text
+    assert f"| hints-fc-speed {sweep.KEPT}" not in text and f"| dagger {sweep.KEPT}" not in text
+    assert "PPO-RGB 1081.5" in text  # the kept row's mean counts in the findings
+    assert f"Rows marked {sweep.KEPT} are kept from the previous report" in text
