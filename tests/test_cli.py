@@ -69,7 +69,7 @@ def test_bad_input_exits_2_with_one_line_and_writes_nothing(arg, tmp_path):
 
 # The same checks in-process (no interpreter start): the imitation agents' own settings.
 BAD_IMITATION_VALUES = {
-    "expert=no/such/expert": "no expert for pendulum at no/such/expert (packaged: acrobot, ant, car_racing, halfcheetah, idp, pendulum)",
+    "expert=no/such/expert": "no expert for pendulum at no/such/expert (packaged: acrobot, ant, car_racing, halfcheetah, humanoid, idp, pendulum)",
     "gail.reward=nope": "unknown gail.reward 'nope'; valid: logit, original",
     "dagger.buffer_size=16": "dagger.buffer_size (16) must hold one round",
     "gail.demonstrations=0": "gail.demonstrations must be positive",
