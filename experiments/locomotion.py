@@ -42,6 +42,8 @@ PAPER = {
 }
 # What a row's figures alone do not say (measured; the report prints it under the env's references).
 NOTES = {
+    "ant": ("The ant's curves show ppo_rgb's earlier run at Table 5's rates (994); its row is the retraining at "
+            "today's settings (2026-11-23, `--only ppo_rgb` alone on an H200)."),
     "humanoid": (
         "expert_ppo and dagger trained beside two other runs on one H200 (2026-11-23; that sweep's record was "
         "lost with the machine, so the footer counts only gail's sweep, alone on an H200). gail fails: its "
