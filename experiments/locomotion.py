@@ -67,12 +67,19 @@ def table_runs(env: str) -> list[str]:
     return [*REFERENCES, *BASELINES, *(hints_run("fc", h) for h in HINTS[env])]
 
 
+def kept_row(runs: Path, env: str, label: str, kept: dict[tuple[str, str], str]) -> str | None:
+    """The previous report's row of a run that neither runs/ nor the archive holds (not even begun)."""
+    if load(runs, env, label) is None and metrics_path(runs, env, label) is None:
+        return kept.get((env, label))
+    return None
+
+
 def findings(runs: Path, env: str, kept: dict[tuple[str, str], str]) -> str:
     """The paper's claims for these rows, as numbers: hints beat vision only, and (but for the
     cheetah) beat PPO on the state. A row kept from the previous report counts with its mean."""
     def mean(label: str) -> float | None:
-        result = load(runs, env, label)
-        return kept_mean(kept[(env, label)]) if result is None and (env, label) in kept else mean_of(result)
+        row = kept_row(runs, env, label, kept)
+        return mean_of(load(runs, env, label)) if row is None else kept_mean(row)
 
     rgb, state = mean("ppo_rgb"), mean("ppo_state")
     hints = {h: mean(hints_run("fc", h)) for h in HINTS[env]}
@@ -103,7 +110,7 @@ def settings_lines(runs: Path, env: str, labels: list[str], kept: dict[tuple[str
     groups: dict[str, list[str]] = {}
     for label in labels:
         ppo = trained_ppo(runs, env, label)
-        note = (f"kept rows {KEPT}; config.ENV_DEFAULTS when last reported" if ppo is None and (env, label) in kept
+        note = (f"kept rows {KEPT}; config.ENV_DEFAULTS when last reported" if kept_row(runs, env, label, kept)
                 else "not run yet; config.ENV_DEFAULTS" if ppo is None else "config.ENV_DEFAULTS" if ppo == default
                 else "not today's config.ENV_DEFAULTS")
         groups.setdefault(f"{ppo_text(ppo or default)} ({note})", []).append(label)
@@ -135,10 +142,10 @@ def report(runs: Path) -> None:
                   "| agent | ours | paper | training return, last 10% | updates with KL > 0.5 | wall-clock (s) |",
                   "|---|---|---|---|---|---|"]
         for label in table_runs(env):
-            result = load(runs, env, label)
-            if result is None and metrics_path(runs, env, label) is None and (env, label) in kept:
-                lines.append(kept[(env, label)])
+            if (row := kept_row(runs, env, label, kept)) is not None:
+                lines.append(row)
                 continue
+            result = load(runs, env, label)
             lines.append(f"| {label} | {cell(result)} | {PAPER[env].get(label, '-')} | {training_cell(runs, env, label)} "
                          f"| {kl_cell(runs, env, label)} "
                          f"| {wall_clock(result)} |")

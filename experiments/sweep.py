@@ -218,8 +218,8 @@ def chosen_runs(parser: argparse.ArgumentParser, args: argparse.Namespace, run_i
 
 
 def run_folder(runs: Path, env: str, label: str) -> Path:
-    """runs/env/label when the run finished there or has begun, else its archived copy (which
-    may not exist either: then the run was never trained)."""
+    """Its archived copy when the run finished only there (runs/env/label lacks eval.json, the
+    archive has it), else runs/env/label (finished, begun, or never run)."""
     folder = runs / env / label
     archived = ARCHIVE / runs.name / env / label
     if (folder / "eval.json").exists() or not (archived / "eval.json").exists():
