@@ -386,13 +386,17 @@ def wall_clock(result: dict | None) -> str:
     return f"{result['wall_seconds']:.0f}" + (" (CPU)" if on_cpu else "")
 
 
+def unique_lines(*paths: Path) -> list[str]:
+    """The non-empty lines of the files that exist among `paths`, each once, in order."""
+    return list(dict.fromkeys(line for path in paths if path.exists() for line in path.read_text().splitlines() if line.strip()))
+
+
 def sweep_records(runs: Path, table: int | str) -> list[dict]:
     """The GPU sweeps of `table` recorded in runs/sweeps.jsonl and in the archive's copy (once
     each). A sweep that trained runs of both tables at once is recorded as table "2+4" and counts
     for each. Sweeps run on a CPU (recorded with "device": "cpu") are left out: their runs are
     marked (CPU)."""
-    lines = dict.fromkeys(line for path in (runs / "sweeps.jsonl", ARCHIVE / runs.name / "sweeps.jsonl")
-                          if path.exists() for line in path.read_text().splitlines() if line.strip())
+    lines = unique_lines(runs / "sweeps.jsonl", ARCHIVE / runs.name / "sweeps.jsonl")
     return [r for r in map(json.loads, lines) if str(table) in str(r["table"]).split("+") and r.get("device") != "cpu"]
 
 
@@ -409,15 +413,15 @@ def sweep_seconds(runs: Path, table: int | str) -> float:
     return total
 
 
-def archive_run(runs: Path, env: str, label: str, archive: Path | None = None) -> Path:
+def archive_run(runs: Path, env: str, label: str) -> Path:
     """Copy what the tables need of the finished run runs/env/label into
-    archive (default ARCHIVE)/<runs' name>/env/label (see the module's docstring); returns that folder."""
+    ARCHIVE/<runs' name>/env/label (see the module's docstring); returns that folder."""
     import numpy as np
 
     from hintsjax.config import CONFIG_YAML
     from hintsjax.runlog import read_curves
 
-    src, dest = runs / env / label, (archive or ARCHIVE) / runs.name / env / label
+    src, dest = runs / env / label, ARCHIVE / runs.name / env / label
     dest.mkdir(parents=True, exist_ok=True)
     for name in ("eval.json", CONFIG_YAML):
         shutil.copyfile(src / name, dest / name)
@@ -437,18 +441,16 @@ def archive_run(runs: Path, env: str, label: str, archive: Path | None = None) -
     return dest
 
 
-def archive_runs(runs: Path, run_ids: list[str], archive: Path | None = None) -> list[str]:
+def archive_runs(runs: Path, run_ids: list[str]) -> list[str]:
     """Archive every run of `run_ids` that finished in `runs` (and the sweeps' records); the
     archived ids."""
     done = [r for r in run_ids if (runs / r / "eval.json").exists()]
     for r in done:
-        archive_run(runs, *r.split("/"), archive=archive)
+        archive_run(runs, *r.split("/"))
     if (runs / "sweeps.jsonl").exists():
-        path = (archive or ARCHIVE) / runs.name / "sweeps.jsonl"
+        path = ARCHIVE / runs.name / "sweeps.jsonl"
         path.parent.mkdir(parents=True, exist_ok=True)
-        old = path.read_text().splitlines() if path.exists() else []
-        lines = dict.fromkeys(line for line in old + (runs / "sweeps.jsonl").read_text().splitlines() if line.strip())
-        path.write_text("".join(line + "\n" for line in lines))
+        path.write_text("".join(line + "\n" for line in unique_lines(path, runs / "sweeps.jsonl")))
     return done
 
 
@@ -460,7 +462,8 @@ def curve_lines(runs: Path, env: str, labels: list[str], out: Path, title: str) 
     paths = {label: metrics_path(runs, env, label) for label in labels}
     curves = {label: read_curves(path) for label, path in paths.items() if path is not None}
     if not curves:  # a figure of runs that predate the archive stays, said to be theirs
-        return [f"![{env} learning curves]({out.name})", "", "(The curves of the runs kept from the previous report.)", ""] if out.exists() else []
+        kept = [f"![{env} learning curves]({out.name})", "", "(The curves of the runs kept from the previous report.)", ""]
+        return kept if out.exists() else []
     plot_curves(curves, out, title)
     return [f"![{env} learning curves]({out.name})", ""]
 
