@@ -12,10 +12,10 @@ The readers below (`load`, `cell`, `metric_cell`, `kl_cell`, `wall_clock`, `swee
 runs/ is not committed (checkpoints, full logs). What the tables need of each finished run is
 kept in the committed archive experiments/results/runs/<sweep>/<env>/<label>/ (`archive_runs`,
 which every `--report` calls first): eval.json and config.yaml as trained, summary.json (the
-training-return and KL cells, worked out from the full metrics.csv) and a metrics.csv cut to
-CURVE_POINTS updates of the learning curve; the sweeps' records go to its sweeps.jsonl. The
-readers take a run from runs/ when it finished there, else from the archive, so a report on a
-fresh checkout rebuilds the committed tables.
+training-return and KL cells, worked out from the full metrics.csv) and a metrics.csv of the
+learning curve averaged into runlog.CURVE_POINTS bins, as the plots draw it; the sweeps' records
+go to its sweeps.jsonl. The readers take a run from runs/ when it finished there, else from the
+archive, so a report on a fresh checkout rebuilds the committed tables.
 """
 
 from __future__ import annotations
@@ -33,7 +33,6 @@ from pathlib import Path
 from typing import Callable
 
 ARCHIVE = Path(__file__).resolve().parent / "results" / "runs"
-CURVE_POINTS = 250  # learning-curve points per seed kept in the archive
 SUMMARY_JSON = "summary.json"
 KL_ABOVE = 0.5  # kl_cell's threshold: an update whose approx. KL exceeds it blew up
 CHILD_ENVIRON = dict(os.environ)  # the workers' environment: a sweep's parent process keeps off the GPU
@@ -265,7 +264,7 @@ def metric_cell(result: dict | None, name: str, variant: int = 0, percent: bool 
 
 
 def metrics_path(runs: Path, env: str, label: str) -> Path | None:
-    """A run's metrics.csv (archived ones hold only CURVE_POINTS updates), or None when not run."""
+    """A run's metrics.csv (archived ones hold runlog.CURVE_POINTS bins of updates), or None when not run."""
     path = run_folder(runs, env, label) / "metrics.csv"
     return path if path.exists() else None
 
@@ -419,7 +418,7 @@ def archive_run(runs: Path, env: str, label: str) -> Path:
     import numpy as np
 
     from hintsjax.config import CONFIG_YAML
-    from hintsjax.runlog import read_curves
+    from hintsjax.runlog import bin_means, read_curves
 
     src, dest = runs / env / label, ARCHIVE / runs.name / env / label
     dest.mkdir(parents=True, exist_ok=True)
@@ -431,12 +430,15 @@ def archive_run(runs: Path, env: str, label: str) -> Path:
         return dest
     kept = {"training_return_seed_means": training_seed_means(src), "kl_share": kl_share(src)}
     steps, values = read_curves(src / "metrics.csv")
-    # metrics.csv's updates count from 1 without gaps (a resumed run goes on from its checkpoint)
-    picks = np.unique(np.linspace(0, len(steps) - 1, min(CURVE_POINTS, len(steps))).round().astype(int))
+    # metrics.csv's updates count from 1 without gaps (a resumed run goes on from its checkpoint);
+    # each archived row is a bin of them, numbered by its last update
+    updates, _ = bin_means(np.arange(1, len(steps) + 1), values)
+    steps, values = bin_means(steps, values)
     with (dest / "metrics.csv").open("w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(["update", "seed", "env_steps", "episode_return"])
-        writer.writerows([i + 1, s, f"{steps[i]:.0f}", f"{values[s, i]:.6g}"] for i in picks for s in range(values.shape[0]))
+        writer.writerows([updates[i], s, f"{steps[i]:.0f}", f"{values[s, i]:.6g}"]
+                         for i in range(len(steps)) for s in range(values.shape[0]))
     (dest / SUMMARY_JSON).write_text(json.dumps(kept, indent=1) + "\n")
     return dest
 

@@ -10,6 +10,7 @@ import numpy as np
 
 METRICS_CSV = "metrics.csv"
 CURVE_PNG = "learning_curve.png"
+CURVE_POINTS = 250  # points per seed of a plotted (and an archived) learning curve
 
 
 class RunLog:
@@ -82,6 +83,17 @@ def read_curves(path: Path, metric: str = "episode_return") -> tuple[np.ndarray,
     return steps, values
 
 
+def bin_means(steps: np.ndarray, values: np.ndarray, points: int = CURVE_POINTS) -> tuple[np.ndarray, np.ndarray]:
+    """A curve averaged over at most `points` runs of consecutive updates: (the env steps of each
+    bin's last update [B], each seed's mean over the bin [S, B]). NaNs are left out of the means;
+    a bin of NaNs stays NaN. With `points` or fewer updates the curve comes back as it was."""
+    edges = np.linspace(0, len(steps), min(points, len(steps)) + 1).round().astype(int)
+    seen = ~np.isnan(values)
+    sums = np.add.reduceat(np.where(seen, values, 0.0), edges[:-1], axis=1)
+    counts = np.add.reduceat(seen, edges[:-1], axis=1)
+    return steps[edges[1:] - 1], np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
+
+
 def mean_confidence_band(values: np.ndarray, level: float = 0.95, resamples: int = 1000,
                          seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(mean, low, high) over seeds (axis 0) per column, with a percentile-bootstrap confidence
@@ -98,14 +110,16 @@ def mean_confidence_band(values: np.ndarray, level: float = 0.95, resamples: int
 
 def plot_curves(curves: dict[str, tuple[np.ndarray, np.ndarray]], out: Path, title: str = "") -> None:
     """One line per label (mean over seeds) with a 95% bootstrap confidence band for the mean;
-    x is environment steps."""
+    x is environment steps. Long curves are first averaged into CURVE_POINTS bins (`bin_means`):
+    per-update returns of runs with few, long episodes are too noisy to read."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(8.5, 4), dpi=120)
-    for label, (steps, values) in curves.items():
+    for label, curve in curves.items():
+        steps, values = bin_means(*curve)
         mean, low, high = mean_confidence_band(values)
         ax.plot(steps, mean, label=f"{label} (n={values.shape[0]})")
         ax.fill_between(steps, low, high, alpha=0.2)

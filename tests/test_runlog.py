@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hintsjax.runlog import mean_confidence_band
+from hintsjax.runlog import bin_means, mean_confidence_band
 
 
 def test_band_brackets_the_mean_and_shrinks_with_agreement():
@@ -29,3 +29,15 @@ def test_nan_seeds_are_ignored():
     mean, low, high = mean_confidence_band(values)
     assert np.isnan(mean[0]) and mean[1] == 2.0 and mean[2] == 2.0
     assert low[1] >= 1.0 and high[1] <= 3.0
+
+
+def test_bin_means_average_runs_of_updates_and_skip_nans():
+    steps = np.arange(1.0, 8.0) * 10  # 7 updates
+    values = np.array([[np.nan, np.nan, 1.0, 3.0, 5.0, np.nan, 7.0],
+                       [0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0]])
+    x, y = bin_means(steps, values, points=3)  # edges 0, 2, 5, 7 (linspace 0, 2.33, 4.67, 7 rounded)
+    np.testing.assert_array_equal(x, [20.0, 50.0, 70.0])  # each bin's last update
+    np.testing.assert_allclose(y, [[np.nan, 3.0, 7.0], [1.0, 6.0, 11.0]])
+    same_x, same_y = bin_means(steps, values, points=7)  # as many points as updates: unchanged
+    np.testing.assert_array_equal(same_x, steps)
+    np.testing.assert_array_equal(same_y, values)

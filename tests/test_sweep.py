@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
@@ -209,8 +210,9 @@ def test_a_table_report_runs_end_to_end(script, tmp_path, monkeypatch):
 
 def test_an_archived_run_reads_as_the_run_did(tmp_path, monkeypatch):
     """archive_runs keeps what the tables need; with the run folder gone, the readers fall back
-    to the archive and give the same cells (the curve cut to CURVE_POINTS updates)."""
+    to the archive and give the same cells (the curve averaged into CURVE_POINTS bins)."""
     from hintsjax import config
+    from hintsjax.runlog import CURVE_POINTS, bin_means, read_curves
 
     runs, archive = tmp_path / "locomotion", tmp_path / "archive"
     monkeypatch.setattr(sweep, "ARCHIVE", archive)
@@ -229,6 +231,7 @@ def test_an_archived_run_reads_as_the_run_did(tmp_path, monkeypatch):
     (runs / "sweeps.jsonl").write_text(json.dumps({"table": "3-locomotion", "workers": 1, "seconds": 60.0}) + "\n")
     before = [f(runs, "ant", "ppo_rgb") for f in (lambda *a: sweep.cell(sweep.load(*a)), sweep.training_cell, sweep.kl_cell)]
     assert before[2] == "25.0%"
+    binned = bin_means(*read_curves(runs / "ant" / "ppo_rgb" / "metrics.csv"))
 
     assert sweep.archive_runs(runs, ["ant/ppo_rgb", "ant/ppo_state"]) == ["ant/ppo_rgb"]  # ppo_state never ran
     import shutil
@@ -237,10 +240,10 @@ def test_an_archived_run_reads_as_the_run_did(tmp_path, monkeypatch):
     assert [f(runs, "ant", "ppo_rgb") for f in (lambda *a: sweep.cell(sweep.load(*a)), sweep.training_cell, sweep.kl_cell)] == before
     assert sweep.run_folder(runs, "ant", "ppo_rgb") == archive / "locomotion" / "ant" / "ppo_rgb"
     assert sweep.trained_ppo(runs, "ant", "ppo_rgb") == config.run_config({"env": "ant", "agent": "ppo_rgb"}).ppo
-    from hintsjax.runlog import read_curves
-
     steps, values = read_curves(sweep.metrics_path(runs, "ant", "ppo_rgb"))
-    assert len(steps) == sweep.CURVE_POINTS and steps[0] == 1024 and steps[-1] == 1024 * 600
+    assert len(steps) == CURVE_POINTS and steps[-1] == 1024 * 600  # bins of 2 or 3 updates
+    np.testing.assert_array_equal(steps, binned[0])
+    np.testing.assert_allclose(values, binned[1], rtol=1e-5)  # written to 6 digits
     assert sweep.sweep_seconds(runs, "3-locomotion") == pytest.approx(60.0)  # the records came along
     assert sweep.cell(sweep.load(runs, "ant", "ppo_state")) == "-"
 
