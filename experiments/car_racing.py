@@ -71,7 +71,7 @@ def findings(runs: Path, env: str) -> str:
             f" ({'beyond' if apart else 'within'} the seeds' spread).")
 
 
-def report(runs: Path) -> None:
+def report(runs: Path, force: bool = False) -> None:
     from hintsjax.config import run_config
 
     lines = [
@@ -103,7 +103,7 @@ def report(runs: Path) -> None:
         lines += curve_lines(runs, env, learners, RESULTS / f"car_curves_{env}.png",
                              f"{env} (standard tracks): Table 3 agents, 5 seeds")
     lines.append(footer(runs, TABLE, run_ids(ENVS)))
-    write_report(RESULTS / "car_table3.md", lines)
+    write_report(RESULTS / "car_table3.md", lines, force)
 
 
 def main() -> None:

@@ -25,7 +25,7 @@ import os
 from pathlib import Path
 
 from sweep import (add_arguments, archive_runs, cell, chosen_envs, chosen_runs, hints_run, load, mean_of, metrics_path, sweep,
-                   sweep_seconds, wall_clock)
+                   refuse_lost_cells, sweep_seconds, wall_clock, write_report)
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("pendulum", "acrobot", "idp")
@@ -143,7 +143,7 @@ def scheme_findings(runs: Path, env: str) -> str:
             + f". The best scheme agrees with the paper's in {agree} of {len(parts)} columns.")
 
 
-def report(runs: Path) -> None:
+def report(runs: Path, force: bool = False) -> None:
     from hintsjax.runlog import plot_curves, read_curves
 
     RESULTS.mkdir(exist_ok=True)
@@ -159,7 +159,7 @@ def report(runs: Path) -> None:
         "ppo_noisy_state) ran one at a time. '(CPU)': trained on a 2-core CPU when the GPU time was spent.",
         "",
     ]
-    lines = ["# Classic control: the paper's Table 2, reproduced", "", *head]
+    lines, curves = ["# Classic control: the paper's Table 2, reproduced", "", *head], {}
     for env in ENVS:
         lines += [f"## {env}", ""]
         deploy = env == "pendulum"
@@ -173,10 +173,8 @@ def report(runs: Path) -> None:
             row += f" {wall_clock(result)} |"
             lines.append(row)
         lines += ["", findings(runs, env), "", f"![{env} learning curves](classic_curves_{env}.png)", ""]
-        curves = {label: read_curves(path) for label in table_runs(2, env)
-                  if label not in REFERENCES and (path := metrics_path(runs, env, label)) is not None}
-        if curves:
-            plot_curves(curves, RESULTS / f"classic_curves_{env}.png", f"{env}: Table 2 agents, 5 seeds")
+        curves[env] = {label: read_curves(path) for label in table_runs(2, env)
+                       if label not in REFERENCES and (path := metrics_path(runs, env, label)) is not None}
     lines += [f"Sweep wall-clock recorded in {runs}/sweeps.jsonl for `--table 2` on the GPU: {sweep_seconds(runs, 2):.0f} s "
               "(it includes runs that the 10-minute limit of a GPU call interrupted and a later call retrained; "
               "the (CPU) rows' sweeps are not in it).",
@@ -196,7 +194,7 @@ def report(runs: Path) -> None:
               "rollout, gamma 0.95, entropy 0.01); dagger learnt from that expert. Without the entropy bonus:",
               f"expert_ppo {cell(load(runs.parent / 'classic_extra', 'pendulum', 'expert_ppo-ent0'))}, gail "
               f"{cell(load(runs.parent / 'classic_extra', 'pendulum', 'gail-ent0'))} (runs/classic_extra/pendulum)."]
-    (RESULTS / "classic_table2.md").write_text("\n".join(lines) + "\n")
+    table2 = lines
 
     lines = ["# Classic control: the paper's Table 4 (conditioning schemes), reproduced", "", *head,
              "The paper's Table 4 is on another scale than its Table 2 (its acrobot floor is -2500 = 5 x -500),",
@@ -212,9 +210,14 @@ def report(runs: Path) -> None:
         lines += [scheme_findings(runs, env), ""]
     lines.append(f"Sweep wall-clock recorded for the Table 4 runs not already in Table 2: {sweep_seconds(runs, 4):.0f} s "
                  "over the GPU calls that trained them (one call also trained Table 2's references and counts for both).")
-    (RESULTS / "classic_table4.md").write_text("\n".join(lines) + "\n")
-    print((RESULTS / "classic_table2.md").read_text())
-    print((RESULTS / "classic_table4.md").read_text())
+    reports = ((RESULTS / "classic_table2.md", table2), (RESULTS / "classic_table4.md", lines))
+    for path, table in reports if not force else ():
+        refuse_lost_cells(path, table)  # before anything is written
+    for path, table in reports:
+        write_report(path, table, force=True)
+    for env, env_curves in curves.items():  # only after the tables: a refused report redraws nothing
+        if env_curves:
+            plot_curves(env_curves, RESULTS / f"classic_curves_{env}.png", f"{env}: Table 2 agents, 5 seeds")
 
 
 def main() -> None:
@@ -225,7 +228,7 @@ def main() -> None:
     os.environ["JAX_PLATFORMS"] = "cpu"  # the parent only reads configs; workers get the devices
     if args.report:
         archive_runs(args.runs, [f"{env}/{label}" for env in ENVS for table in (2, 4) for label in table_runs(table, env)])
-        report(args.runs)
+        report(args.runs, args.force)
         return
     if args.table is None:
         parser.exit(2, "error: give --table 2, --table 4 or --report\n")

@@ -127,7 +127,7 @@ def settings_lines(runs: Path, env: str, labels: list[str], kept: dict[tuple[str
     return ["PPO, as each row was trained:", "", *(f"- {', '.join(rows)}: {text}." for text, rows in groups.items())]
 
 
-def report(runs: Path) -> None:
+def report(runs: Path, force: bool = False) -> None:
     from hintsjax.config import run_config
 
     kept = kept_rows(RESULTS / REPORT)
@@ -166,7 +166,7 @@ def report(runs: Path) -> None:
                      f"{UNARCHIVED_SWEEP_SECONDS} s of GPU wall-clock, beside the footer's.")
         lines.append("")
     lines.append(footer(runs, TABLE, run_ids(ENVS)))
-    write_report(RESULTS / REPORT, lines)
+    write_report(RESULTS / REPORT, lines, force)
 
 
 def main() -> None:

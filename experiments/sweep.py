@@ -176,6 +176,8 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int |
 def add_arguments(parser: argparse.ArgumentParser, runs: str, envs: tuple[str, ...]) -> None:
     """The options every sweep script takes (`runs`: the default runs folder)."""
     parser.add_argument("--report", action="store_true", help="only write the result tables and curves")
+    parser.add_argument("--force", action="store_true",
+                        help="with --report: rewrite a table even where it would blank cells the committed one fills")
     parser.add_argument("--envs", default=",".join(envs), help=f"comma-separated subset of {', '.join(envs)}")
     parser.add_argument("--runs", type=Path, default=Path(runs))
     parser.add_argument("--workers", type=int, default=1, help="configurations trained at once")
@@ -499,14 +501,47 @@ def kept_mean(row: str) -> float:
     return float(row.split("|")[2].split("±")[0])
 
 
-def write_report(path: Path, lines: list[str]) -> None:
+def table_cells(text: str) -> dict[tuple[str, str, int], str]:
+    """Every cell of a report's markdown tables, by (section heading, row label, column)."""
+    cells, section = {}, ""
+    for line in text.splitlines():
+        if line.startswith("## "):
+            section = line[3:].split(" (")[0]
+        elif line.startswith("| ") and not line.startswith("|---"):
+            label, *rest = [part.strip() for part in line.strip().strip("|").split("|")]
+            cells.update({(section, label.removesuffix(KEPT).strip(), i): c for i, c in enumerate(rest, 1)})
+    return cells
+
+
+def lost_cells(old: str, new: str) -> list[str]:
+    """'section/label' of every row with a cell that the report `old` filled and `new` leaves '-'."""
+    after = table_cells(new)
+    return list(dict.fromkeys(f"{section}/{label}" for (section, label, i), c in table_cells(old).items()
+                              if c != "-" and after.get((section, label, i), "-") == "-"))
+
+
+def refuse_lost_cells(path: Path, lines: list[str]) -> None:
+    """Exit 2, naming them, if the report `lines` would blank cells that the committed report at
+    `path` fills: their runs are neither in runs/ nor in the archive (e.g. a checkout whose runs
+    were lost). --force skips this check."""
+    if path.exists() and (lost := lost_cells(path.read_text(), "\n".join(lines))):
+        sys.stderr.write(f"error: {path.name} not rewritten: it would blank {len(lost)} rows whose runs are in neither "
+                         f"--runs nor {ARCHIVE} ({', '.join(lost[:5])}{', ...' if len(lost) > 5 else ''}); "
+                         "--force rewrites it anyway\n")
+        raise SystemExit(2)
+
+
+def write_report(path: Path, lines: list[str], force: bool = False) -> None:
+    """Write a report (refused as `refuse_lost_cells` says unless `force`) and print it."""
+    if not force:
+        refuse_lost_cells(path, lines)
     path.parent.mkdir(exist_ok=True)
     path.write_text("\n".join(lines) + "\n")
     print(path.read_text())
 
 
 def table_main(description: str, default_runs: str, envs: tuple[str, ...], table: str,
-               run_ids: Callable[[list[str]], list[str]], report: Callable[[Path], None]) -> None:
+               run_ids: Callable[[list[str]], list[str]], report: Callable[[Path, bool], None]) -> None:
     """The command line of a table's sweep script: train its runs for --envs, or --report."""
     parser = argparse.ArgumentParser(description=description)
     add_arguments(parser, default_runs, envs)
@@ -514,7 +549,7 @@ def table_main(description: str, default_runs: str, envs: tuple[str, ...], table
     os.environ["JAX_PLATFORMS"] = "cpu"  # the parent only reads configs; workers get the devices
     if args.report:
         archive_runs(args.runs, run_ids(list(envs)))
-        report(args.runs)
+        report(args.runs, args.force)
         return
     names = chosen_envs(parser, args, envs)
     ids = chosen_runs(parser, args, run_ids(names))

@@ -265,10 +265,31 @@ def test_a_report_keeps_the_rows_of_runs_it_cannot_read(tmp_path, monkeypatch):
         "| hints-fc-speed | - | 1313.57 ± 57.6 | - | - | - |", ""]))
     write_run(tmp_path / "runs", "ant", "ppo_state", [evaluation(5.0, 1.0, [5.0])])
     write_run(tmp_path / "runs", "ant", "hints-fc-speed", [evaluation(2000.0, 1.0, [2000.0])])
-    locomotion.report(tmp_path / "runs")
+    locomotion.report(tmp_path / "runs", force=True)  # ppo_state's stand-in run has no metrics.csv to fill its cells
     text = (tmp_path / "results" / locomotion.REPORT).read_text()
     assert f"| ppo_rgb {sweep.KEPT} | 1081.5 ± 175.9 (170.2) | 1015.49 ± 3.3 | 1049.8 ± 88.7 | 0.0% | 915 |" in text
     assert "| ppo_state | 5.0 ± 1.0 (0.0) |" in text and "3764.1" not in text
     assert f"| hints-fc-speed {sweep.KEPT}" not in text and f"| dagger {sweep.KEPT}" not in text
     assert "PPO-RGB 1081.5" in text  # the kept row's mean counts in the findings
     assert f"Rows marked {sweep.KEPT} are kept from the previous report" in text
+
+
+def test_a_report_that_would_blank_committed_cells_is_refused(tmp_path, capsys):
+    """write_report exits 2 naming the rows, and leaves the committed report as it was, when a
+    cell it filled would go '-' (its run neither in runs/ nor the archive); --force rewrites."""
+    path = tmp_path / "table.md"
+    committed = ["## pendulum", "", "| scheme | angular_velocity | state |", "|---|---|---|",
+                 "| fc (ours) | -691.3 ± 516.1 (336.6) | -468.3 ± 483.7 (365.8) |",
+                 "| fc (paper) | -2895.88 ± 1767.0 | -6423.87 ± 597.8 |", ""]
+    path.write_text("\n".join(committed) + "\n")
+    blanked = [line.replace("-468.3 ± 483.7 (365.8)", "-") for line in committed]
+    with pytest.raises(SystemExit) as exit_info:
+        sweep.write_report(path, blanked)
+    assert exit_info.value.code == 2
+    assert "pendulum/fc (ours)" in capsys.readouterr().err
+    assert path.read_text() == "\n".join(committed) + "\n"
+    refilled = [line.replace("-691.3 ± 516.1 (336.6)", "-650.0 ± 500.0 (300.0)") for line in committed]
+    sweep.write_report(path, refilled)  # a changed cell is no loss
+    assert "-650.0 ± 500.0" in path.read_text()
+    sweep.write_report(path, blanked, force=True)
+    assert "-468.3" not in path.read_text()
