@@ -70,7 +70,11 @@ def restore_latest(run_dir: Path, cfg: RunConfig, trainer=None):
     trainer = trainer or make_trainer(cfg)
     keys = jax.random.split(jax.random.key(0), cfg.seeds)
     abstract = jax.eval_shape(jax.vmap(trainer.init), keys)
-    expected = jax.eval_shape(_raw_keys, abstract)
+    # Onto this machine's default device, wherever the checkpoint was saved (a GPU's checkpoint
+    # records its devices, which a CPU-only machine lacks).
+    here = jax.sharding.SingleDeviceSharding(jax.devices()[0])
+    expected = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=here),
+                            jax.eval_shape(_raw_keys, abstract))
     try:
         with _quiet(), _manager(run_dir, create=False) as manager:
             # Compare the stored arrays' shapes before reading any: a mismatched restore fails
