@@ -186,6 +186,34 @@ def test_evaluate_bad_inputs(finished_run, tmp_path, capsys):
     assert "no checkpoint" in capsys.readouterr().err
 
 
+def test_a_checkpoint_saved_on_another_device_restores_here(finished_run, tmp_path):
+    """A run's checkpoint names the devices it was saved from (a GPU's, say); restoring onto a
+    machine that lacks them gives the same state on this machine's device."""
+    copy = tmp_path / "moved"
+    shutil.copytree(finished_run, copy)
+    shutil.rmtree(copy / "checkpoints")
+    script = (  # a second CPU device stands in for a device this process lacks
+        "import sys, jax\n"
+        "from hintsjax import checkpoint, run\n"
+        f"src, dest = {str(finished_run)!r}, {str(copy)!r}\n"
+        "state, update = checkpoint.restore_latest(src, run.load_run_config(src))\n"
+        "checkpoint.save(dest, jax.device_put(state, jax.devices()[1]), update)\n"
+    )
+    env = {**os.environ, "JAX_PLATFORMS": "cpu", "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
+    out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert len(jax.devices()) == 1
+    cfg = run.load_run_config(finished_run)
+    moved, update = checkpoint.restore_latest(copy, cfg)
+    original, _ = checkpoint.restore_latest(finished_run, cfg)
+    assert update == 4
+    for a, b in zip(jax.tree.leaves(original), jax.tree.leaves(moved)):
+        if jax.dtypes.issubdtype(a.dtype, jax.dtypes.prng_key):
+            a, b = jax.random.key_data(a), jax.random.key_data(b)
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+        assert b.devices() == {jax.devices()[0]}
+
+
 def test_mismatched_checkpoint_is_refused(finished_run, tmp_path):
     copy = tmp_path / "mismatched"
     shutil.copytree(finished_run, copy)
