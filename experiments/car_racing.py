@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sweep import (cell, curve_lines, footer, hints_run, load, metric_cell, metric_of, references_note, table_main,
+from sweep import (apart_text, cell, curve_lines, footer, hints_run, load, metric_cell, metric_of, references_note, table_main,
                    training_cell, wall_clock, write_report)
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -64,11 +64,10 @@ def findings(runs: Path, env: str) -> str:
     composite = hairpin_progress(load(runs, env, hints_run("mc", "composite")))
     if rgb is None or composite is None:
         return ""
-    apart = abs(composite[0] - rgb[0]) > composite[1] + rgb[1]
     return (f"Hairpin progress: HINTS-MC composite {100 * composite[0]:.0f}% (seed std {100 * composite[1]:.0f}), "
             f"PPO-RGB {100 * rgb[0]:.0f}% (seed std {100 * rgb[1]:.0f}); paper 78% against 46%. "
             f"Composite beats vision only on hairpins: {'yes' if composite[0] > rgb[0] else 'no'}"
-            f" ({'beyond' if apart else 'within'} the seeds' spread).")
+            f" ({apart_text(composite, rgb)} the seeds' spread).")
 
 
 def report(runs: Path, force: bool = False) -> None:

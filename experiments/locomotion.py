@@ -15,8 +15,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sweep import (KEPT, cell, curve_lines, footer, hints_run, kept_mean, kept_rows, kl_cell, load, mean_of, metrics_path,
-                   references_note, table_main, trained_ppo, training_cell, wall_clock, write_report)
+from sweep import (KEPT, apart_text, cell, cell_stats, curve_lines, footer, hints_run, kept_rows, kl_cell, load,
+                   metrics_path, references_note, table_main, trained_ppo, training_cell, wall_clock, write_report)
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("halfcheetah", "ant", "humanoid")
@@ -85,19 +85,24 @@ def kept_row(runs: Path, env: str, label: str, kept: dict[tuple[str, str], str])
 def findings(runs: Path, env: str, kept: dict[tuple[str, str], str]) -> str:
     """The paper's claims for these rows, as numbers: hints beat vision only, and (but for the
     cheetah) beat PPO on the state. A row kept from the previous report counts with its mean."""
-    def mean(label: str) -> float | None:
+    def stats(label: str) -> tuple[float, float] | None:
         row = kept_row(runs, env, label, kept)
-        return mean_of(load(runs, env, label)) if row is None else kept_mean(row)
+        return cell_stats(cell(load(runs, env, label)) if row is None else row.split("|")[2])
 
-    rgb, state = mean("ppo_rgb"), mean("ppo_state")
-    hints = {h: mean(hints_run("fc", h)) for h in HINTS[env]}
+    rgb, state = stats("ppo_rgb"), stats("ppo_state")
+    hints = {h: stats(hints_run("fc", h)) for h in HINTS[env]}
     hints = {h: v for h, v in hints.items() if v is not None}
     if rgb is None or state is None or not hints:
         return ""
-    best = max(hints, key=hints.get)
-    return (f"Best HINTS-FC hint `{best}` {hints[best]:.1f}; PPO-RGB {rgb:.1f}; PPO-x {state:.1f}. "
-            f"Hints beat vision only: {'yes' if hints[best] > rgb else 'no'}; beat the state: "
-            f"{'yes' if hints[best] > state else 'no'}.")
+    best = max(hints, key=lambda h: hints[h][0])
+    top = hints[best]
+
+    def verdict(other: tuple[float, float]) -> str:
+        return f"{'yes' if top[0] > other[0] else 'no'} ({apart_text(top, other)} the seeds' spread)"
+
+    return (f"Best HINTS-FC hint `{best}` {top[0]:.1f}; PPO-RGB {rgb[0]:.1f}; PPO-x {state[0]:.1f}. "
+            f"Hints beat vision only: {verdict(rgb)}; beat the state: {verdict(state)}. "
+            "(Beyond: the means differ by more than the two stds of the per-seed means together.)")
 
 
 def ppo_text(ppo) -> str:

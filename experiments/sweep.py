@@ -496,9 +496,17 @@ def kept_rows(path: Path) -> dict[tuple[str, str], str]:
     return rows
 
 
-def kept_mean(row: str) -> float:
-    """The mean of a kept row's 'ours' cell ('mean ± std (seed std)')."""
-    return float(row.split("|")[2].split("±")[0])
+def cell_stats(text: str) -> tuple[float, float] | None:
+    """(mean, std of the per-seed means) of a 'mean ± std (seed std)' cell; None for '-'."""
+    if text.strip() == "-":
+        return None
+    mean, rest = text.split("±")
+    return float(mean), float(rest.split("(")[1].rstrip(") "))
+
+
+def apart_text(a: tuple[float, float], b: tuple[float, float]) -> str:
+    """Whether two agents' means differ by more than their seed stds together."""
+    return "beyond" if abs(a[0] - b[0]) > a[1] + b[1] else "within"
 
 
 def table_cells(text: str) -> dict[tuple[str, str, int], str]:
