@@ -33,6 +33,12 @@ class MjxEnv(Env):
         self.site_ids = {self.mj_model.site(i).name: i for i in range(self.mj_model.nsite)}
 
     @classmethod
+    def with_options(cls, **options: Any) -> type[MjxEnv]:
+        """This env's class with more `mj_model.opt` fields overridden (e.g. fewer solver
+        iterations): what a benchmark compares. The registered envs keep their documented options."""
+        return type(cls.__name__, (cls,), {"options": {**cls.options, **options}})
+
+    @classmethod
     def make_mj_model(cls) -> mujoco.MjModel:
         """The MuJoCo C model with `options` applied: what a parity test steps as the reference."""
         model = mujoco.MjModel.from_xml_string(cls.mjcf or load_asset(cls.asset))

@@ -2,6 +2,7 @@
 
     python experiments/bench.py [--envs pendulum,acrobot,idp] [--sizes 4096,65536] [--steps 100] [--no-train]
                                 [--reset-cost] [--default-train-only] [--quick] [--out results.json]
+                                [--model-option integrator=EULER ...]
 
 Measures, in one process on whatever device JAX sees:
   env      env steps/s including the env's picture (AutoReset, vmapped, in a scan), beside the
@@ -26,6 +27,7 @@ import time
 
 import jax
 import jax.numpy as jnp
+import mujoco
 import optax
 
 from hintsjax import envs
@@ -50,9 +52,36 @@ RESETS = {  # how AutoReset gets the next start: the --reset-cost rows compare t
 }
 
 
-def bench_env(name: str, num_envs: int, steps: int, pixels: bool = True, reset: str = "step", rollout: int = 8) -> dict:
+# mj_model.opt fields whose values are MuJoCo enums, named in --model-option by their suffix
+OPTION_ENUMS = {"integrator": mujoco.mjtIntegrator, "solver": mujoco.mjtSolver, "cone": mujoco.mjtCone,
+                "jacobian": mujoco.mjtJacobian}
+
+
+def model_options(items: list[str]) -> dict:
+    """mj_model.opt overrides from FIELD=VALUE items (an enum by its suffix: integrator=EULER);
+    ValueError naming the valid fields or values."""
+    fields = sorted(f for f in dir(mujoco.MjOption) if not f.startswith("_"))
+    options = {}
+    for item in items:
+        field, _, value = item.partition("=")
+        if field not in fields or not value:
+            raise ValueError(f"--model-option {item!r}: give FIELD=VALUE with FIELD one of {', '.join(fields)}")
+        if field in OPTION_ENUMS:
+            members = {name.split("_", 1)[1]: m for name, m in OPTION_ENUMS[field].__members__.items()}
+            if value.upper() not in members:
+                raise ValueError(f"--model-option {item!r}: {field} is one of {', '.join(members)}")
+            options[field] = members[value.upper()]
+        else:
+            options[field] = float(value) if "." in value or "e" in value.lower() else int(value)
+    return options
+
+
+def bench_env(name: str, num_envs: int, steps: int, pixels: bool = True, reset: str = "step", rollout: int = 8,
+              options: dict | None = None) -> dict:
     observe = ("pixels", "hint") if pixels else ("hint",)
     env = envs.make(name, ENV_DEFAULTS[name].get("hint", envs.NO_HINT), observe)
+    if options:  # the same env with other physics options (--model-option)
+        env = type(env).with_options(**options)(env.hint, observe)
     env = env if reset == "none" else envs.AutoReset(env)
     params = envs.make_params(name)
     ts = jax.jit(jax.vmap(env.reset, in_axes=(0, None)))(jax.random.split(jax.random.key(0), num_envs), params)
@@ -140,12 +169,22 @@ def main() -> None:
     parser.add_argument("--default-train-only", action="store_true",
                         help="one training row per env: 5 seeds at the env's default settings")
     parser.add_argument("--quick", action="store_true", help="small sizes (a CPU smoke run)")
+    parser.add_argument("--model-option", action="append", default=[], metavar="FIELD=VALUE",
+                        help="env rows of MJX envs: override an mj_model.opt field, e.g. integrator=EULER or "
+                             "iterations=1 (repeatable); the registered envs keep their own")
     parser.add_argument("--out", default=None, help="write the results as JSON here")
     args = parser.parse_args()
     names = [n.strip() for n in args.envs.split(",") if n.strip()]
     unknown = [n for n in names if n not in envs.REGISTRY]
     if unknown:
         parser.exit(2, f"error: unknown env {unknown}; valid choices: {', '.join(envs.env_names())}\n")
+    try:
+        options = model_options(args.model_option)
+    except ValueError as e:
+        parser.exit(2, f"error: {e}\n")
+    if options and not all(hasattr(envs.REGISTRY[n].cls, "with_options") for n in names):
+        parser.exit(2, "error: --model-option applies to MJX envs only: "
+                       f"{', '.join(n for n in envs.env_names() if hasattr(envs.REGISTRY[n].cls, 'with_options'))}\n")
     q = args.quick
     results = {"device": str(jax.devices()[0].device_kind), "platform": jax.default_backend(),
                "jax": jax.__version__, "python": platform.python_version(), "xla_flags": os.environ.get("XLA_FLAGS", "")}
@@ -157,9 +196,11 @@ def main() -> None:
         for n in ([int(n) for n in args.sizes.split(",")] if not q else (64,)):
             size = envs.make(name).image_size
             for pixels, reset in ((False, "step"), (True, "step"), *(((True, "rollout"), (True, "none")) if args.reset_cost else ())):
-                r = bench_env(name, n, args.steps if not q else 16, pixels, reset)
+                r = bench_env(name, n, args.steps if not q else 16, pixels, reset, options=options)
+                r["model_options"] = args.model_option
                 results["env"].append(r)
-                what = f"with {size}x{size} picture" if pixels else "physics, reward, hint"
+                what = (f"with {size}x{size} picture" if pixels else "physics, reward, hint") + "".join(
+                    f"; {o}" for o in args.model_option)
                 print(f"env     {name:>9} {n:>6} envs: {r['env_steps_per_s']:>14,.0f} env steps/s "
                       f"({what}; {RESETS[reset]})", flush=True)
         settings = (((5, {}), (5, {"num_envs": 64}), (32, {}), (32, {"num_envs": 64, "minibatch_size": 1024}))

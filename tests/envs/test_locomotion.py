@@ -33,10 +33,16 @@ KEY = jax.random.key(0)
 ELLIPTIC = dict(solver=mujoco.mjtSolver.mjSOL_NEWTON, iterations=100, ls_iterations=50, cone=mujoco.mjtCone.mjCONE_ELLIPTIC)
 
 
-class AntElliptic(Ant):
-    """The ant with elliptic friction cones and MuJoCo's default solver budget."""
+AntElliptic = Ant.with_options(**ELLIPTIC)  # elliptic friction cones, MuJoCo's default solver budget
 
-    options = ELLIPTIC
+
+def test_with_options_changes_a_copy_of_the_model_options():
+    euler = mujoco.mjtIntegrator.mjINT_EULER
+    fast, shipped = Ant.with_options(integrator=euler, iterations=1).make_mj_model(), Ant.make_mj_model()
+    assert fast.opt.integrator == euler and fast.opt.iterations == 1
+    assert fast.opt.ls_iterations == 8  # the rest of the shipped options stay
+    assert shipped.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4 and shipped.opt.iterations == 4
+    assert AntElliptic.make_mj_model().opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
 
 
 def f32(x):
