@@ -34,6 +34,9 @@ from typing import Callable
 
 ARCHIVE = Path(__file__).resolve().parent / "results" / "runs"
 SUMMARY_JSON = "summary.json"
+# A sweep's runs save at most once a minute: fast runs finish 50 updates in seconds, and a big
+# run's checkpoint (every env's MJX state) can reach a GB; an interruption loses at most a minute.
+CHECKPOINT_SECONDS = 60
 KL_ABOVE = 0.5  # kl_cell's threshold: an update whose approx. KL exceeds it blew up
 CHILD_ENVIRON = dict(os.environ)  # the workers' environment: a sweep's parent process keeps off the GPU
 EXPERT_RUN = "expert_ppo"  # the run whose best seed becomes its env's expert for dagger and gail
@@ -52,7 +55,8 @@ def run_values(env: str, label: str, seeds: int, smoke: bool = False, experts: P
     """Config values of a run label (the inverse of RunConfig.label)."""
     from hintsjax.agents import AGENTS
 
-    values = {"env": env, "seeds": seeds, "checkpoint_every": 50, **(SMOKE if smoke else {})}
+    values = {"env": env, "seeds": seeds, "checkpoint_every": 50, "checkpoint_seconds": CHECKPOINT_SECONDS,
+              **(SMOKE if smoke else {})}
     if label in AGENTS and AGENTS[label].imitates:
         return {**values, "agent": label, "expert": None if experts is None else str(experts / env)}
     if label in AGENTS:

@@ -279,6 +279,7 @@ class RunConfig:
     eval_variants: tuple[str, ...] = ()  # deploy variants evaluated after training
     stochastic_eval: bool = False
     checkpoint_every: int = 10  # updates between progress reports and checkpoints
+    checkpoint_seconds: float = 0.0  # at least this long between checkpoints (0: after every report)
     expert: str | None = None  # dagger/gail: an exported expert folder (None: the env's packaged one)
     ppo: PPOConfig = field(default_factory=PPOConfig)
     dagger: DaggerConfig = field(default_factory=DaggerConfig)
@@ -325,6 +326,8 @@ class RunConfig:
         for v in (self.variant, *self.eval_variants):
             env_params(self.env, v)
         require_positive(self, ("seeds", "eval_episodes", "checkpoint_every"))
+        if self.checkpoint_seconds < 0:
+            raise UsageError(f"checkpoint_seconds must be 0 or more, got {self.checkpoint_seconds}")
         for section in SECTIONS:
             getattr(self, section).validate()
         if self.agent_spec.algorithm == "dagger" and self.dagger.buffer_size < self.ppo.batch_size:

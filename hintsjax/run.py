@@ -77,15 +77,17 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
     log = RunLog(run_dir, resume_update=done)
     before = seconds_trained(run_dir) if resume else 0.0  # kept work of earlier calls
     bar = tqdm(total=total, initial=done, unit="upd", disable=not progress, desc=f"{cfg.env} {cfg.label}")
-    t0 = time.time()
+    t0 = saved = time.time()
     while done < total:
         n = min(cfg.checkpoint_every, total - done)
         state, metrics = run_chunk(state, n)
         metrics = jax.tree.map(np.asarray, metrics)
         log.write(metrics, done)
         done += n
-        checkpoint.save(run_dir, state, done)
-        (run_dir / SECONDS_JSON).write_text(json.dumps({"update": done, "seconds": before + time.time() - t0}))
+        if done == total or time.time() - saved >= cfg.checkpoint_seconds:
+            checkpoint.save(run_dir, state, done)
+            saved = time.time()
+            (run_dir / SECONDS_JSON).write_text(json.dumps({"update": done, "seconds": before + saved - t0}))
         returns = metrics["episode_return"][:, -1]
         bar.set_postfix(steps=int(metrics["env_steps"][0, -1]), ret=f"{np.nanmean(returns):.1f}" if not np.all(np.isnan(returns)) else "-")
         bar.update(n)

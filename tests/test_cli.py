@@ -136,6 +136,19 @@ def test_a_saved_config_reads_back_as_trained_whatever_todays_env_defaults(tmp_p
     assert load_run_config(tmp_path) == cfg
 
 
+def test_checkpoint_seconds_spaces_the_checkpoints_and_keeps_the_last(tmp_path, monkeypatch):
+    """With checkpoint_seconds longer than the run, only the last update is saved; every update
+    is still logged."""
+    saved, real_save = [], checkpoint.save
+    monkeypatch.setattr(checkpoint, "save", lambda run_dir, state, update: (saved.append(update), real_save(run_dir, state, update)))
+    assert run.main_from_values(tiny_values(out_dir=str(tmp_path), name="spaced", checkpoint_seconds=1e9)) == 0
+    assert saved == [4]
+    assert json.loads((tmp_path / "spaced" / run.SECONDS_JSON).read_text())["update"] == 4
+    assert len((tmp_path / "spaced" / "metrics.csv").read_text().strip().splitlines()) == 1 + 4 * 2
+    assert run.main_from_values(tiny_values(out_dir=str(tmp_path), name="bad", checkpoint_seconds=-1)) == 2
+    assert not (tmp_path / "bad").exists()
+
+
 def test_interrupted_then_resumed_run_ends_where_the_uninterrupted_one_ends(finished_run, tmp_path, monkeypatch):
     values = tiny_values(out_dir=str(tmp_path), name="interrupted")
     real_save = checkpoint.save

@@ -106,7 +106,8 @@ def test_deterministic_gpu_ops_reads_the_last_flag(monkeypatch, flags, expected)
 
 def test_run_values_invert_the_labels():
     assert sweep.run_values("car_racing", "hints-mc-on_track", 5) == {
-        "env": "car_racing", "seeds": 5, "checkpoint_every": 50, "agent": "hints", "scheme": "mc", "hint": "on_track"}
+        "env": "car_racing", "seeds": 5, "checkpoint_every": 50, "checkpoint_seconds": sweep.CHECKPOINT_SECONDS,
+        "agent": "hints", "scheme": "mc", "hint": "on_track"}
     assert sweep.run_values("ant", "ppo_rgb", 2)["agent"] == "ppo_rgb"
 
 
