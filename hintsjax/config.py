@@ -137,9 +137,12 @@ class GailConfig:
     reward: str = "logit"
     # D reads the state standardised by the demonstrations' mean and variance (gail.py).
     normalize_state: bool = False
+    grad_penalty: float = 0.0  # weight of D's R1 gradient penalty on the expert's pairs (gail.py)
 
     def validate(self) -> None:
         require_positive(self, ("demonstrations", "disc_steps", "disc_lr", "disc_hidden"), "gail.")
+        if self.grad_penalty < 0:
+            raise UsageError(f"gail.grad_penalty must be 0 or more, got {self.grad_penalty}")
         if self.reward not in GAIL_REWARDS:
             raise UsageError(f"unknown gail.reward {self.reward!r}; valid: {', '.join(GAIL_REWARDS)}")
 
