@@ -237,9 +237,9 @@ ENV_DEFAULTS: dict[str, dict[str, Any]] = {
                         **_references(10_000_000, dagger_steps=250_000, gail_reward="original", num_envs=1024,
                                       batch_size=8192, minibatch_size=1024, epochs=8)}),
     # Humanoid's learners take the ant's KL early stop and its 256 envs per seed (rollouts of 4
-    # steps: each update waits on 4 latency-bound MJX steps instead of 8). Its references follow the ant's: the
-    # expert is PPO on the state for 20 M steps (2x the learners'), 1024 envs per seed in
-    # batches of 8192, minibatches of 1024, 8 epochs; 50 M would take 3 h of GPU (5 seeds).
+    # steps: each update waits on 4 latency-bound MJX steps instead of 8). Its references follow
+    # the ant's: the expert is PPO on the state for 20 M steps (2x the learners'), 1024 envs per
+    # seed in batches of 8192, minibatches of 1024, 8 epochs; 50 M would take 3 h of GPU (5 seeds).
     # Every humanoid agent learns from rewards x 0.1 and normalises the state (its contact
     # forces run to thousands); GAIL's discriminator reads it standardised by the demonstrations'
     # statistics (gail.normalize_state). The expert's PPO at 5 M steps, 2 seeds (H200; evaluation 2 x 10
