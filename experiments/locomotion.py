@@ -164,7 +164,8 @@ def report(runs: Path, force: bool = False) -> None:
                          f"| {wall_clock(result)} |")
         lines += ["", findings(runs, env, kept), "", references_note(runs, env, REFERENCES), ""]
         lines += [NOTES[env], ""] if env in NOTES else []
-        lines += curve_lines(runs, env, learners, RESULTS / f"locomotion_curves_{env}.png", f"{env}: Table 3 agents, 5 seeds")
+        lines += curve_lines(runs, env, learners, RESULTS / f"locomotion_curves_{env}.png", f"{env}: Table 3 agents, 5 seeds",
+                             kept=tuple(label for label in learners if kept_row(runs, env, label, kept)))
     if any(KEPT in line for line in lines):
         lines.append(f"Rows marked {KEPT} are kept from the previous report: their runs predate the results archive "
                      "(experiments/results/runs) and their run folders were lost. The sweeps before the archive took "

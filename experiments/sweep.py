@@ -462,16 +462,22 @@ def archive_runs(runs: Path, run_ids: list[str]) -> list[str]:
     return done
 
 
-def curve_lines(runs: Path, env: str, labels: list[str], out: Path, title: str) -> list[str]:
+def curve_lines(runs: Path, env: str, labels: list[str], out: Path, title: str, kept: tuple[str, ...] = ()) -> list[str]:
     """Plot the learning curves of `labels`' runs (those with a metrics.csv) into `out`; the
-    report's markdown lines for it ([] when none has started)."""
+    report's markdown lines for it ([] when none has started). While some rows are `kept` (runs
+    that predate the archive, with no curve to draw), `out` is their figure and stays; the other
+    runs' curves go to a sibling figure, `out`'s name + ARCHIVED_SUFFIX."""
     from hintsjax.runlog import plot_curves, read_curves
 
     paths = {label: metrics_path(runs, env, label) for label in labels}
     curves = {label: read_curves(path) for label, path in paths.items() if path is not None}
+    old = [f"![{env} learning curves]({out.name})", "", "(The curves of the runs kept from the previous report.)", ""]
     if not curves:  # a figure of runs that predate the archive stays, said to be theirs
-        kept = [f"![{env} learning curves]({out.name})", "", "(The curves of the runs kept from the previous report.)", ""]
-        return kept if out.exists() else []
+        return old if out.exists() else []
+    if kept and out.exists():
+        out = out.with_name(out.stem + ARCHIVED_SUFFIX + out.suffix)
+        plot_curves(curves, out, f"{title}: runs since the archive")
+        return [*old, f"![{env} learning curves of the runs since the archive]({out.name})", ""]
     plot_curves(curves, out, title)
     return [f"![{env} learning curves]({out.name})", ""]
 
@@ -483,6 +489,7 @@ def footer(runs: Path, table: str, run_ids: list[str]) -> str:
 
 
 KEPT = "†"  # marks a row kept from the committed report: its run predates the archive
+ARCHIVED_SUFFIX = "_archived"  # curve_lines' figure of the runs beside kept ones
 
 
 def kept_rows(path: Path) -> dict[tuple[str, str], str]:

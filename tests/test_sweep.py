@@ -294,3 +294,19 @@ def test_a_report_that_would_blank_committed_cells_is_refused(tmp_path, capsys):
     assert "-650.0 ± 500.0" in path.read_text()
     sweep.write_report(path, blanked, force=True)
     assert "-468.3" not in path.read_text()
+
+
+def test_curves_beside_kept_rows_go_to_their_own_figure(tmp_path, monkeypatch):
+    """While some rows are kept (no curves to draw), their committed figure stays as it was and
+    the newer runs' curves get a sibling figure; with no kept rows the figure is redrawn."""
+    monkeypatch.setattr(sweep, "ARCHIVE", tmp_path / "archive")
+    runs, out = tmp_path / "runs", tmp_path / "curves_ant.png"
+    write_run(runs, "ant", "ppo_state", [evaluation(5.0, 1.0, [5.0])], [[1.0, 2.0, 3.0]])
+    out.write_bytes(b"the kept runs' figure")
+    lines = sweep.curve_lines(runs, "ant", ["ppo_rgb", "ppo_state"], out, "ant", kept=("ppo_rgb",))
+    assert out.read_bytes() == b"the kept runs' figure"
+    sibling = tmp_path / f"curves_ant{sweep.ARCHIVED_SUFFIX}.png"
+    assert sibling.stat().st_size > 1000 and f"![ant learning curves]({out.name})" in lines
+    assert any(sibling.name in line for line in lines)
+    lines = sweep.curve_lines(runs, "ant", ["ppo_rgb", "ppo_state"], out, "ant")
+    assert out.read_bytes()[:4] == b"\x89PNG" and lines == [f"![ant learning curves]({out.name})", ""]
