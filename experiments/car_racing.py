@@ -17,8 +17,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sweep import (apart_text, cell, curve_lines, footer, hints_run, load, metric_cell, metric_of, references_note, table_main,
-                   training_cell, wall_clock, write_report)
+from report import (apart_text, cell, curve_lines, footer, load, metric_cell, metric_of, references_note,
+                    training_cell, wall_clock, write_report)
+from sweep import hints_run, table_main
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("car_racing",)

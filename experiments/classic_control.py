@@ -24,8 +24,9 @@ import argparse
 import os
 from pathlib import Path
 
-from sweep import (add_arguments, archive_runs, cell, chosen_envs, chosen_runs, hints_run, load, mean_of, metrics_path, sweep,
-                   refuse_lost_cells, sweep_seconds, wall_clock, write_report)
+from report import (archive_runs, cell, load, mean_of, metrics_path, refuse_lost_cells, sweep_seconds, wall_clock,
+                    write_report)
+from sweep import add_arguments, chosen_envs, chosen_runs, hints_run, sweep
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("pendulum", "acrobot", "idp")

@@ -15,8 +15,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sweep import (KEPT, apart_text, cell, cell_stats, curve_lines, footer, hints_run, kept_rows, kl_cell, load,
-                   metrics_path, references_note, table_main, trained_ppo, training_cell, wall_clock, write_report)
+from report import (KEPT, apart_text, cell, cell_stats, curve_lines, footer, kept_rows, kl_cell, load, metrics_path,
+                    references_note, trained_ppo, training_cell, wall_clock, write_report)
+from sweep import hints_run, table_main
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("halfcheetah", "ant", "humanoid")

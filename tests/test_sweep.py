@@ -1,4 +1,4 @@
-"""The sweep scripts' table cells and records (experiments/sweep.py), on hand-written run folders."""
+"""The sweep scripts (experiments/sweep.py) and their tables and archive (experiments/report.py), on hand-written run folders."""
 
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
-import sweep  # noqa: E402  (experiments/ is a folder of scripts, not a package)
+import report  # noqa: E402  (experiments/ is a folder of scripts, not a package)
+import sweep  # noqa: E402
 
 
 def write_run(runs: Path, env: str, label: str, evaluations: list[dict] | None = None, returns=None,
@@ -41,15 +42,15 @@ def test_cells_read_the_evaluations(tmp_path):
         evaluation(100.0, 20.0, [90.0, 110.0]),
         evaluation(50.0, 5.0, [50.0, 50.0], progress_mean=0.25, progress_std=0.1, progress_seed_means=[0.2, 0.3]),
     ])
-    result = sweep.load(tmp_path, "car_racing", "ppo_rgb")
-    assert sweep.cell(result) == "100.0 ± 20.0 (10.0)"
-    assert sweep.cell(result, 1) == "50.0 ± 5.0 (0.0)"
-    assert sweep.metric_cell(result, "progress", 1, percent=True) == "25% ± 10 (5)"
-    assert sweep.metric_cell(result, "progress", 0) == "-"  # not recorded on that variant
-    assert sweep.cell(sweep.load(tmp_path, "car_racing", "hints-mc-composite")) == "-"  # not run
-    assert sweep.wall_clock(result) == "61"
+    result = report.load(tmp_path, "car_racing", "ppo_rgb")
+    assert report.cell(result) == "100.0 ± 20.0 (10.0)"
+    assert report.cell(result, 1) == "50.0 ± 5.0 (0.0)"
+    assert report.metric_cell(result, "progress", 1, percent=True) == "25% ± 10 (5)"
+    assert report.metric_cell(result, "progress", 0) == "-"  # not recorded on that variant
+    assert report.cell(report.load(tmp_path, "car_racing", "hints-mc-composite")) == "-"  # not run
+    assert report.wall_clock(result) == "61"
     trained_alone = {"evaluations": [evaluation(1.0, 0.0, [1.0])], "train_seconds": 53.7}  # by python -m hintsjax.run
-    assert sweep.wall_clock(trained_alone) == "54 (training only)"
+    assert report.wall_clock(trained_alone) == "54 (training only)"
 
 
 def test_training_cell_averages_the_last_tenth_of_updates_per_seed(tmp_path):
@@ -57,10 +58,10 @@ def test_training_cell_averages_the_last_tenth_of_updates_per_seed(tmp_path):
     # ended: the value before it carries forward, 30), 40 -> 35. Mean 25, std over seeds 10.
     nan = float("nan")
     write_run(tmp_path, "halfcheetah", "ppo_rgb", returns=[[0.0] * 18 + [10.0, 20.0], [0.0] * 17 + [30.0, nan, 40.0]])
-    assert sweep.training_cell(tmp_path, "halfcheetah", "ppo_rgb") == "25.0 ± 10.0"
+    assert report.training_cell(tmp_path, "halfcheetah", "ppo_rgb") == "25.0 ± 10.0"
     write_run(tmp_path, "halfcheetah", "ppo_state", returns=[[nan] * 20])
-    assert sweep.training_cell(tmp_path, "halfcheetah", "ppo_state") == "-"  # no episode ended yet
-    assert sweep.training_cell(tmp_path, "halfcheetah", "hints-fc-velocity") == "-"
+    assert report.training_cell(tmp_path, "halfcheetah", "ppo_state") == "-"  # no episode ended yet
+    assert report.training_cell(tmp_path, "halfcheetah", "hints-fc-velocity") == "-"
 
 
 def test_sweep_records_give_the_gpu_seconds_and_hardware(tmp_path):
@@ -74,23 +75,23 @@ def test_sweep_records_give_the_gpu_seconds_and_hardware(tmp_path):
     ]
     (tmp_path / "sweeps.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
     ids = ["halfcheetah/ppo_rgb", "halfcheetah/ppo_state"]
-    assert sweep.sweep_seconds(tmp_path, "3-locomotion") == pytest.approx(600.0)
-    assert sweep.sweep_hardware(tmp_path, "3-locomotion", ids) == "NVIDIA H200; 6 runs at once over 2 GPUs"
-    assert sweep.sweep_hardware(tmp_path, "3-car", ids) == "NVIDIA H200; 4 runs at once on one GPU"
-    assert sweep.footer(tmp_path, "3-locomotion", ids).endswith("600 s (NVIDIA H200; 6 runs at once over 2 GPUs).")
-    assert sweep.sweep_hardware(tmp_path, "3-ant", ids) == "NVIDIA H200; 1 run at a time on one GPU"
-    assert sweep.sweep_hardware(tmp_path, "2", ids) == ""
+    assert report.sweep_seconds(tmp_path, "3-locomotion") == pytest.approx(600.0)
+    assert report.sweep_hardware(tmp_path, "3-locomotion", ids) == "NVIDIA H200; 6 runs at once over 2 GPUs"
+    assert report.sweep_hardware(tmp_path, "3-car", ids) == "NVIDIA H200; 4 runs at once on one GPU"
+    assert report.footer(tmp_path, "3-locomotion", ids).endswith("600 s (NVIDIA H200; 6 runs at once over 2 GPUs).")
+    assert report.sweep_hardware(tmp_path, "3-ant", ids) == "NVIDIA H200; 1 run at a time on one GPU"
+    assert report.sweep_hardware(tmp_path, "2", ids) == ""
     write_run(tmp_path, "halfcheetah", "ppo_fast", [evaluation(1.0, 0.0, [1.0])])
     eval_json = tmp_path / "halfcheetah" / "ppo_fast" / "eval.json"
     eval_json.write_text(json.dumps({**json.loads(eval_json.read_text()), "deterministic": False}))
-    assert sweep.sweep_hardware(tmp_path, "3-locomotion", [*ids, "halfcheetah/ppo_fast"]).endswith(
+    assert report.sweep_hardware(tmp_path, "3-locomotion", [*ids, "halfcheetah/ppo_fast"]).endswith(
         "over 2 GPUs; deterministic GPU ops off (1 runs)")
     # Two sweeps side by side on one machine (10:00-10:20 and 10:05-10:30), then one at 11:00-11:10:
     # the overlap counts once, 30 + 10 minutes.
     side_by_side = [{"table": "3-locomotion", "workers": 1, "seconds": s, "finished": f"2026-11-22 {end}", "gpus": ["0"]}
                     for s, end in ((1200.0, "10:20:00"), (1500.0, "10:30:00"), (600.0, "11:10:00"))]
     (tmp_path / "sweeps.jsonl").write_text("".join(json.dumps(r) + "\n" for r in side_by_side))
-    assert sweep.sweep_seconds(tmp_path, "3-locomotion") == pytest.approx(2400.0)
+    assert report.sweep_seconds(tmp_path, "3-locomotion") == pytest.approx(2400.0)
 
 
 @pytest.mark.parametrize("flags, expected", [
@@ -121,11 +122,11 @@ def test_locomotion_references_train_their_expert_before_dagger_and_gail():
     experts = Path("/somewhere/experts")
     assert sweep.run_values("halfcheetah", "dagger", 5, experts=experts)["expert"] == str(experts / "halfcheetah")
     # The note reads the packaged expert's seed and the references' budgets from the config.
-    note = sweep.references_note(Path("/nowhere"), "halfcheetah", locomotion.REFERENCES)
+    note = report.references_note(Path("/nowhere"), "halfcheetah", locomotion.REFERENCES)
     assert "5 M steps" in note and "250 K expert-labelled steps" in note and "hintsjax/experts/halfcheetah" in note
     assert "by PPO for 5 M steps on the discriminator's reward the log odds log D - log(1 - D)" in note
     # The ant's episodes end when it falls: its GAIL is paid -log(1 - D) > 0, not the log odds.
-    assert "PPO for 10 M steps on the discriminator's reward -log(1 - D)" in sweep.references_note(
+    assert "PPO for 10 M steps on the discriminator's reward -log(1 - D)" in report.references_note(
         Path("/nowhere"), "ant", locomotion.REFERENCES)
 
 
@@ -134,7 +135,7 @@ def test_car_references_come_first_and_the_note_describes_gail():
 
     assert car_racing.run_ids(["car_racing"])[:3] == [f"car_racing/{a}" for a in ("expert_ppo", "dagger", "gail")]
     assert sweep.prerequisite("car_racing/gail") == "car_racing/expert_ppo"
-    note = sweep.references_note(Path("/nowhere"), "car_racing", car_racing.REFERENCES)
+    note = report.references_note(Path("/nowhere"), "car_racing", car_racing.REFERENCES)
     assert "2 M steps" in note and "250 K expert-labelled steps" in note
     assert "gail learns from 16 of that expert's episodes, by PPO for 2 M steps on the discriminator's reward -log(1 - D)" in note
 
@@ -172,11 +173,11 @@ def test_kl_cell_is_the_share_of_blown_up_updates(tmp_path):
         writer = csv.DictWriter(f, ["update", "seed", "env_steps", "approx_kl"])
         writer.writeheader()
         writer.writerows(rows)
-    assert sweep.kl_cell(tmp_path, "ant", "hints-fc-speed") == "20.0%"
-    assert sweep.kl_cell(tmp_path, "ant", "hints-fc-speed", above=0.05) == "25.0%"
+    assert report.kl_cell(tmp_path, "ant", "hints-fc-speed") == "20.0%"
+    assert report.kl_cell(tmp_path, "ant", "hints-fc-speed", above=0.05) == "25.0%"
     write_run(tmp_path, "ant", "dagger", returns=[[1.0]])  # no approx_kl column: not PPO
-    assert sweep.kl_cell(tmp_path, "ant", "dagger") == "-"
-    assert sweep.kl_cell(tmp_path, "ant", "ppo_rgb") == "-"  # not run
+    assert report.kl_cell(tmp_path, "ant", "dagger") == "-"
+    assert report.kl_cell(tmp_path, "ant", "ppo_rgb") == "-"  # not run
 
 
 def test_only_picks_labels_and_names_the_valid_ones(capsys):
@@ -206,7 +207,7 @@ def test_a_table_report_runs_end_to_end(script, tmp_path, monkeypatch):
     module.report(tmp_path / "runs")
     text = next((tmp_path / "results").glob("*.md")).read_text()
     assert "References (no budget limit): expert_ppo is PPO on the state" in text
-    assert f"| ppo_rgb | {sweep.cell(sweep.load(tmp_path / 'runs', env, 'ppo_rgb'))} |" in text
+    assert f"| ppo_rgb | {report.cell(report.load(tmp_path / 'runs', env, 'ppo_rgb'))} |" in text
 
 
 def test_an_archived_run_reads_as_the_run_did(tmp_path, monkeypatch):
@@ -216,7 +217,7 @@ def test_an_archived_run_reads_as_the_run_did(tmp_path, monkeypatch):
     from hintsjax.runlog import CURVE_POINTS, bin_means, read_curves
 
     runs, archive = tmp_path / "locomotion", tmp_path / "archive"
-    monkeypatch.setattr(sweep, "ARCHIVE", archive)
+    monkeypatch.setattr(report, "ARCHIVE", archive)
     nan = float("nan")
     rng = __import__("numpy").random.default_rng(0)
     returns = [[nan] * 5 + list(rng.normal(100 * s, 10, 595)) for s in range(2)]  # 600 updates, 2 seeds
@@ -230,23 +231,23 @@ def test_an_archived_run_reads_as_the_run_did(tmp_path, monkeypatch):
         writer.writeheader()
         writer.writerows(rows)
     (runs / "sweeps.jsonl").write_text(json.dumps({"table": "3-locomotion", "workers": 1, "seconds": 60.0}) + "\n")
-    before = [f(runs, "ant", "ppo_rgb") for f in (lambda *a: sweep.cell(sweep.load(*a)), sweep.training_cell, sweep.kl_cell)]
+    before = [f(runs, "ant", "ppo_rgb") for f in (lambda *a: report.cell(report.load(*a)), report.training_cell, report.kl_cell)]
     assert before[2] == "25.0%"
     binned = bin_means(*read_curves(runs / "ant" / "ppo_rgb" / "metrics.csv"))
 
-    assert sweep.archive_runs(runs, ["ant/ppo_rgb", "ant/ppo_state"]) == ["ant/ppo_rgb"]  # ppo_state never ran
+    assert report.archive_runs(runs, ["ant/ppo_rgb", "ant/ppo_state"]) == ["ant/ppo_rgb"]  # ppo_state never ran
     import shutil
 
     shutil.rmtree(runs)
-    assert [f(runs, "ant", "ppo_rgb") for f in (lambda *a: sweep.cell(sweep.load(*a)), sweep.training_cell, sweep.kl_cell)] == before
-    assert sweep.run_folder(runs, "ant", "ppo_rgb") == archive / "locomotion" / "ant" / "ppo_rgb"
-    assert sweep.trained_ppo(runs, "ant", "ppo_rgb") == config.run_config({"env": "ant", "agent": "ppo_rgb"}).ppo
-    steps, values = read_curves(sweep.metrics_path(runs, "ant", "ppo_rgb"))
+    assert [f(runs, "ant", "ppo_rgb") for f in (lambda *a: report.cell(report.load(*a)), report.training_cell, report.kl_cell)] == before
+    assert report.run_folder(runs, "ant", "ppo_rgb") == archive / "locomotion" / "ant" / "ppo_rgb"
+    assert report.trained_ppo(runs, "ant", "ppo_rgb") == config.run_config({"env": "ant", "agent": "ppo_rgb"}).ppo
+    steps, values = read_curves(report.metrics_path(runs, "ant", "ppo_rgb"))
     assert len(steps) == CURVE_POINTS and steps[-1] == 1024 * 600  # bins of 2 or 3 updates
     np.testing.assert_array_equal(steps, binned[0])
     np.testing.assert_allclose(values, binned[1], rtol=1e-5)  # written to 6 digits
-    assert sweep.sweep_seconds(runs, "3-locomotion") == pytest.approx(60.0)  # the records came along
-    assert sweep.cell(sweep.load(runs, "ant", "ppo_state")) == "-"
+    assert report.sweep_seconds(runs, "3-locomotion") == pytest.approx(60.0)  # the records came along
+    assert report.cell(report.load(runs, "ant", "ppo_state")) == "-"
 
 
 def test_a_report_keeps_the_rows_of_runs_it_cannot_read(tmp_path, monkeypatch):
@@ -255,7 +256,7 @@ def test_a_report_keeps_the_rows_of_runs_it_cannot_read(tmp_path, monkeypatch):
     import locomotion
 
     monkeypatch.setattr(locomotion, "RESULTS", tmp_path / "results")
-    monkeypatch.setattr(sweep, "ARCHIVE", tmp_path / "archive")
+    monkeypatch.setattr(report, "ARCHIVE", tmp_path / "archive")
     (tmp_path / "results").mkdir()
     (tmp_path / "results" / locomotion.REPORT).write_text("\n".join([
         "## ant (5 M env steps per seed)", "",
@@ -268,11 +269,11 @@ def test_a_report_keeps_the_rows_of_runs_it_cannot_read(tmp_path, monkeypatch):
     write_run(tmp_path / "runs", "ant", "hints-fc-speed", [evaluation(2000.0, 1.0, [2000.0])])
     locomotion.report(tmp_path / "runs", force=True)  # ppo_state's stand-in run has no metrics.csv to fill its cells
     text = (tmp_path / "results" / locomotion.REPORT).read_text()
-    assert f"| ppo_rgb {sweep.KEPT} | 1081.5 ± 175.9 (170.2) | 1015.49 ± 3.3 | 1049.8 ± 88.7 | 0.0% | 915 |" in text
+    assert f"| ppo_rgb {report.KEPT} | 1081.5 ± 175.9 (170.2) | 1015.49 ± 3.3 | 1049.8 ± 88.7 | 0.0% | 915 |" in text
     assert "| ppo_state | 5.0 ± 1.0 (0.0) |" in text and "3764.1" not in text
-    assert f"| hints-fc-speed {sweep.KEPT}" not in text and f"| dagger {sweep.KEPT}" not in text
+    assert f"| hints-fc-speed {report.KEPT}" not in text and f"| dagger {report.KEPT}" not in text
     assert "PPO-RGB 1081.5" in text  # the kept row's mean counts in the findings
-    assert f"Rows marked {sweep.KEPT} are kept from the previous report" in text
+    assert f"Rows marked {report.KEPT} are kept from the previous report" in text
 
 
 def test_a_report_that_would_blank_committed_cells_is_refused(tmp_path, capsys):
@@ -285,28 +286,28 @@ def test_a_report_that_would_blank_committed_cells_is_refused(tmp_path, capsys):
     path.write_text("\n".join(committed) + "\n")
     blanked = [line.replace("-468.3 ± 483.7 (365.8)", "-") for line in committed]
     with pytest.raises(SystemExit) as exit_info:
-        sweep.write_report(path, blanked)
+        report.write_report(path, blanked)
     assert exit_info.value.code == 2
     assert "pendulum/fc (ours)" in capsys.readouterr().err
     assert path.read_text() == "\n".join(committed) + "\n"
     refilled = [line.replace("-691.3 ± 516.1 (336.6)", "-650.0 ± 500.0 (300.0)") for line in committed]
-    sweep.write_report(path, refilled)  # a changed cell is no loss
+    report.write_report(path, refilled)  # a changed cell is no loss
     assert "-650.0 ± 500.0" in path.read_text()
-    sweep.write_report(path, blanked, force=True)
+    report.write_report(path, blanked, force=True)
     assert "-468.3" not in path.read_text()
 
 
 def test_curves_beside_kept_rows_go_to_their_own_figure(tmp_path, monkeypatch):
     """While some rows are kept (no curves to draw), their committed figure stays as it was and
     the newer runs' curves get a sibling figure; with no kept rows the figure is redrawn."""
-    monkeypatch.setattr(sweep, "ARCHIVE", tmp_path / "archive")
+    monkeypatch.setattr(report, "ARCHIVE", tmp_path / "archive")
     runs, out = tmp_path / "runs", tmp_path / "curves_ant.png"
     write_run(runs, "ant", "ppo_state", [evaluation(5.0, 1.0, [5.0])], [[1.0, 2.0, 3.0]])
     out.write_bytes(b"the kept runs' figure")
-    lines = sweep.curve_lines(runs, "ant", ["ppo_rgb", "ppo_state"], out, "ant", kept=("ppo_rgb",))
+    lines = report.curve_lines(runs, "ant", ["ppo_rgb", "ppo_state"], out, "ant", kept=("ppo_rgb",))
     assert out.read_bytes() == b"the kept runs' figure"
-    sibling = tmp_path / f"curves_ant{sweep.ARCHIVED_SUFFIX}.png"
+    sibling = tmp_path / f"curves_ant{report.ARCHIVED_SUFFIX}.png"
     assert sibling.stat().st_size > 1000 and f"![ant learning curves]({out.name})" in lines
     assert any(sibling.name in line for line in lines)
-    lines = sweep.curve_lines(runs, "ant", ["ppo_rgb", "ppo_state"], out, "ant")
+    lines = report.curve_lines(runs, "ant", ["ppo_rgb", "ppo_state"], out, "ant")
     assert out.read_bytes()[:4] == b"\x89PNG" and lines == [f"![ant learning curves]({out.name})", ""]
