@@ -20,7 +20,7 @@ def _manager(run_dir: Path, create: bool) -> ocp.CheckpointManager:
                                  item_handlers=ocp.StandardCheckpointHandler())
 
 
-def _arrays(tree) -> list[tuple[tuple[int, ...], str]]:
+def array_specs(tree) -> list[tuple[tuple[int, ...], str]]:
     """The (shape, dtype) of every array in `tree`, sorted: comparable across pytree types."""
     return sorted((tuple(x.shape), str(x.dtype)) for x in jax.tree.leaves(tree))
 
@@ -79,7 +79,7 @@ def restore_latest(run_dir: Path, cfg: RunConfig, trainer=None):
         with _quiet(), _manager(run_dir, create=False) as manager:
             # Compare the stored arrays' shapes before reading any: a mismatched restore fails
             # part-way and leaves orbax's other reads pending (warnings at garbage collection).
-            saved, wanted = _arrays(manager.item_metadata(update)), _arrays(expected)
+            saved, wanted = array_specs(manager.item_metadata(update)), array_specs(expected)
             if saved != wanted:
                 raise ValueError(f"its {len(saved)} arrays differ in shape or type from the {len(wanted)} "
                                  "that the config gives")

@@ -204,6 +204,11 @@ def test_expert_errors_name_the_problem(expert_run, tmp_path):
         expert.load("pendulum", out)
     with pytest.raises(config.UsageError, match="no expert for linear at .*packaged: .*pendulum"):
         expert.load("linear", tmp_path / "nowhere")
+    meta = json.loads((out / expert.EXPERT_JSON).read_text())
+    (out / expert.EXPERT_JSON).write_text(json.dumps({**meta, "hidden": [8, 8]}))  # the policy is wider
+    with pytest.raises(config.UsageError, match=r"does not match expert.json: its \d+ arrays differ in shape"):
+        expert.load("linear", out)  # refused from the stored shapes, before any array is read
+    (out / expert.EXPERT_JSON).write_text(json.dumps(meta))
     for f in (out / expert.POLICY).rglob("*"):
         if f.is_file():
             f.write_bytes(b"garbage")
