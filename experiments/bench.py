@@ -182,9 +182,9 @@ def main() -> None:
         options = model_options(args.model_option)
     except ValueError as e:
         parser.exit(2, f"error: {e}\n")
-    if options and not all(hasattr(envs.REGISTRY[n].cls, "with_options") for n in names):
-        parser.exit(2, "error: --model-option applies to MJX envs only: "
-                       f"{', '.join(n for n in envs.env_names() if hasattr(envs.REGISTRY[n].cls, 'with_options'))}\n")
+    mjx_envs = [n for n in envs.env_names() if hasattr(envs.REGISTRY[n].cls, "with_options")]
+    if options and not set(names) <= set(mjx_envs):
+        parser.exit(2, f"error: --model-option applies to MJX envs only: {', '.join(mjx_envs)}\n")
     q = args.quick
     results = {"device": str(jax.devices()[0].device_kind), "platform": jax.default_backend(),
                "jax": jax.__version__, "python": platform.python_version(), "xla_flags": os.environ.get("XLA_FLAGS", "")}
