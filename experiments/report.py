@@ -297,19 +297,26 @@ KEPT = "†"  # marks a row kept from the committed report: its run predates the
 ARCHIVED_SUFFIX = "_archived"  # curve_lines' figure of the runs beside kept ones
 
 
+def table_rows(text: str):
+    """(section heading, row label without KEPT, its cells, the line) of every row of a report's
+    markdown tables, header rows included."""
+    section = ""
+    for line in text.splitlines():
+        if line.startswith("## "):
+            section = line[3:].split(" (")[0]
+        elif line.startswith("| ") and not line.startswith("|---"):
+            label, *cells = [part.strip() for part in line.strip().strip("|").split("|")]
+            yield section, label.removesuffix(KEPT).strip(), cells, line
+
+
 def kept_rows(path: Path) -> dict[tuple[str, str], str]:
     """The table rows of the committed report at `path`, by (section heading, agent label), each
     with its label marked KEPT. A report keeps the row of a run that is neither in runs/ nor in the
     archive (one trained before the archive existed, whose run folder was lost) instead of
     blanking it."""
-    rows, section = {}, ""
-    for line in path.read_text().splitlines() if path.exists() else []:
-        if line.startswith("## "):
-            section = line[3:].split(" (")[0]
-        elif line.startswith("| ") and not line.startswith("| agent") and line.split("|")[2].strip() != "-":
-            label = line.split("|")[1].strip().removesuffix(KEPT).strip()
-            rows[(section, label)] = f"| {label} {KEPT} |" + line.split("|", 2)[2]
-    return rows
+    text = path.read_text() if path.exists() else ""
+    return {(section, label): f"| {label} {KEPT} |" + line.split("|", 2)[2]
+            for section, label, cells, line in table_rows(text) if label != "agent" and cells[0] != "-"}
 
 
 def cell_stats(text: str) -> tuple[float, float] | None:
@@ -327,14 +334,7 @@ def apart_text(a: tuple[float, float], b: tuple[float, float]) -> str:
 
 def table_cells(text: str) -> dict[tuple[str, str, int], str]:
     """Every cell of a report's markdown tables, by (section heading, row label, column)."""
-    cells, section = {}, ""
-    for line in text.splitlines():
-        if line.startswith("## "):
-            section = line[3:].split(" (")[0]
-        elif line.startswith("| ") and not line.startswith("|---"):
-            label, *rest = [part.strip() for part in line.strip().strip("|").split("|")]
-            cells.update({(section, label.removesuffix(KEPT).strip(), i): c for i, c in enumerate(rest, 1)})
-    return cells
+    return {(section, label, i): c for section, label, cells, _ in table_rows(text) for i, c in enumerate(cells, 1)}
 
 
 def lost_cells(old: str, new: str) -> list[str]:
