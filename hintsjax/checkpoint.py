@@ -20,9 +20,25 @@ def _manager(run_dir: Path, create: bool) -> ocp.CheckpointManager:
                                  item_handlers=ocp.StandardCheckpointHandler())
 
 
-def array_specs(tree) -> list[tuple[tuple[int, ...], str]]:
+def _array_specs(tree) -> list[tuple[tuple[int, ...], str]]:
     """The (shape, dtype) of every array in `tree`, sorted: comparable across pytree types."""
     return sorted((tuple(x.shape), str(x.dtype)) for x in jax.tree.leaves(tree))
+
+
+def require_same_arrays(stored, expected, source: str) -> None:
+    """ValueError unless the stored arrays' metadata matches `expected` in shapes and types.
+    Compared before reading any array: a mismatched restore fails part-way and leaves orbax's
+    other reads pending (pages of tracebacks at exit)."""
+    saved, wanted = _array_specs(stored), _array_specs(expected)
+    if saved != wanted:
+        raise ValueError(f"its {len(saved)} arrays differ in shape or type from the {len(wanted)} that {source}")
+
+
+def on_this_device(abstract):
+    """`abstract`'s shapes and types placed on this machine's default device: what to restore
+    into, wherever the arrays were saved (a GPU's checkpoint records devices a CPU lacks)."""
+    here = jax.sharding.SingleDeviceSharding(jax.devices()[0])
+    return jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=here), abstract)
 
 
 @contextlib.contextmanager
@@ -70,19 +86,10 @@ def restore_latest(run_dir: Path, cfg: RunConfig, trainer=None):
     trainer = trainer or make_trainer(cfg)
     keys = jax.random.split(jax.random.key(0), cfg.seeds)
     abstract = jax.eval_shape(jax.vmap(trainer.init), keys)
-    # Onto this machine's default device, wherever the checkpoint was saved (a GPU's checkpoint
-    # records its devices, which a CPU-only machine lacks).
-    here = jax.sharding.SingleDeviceSharding(jax.devices()[0])
-    expected = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=here),
-                            jax.eval_shape(_raw_keys, abstract))
+    expected = on_this_device(jax.eval_shape(_raw_keys, abstract))
     try:
         with _quiet(), _manager(run_dir, create=False) as manager:
-            # Compare the stored arrays' shapes before reading any: a mismatched restore fails
-            # part-way and leaves orbax's other reads pending (warnings at garbage collection).
-            saved, wanted = array_specs(manager.item_metadata(update)), array_specs(expected)
-            if saved != wanted:
-                raise ValueError(f"its {len(saved)} arrays differ in shape or type from the {len(wanted)} "
-                                 "that the config gives")
+            require_same_arrays(manager.item_metadata(update), expected, "the config gives")
             raw = manager.restore(update, args=ocp.args.StandardRestore(expected))
     except Exception as e:  # orbax raises many types for unreadable or mismatched files
         reason = str(e).strip().splitlines()[0][:200] if str(e).strip() else type(e).__name__

@@ -25,7 +25,7 @@ import orbax.checkpoint as ocp
 from flax import struct
 
 from hintsjax import normalization
-from hintsjax.checkpoint import array_specs
+from hintsjax.checkpoint import on_this_device, require_same_arrays
 from hintsjax.config import RunConfig, UsageError, fail, load_run_config, to_dict
 from hintsjax.networks import MLP
 
@@ -133,17 +133,10 @@ def load(env: str, path: str | Path | None = None) -> Expert:
     }
     if meta.get("normalize_state"):
         shapes["state_norm"] = {k: jax.ShapeDtypeStruct((sizes[0],), jnp.float32) for k in ("mean", "var")}
-    # Onto this machine's default device, wherever the expert was saved (a GPU's checkpoint
-    # records its device, which a CPU-only machine lacks).
-    here = jax.sharding.SingleDeviceSharding(jax.devices()[0])
-    abstract = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=here), shapes)
+    abstract = on_this_device(shapes)
     try:
         with ocp.StandardCheckpointer() as loader:
-            # Compare the stored shapes first: a mismatched restore fails part-way and leaves
-            # orbax's other reads pending (pages of tracebacks at exit), as checkpoint.py notes.
-            saved, wanted = array_specs(loader.metadata((folder / POLICY).absolute()).item_metadata), array_specs(abstract)
-            if saved != wanted:
-                raise ValueError(f"its {len(saved)} arrays differ in shape or type from the {len(wanted)} it describes")
+            require_same_arrays(loader.metadata((folder / POLICY).absolute()).item_metadata, abstract, "it describes")
             params = loader.restore((folder / POLICY).absolute(), abstract)
     except Exception as e:  # orbax raises many types for unreadable or mismatched files
         reason = str(e).strip().splitlines()[0][:200] if str(e).strip() else type(e).__name__
