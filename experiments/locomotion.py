@@ -47,7 +47,14 @@ NOTES = {
             "today's settings (2026-11-23, `--only ppo_rgb` alone on an H200)."),
     "humanoid": (
         "expert_ppo and dagger trained beside two other runs on one H200 (2026-11-23; that sweep's record was "
-        "lost with the machine, so the footer counts only gail's sweep, alone on an H200). The learners' "
+        "lost with the machine). gail trained alone on an H200 by `python -m hintsjax.run env=humanoid "
+        "agent=gail` (2026-11-23; its wall-clock is the training alone); the footer counts the sweep of its "
+        "first run (900 s), which had no R1 penalty (gail.grad_penalty 0): there the discriminator told the "
+        "expert's pairs from the policy's perfectly from update 200 on (accuracy 1.0, reward -log(1 - D) near "
+        "0), the entropy bonus drove the policy's entropy from 24 to 159, the robot fell after about 78 steps "
+        "and gail scored 446.7 ± 125.1. With the penalty of 10 the accuracy is also 1.0 until about update "
+        "600, the reward as small (0.002 to 0.017 a step), yet the training return climbs (3397 to 6480 at "
+        "update 600), and by the end the accuracy is 0.44 to 0.74. The learners' "
         "wall-clock is their training time summed over calls, while sharing the GPU (2026-11-23, H200s): one "
         "sweep started all four learners, stopped the two hint runs after 8 minutes and ppo_rgb after 16 "
         "(at update 3450, its checkpoint carried to the next machine), and let ppo_state finish alone; a "
@@ -55,10 +62,7 @@ NOTES = {
         "1800 s by its log); hints-fc-goal_height trained alone on an H200 (1108 s). ppo_rgb's log lacks updates 3451 to 8600: each later call to the machine "
         "copied the carried folder over the running one's, and the run, going on in memory, wrote on into "
         "the copy; its parameters and evaluation are whole, its curve joins update 3450 to 8601 with a "
-        "straight line, and its training-return and KL cells cover the 4615 updates logged. gail fails: its "
-        "discriminator told the expert's pairs from the policy's almost perfectly from update 200 on (accuracy 1.0, "
-        "reward -log(1 - D) near 0), so the entropy bonus drove the policy's entropy from 24 to 159 "
-        "(metrics.csv); the robot falls after about 78 steps."),
+        "straight line, and its training-return and KL cells cover the 4615 updates logged."),
 }
 DEFAULT_RUNS = "runs/locomotion"
 REPORT = "locomotion_table3.md"  # under RESULTS

@@ -177,7 +177,9 @@ def references_note(runs: Path, env: str, references: tuple[str, ...]) -> str:
         text += (f"; gail learns from {gail.gail.demonstrations} of that expert's episodes, by PPO for "
                  f"{gail.ppo.total_env_steps / 1e6:g} M steps on the discriminator's reward {reward}"
                  + (", the discriminator reading the state standardised by the demonstrations' statistics"
-                    if gail.gail.normalize_state else ""))
+                    if gail.gail.normalize_state else "")
+                 + (f" and held smooth by an R1 penalty of {gail.gail.grad_penalty:g} on the expert's pairs"
+                    if gail.gail.grad_penalty else ""))
     return text + "."
 
 
