@@ -30,7 +30,7 @@ test: setup
 test-slow: setup
 	$(BIN)/python -m pytest -q -m slow -n 2 --dist loadfile
 
-BENCH_ENVS ?= pendulum,acrobot,idp,halfcheetah,ant,humanoid,car_racing
+BENCH_ENVS ?= pendulum,acrobot,idp,halfcheetah,ant,ant_fast,humanoid,car_racing
 bench: setup
 	$(BIN)/python experiments/bench.py --envs $(BENCH_ENVS)
 

@@ -39,6 +39,7 @@ REGISTRY: dict[str, EnvEntry] = {
     "acrobot": EnvEntry(acrobot.Acrobot, acrobot.VARIANTS),
     "idp": EnvEntry(idp.InvertedDoublePendulum, idp.VARIANTS),
     "ant": EnvEntry(ant.Ant, ant.VARIANTS),
+    "ant_fast": EnvEntry(ant.AntFast, ant.VARIANTS),
     "halfcheetah": EnvEntry(halfcheetah.HalfCheetah, halfcheetah.VARIANTS),
     "humanoid": EnvEntry(humanoid.Humanoid, humanoid.VARIANTS),
     "car_racing": EnvEntry(car_racing.CarRacing, car_racing.VARIANTS),

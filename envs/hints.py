@@ -57,6 +57,13 @@ def register_composite(env: str, name: str, parts: tuple[str, ...]) -> None:
     _COMPOSITES.setdefault(env, {})[name] = tuple(parts)
 
 
+def share_hints(env: str, source: str) -> None:
+    """Give `env` the hints and composites of `source`, now and as `source` gains more (an env
+    that is a variant of another's physics, such as `ant_fast` of `ant`)."""
+    _HINTS[env] = _HINTS.setdefault(source, {})
+    _COMPOSITES[env] = _COMPOSITES.setdefault(source, {})
+
+
 def register_link_velocity_hints(env: str, link_velocities: Callable[[Any], jax.Array]) -> None:
     """The hints that acrobot and idp share (SPEC section 3), from `link_velocities(state)`, the
     float32[2] speeds (rad/s) of the two hinges, the second relative to the first:

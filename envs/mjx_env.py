@@ -40,8 +40,14 @@ class MjxEnv(Env):
 
     @classmethod
     def make_mj_model(cls) -> mujoco.MjModel:
-        """The MuJoCo C model with `options` applied: what a parity test steps as the reference."""
-        model = mujoco.MjModel.from_xml_string(cls.mjcf or load_asset(cls.asset))
+        """The MuJoCo C model with this env's changes (`adapt`): what a parity test steps as the
+        reference."""
+        return cls.adapt(mujoco.MjModel.from_xml_string(cls.mjcf or load_asset(cls.asset)))
+
+    @classmethod
+    def adapt(cls, model: mujoco.MjModel) -> mujoco.MjModel:
+        """`model` (changed in place) with this env's changes to its file: the `options`; an env
+        that changes more extends this, so that a test can make the same changes to a reference."""
         for field, value in cls.options.items():
             setattr(model.opt, field, value)
         return model

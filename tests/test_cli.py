@@ -41,7 +41,7 @@ def cli(*args: str, cwd: Path, module: str = "hintsjax.run") -> subprocess.Compl
 
 
 BAD_RUN_ARGS = {
-    "env=nope": "valid choices: acrobot, ant, car_racing, halfcheetah, humanoid, idp, pendulum",
+    "env=nope": "valid choices: acrobot, ant, ant_fast, car_racing, halfcheetah, humanoid, idp, pendulum",
     "agent=nope": "valid choices: dagger, expert_ppo, gail, hints, hints_blind, hints_state, ppo_noisy_state, ppo_rgb, ppo_state",
     "scheme=nope": "valid choices: ac, fc, lc, mc",
     "hint=nope": "valid choices: angular_velocity, composite, goal_distance, partial_state, state, torque",

@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from hintsjax import envs
-from hintsjax.envs.ant import Ant
+from hintsjax.envs.ant import Ant, AntFast
 from hintsjax.envs.halfcheetah import HalfCheetah
 from hintsjax.envs.humanoid import Humanoid
 from hintsjax.envs.locomotion import LocomotionState
@@ -63,17 +63,21 @@ def cheetah() -> Compiled:
     return Compiled(HalfCheetah(envs.make_hint("halfcheetah", "none"), ("state",)))
 
 
-def parity(compiled: Compiled, gym_id: str, steps: int, gym_options: dict | None = None) -> dict[str, float]:
+def parity(compiled: Compiled, gym_id: str, steps: int, gym_options: dict | None = None, adapt=None,
+           same_termination: bool = True) -> dict[str, float]:
     """Worst |d obs|, |d reward|, |d qpos|, |d qvel| along gym's trajectories (a fresh gym
-    episode every 20 steps and after each termination), asserting equal termination; counts of
-    terminal and contact steps."""
+    episode every 20 steps and after each termination), asserting equal termination (or, with
+    `same_termination` False, counting the steps where it differs); counts of terminal and
+    contact steps. gym's model takes `gym_options` and then `adapt(model)`, if given."""
     params, step, state_at = compiled.params, compiled.transition, compiled.state_at
     gym_env = gym.make(gym_id).unwrapped
     for field, value in (gym_options or {}).items():
         setattr(gym_env.model.opt, field, value)
+    if adapt is not None:
+        adapt(gym_env.model)
     rng = np.random.default_rng(0)
     low, high = gym_env.action_space.low, gym_env.action_space.high
-    worst = dict(obs=0.0, reward=0.0, qpos=0.0, qvel=0.0, terminal=0, contact=0)
+    worst = dict(obs=0.0, reward=0.0, qpos=0.0, qvel=0.0, terminal=0, contact=0, termination_differs=0)
     fresh = True
     for i in range(steps):
         if fresh or i % 20 == 0:
@@ -83,7 +87,8 @@ def parity(compiled: Compiled, gym_id: str, steps: int, gym_options: dict | None
         action = rng.uniform(low, high).astype(np.float32)
         out = step(KEY, state_at(qpos, qvel), jnp.asarray(action), params)
         obs, reward, terminated, _, _ = gym_env.step(action)
-        assert bool(out.terminated) == terminated, f"step {i}"
+        assert bool(out.terminated) == terminated or not same_termination, f"step {i}"
+        worst["termination_differs"] += bool(out.terminated) != terminated
         worst["obs"] = max(worst["obs"], float(np.abs(np.asarray(out.state.obs) - obs).max()))
         worst["reward"] = max(worst["reward"], abs(float(out.reward) - reward))
         for name in ("qpos", "qvel"):
@@ -134,6 +139,59 @@ def test_ant_with_euler_against_ant_v5_as_shipped():
     worst = parity(Compiled(euler(envs.make_hint("ant", "none"), ("state",))), "Ant-v5", 60)
     assert worst["contact"] > 10
     assert worst["qpos"] < 0.6 and worst["qvel"] < 25.0 and worst["reward"] < 1.0
+
+
+def test_ant_fast_is_the_ant_with_cheaper_physics():
+    """ant_fast: Euler, 2 Newton iterations, floor contacts for the torso and lower legs only
+    (9, against the ant's 25), the ant's hints, and next starts drawn once per rollout."""
+    from mujoco import mjx
+
+    from hintsjax.config import run_config
+
+    fast, ant = envs.make("ant_fast", "speed"), envs.make("ant", "speed")
+    assert fast.mj_model.opt.integrator == mujoco.mjtIntegrator.mjINT_EULER and fast.mj_model.opt.iterations == 2
+    assert mjx.make_data(fast.model)._impl.contact.dist.shape == (9,)
+    assert mjx.make_data(ant.model)._impl.contact.dist.shape == (25,)
+    assert envs.hint_names("ant_fast") == envs.hint_names("ant")
+    assert run_config({"env": "ant_fast"}).ppo.starts_per_rollout and not run_config({"env": "ant"}).ppo.starts_per_rollout
+
+
+@pytest.fixture(scope="module")
+def ant_fast() -> Compiled:
+    return Compiled(AntFast(envs.make_hint("ant_fast", "none"), ("state",)))
+
+
+@pytest.mark.slow
+def test_ant_fast_parity(ant_fast):
+    """ant_fast against MuJoCo C with the same changes (AntFast.adapt on Gymnasium's model): what
+    MJX changes. Measured (60 steps, 9 with contacts): |d obs| = |d qvel| 8.2, |d qpos| 0.08,
+    |d reward| 0.11; termination identical. The pyramid's orientation (module docstring) weighs
+    more with Euler: the ant as shipped gives |d obs| 1.49."""
+    worst = parity(ant_fast, "Ant-v5", 60, adapt=AntFast.adapt)
+    assert worst["contact"] > 5
+    assert worst["obs"] < 20.0 and worst["qpos"] < 0.3 and worst["reward"] < 0.3
+
+
+@pytest.mark.slow
+def test_ant_fast_against_ant_v5_as_shipped(ant_fast):
+    """What ant_fast's physics costs: against Ant-v5 as Gymnasium ships it. Measured (60 steps,
+    24 with contacts): |d qvel| 12.1, |d qpos| 0.27, |d reward| 0.47, termination identical: the
+    same as Euler alone (test_ant_with_euler_against_ant_v5_as_shipped), so the 2 iterations
+    and the fewer contacts changed nothing on these steps."""
+    worst = parity(ant_fast, "Ant-v5", 60, same_termination=False)
+    assert worst["contact"] > 10
+    assert worst["termination_differs"] <= 1 and worst["qvel"] < 25.0 and worst["reward"] < 1.0
+
+
+@pytest.mark.slow
+def test_one_newton_iteration_is_too_few_for_the_fast_ant():
+    """Why ant_fast keeps 2 Newton iterations: with 1, against Ant-v5 as shipped. Measured (60
+    steps): |d qvel| 73, |d reward| 1.9, one termination differing (with 2: 12.1, 0.47, none).
+    1 iteration ran 1.45 M env steps/s on an H200 (physics alone, AutoReset, 25 contacts),
+    against 0.94 M with 2 (experiments/results/bench_h100_locomotion.txt)."""
+    one = AntFast.with_options(iterations=1)
+    worst = parity(Compiled(one(envs.make_hint("ant_fast", "none"), ("state",))), "Ant-v5", 60, same_termination=False)
+    assert worst["qvel"] > 30.0 or worst["termination_differs"] > 0
 
 
 @pytest.fixture(scope="module")
