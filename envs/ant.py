@@ -89,9 +89,9 @@ ABOVE_KNEES = tuple(f"{part}_geom" for part in ("aux_1", "aux_2", "aux_3", "aux_
 class AntFast(Ant):
     """`ant_fast`: the ant with cheaper physics, for work that needs throughput more than
     Gymnasium's dynamics. Euler instead of RK4 (one forward pass per substep, not four), Newton
-    capped at 2 iterations and 4 line-search steps (the ant's solve converges in 2; 1 is unstable,
-    see tests/envs/test_locomotion.py), and floor contacts only for the torso and the four lower
-    legs (9 contacts instead of 25). Reward, termination, observation and hints are the ant's.
+    capped at 2 iterations and 4 line-search steps (with Euler, 2 miss Gymnasium's steps by as
+    much as 4 do, and 1 by far more: tests/envs/test_locomotion.py), and floor contacts only for
+    the torso and the four lower legs (9 contacts instead of 25). Reward, termination, observation and hints are the ant's.
     Its distance from Ant-v5 as shipped and from MuJoCo C with the same changes is measured by
     the ant_fast tests in tests/envs/test_locomotion.py."""
 
