@@ -91,9 +91,9 @@ class AntFast(Ant):
     Gymnasium's dynamics. Euler instead of RK4 (one forward pass per substep, not four), Newton
     capped at 2 iterations and 4 line-search steps (with Euler, 2 miss Gymnasium's steps by as
     much as 4 do, and 1 by far more: tests/envs/test_locomotion.py), and floor contacts only for
-    the torso and the four lower legs (9 contacts instead of 25). Reward, termination, observation and hints are the ant's.
-    Its distance from Ant-v5 as shipped and from MuJoCo C with the same changes is measured by
-    the ant_fast tests in tests/envs/test_locomotion.py."""
+    the torso and the four lower legs (9 contacts instead of 25). Reward, termination,
+    observation and hints are the ant's. Its distance from Ant-v5 as shipped and from MuJoCo C
+    with the same changes is measured by the ant_fast tests in tests/envs/test_locomotion.py."""
 
     name = FAST_NAME
     options = {**Ant.options, "integrator": mujoco.mjtIntegrator.mjINT_EULER, "iterations": 2, "ls_iterations": 4}

@@ -59,7 +59,8 @@ NOTES = {
         "sweep started all four learners, stopped the two hint runs after 8 minutes and ppo_rgb after 16 "
         "(at update 3450, its checkpoint carried to the next machine), and let ppo_state finish alone; a "
         "second sweep resumed ppo_rgb beside hints-fc-velocity (its record was lost with the machine: about "
-        "1800 s by its log); hints-fc-goal_height trained alone on an H200 (1108 s). ppo_rgb's log lacks updates 3451 to 8600: each later call to the machine "
+        "1800 s by its log); hints-fc-goal_height trained alone on an H200 (1108 s). ppo_rgb's log lacks "
+        "updates 3451 to 8600: each later call to the machine "
         "copied the carried folder over the running one's, and the run, going on in memory, wrote on into "
         "the copy; its parameters and evaluation are whole, its curve joins update 3450 to 8601 with a "
         "straight line, and its training-return and KL cells cover the 4615 updates logged."),
