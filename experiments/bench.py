@@ -11,9 +11,11 @@ Measures, in one process on whatever device JAX sees:
            and without AutoReset (which otherwise draws a start, picture and all, every step)
   ceiling  the encoder + heads' own update rate: samples/s of one forward+backward+Adam step
            of the hints/fc network at batch 8192 (nothing else in the graph)
-  train    end-to-end training (rollout, GAE, epochs of minibatch updates), seed-vmapped:
-           env steps/s, and gradient samples/s = env steps/s x epochs, as a fraction of the
-           ceiling (1.0 would mean the GPU did nothing but full-batch updates)
+  train    end-to-end training (rollout, GAE, epochs of minibatch updates), seed-vmapped, timed
+           through run.train, the function the command line runs (compile apart), beside the same
+           updates as one bare jitted scan: env steps/s, and gradient samples/s = env steps/s x
+           epochs, as a fraction of the ceiling (1.0 would mean the GPU did nothing but full-batch
+           updates); and the milliseconds of one update's rollout, learning and env steps alone
 Each timing is the best of a few repetitions after a compile-and-warm-up call.
 """
 
@@ -24,6 +26,7 @@ import json
 import os
 import platform
 import time
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -141,20 +144,64 @@ def bench_ceiling(batch: int) -> dict:
     return {"batch": batch, "update_samples_per_s": batch / seconds}
 
 
-def bench_train(name: str, seeds: int, updates: int, overrides: dict) -> dict:
-    values = {"env": name, "agent": "hints", "scheme": "fc", "seeds": seeds,  # the env's default hint
-              "ppo": {"total_env_steps": 10**9, **overrides}}
+def bench_train(name: str, seeds: int, updates: int, overrides: dict, agent: str = "hints") -> dict:
+    """Training rate of the env's default cell (hints/fc with its default hint), two ways:
+    `env_steps_per_s` through run.train, the function `python -m hintsjax.run` calls (chunks,
+    checkpoints, logs; compile apart), and `scan_env_steps_per_s`, the same updates as one bare
+    jitted scan (no I/O), best of two after a warm-up; and the seconds of one update's parts."""
+    import tempfile
+
+    from hintsjax import run
+
+    values = {"env": name, "agent": agent, "scheme": "fc", "seeds": seeds, "eval_episodes": 1,
+              "checkpoint_every": min(10, updates), "ppo": overrides}
     cfg = run_config(values)
+    cfg = run_config({**values, "ppo": {**overrides, "total_env_steps": updates * cfg.ppo.batch_size}})
+    with tempfile.TemporaryDirectory() as folder:
+        results = run.train(cfg, Path(folder), progress=False)
     trainer = make_trainer(cfg)
     keys = jax.random.split(jax.random.key(0), seeds)
     state = jax.jit(jax.vmap(trainer.init))(keys)
-    run = jax.jit(jax.vmap(trainer.run, in_axes=(0, None)), static_argnums=1)
-    seconds = best_time(lambda s: run(s, updates)[1]["env_steps"], state, repeats=2)
+    scan = jax.jit(jax.vmap(trainer.run, in_axes=(0, None)), static_argnums=1)
+    seconds = best_time(lambda s: scan(s, updates)[1]["env_steps"], state, repeats=2)
     env_steps = seeds * updates * cfg.ppo.batch_size
     return {
-        "env": name, "seeds": seeds, "updates": updates, "ppo": {k: getattr(cfg.ppo, k) for k in ("num_envs", "batch_size", "epochs", "minibatch_size")},
-        "env_steps_per_s": env_steps / seconds,
-        "grad_samples_per_s": env_steps * cfg.ppo.epochs / seconds,
+        "env": name, "agent": agent, "seeds": seeds, "updates": updates,
+        "ppo": {k: getattr(cfg.ppo, k) for k in ("num_envs", "batch_size", "epochs", "minibatch_size")},
+        "env_steps_per_s": results["train_env_steps_per_s"],
+        "grad_samples_per_s": results["train_env_steps_per_s"] * cfg.ppo.epochs,
+        "compile_s": results["compile_seconds"],
+        "scan_env_steps_per_s": env_steps / seconds,
+        "update_parts_s": update_parts(cfg, state),
+    }
+
+
+def update_parts(cfg, state) -> dict:
+    """Seconds of one seed-vmapped PPO update's parts: the rollout (env steps with pictures and
+    the policy's actions), the learning (GAE and the epochs of minibatch steps), and the env steps
+    alone (random actions, same envs)."""
+    from hintsjax.ppo import make_ppo
+
+    parts = make_ppo(cfg)
+    key = jax.random.split(jax.random.key(1), cfg.seeds)
+    rollout = jax.jit(jax.vmap(parts.rollout))
+    _, traj, last = rollout(state, key)
+    learn = jax.jit(jax.vmap(parts.learn))
+    env, N = parts.env, cfg.ppo.num_envs
+
+    @jax.jit
+    def env_only(env_state, key):
+        def step(s, k):
+            k_act, k_env = jax.random.split(k)
+            action = jax.random.uniform(k_act, (N, env.action_size), minval=-1, maxval=1)
+            out = jax.vmap(env.step, in_axes=(0, 0, 0, None))(jax.random.split(k_env, N), s, action, parts.env_params)
+            return out.state, out.reward.sum()
+        return jax.lax.scan(step, env_state, jax.random.split(key, cfg.ppo.rollout_length))
+
+    return {
+        "rollout": best_time(lambda s, k: rollout(s, k)[2], state, key),
+        "learn": best_time(lambda s: learn(s, traj, last, traj.reward, key)[1]["approx_kl"], state),
+        "env_steps_only": best_time(jax.vmap(env_only), state.env_state, key),
     }
 
 
@@ -168,6 +215,9 @@ def main() -> None:
                         help="add rows with starts drawn once per rollout of 8 steps, and without AutoReset")
     parser.add_argument("--default-train-only", action="store_true",
                         help="one training row per env: 5 seeds at the env's default settings")
+    parser.add_argument("--parts", action="store_true",
+                        help="only the milliseconds of one update's parts (rollout, learning, env steps alone) "
+                             "of each env's default cell at 5 seeds")
     parser.add_argument("--quick", action="store_true", help="small sizes (a CPU smoke run)")
     parser.add_argument("--model-option", action="append", default=[], metavar="FIELD=VALUE",
                         help="env rows of MJX envs: override an mj_model.opt field, e.g. integrator=EULER or "
@@ -186,6 +236,14 @@ def main() -> None:
     if options and not set(names) <= set(mjx_envs):
         parser.exit(2, f"error: --model-option applies to MJX envs only: {', '.join(mjx_envs)}\n")
     q = args.quick
+    if args.parts:
+        for name in names:
+            cfg = run_config({"env": name, "agent": "hints", "scheme": "fc", "seeds": 5})
+            state = jax.jit(jax.vmap(make_trainer(cfg).init))(cfg.seed_keys())
+            parts = update_parts(cfg, state)
+            print(f"update  {name:>9} 5 seeds {cfg.ppo.num_envs} envs x {cfg.ppo.rollout_length} steps: "
+                  + ", ".join(f"{k} {1e3 * v:.1f} ms" for k, v in parts.items()), flush=True)
+        return
     results = {"device": str(jax.devices()[0].device_kind), "platform": jax.default_backend(),
                "jax": jax.__version__, "python": platform.python_version(), "xla_flags": os.environ.get("XLA_FLAGS", "")}
     results["ceiling"] = bench_ceiling(8192 if not q else 64)
@@ -207,11 +265,14 @@ def main() -> None:
                     if not q else ((2, {"num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}),))
         settings = settings[:1] if args.default_train_only else settings
         for seeds, overrides in settings if not args.no_train else ():
-            r = bench_train(name, seeds, 8 if not q else 2, overrides)
+            r = bench_train(name, seeds, 40 if not q else 2, overrides)
             r["fraction_of_ceiling"] = r["grad_samples_per_s"] / ceiling
             results["train"].append(r)
-            print(f"train   {name:>9} {seeds:>3} seeds {r['ppo']}: {r['env_steps_per_s']:,.0f} env steps/s, "
-                  f"{r['grad_samples_per_s']:,.0f} grad samples/s = {r['fraction_of_ceiling']:.0%} of ceiling", flush=True)
+            print(f"train   {name:>9} {seeds:>3} seeds {r['ppo']}: {r['env_steps_per_s']:,.0f} env steps/s "
+                  f"through run.train (bare scan {r['scan_env_steps_per_s']:,.0f}), "
+                  f"{r['grad_samples_per_s']:,.0f} grad samples/s = {r['fraction_of_ceiling']:.0%} of ceiling; "
+                  f"compile {r['compile_s']['train']:.1f} s; one update: "
+                  + ", ".join(f"{k} {1e3 * v:.1f} ms" for k, v in r["update_parts_s"].items()), flush=True)
     if args.out:
         with open(args.out, "w") as f:
             json.dump(results, f, indent=1)

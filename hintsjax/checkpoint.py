@@ -1,4 +1,12 @@
-"""Orbax checkpoints of the full runner state (params, optimiser state, env state, RNG, step)."""
+"""Orbax checkpoints of the full runner state (params, optimiser state, env state, RNG, step).
+
+`save` blocks until the checkpoint is written, except inside `writing(run_dir)` (the run loop):
+there it returns once the arrays are copied off the device and orbax writes the files in a
+background thread (its async checkpointing), so training goes on meanwhile. Either way a
+checkpoint appears in its folder only when complete (orbax finalises it by an atomic rename), so
+a process killed mid-write keeps the previous one. Leaving `writing` waits for the writes and
+reports a failed one.
+"""
 
 from __future__ import annotations
 
@@ -14,10 +22,30 @@ from hintsjax.config import RunConfig, UsageError
 CHECKPOINTS = "checkpoints"
 
 
-def _manager(run_dir: Path, create: bool) -> ocp.CheckpointManager:
-    options = ocp.CheckpointManagerOptions(max_to_keep=2, create=create)
+class CheckpointWriteError(RuntimeError):
+    """A checkpoint could not be written (disk full, folder removed): the run stops, and the
+    newest complete checkpoint is the one to resume from."""
+
+
+def _manager(run_dir: Path, create: bool, background: bool = False) -> ocp.CheckpointManager:
+    options = ocp.CheckpointManagerOptions(max_to_keep=2, create=create, enable_async_checkpointing=background)
     return ocp.CheckpointManager((Path(run_dir) / CHECKPOINTS).absolute(), options=options,
                                  item_handlers=ocp.StandardCheckpointHandler())
+
+
+_WRITERS: dict[Path, ocp.CheckpointManager] = {}  # folders inside `writing`: their async managers
+
+
+@contextlib.contextmanager
+def writing(run_dir: Path):
+    """Within this block `save(run_dir, ...)` writes in the background; leaving it waits for the
+    writes to finish (CheckpointWriteError if one failed), also when the block is left by an
+    exception, so an interrupted run keeps the checkpoint it was writing."""
+    _WRITERS[Path(run_dir).absolute()] = _manager(run_dir, create=True, background=True)
+    try:
+        yield
+    finally:
+        flush(run_dir)
 
 
 def _array_specs(tree) -> list[tuple[tuple[int, ...], str]]:
@@ -59,13 +87,50 @@ def _raw_keys(state):
 
 
 def save(run_dir: Path, state, update: int) -> None:
-    """Save the seed-batched runner state after `update` updates (blocking)."""
-    with _manager(run_dir, create=True) as manager:
+    """Save the seed-batched runner state after `update` updates: in the background inside
+    `writing(run_dir)` (after this folder's previous write is done), else blocking.
+    CheckpointWriteError if this or an earlier background write failed."""
+    manager = _WRITERS.get(Path(run_dir).absolute())
+    try:
+        if manager is None:
+            with _manager(run_dir, create=True) as blocking:
+                blocking.save(update, args=ocp.args.StandardSave(_raw_keys(state)))
+                blocking.wait_until_finished()
+            return
+        manager.check_for_errors()
         manager.save(update, args=ocp.args.StandardSave(_raw_keys(state)))
+    except Exception as e:
+        raise CheckpointWriteError(f"could not write checkpoint {update} in {run_dir}: {_first_line(e)}") from None
+
+
+def saving(run_dir: Path) -> bool:
+    """Whether a checkpoint of `run_dir` is still being written."""
+    manager = _WRITERS.get(Path(run_dir).absolute())
+    return manager is not None and manager.is_saving_in_progress()
+
+
+def flush(run_dir: Path) -> None:
+    """Wait until the background writes into `run_dir` are complete and stop writing in the
+    background; CheckpointWriteError naming the first that failed (the complete ones stay)."""
+    manager = _WRITERS.pop(Path(run_dir).absolute(), None)
+    if manager is None:
+        return
+    try:
         manager.wait_until_finished()
+        manager.check_for_errors()
+    except Exception as e:
+        raise CheckpointWriteError(f"could not write a checkpoint in {run_dir}: {_first_line(e)}") from None
+    finally:
+        with contextlib.suppress(Exception):
+            manager.close()
+
+
+def _first_line(e: Exception) -> str:
+    return str(e).strip().splitlines()[0][:200] if str(e).strip() else type(e).__name__
 
 
 def latest_update(run_dir: Path) -> int | None:
+    """The update of the newest complete checkpoint in `run_dir` (None without any)."""
     path = Path(run_dir) / CHECKPOINTS
     if not path.is_dir():
         return None
@@ -92,9 +157,8 @@ def restore_latest(run_dir: Path, cfg: RunConfig, trainer=None):
             require_same_arrays(manager.item_metadata(update), expected, "the config gives")
             raw = manager.restore(update, args=ocp.args.StandardRestore(expected))
     except Exception as e:  # orbax raises many types for unreadable or mismatched files
-        reason = str(e).strip().splitlines()[0][:200] if str(e).strip() else type(e).__name__
         raise UsageError(
-            f"checkpoint {update} in {run_dir} is corrupt or does not match its config.yaml: {reason}"
+            f"checkpoint {update} in {run_dir} is corrupt or does not match its config.yaml: {_first_line(e)}"
         ) from None
     state = jax.tree.map(
         lambda a, r: jax.random.wrap_key_data(r) if jax.dtypes.issubdtype(a.dtype, jax.dtypes.prng_key) else r,

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from pathlib import Path
 from typing import Any, Callable
 
@@ -38,16 +39,16 @@ class EvalResult:
     metrics: dict[str, jax.Array] = struct.field(default_factory=dict)
 
 
-def make_evaluator(
-    cfg: RunConfig, variant: str | None, num_episodes: int, stochastic: bool = False
-) -> Callable[[Any, jax.Array], EvalResult]:
-    """`evaluate(params, key) -> EvalResult[E]` for one seed's params; vmap it over seeds."""
+def make_task_evaluator(
+    cfg: RunConfig, num_episodes: int, stochastic: bool = False
+) -> Callable[[Any, jax.Array, Any], EvalResult]:
+    """`evaluate(params, key, task_params) -> EvalResult[E]` for one seed's params on any variant
+    of the env (its params are an argument, so one compiled program serves every variant)."""
     env = cfg.make_env()
-    task_params = envs.make_params(cfg.env, variant)
     network = make_network(cfg, env)
     metrics_of = jax.vmap(env.metrics, in_axes=(0, None))
 
-    def evaluate(params: Any, key: jax.Array) -> EvalResult:
+    def evaluate(params: Any, key: jax.Array, task_params: Any) -> EvalResult:
         k_reset, k_run = jax.random.split(key)
         ts = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_reset, num_episodes), task_params)
 
@@ -77,6 +78,15 @@ def make_evaluator(
         return EvalResult(ret, length, metrics)
 
     return evaluate
+
+
+def make_evaluator(
+    cfg: RunConfig, variant: str | None, num_episodes: int, stochastic: bool = False
+) -> Callable[[Any, jax.Array], EvalResult]:
+    """`evaluate(params, key) -> EvalResult[E]` for one seed's params on `variant`; vmap it over seeds."""
+    evaluate = make_task_evaluator(cfg, num_episodes, stochastic)
+    task_params = envs.make_params(cfg.env, variant)
+    return lambda params, key: evaluate(params, key, task_params)
 
 
 def eval_keys(cfg: RunConfig) -> jax.Array:
@@ -111,11 +121,23 @@ def metrics_text(summary: dict[str, Any]) -> str:
     return "".join(f"  {n} {summary[n + '_mean']:.2f} +- {summary[n + '_std']:.2f}" for n in names)
 
 
+def evaluate_variants(cfg: RunConfig, params: Any, variants: tuple[str | None, ...], episodes: int,
+                      stochastic: bool) -> tuple[list[dict], float]:
+    """Evaluate seed-batched params on each variant, all seeds x episodes in one call per variant
+    of one program compiled once; (one summary per variant, seconds spent compiling)."""
+    keys = eval_keys(cfg)
+    task_params = [envs.make_params(cfg.env, v) for v in variants]
+    t = time.perf_counter()
+    evaluate = jax.jit(jax.vmap(make_task_evaluator(cfg, episodes, stochastic), in_axes=(0, 0, None)))
+    evaluate = evaluate.lower(params, keys, task_params[0]).compile()
+    compile_seconds = time.perf_counter() - t
+    return [{"variant": v or envs.variant_names(cfg.env)[0], "stochastic": stochastic,
+             **summarize(evaluate(params, keys, p))} for v, p in zip(variants, task_params)], compile_seconds
+
+
 def evaluate_params(cfg: RunConfig, params: Any, variant: str | None, episodes: int, stochastic: bool) -> dict:
     """Evaluate seed-batched params on one variant: all seeds x episodes in one jitted call."""
-    evaluate = jax.jit(jax.vmap(make_evaluator(cfg, variant, episodes, stochastic)))
-    summary = summarize(evaluate(params, eval_keys(cfg)))
-    return {"variant": variant or envs.variant_names(cfg.env)[0], "stochastic": stochastic, **summary}
+    return evaluate_variants(cfg, params, (variant,), episodes, stochastic)[0][0]
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -14,31 +14,39 @@ from __future__ import annotations
 import json
 import sys
 import time
+from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import hydra
 import jax
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from hintsjax import checkpoint, expert
+from hintsjax import checkpoint, compilation_cache, expert
 from hintsjax.config import RunConfig, UsageError, fail, load_run_config, run_config, save_run_config
-from hintsjax.evaluate import evaluate_params, metrics_text
+from hintsjax.evaluate import evaluate_variants, metrics_text
 from hintsjax.algorithms import make_trainer
 from hintsjax.runlog import CURVE_PNG, METRICS_CSV, RunLog, plot_curves, read_curves
+from hintsjax.trainer import Trainer
 
 EVAL_JSON = "eval.json"
 
 
+def seed_sharding(seeds: int) -> jax.sharding.Sharding | None:
+    """The seed axis split over this machine's devices when several divide it (None: one device)."""
+    devices = jax.devices()
+    if len(devices) > 1 and seeds % len(devices) == 0:
+        mesh = jax.sharding.Mesh(np.array(devices), ("seeds",))
+        return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("seeds"))
+    return None
+
+
 def seed_keys(cfg: RunConfig) -> tuple[jax.Array, int]:
     """[S] training keys, sharded over the seed axis when several devices divide it; and how many devices."""
-    keys = cfg.seed_keys()
-    devices = jax.devices()
-    if len(devices) > 1 and cfg.seeds % len(devices) == 0:
-        mesh = jax.sharding.Mesh(np.array(devices), ("seeds",))
-        return jax.device_put(keys, jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("seeds"))), len(devices)
-    return keys, 1
+    keys, sharding = cfg.seed_keys(), seed_sharding(cfg.seeds)
+    return (keys, 1) if sharding is None else (jax.device_put(keys, sharding), len(jax.devices()))
 
 
 def new_run_dir(out_dir: str, name: str | None, cfg: RunConfig) -> Path:
@@ -60,45 +68,100 @@ def seconds_trained(run_dir: Path) -> float:
     return json.loads(path.read_text())["seconds"] if path.exists() else 0.0
 
 
+@dataclass(frozen=True)
+class Compiled:
+    """A run's training programs, compiled ahead of time for its seed-batched state."""
+
+    init: Callable[[jax.Array], Any]  # [S] keys -> state
+    # (state, n) -> (state n updates on, metrics [S, chunk]): the first n <= chunk updates of one
+    # program, so every chunk, the shorter last one too, runs the same compiled code
+    run_chunk: Callable[[Any, np.int32], tuple[Any, dict[str, jax.Array]]]
+    chunk: int
+    seconds: float  # spent tracing and compiling both
+
+
+def compile_training(trainer: Trainer, keys: jax.Array, chunk: int) -> Compiled:
+    """Compile `trainer`'s init and its chunk of `chunk` updates for the seed keys' batch (every
+    array of the state and the metrics split over devices by its seed axis, if the keys are)."""
+    t = time.perf_counter()
+    seeds = seed_sharding(keys.shape[0]) if len(keys.devices()) > 1 else None
+    placed = (lambda f, args: jax.jit(f, in_shardings=args, out_shardings=seeds)) if seeds else (lambda f, _: jax.jit(f))
+    init = placed(jax.vmap(trainer.init), seeds).lower(keys).compile()
+    run = placed(jax.vmap(partial(trainer.run_chunk, length=chunk), in_axes=(0, None)), (seeds, None))
+    run_chunk = run.lower(jax.eval_shape(jax.vmap(trainer.init), keys), np.int32(chunk)).compile()
+    return Compiled(init, run_chunk, chunk, time.perf_counter() - t)
+
+
 def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = True) -> dict[str, Any]:
-    """Train all seeds (in chunks, with checkpoints), evaluate, plot; returns eval results."""
+    """Train all seeds (in chunks, with checkpoints), evaluate, plot; returns eval results.
+
+    The device never waits on the host: each chunk is dispatched before the previous one's
+    metrics are written and its state checkpointed (in the background), so logging and saving
+    overlap with training. A save that comes due while the previous one is still being written
+    is skipped (the newest complete checkpoint is then at most one write old); the last update
+    is always saved. Compile seconds are reported apart from training seconds.
+    """
     from tqdm import tqdm
 
     trainer = make_trainer(cfg)
     keys, num_devices = seed_keys(cfg)
     total = cfg.ppo.num_updates
-    if resume:
+    compiled = compile_training(trainer, keys, min(cfg.checkpoint_every, total))
+    if resume:  # restored onto one device: placed as the compiled chunk expects (seeds sharded, if they are)
         state, done = checkpoint.restore_latest(run_dir, cfg, trainer)
+        state = jax.device_put(state, compiled.run_chunk.input_shardings[0][0])
     else:
-        state, done = jax.jit(jax.vmap(trainer.init))(keys), 0
+        state, done = compiled.init(keys), 0
     print(f"{cfg.env} {cfg.label}: {cfg.seeds} seeds x {total} updates of {cfg.ppo.batch_size} env steps "
-          f"on {num_devices} {jax.default_backend()} device(s) -> {run_dir}", flush=True)
-    run_chunk = jax.jit(jax.vmap(trainer.run, in_axes=(0, None)), static_argnums=1)
+          f"on {num_devices} {jax.default_backend()} device(s), compiled in {compiled.seconds:.1f} s -> {run_dir}",
+          flush=True)
     log = RunLog(run_dir, resume_update=done)
     before = seconds_trained(run_dir) if resume else 0.0  # kept work of earlier calls
+    first = done
     bar = tqdm(total=total, initial=done, unit="upd", disable=not progress, desc=f"{cfg.env} {cfg.label}")
-    t0 = saved = time.time()
-    while done < total:
-        n = min(cfg.checkpoint_every, total - done)
-        state, metrics = run_chunk(state, n)
-        metrics = jax.tree.map(np.asarray, metrics)
-        log.write(metrics, done)
-        done += n
-        if done == total or time.time() - saved >= cfg.checkpoint_seconds:
-            checkpoint.save(run_dir, state, done)
-            saved = time.time()
-            (run_dir / SECONDS_JSON).write_text(json.dumps({"update": done, "seconds": before + saved - t0}))
+    t0 = saved = time.perf_counter()
+
+    def save(state: Any, update: int) -> None:
+        nonlocal saved
+        checkpoint.save(run_dir, state, update)
+        saved = time.perf_counter()
+        (run_dir / SECONDS_JSON).write_text(json.dumps({"update": update, "seconds": before + saved - t0,
+                                                         "compile_seconds": compiled.seconds}))
+
+    def report(metrics: dict[str, jax.Array], after: int, n: int) -> None:
+        metrics = {k: np.asarray(v)[:, :n] for k, v in metrics.items()}  # waits for that chunk only
+        log.write(metrics, after)
         returns = metrics["episode_return"][:, -1]
-        bar.set_postfix(steps=int(metrics["env_steps"][0, -1]), ret=f"{np.nanmean(returns):.1f}" if not np.all(np.isnan(returns)) else "-")
+        bar.set_postfix(steps=int(metrics["env_steps"][0, -1]),
+                        ret=f"{np.nanmean(returns):.1f}" if not np.all(np.isnan(returns)) else "-")
         bar.update(n)
-    bar.close()
-    log.close()
-    train_seconds = time.time() - t0
+
+    pending = None  # (metrics, updates before, length) of the chunk dispatched last
+    try:
+        with checkpoint.writing(run_dir):
+            while done < total:
+                n = min(compiled.chunk, total - done)
+                following, metrics = compiled.run_chunk(state, np.int32(n))  # returns at once; the device works on
+                if pending is not None:
+                    report(*pending)
+                if (done > first and time.perf_counter() - saved >= cfg.checkpoint_seconds
+                        and not checkpoint.saving(run_dir)):
+                    save(state, done)  # the state this chunk started from: computed, copied off as the chunk runs
+                state, pending, done = following, (metrics, done, n), done + n
+            if pending is not None:
+                report(*pending)
+            save(state, total)
+    finally:
+        bar.close()
+        log.close()
+    train_seconds = time.perf_counter() - t0
+    variants = (cfg.variant, *cfg.eval_variants)
+    evaluations, eval_compile = evaluate_variants(cfg, state.params, variants, cfg.eval_episodes, cfg.stochastic_eval)
     results = {"label": cfg.label, "env": cfg.env, "train_seconds_this_call": train_seconds,
                "train_seconds": before + train_seconds,
-               "env_steps": total * cfg.ppo.batch_size, "evaluations": []}
-    for variant in (cfg.variant, *cfg.eval_variants):
-        results["evaluations"].append(evaluate_params(cfg, state.params, variant, cfg.eval_episodes, cfg.stochastic_eval))
+               "compile_seconds": {"train": compiled.seconds, "eval": eval_compile},
+               "train_env_steps_per_s": (total - first) * cfg.ppo.batch_size * cfg.seeds / train_seconds,
+               "env_steps": total * cfg.ppo.batch_size, "evaluations": evaluations}
     (run_dir / EVAL_JSON).write_text(json.dumps(results, indent=1))
     if (run_dir / METRICS_CSV).exists():
         plot_curves({cfg.label: read_curves(run_dir / METRICS_CSV)}, run_dir / CURVE_PNG, f"{cfg.env}: {cfg.label}")
@@ -111,6 +174,7 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
 def main_from_values(values: dict[str, Any]) -> int:
     """Run from plain config values (what Hydra resolved); returns the exit status."""
     values = dict(values)
+    cache = values.pop("compilation_cache", None)
     try:
         resume = values.pop("resume", None)
         out_dir, name = values.pop("out_dir", "runs"), values.pop("name", None)
@@ -124,6 +188,7 @@ def main_from_values(values: dict[str, Any]) -> int:
             expert.describe(cfg.env, cfg.expert)  # a missing or foreign expert fails before any folder is made
     except UsageError as e:
         return fail(e)
+    compilation_cache.enable(compilation_cache.folder(cache))
     if run_dir is None:
         run_dir = new_run_dir(out_dir, name, cfg)
         save_run_config(run_dir, cfg)
@@ -131,6 +196,9 @@ def main_from_values(values: dict[str, Any]) -> int:
         train(cfg, run_dir, resume=resume is not None)
     except UsageError as e:
         return fail(e)
+    except checkpoint.CheckpointWriteError as e:  # the newest complete checkpoint stays; resume from it
+        print(f"error: {e}", file=sys.stderr)
+        return 1
     return 0
 
 

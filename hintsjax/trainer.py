@@ -1,7 +1,9 @@
 """What every training algorithm builds: a `Trainer` of pure functions over one run's state.
 
 `init(key)` builds the state, `update(state)` advances it by one update and returns that
-update's metrics; `run(state, n)` is `n` updates in one `lax.scan` and `train(key)` the whole run.
+update's metrics; `run(state, n)` is `n` updates in one `lax.scan` and `train(key)` the whole run; `run_chunk(state, n,
+length)` is one compiled program for every chunk of a chunked run (the first `n` of `length`
+updates happen, `n` a traced number), so a shorter last chunk does not compile again.
 All are pure, so `jax.jit(jax.vmap(trainer.train))(keys)` trains many seeds at once, and chunking
 `run` between checkpoints gives the same result as one call. The state is any pytree with a
 `params` field (the policy's ActorCritic parameters, which evaluation uses) and an `update`
@@ -32,6 +34,21 @@ class Trainer:
     def run(self, state: Any, num_updates: int) -> tuple[Any, dict[str, jax.Array]]:
         """Advance `num_updates` updates; metrics are [num_updates]-stacked."""
         return jax.lax.scan(lambda s, _: self.update(s), state, None, length=num_updates)
+
+    def run_chunk(self, state: Any, count: jax.Array, length: int) -> tuple[Any, dict[str, jax.Array]]:
+        """The first `count` of `length` updates (`count` may be traced); metrics are [length]-stacked,
+        those after `count` filled with NaN (0 for integer metrics) and the state left as it was."""
+        update = jax.jit(self.update)  # traced once: its shapes below and the branch reuse the trace
+        shapes = jax.eval_shape(lambda s: update(s)[1], state)
+        blank = jax.tree.map(lambda x: jnp.full(x.shape, jnp.nan if jnp.issubdtype(x.dtype, jnp.floating) else 0,
+                                                x.dtype), shapes)
+
+        def body(s, i):
+            # Under vmap over seeds `count` and `i` stay unbatched, so this is a real branch: a
+            # skipped update costs nothing.
+            return jax.lax.cond(i < count, update, lambda s: (s, blank), s)
+
+        return jax.lax.scan(body, state, jnp.arange(length))
 
     def train(self, key: jax.Array) -> tuple[Any, dict[str, jax.Array]]:
         """The whole run from a seed key: the function that is vmapped over seeds."""

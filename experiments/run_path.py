@@ -1,0 +1,101 @@
+"""What the command a user types delivers: `python -m hintsjax.run` timed end to end, beside the bench.
+
+    python experiments/run_path.py [--cells pendulum,ant] [--ant-updates 200] [--out experiments/results/run_path.json]
+
+For each cell (pendulum: hints/fc/composite; ant: hints/fc/speed, the env defaults otherwise),
+the command runs twice in a fresh process, first with an empty compilation cache (cold), then
+with the cache the first run filled (warm). Each row: `cell_wall_s` (the whole command, start-up,
+compiles, training, evaluation and plotting), `compile_s` (training and evaluation programs),
+`train_env_steps_per_s` (the command's training rate, compile excluded), and
+`bench_env_steps_per_s` (the same updates as one bare jitted scan: experiments/bench.py's
+`scan_env_steps_per_s`) from the same process kind on the same device. A cell whose full budget
+does not fit a device lease (the ant's 5 M steps) is trained for `--ant-updates` updates and its
+full wall is extrapolated at the measured rate: such rows say so (`updates`, `full_cell_wall_s`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+CELLS = {"pendulum": ["env=pendulum", "agent=hints", "hint=composite", "scheme=fc"],
+         "ant": ["env=ant", "agent=hints", "hint=speed", "scheme=fc"]}
+
+
+def timed_command(args: list[str], cache: Path, out_dir: Path) -> tuple[float, dict]:
+    """Run the command once; (wall seconds, its eval.json)."""
+    name = f"r{time.time_ns()}"
+    t = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "hintsjax.run", *args, f"out_dir={out_dir}", f"name={name}",
+                    f"compilation_cache={cache}"], check=True)
+    wall = time.perf_counter() - t
+    return wall, json.loads((out_dir / name / "eval.json").read_text())
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cells", default="pendulum,ant", help=f"comma-separated subset of {', '.join(CELLS)}")
+    parser.add_argument("--ant-updates", type=int, default=200, help="updates of the ant cell (its full budget is 4882)")
+    parser.add_argument("--out", type=Path, default=None)
+    args = parser.parse_args()
+    cells = [c for c in args.cells.split(",") if c]
+    unknown = [c for c in cells if c not in CELLS]
+    if unknown:
+        parser.exit(2, f"error: unknown cell {unknown}; valid choices: {', '.join(CELLS)}\n")
+    if args.ant_updates < 1:
+        parser.exit(2, "error: --ant-updates must be at least 1\n")
+    import jax
+
+    import hintsjax
+    from hintsjax.config import run_config
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench import bench_train
+
+    rows = []
+    for cell in cells:
+        values = dict(a.split("=") for a in CELLS[cell])
+        cfg = run_config(values)
+        budget = []
+        if cell == "ant":
+            budget = [f"ppo.total_env_steps={args.ant_updates * cfg.ppo.batch_size}"]
+        cache = Path(tempfile.mkdtemp(prefix="xla-cache-"))
+        with tempfile.TemporaryDirectory() as out:
+            for warm in (False, True):
+                wall, result = timed_command(CELLS[cell] + budget, cache, Path(out))
+                updates = result["env_steps"] // cfg.ppo.batch_size
+                compile_s = sum(result["compile_seconds"].values())
+                row = {"env": cell, "label": result["label"], "cell_wall_s": wall, "compile_s": compile_s,
+                       "compile_s_parts": result["compile_seconds"], "updates": updates,
+                       "train_env_steps_per_s": result["train_env_steps_per_s"],
+                       "device": jax.devices()[0].device_kind, "jax": jax.__version__,
+                       "deterministic": jax.default_backend() == "cpu" or hintsjax.deterministic_gpu_ops(),
+                       "warm_cache": warm}
+                if updates < cfg.ppo.num_updates:  # extrapolated to the full budget at the measured rate
+                    rest = (cfg.ppo.num_updates - updates) * cfg.ppo.batch_size * cfg.seeds
+                    row["full_cell_wall_s"] = wall + rest / result["train_env_steps_per_s"]
+                rows.append(row)
+                print(json.dumps(row), flush=True)
+        shutil.rmtree(cache, ignore_errors=True)
+        bench = bench_train(cell, cfg.seeds, 40, {})
+        for row in rows:
+            if row["env"] == cell:
+                row["bench_env_steps_per_s"] = bench["scan_env_steps_per_s"]
+                row["cli_fraction_of_bench"] = row["train_env_steps_per_s"] / bench["scan_env_steps_per_s"]
+                row["update_parts_s"] = bench["update_parts_s"]
+        print(json.dumps({"bench": bench}), flush=True)
+    if args.out:
+        args.out.write_text(json.dumps({"command": "python experiments/run_path.py " + " ".join(sys.argv[1:]),
+                                        "rows": rows}, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("PYTHONUNBUFFERED", "1")
+    main()
