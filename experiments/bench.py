@@ -31,9 +31,10 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import mujoco
+import numpy as np
 import optax
 
-from hintsjax import envs
+from hintsjax import compilation_cache, envs
 from hintsjax.config import ENV_DEFAULTS, run_config
 from hintsjax.ppo import gaussian_log_prob, make_network, make_optimizer, make_trainer
 
@@ -147,23 +148,29 @@ def bench_ceiling(batch: int) -> dict:
 def bench_train(name: str, seeds: int, updates: int, overrides: dict, agent: str = "hints") -> dict:
     """Training rate of the env's default cell (hints/fc with its default hint), two ways:
     `env_steps_per_s` through run.train, the function `python -m hintsjax.run` calls (chunks,
-    checkpoints, logs; compile apart), and `scan_env_steps_per_s`, the same updates as one bare
-    jitted scan (no I/O), best of two after a warm-up; and the seconds of one update's parts."""
+    checkpoints, logs; compile apart), and `scan_env_steps_per_s`, the same compiled chunks called
+    back to back with nothing else on the host (no logs, no checkpoints), best of two; and the
+    seconds of one update's parts."""
     import tempfile
 
     from hintsjax import run
 
-    values = {"env": name, "agent": agent, "scheme": "fc", "seeds": seeds, "eval_episodes": 1,
-              "checkpoint_every": min(10, updates), "ppo": overrides}
+    values = {"env": name, "agent": agent, "scheme": "fc", "seeds": seeds, "checkpoint_every": min(10, updates),
+              "ppo": overrides}
     cfg = run_config(values)
     cfg = run_config({**values, "ppo": {**overrides, "total_env_steps": updates * cfg.ppo.batch_size}})
     with tempfile.TemporaryDirectory() as folder:
         results = run.train(cfg, Path(folder), progress=False)
-    trainer = make_trainer(cfg)
-    keys = jax.random.split(jax.random.key(0), seeds)
-    state = jax.jit(jax.vmap(trainer.init))(keys)
-    scan = jax.jit(jax.vmap(trainer.run, in_axes=(0, None)), static_argnums=1)
-    seconds = best_time(lambda s: scan(s, updates)[1]["env_steps"], state, repeats=2)
+    compiled = run.compile_training(make_trainer(cfg), cfg.seed_keys(), cfg.checkpoint_every)
+    state = compiled.init(cfg.seed_keys())
+
+    def back_to_back(state):
+        for _ in range(updates // compiled.chunk):
+            state, metrics = compiled.run_chunk(state, np.int32(compiled.chunk))
+        return metrics["env_steps"]
+
+    seconds = best_time(back_to_back, state, repeats=2)
+    updates = updates // compiled.chunk * compiled.chunk
     env_steps = seeds * updates * cfg.ppo.batch_size
     return {
         "env": name, "agent": agent, "seeds": seeds, "updates": updates,
@@ -244,6 +251,7 @@ def main() -> None:
             print(f"update  {name:>9} 5 seeds {cfg.ppo.num_envs} envs x {cfg.ppo.rollout_length} steps: "
                   + ", ".join(f"{k} {1e3 * v:.1f} ms" for k, v in parts.items()), flush=True)
         return
+    compilation_cache.enable(compilation_cache.folder(True))  # as the command line: a second bench compiles little
     results = {"device": str(jax.devices()[0].device_kind), "platform": jax.default_backend(),
                "jax": jax.__version__, "python": platform.python_version(), "xla_flags": os.environ.get("XLA_FLAGS", "")}
     results["ceiling"] = bench_ceiling(8192 if not q else 64)

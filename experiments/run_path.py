@@ -7,8 +7,9 @@ the command runs twice in a fresh process, first with an empty compilation cache
 with the cache the first run filled (warm). Each row: `cell_wall_s` (the whole command, start-up,
 compiles, training, evaluation and plotting), `compile_s` (training and evaluation programs),
 `train_env_steps_per_s` (the command's training rate, compile excluded), and
-`bench_env_steps_per_s` (the same updates as one bare jitted scan: experiments/bench.py's
-`scan_env_steps_per_s`) from the same process kind on the same device. A cell whose full budget
+`bench_env_steps_per_s` (the same compiled chunks called back to back with nothing else on the
+host: experiments/bench.py's `scan_env_steps_per_s`), and the milliseconds of one update's
+parts, measured in this process on the same device. A cell whose full budget
 does not fit a device lease (the ant's 5 M steps) is trained for `--ant-updates` updates and its
 full wall is extrapolated at the measured rate: such rows say so (`updates`, `full_cell_wall_s`).
 """
@@ -54,6 +55,7 @@ def main() -> None:
     import jax
 
     import hintsjax
+    from hintsjax import compilation_cache
     from hintsjax.config import run_config
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -83,8 +85,9 @@ def main() -> None:
                     row["full_cell_wall_s"] = wall + rest / result["train_env_steps_per_s"]
                 rows.append(row)
                 print(json.dumps(row), flush=True)
-        shutil.rmtree(cache, ignore_errors=True)
+        compilation_cache.enable(cache)  # the bench's programs are the command's: compiled above
         bench = bench_train(cell, cfg.seeds, 40, {})
+        shutil.rmtree(cache, ignore_errors=True)
         for row in rows:
             if row["env"] == cell:
                 row["bench_env_steps_per_s"] = bench["scan_env_steps_per_s"]

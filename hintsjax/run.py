@@ -59,7 +59,9 @@ def new_run_dir(out_dir: str, name: str | None, cfg: RunConfig) -> Path:
     return run_dir
 
 
-SECONDS_JSON = "seconds.json"  # training seconds up to the newest checkpoint, summed over resumed calls
+# Training seconds (compiles excluded) up to the newest checkpoint, summed over resumed calls; and
+# this call's compile seconds, of which tracing (Python).
+SECONDS_JSON = "seconds.json"
 
 
 def seconds_trained(run_dir: Path) -> float:
@@ -78,6 +80,7 @@ class Compiled:
     run_chunk: Callable[[Any, np.int32], tuple[Any, dict[str, jax.Array]]]
     chunk: int
     seconds: float  # spent tracing and compiling both
+    trace_seconds: float  # of which tracing and lowering to XLA (Python; the persistent cache cannot save it)
 
 
 def compile_training(trainer: Trainer, keys: jax.Array, chunk: int) -> Compiled:
@@ -86,10 +89,12 @@ def compile_training(trainer: Trainer, keys: jax.Array, chunk: int) -> Compiled:
     t = time.perf_counter()
     seeds = seed_sharding(keys.shape[0]) if len(keys.devices()) > 1 else None
     placed = (lambda f, args: jax.jit(f, in_shardings=args, out_shardings=seeds)) if seeds else (lambda f, _: jax.jit(f))
-    init = placed(jax.vmap(trainer.init), seeds).lower(keys).compile()
-    run = placed(jax.vmap(partial(trainer.run_chunk, length=chunk), in_axes=(0, None)), (seeds, None))
-    run_chunk = run.lower(jax.eval_shape(jax.vmap(trainer.init), keys), np.int32(chunk)).compile()
-    return Compiled(init, run_chunk, chunk, time.perf_counter() - t)
+    lowered = [placed(jax.vmap(trainer.init), seeds).lower(keys),
+               placed(jax.vmap(partial(trainer.run_chunk, length=chunk), in_axes=(0, None)), (seeds, None)).lower(
+                   jax.eval_shape(jax.vmap(trainer.init), keys), np.int32(chunk))]
+    traced = time.perf_counter() - t
+    init, run_chunk = (program.compile() for program in lowered)
+    return Compiled(init, run_chunk, chunk, time.perf_counter() - t, traced)
 
 
 def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = True) -> dict[str, Any]:
@@ -126,7 +131,8 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
         checkpoint.save(run_dir, state, update)
         saved = time.perf_counter()
         (run_dir / SECONDS_JSON).write_text(json.dumps({"update": update, "seconds": before + saved - t0,
-                                                         "compile_seconds": compiled.seconds}))
+                                                         "compile_seconds": compiled.seconds,
+                                                         "trace_seconds": compiled.trace_seconds}))
 
     def report(metrics: dict[str, jax.Array], after: int, n: int) -> None:
         metrics = {k: np.asarray(v)[:, :n] for k, v in metrics.items()}  # waits for that chunk only
@@ -160,6 +166,7 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
     results = {"label": cfg.label, "env": cfg.env, "train_seconds_this_call": train_seconds,
                "train_seconds": before + train_seconds,
                "compile_seconds": {"train": compiled.seconds, "eval": eval_compile},
+               "trace_seconds": {"train": compiled.trace_seconds},
                "train_env_steps_per_s": (total - first) * cfg.ppo.batch_size * cfg.seeds / train_seconds,
                "env_steps": total * cfg.ppo.batch_size, "evaluations": evaluations}
     (run_dir / EVAL_JSON).write_text(json.dumps(results, indent=1))

@@ -1,0 +1,113 @@
+"""The run loop's pieces: a masked chunk equals the plain updates, the compilation cache's
+settings and its bad folders, and a failed background checkpoint write."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import numpy as np
+import orbax.checkpoint as ocp
+import pytest
+
+import linear_env  # noqa: F401  (registers the test env "linear")
+from hintsjax import checkpoint, compilation_cache, run
+from hintsjax.algorithms import make_trainer
+from hintsjax.config import run_config
+
+TINY_PPO = {"total_env_steps": 320, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}
+
+
+@pytest.fixture(scope="module")
+def trainer():
+    return make_trainer(run_config({"env": "linear", "agent": "ppo_state", "seeds": 2, "ppo": TINY_PPO}))
+
+
+def test_a_masked_chunk_equals_its_first_updates_and_skips_the_rest(trainer):
+    """3 of 5 updates in one program give the state of 3 plain updates, bit for bit; the 2
+    skipped ones leave the state alone and log NaN (0 for integer metrics)."""
+    state = trainer.init(jax.random.key(3))
+    plain, plain_metrics = jax.jit(trainer.run, static_argnums=1)(state, 3)
+    masked, metrics = jax.jit(trainer.run_chunk, static_argnums=2)(state, np.int32(3), 5)
+    for a, b in zip(jax.tree.leaves(jax.tree.map(_data, plain)), jax.tree.leaves(jax.tree.map(_data, masked))):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    assert int(masked.update) == 3
+    np.testing.assert_array_equal(metrics["policy_loss"][:3], plain_metrics["policy_loss"])
+    assert np.all(np.isnan(metrics["policy_loss"][3:])) and np.all(np.asarray(metrics["episodes"][3:]) == 0)
+
+
+def _data(x):
+    return jax.random.key_data(x) if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key) else x
+
+
+def test_compilation_cache_settings(monkeypatch, tmp_path):
+    monkeypatch.delenv(compilation_cache.ENV_VAR, raising=False)
+    assert compilation_cache.folder(True) == str(compilation_cache.DEFAULT)
+    assert compilation_cache.folder(None) is None and compilation_cache.folder(False) is None
+    assert compilation_cache.folder("off") is None and compilation_cache.folder(str(tmp_path)) == str(tmp_path)
+    monkeypatch.setenv(compilation_cache.ENV_VAR, "off")
+    assert compilation_cache.folder(True) is None
+    monkeypatch.setenv(compilation_cache.ENV_VAR, str(tmp_path / "c"))
+    assert compilation_cache.folder(True) == str(tmp_path / "c")
+
+
+def test_a_cache_folder_that_cannot_be_made_turns_the_cache_off_with_one_line(tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    assert compilation_cache.enable(blocker / "cache") is None
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("warning: compilation cache off")
+
+
+CACHED = """
+import sys, jax, jax.numpy as jnp
+from hintsjax import compilation_cache
+compilation_cache.enable(sys.argv[1], min_compile_seconds=0)
+f = jax.jit(lambda x: jnp.cumsum(jnp.sin(x) * 3.0) @ jnp.cos(x))
+print(float(f(jnp.arange(64.0))))
+"""
+
+
+def test_a_corrupt_cache_entry_is_compiled_afresh_with_the_right_result(tmp_path):
+    """A cache whose entries are garbage (another writer's truncated files, a disk error) costs
+    a compile and a warning, never a crash or a wrong program."""
+    cache = tmp_path / "cache"
+
+    def once() -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-c", CACHED, str(cache)], capture_output=True, text=True, timeout=120)
+
+    first = once()
+    assert first.returncode == 0, first.stderr
+    entries = [p for p in cache.rglob("*") if p.is_file() and not p.name.startswith(".")]
+    assert entries, "nothing was cached"
+    for p in entries:
+        p.write_bytes(b"not an executable" * 3)
+    second = once()
+    assert second.returncode == 0, second.stderr
+    assert second.stdout == first.stdout and "Traceback" not in second.stderr
+
+
+def test_a_failed_background_write_stops_the_run_with_one_line_and_keeps_the_last_checkpoint(tmp_path, monkeypatch, capsys):
+    real_save, calls = ocp.CheckpointManager.save, []
+
+    def fail_after_first(self, step, *args, **kwargs):
+        calls.append(step)
+        if len(calls) > 1:
+            raise OSError(28, "No space left on device")
+        return real_save(self, step, *args, **kwargs)
+
+    monkeypatch.setattr(ocp.CheckpointManager, "save", fail_after_first)
+    values = {"env": "linear", "agent": "ppo_state", "seeds": 2, "eval_episodes": 2, "checkpoint_every": 1,
+              "ppo": TINY_PPO, "out_dir": str(tmp_path), "name": "r"}
+    assert run.main_from_values(values) == 1
+    err = capsys.readouterr().err
+    errors = [line for line in err.splitlines() if line.startswith("error")]  # the rest is the progress bar
+    assert len(errors) == 1 and "No space left on device" in errors[0], err
+    assert errors[0].startswith("error: could not write checkpoint") and "Traceback" not in err
+    monkeypatch.setattr(ocp.CheckpointManager, "save", real_save)
+    assert checkpoint.latest_update(tmp_path / "r") == calls[0]
+    assert not (tmp_path / "r" / run.EVAL_JSON).exists()
+    assert json.loads((tmp_path / "r" / run.SECONDS_JSON).read_text())["update"] == calls[0]
