@@ -24,8 +24,8 @@ import argparse
 import os
 from pathlib import Path
 
-from report import (archive_runs, cell, load, mean_of, metrics_path, refuse_lost_cells, sweep_seconds, wall_clock,
-                    write_report)
+from report import (archive_runs, cell, iqm_cell, load, mean_of, metrics_path, ordering, refuse_lost_cells,
+                    sweep_seconds, wall_clock, write_report)
 from sweep import add_arguments, chosen_envs, chosen_runs, hints_run, sweep
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -122,7 +122,25 @@ def findings(runs: Path, env: str) -> str:
     if "composite" in hints:
         others = [f"{h} {hints[h]:.1f}" for h in ("partial_state", "state") if h in hints]
         text += f" O5: composite {hints['composite']:.1f} vs " + ", ".join(others) + "."
-    return text
+    return text + orderings(runs, env, best)
+
+
+def orderings(runs: Path, env: str, best: str) -> str:
+    """The paper's orderings that Table 2 touches, as probabilities of improvement over seeds:
+    O1 (the best hint and the composite over PPO-RGB), O5 (the composite over partial and full
+    state as hints) and, on the pendulum, O6 (on swingto, angular velocity over the composite)."""
+    run = lambda h: load(runs, env, hints_run("fc", h))  # noqa: E731
+    rgb = load(runs, env, "ppo_rgb")
+    pairs = [("O1", ordering(best, run(best), "ppo_rgb", rgb)),
+             ("O1", ordering("composite", run("composite"), "ppo_rgb", rgb) if best != "composite" else None),
+             *(("O5", ordering("composite", run("composite"), h, run(h))) for h in ("partial_state", "state")),
+             ("O6", ordering("angular_velocity", run("angular_velocity"), "composite", run("composite"), variant=1)
+              if env == "pendulum" else None)]
+    lines = [f"- {tag}: {text}" + (" (on swingto)" if tag == "O6" else "") for tag, text in pairs if text]
+    if not lines:
+        return ""
+    return ("\n\nOrderings as probabilities of improvement over the per-seed mean returns, with 95% bootstrap "
+            "intervals (hintsjax/stats.py); decided where the interval excludes 0.5:\n\n" + "\n".join(lines))
 
 
 def paper_mean(value: str) -> float:
@@ -158,20 +176,24 @@ def report(runs: Path, force: bool = False) -> None:
         "evaluation, with 3 to 10 runs sharing the GPU (time-sliced) in the sweeps of 2026-11-22 05:30-08:25,",
         "so it overstates a run's cost alone; the pendulum rows trained before then (all but torque and",
         "ppo_noisy_state) ran one at a time. '(CPU)': trained on a 2-core CPU when the GPU time was spent.",
+        "The last column is the interquartile mean of the per-seed mean returns with a 95% percentile",
+        "bootstrap interval over seeds (hintsjax/stats.py, as rliable computes it); with 5 seeds the IQM",
+        "is the mean of the middle 3 and the interval is wide.",
         "",
     ]
     lines, curves = ["# Classic control: the paper's Table 2, reproduced", "", *head], {}
     for env in ENVS:
         lines += [f"## {env}", ""]
         deploy = env == "pendulum"
-        header = "| agent | ours | paper |" + (" swingto deploy (ours) | swingto (paper) |" if deploy else "") + " wall-clock (s) |"
+        header = ("| agent | ours | paper |" + (" swingto deploy (ours) | swingto (paper) |" if deploy else "")
+                  + " wall-clock (s) | IQM of seed means [95% CI] |")
         lines += [header, "|" + "---|" * (header.count("|") - 1)]
         for label in table_runs(2, env):
             result = load(runs, env, label)
             row = f"| {label} | {cell(result)} | {PAPER_TABLE2[env].get(label, '-')} |"
             if deploy:
                 row += f" {cell(result, 1)} | {PAPER_SWINGTO.get(label, '-')} |"
-            row += f" {wall_clock(result)} |"
+            row += f" {wall_clock(result)} | {iqm_cell(result)} |"
             lines.append(row)
         lines += ["", findings(runs, env), "", f"![{env} learning curves](classic_curves_{env}.png)", ""]
         curves[env] = {label: read_curves(path) for label in table_runs(2, env)
@@ -206,6 +228,8 @@ def report(runs: Path, force: bool = False) -> None:
         for scheme in SCHEMES:
             ours = [cell(load(runs, env, hints_run(scheme, h))) for h in cols]
             lines.append(f"| {scheme} (ours) | " + " | ".join(ours) + " |")
+            lines.append(f"| {scheme} (ours, IQM [95% CI]) | "
+                         + " | ".join(iqm_cell(load(runs, env, hints_run(scheme, h))) for h in cols) + " |")
             lines.append(f"| {scheme} (paper) | " + " | ".join(PAPER_TABLE4[scheme][env][h] for h in cols) + " |")
         lines.append("")
         lines += [scheme_findings(runs, env), ""]

@@ -50,6 +50,25 @@ def cell(result: dict | None, variant: int = 0) -> str:
     return f"{e['mean']:.1f} ± {e['std']:.1f} ({e['seed_std']:.1f})"
 
 
+def iqm_cell(result: dict | None, variant: int = 0) -> str:
+    """'IQM [low, high]' of one evaluation's per-seed mean returns with a 95% bootstrap CI over
+    seeds (hintsjax.stats), or '-' when not run."""
+    from hintsjax import stats
+
+    return "-" if result is None else stats.iqm_cell(result["evaluations"][variant]["seed_means"])
+
+
+def ordering(name_x: str, x: dict | None, name_y: str, y: dict | None, variant: int = 0) -> str | None:
+    """'P(x > y) = p [low, high]: decided|undecided' over the two runs' per-seed mean returns (95%
+    bootstrap CI; decided when it excludes 0.5), or None when either was not run."""
+    from hintsjax import stats
+
+    if x is None or y is None:
+        return None
+    seeds = [r["evaluations"][variant]["seed_means"] for r in (x, y)]
+    return stats.ordering_text(name_x, name_y, stats.poi_ci(*seeds))
+
+
 def metric_of(result: dict | None, name: str, variant: int = 0) -> tuple[float, float, float] | None:
     """(mean, std, std of the per-seed means) of an env metric (e.g. progress) of one
     evaluation; None when not run or not recorded."""

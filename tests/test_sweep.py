@@ -311,3 +311,29 @@ def test_curves_beside_kept_rows_go_to_their_own_figure(tmp_path, monkeypatch):
     assert any(sibling.name in line for line in lines)
     lines = report.curve_lines(runs, "ant", ["ppo_rgb", "ppo_state"], out, "ant")
     assert out.read_bytes()[:4] == b"\x89PNG" and lines == [f"![ant learning curves]({out.name})", ""]
+
+
+def test_classic_report_gives_iqm_cells_and_orderings_as_probabilities_of_improvement(tmp_path, monkeypatch):
+    """Table 2's last column is the IQM of the seed means with its interval; the findings state
+    O1 and O5 as P(x > y) with an interval, decided only when it excludes 0.5 (hand values: every
+    composite seed beats every ppo_rgb seed, so P = 1 with a zero-width interval; composite and
+    state seeds interleave, P = 0.5)."""
+    import classic_control
+
+    monkeypatch.setattr(classic_control, "RESULTS", tmp_path / "results")
+    runs = tmp_path / "classic"
+    seeds = {"ppo_rgb": [-1300.0, -1200.0, -1250.0, -1400.0], "hints-fc-composite": [-250.0, -200.0, -300.0, -220.0],
+             "hints-fc-state": [-260.0, -190.0, -310.0, -210.0]}
+    for label, means in seeds.items():
+        write_run(runs, "pendulum", label, [evaluation(float(np.mean(means)), 10.0, means)] * 2)
+    text = classic_control.findings(runs, "pendulum")
+    assert "- O1: P(composite > ppo_rgb) = 1.00 [1.00, 1.00]: decided" in text
+    assert "- O5: P(composite > state) = 0.50 [" in text and text.split("P(composite > state)")[1].split("\n")[0].endswith("undecided")
+    row = report.iqm_cell(report.load(runs, "pendulum", "hints-fc-composite"))
+    assert row.startswith("-235.0 [")  # the middle two of -300, -250, -220, -200
+    monkeypatch.setattr(classic_control, "refuse_lost_cells", lambda *a: None)
+    monkeypatch.setattr(classic_control, "write_report", lambda path, lines, force=False: path.write_text("\n".join(lines)))
+    (tmp_path / "results").mkdir()
+    classic_control.report(runs, force=True)
+    table = (tmp_path / "results" / "classic_table2.md").read_text()
+    assert f"| {row} |" in table and "IQM of seed means [95% CI]" in table
