@@ -154,9 +154,9 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
                         and not checkpoint.saving(run_dir)):
                     save(state, done)  # the state this chunk started from: computed, copied off as the chunk runs
                 state, pending, done = following, (metrics, done, n), done + n
-            if pending is not None:
+            if pending is not None:  # something was trained (a run resumed at its end only evaluates)
                 report(*pending)
-            save(state, total)
+                save(state, total)
     finally:
         bar.close()
         log.close()

@@ -111,3 +111,18 @@ def test_a_failed_background_write_stops_the_run_with_one_line_and_keeps_the_las
     assert checkpoint.latest_update(tmp_path / "r") == calls[0]
     assert not (tmp_path / "r" / run.EVAL_JSON).exists()
     assert json.loads((tmp_path / "r" / run.SECONDS_JSON).read_text())["update"] == calls[0]
+
+
+def test_a_run_resumed_at_its_last_update_only_evaluates(tmp_path):
+    """A run killed during its evaluation resumes at its end: nothing is trained or saved again."""
+    values = {"env": "linear", "agent": "ppo_state", "seeds": 2, "eval_episodes": 2, "checkpoint_every": 2,
+              "ppo": TINY_PPO, "out_dir": str(tmp_path), "name": "r"}
+    assert run.main_from_values(values) == 0
+    folder = tmp_path / "r"
+    first = json.loads((folder / run.EVAL_JSON).read_text())
+    (folder / run.EVAL_JSON).unlink()
+    rows = (folder / "metrics.csv").read_text()
+    assert run.main_from_values({"resume": str(folder)}) == 0
+    again = json.loads((folder / run.EVAL_JSON).read_text())
+    assert again["evaluations"] == first["evaluations"] and (folder / "metrics.csv").read_text() == rows
+    assert checkpoint.latest_update(folder) == 5
