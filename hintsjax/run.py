@@ -89,11 +89,11 @@ def compile_training(trainer: Trainer, keys: jax.Array, chunk: int) -> Compiled:
     t = time.perf_counter()
     seeds = seed_sharding(keys.shape[0]) if len(keys.devices()) > 1 else None
     placed = (lambda f, args: jax.jit(f, in_shardings=args, out_shardings=seeds)) if seeds else (lambda f, _: jax.jit(f))
-    lowered = [placed(jax.vmap(trainer.init), seeds).lower(keys),
-               placed(jax.vmap(partial(trainer.run_chunk, length=chunk), in_axes=(0, None)), (seeds, None)).lower(
-                   jax.eval_shape(jax.vmap(trainer.init), keys), np.int32(chunk))]
+    init = placed(jax.vmap(trainer.init), seeds).lower(keys)
+    run_chunk = placed(jax.vmap(partial(trainer.run_chunk, length=chunk), in_axes=(0, None)), (seeds, None)).lower(
+        init.out_info, np.int32(chunk))  # the state's shapes as init's lowering found them: no second trace
     traced = time.perf_counter() - t
-    init, run_chunk = (program.compile() for program in lowered)
+    init, run_chunk = init.compile(), run_chunk.compile()
     return Compiled(init, run_chunk, chunk, time.perf_counter() - t, traced)
 
 
