@@ -186,7 +186,8 @@ def bench_train(name: str, seeds: int, updates: int, overrides: dict, agent: str
 def update_parts(cfg, state) -> dict:
     """Seconds of one seed-vmapped PPO update's parts: the rollout (env steps with pictures and
     the policy's actions), the learning (GAE and the epochs of minibatch steps), and the env steps
-    alone (random actions, same envs)."""
+    alone without their pictures (physics, reward and hint under random actions, as `bench_env`
+    times them)."""
     from hintsjax.ppo import make_ppo
 
     parts = make_ppo(cfg)
@@ -194,21 +195,11 @@ def update_parts(cfg, state) -> dict:
     rollout = jax.jit(jax.vmap(parts.rollout))
     _, traj, last = rollout(state, key)
     learn = jax.jit(jax.vmap(parts.learn))
-    env, N = parts.env, cfg.ppo.num_envs
-
-    @jax.jit
-    def env_only(env_state, key):
-        def step(s, k):
-            k_act, k_env = jax.random.split(k)
-            action = jax.random.uniform(k_act, (N, env.action_size), minval=-1, maxval=1)
-            out = jax.vmap(env.step, in_axes=(0, 0, 0, None))(jax.random.split(k_env, N), s, action, parts.env_params)
-            return out.state, out.reward.sum()
-        return jax.lax.scan(step, env_state, jax.random.split(key, cfg.ppo.rollout_length))
-
+    width, steps = cfg.seeds * cfg.ppo.num_envs, cfg.ppo.rollout_length  # every seed's envs side by side
     return {
         "rollout": best_time(lambda s, k: rollout(s, k)[2], state, key),
         "learn": best_time(lambda s: learn(s, traj, last, traj.reward, key)[1]["approx_kl"], state),
-        "env_steps_only": best_time(jax.vmap(env_only), state.env_state, key),
+        "env_steps_only": width * steps / bench_env(cfg.env, width, steps, pixels=False)["env_steps_per_s"],
     }
 
 
@@ -223,7 +214,8 @@ def main() -> None:
     parser.add_argument("--default-train-only", action="store_true",
                         help="one training row per env: 5 seeds at the env's default settings")
     parser.add_argument("--parts", action="store_true",
-                        help="only the milliseconds of one update's parts (rollout, learning, env steps alone) "
+                        help="only the milliseconds of one update's parts (rollout, learning, env steps alone "
+                             "without pictures) "
                              "of each env's default cell at 5 seeds")
     parser.add_argument("--quick", action="store_true", help="small sizes (a CPU smoke run)")
     parser.add_argument("--model-option", action="append", default=[], metavar="FIELD=VALUE",
