@@ -36,7 +36,7 @@ import optax
 
 from hintsjax import compilation_cache, envs
 from hintsjax.config import ENV_DEFAULTS, run_config
-from hintsjax.ppo import gaussian_log_prob, make_network, make_optimizer, make_trainer
+from hintsjax.ppo import Hyper, gaussian_log_prob, make_network, make_optimizer, make_trainer
 
 
 def best_time(fn, *args, repeats: int = 3) -> float:
@@ -127,7 +127,7 @@ def bench_ceiling(batch: int) -> dict:
         "hint": jax.random.normal(k, (batch, env.hint.dim)),
     }
     params = network.init(k, jax.tree.map(lambda x: x[:1], obs))
-    tx = make_optimizer(cfg.ppo, params)
+    tx = make_optimizer(Hyper.of(cfg), params)
     opt_state = tx.init(params)
     action = jax.random.normal(k, (batch, 1))
 

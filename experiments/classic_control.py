@@ -248,7 +248,7 @@ def report(runs: Path, force: bool = False) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--table", type=int, choices=(2, 4), help="train the runs of this table")
-    add_arguments(parser, "runs/classic", ENVS)
+    add_arguments(parser, "runs/classic", ENVS, seeds=20)
     args = parser.parse_args()
     os.environ["JAX_PLATFORMS"] = "cpu"  # the parent only reads configs; workers get the devices
     if args.report:
@@ -261,7 +261,8 @@ def main() -> None:
     run_ids = chosen_runs(parser, args, [f"{env}/{label}" for env in names for label in table_runs(args.table, env)])
     if args.table == 4:  # the fc row is Table 2's
         run_ids = [r for r in run_ids if "-fc-" not in r or not (args.runs / r / "eval.json").exists()]
-    sweep(args.runs, run_ids, args.workers, args.seeds, args.table, args.smoke, args.launch_until, args.experts, args.gpus)
+    sweep(args.runs, run_ids, args.workers, args.seeds, args.table, args.smoke, args.launch_until, args.experts, args.gpus,
+          args.alone)
 
 
 if __name__ == "__main__":

@@ -2,10 +2,16 @@
 
 A run is named `env/label`, where the label is `RunConfig.label` (an agent's name, or
 hints-<scheme>-<hint>); its folder runs/<sweep>/env/label holds config.yaml, metrics.csv,
-train.log and, once finished, eval.json. `sweep` trains every unfinished run of a list,
-`workers` processes at a time, each a call of this file with `--one env/label`:
+checkpoints and, once finished, eval.json. `sweep` groups the unfinished runs of a list that
+share a network's shapes (hintsjax.group: e.g. HINTS-FC with every hint, or PPO-x with
+PPO-x+N(0,1)) and trains each group, all its runs and seeds in one compiled program,
+`workers` processes at a time, each a call of this file with `--one` and the group's runs:
 
-    python experiments/sweep.py --runs runs/classic --seeds 5 --one idp/ppo_rgb [--smoke]
+    python experiments/sweep.py --runs runs/classic --seeds 20 --one idp/ppo_rgb [--smoke]
+    python experiments/sweep.py --runs runs/classic --seeds 20 --one pendulum/ppo_state,pendulum/ppo_noisy_state
+
+A group's checkpoints and train.log are in runs/<sweep>/env/_groups/<its runs' digest>; a group
+too big for the device's memory is split in halves until each part fits.
 
 `table_main` is a table script's command line: train its runs, or `--report` (archive the
 finished runs, then write the tables with report.py's readers).
@@ -14,6 +20,7 @@ finished runs, then write the tables with report.py's readers).
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import signal
@@ -30,6 +37,7 @@ from report import archive_runs, load
 CHECKPOINT_SECONDS = 60
 CHILD_ENVIRON = dict(os.environ)  # the workers' environment: a sweep's parent process keeps off the GPU
 EXPERT_RUN = "expert_ppo"  # the run whose best seed becomes its env's expert for dagger and gail
+GROUPS = "_groups"  # under runs/<sweep>/<env>: the groups' checkpoints and logs
 
 
 def hints_run(scheme: str, hint: str) -> str:
@@ -55,33 +63,70 @@ def run_values(env: str, label: str, seeds: int, smoke: bool = False, experts: P
     return {**values, "agent": "hints", "scheme": scheme, "hint": hint}
 
 
-def train_one(runs: Path, run_id: str, seeds: int, smoke: bool, experts: Path | None) -> None:
-    """Train and evaluate one configuration `env/label` into runs/env/label; export an expert's."""
+def group_folder(runs: Path, run_ids: list[str]) -> Path:
+    """Where a group of runs keeps its checkpoints and log: named by its runs, so that another
+    set of runs never resumes from it."""
+    env = run_ids[0].split("/")[0]
+    digest = hashlib.sha1(",".join(run_ids).encode()).hexdigest()[:10]
+    return runs / env / GROUPS / digest
+
+
+def train_one(runs: Path, run_ids: list[str], seeds: int, smoke: bool, experts: Path | None) -> None:
+    """Train and evaluate runs `env/label` (one, or a group that shares a program) into
+    runs/env/label; export an expert's. A group that does not fit in memory is split in halves."""
     import jax
 
     import hintsjax
     from hintsjax import checkpoint, expert, run
     from hintsjax.config import run_config, save_run_config
 
-    env, label = run_id.split("/")
-    cfg = run_config(run_values(env, label, seeds, smoke, experts))
-    assert cfg.label == label, (cfg.label, label)
-    folder = runs / env / label
-    folder.mkdir(parents=True, exist_ok=True)
-    save_run_config(folder, cfg)
+    cfgs = []
+    for run_id in run_ids:
+        env, label = run_id.split("/")
+        cfg = run_config(run_values(env, label, seeds, smoke, experts))
+        assert cfg.label == label, (cfg.label, label)
+        cfgs.append(cfg)
+        (runs / run_id).mkdir(parents=True, exist_ok=True)
+        save_run_config(runs / run_id, cfg)
+    folder = runs / run_ids[0] if len(run_ids) == 1 else group_folder(runs, run_ids)
     # An interrupted run (killed by a time limit) goes on from its newest checkpoint; its
     # wall-clock counts the kept work of earlier calls, not what was lost after their last checkpoint.
     resume = checkpoint.latest_update(folder) is not None
     before, t = run.seconds_trained(folder) if resume else 0.0, time.time()
     if resume:
-        print(f"resuming {run_id} from update {checkpoint.latest_update(folder)}", flush=True)
-    results = run.train(cfg, folder, resume=resume, progress=False)
-    results["wall_seconds"] = before + time.time() - t
-    results["device"] = jax.devices()[0].device_kind
-    results["deterministic"] = jax.default_backend() == "cpu" or hintsjax.deterministic_gpu_ops()
-    (folder / "eval.json").write_text(json.dumps(results, indent=1))
-    if label == EXPERT_RUN:
-        print(f"exported the expert to {expert.export(folder, None if experts is None else experts / env)}", flush=True)
+        print(f"resuming {', '.join(run_ids)} from update {checkpoint.latest_update(folder)}", flush=True)
+    if len(run_ids) == 1:
+        results = [run.train(cfgs[0], folder, resume=resume, progress=False)]
+    else:
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / "group.json").write_text(json.dumps({"runs": run_ids, "seeds": seeds}))
+        try:
+            results = run.train_group(cfgs, folder, [runs / r for r in run_ids], resume=resume, progress=False)
+        except run.GroupTooBig as e:
+            half = len(run_ids) // 2
+            print(f"{e}: splitting the group into {half} and {len(run_ids) - half} runs", flush=True)
+            for part in (run_ids[:half], run_ids[half:]):
+                train_one(runs, part, seeds, smoke, experts)
+            return
+    extra = {"wall_seconds": before + time.time() - t, "device": jax.devices()[0].device_kind,
+             "deterministic": jax.default_backend() == "cpu" or hintsjax.deterministic_gpu_ops()}
+    for run_id, result in zip(run_ids, results):
+        (runs / run_id / "eval.json").write_text(json.dumps({**result, **extra}, indent=1))
+    for run_id in run_ids:
+        if run_id.split("/")[1] == EXPERT_RUN:
+            exported = expert.export(runs / run_id, None if experts is None else experts / run_id.split("/")[0])
+            print(f"exported the expert to {exported}", flush=True)
+
+
+def plan_jobs(run_ids: list[str], seeds: int, smoke: bool, alone: bool = False) -> list[list[str]]:
+    """The runs partitioned into groups that train together (each its own job with `alone`)."""
+    from hintsjax.config import run_config
+    from hintsjax.group import plan
+
+    if alone:
+        return [[r] for r in run_ids]
+    cfgs = [run_config(run_values(*r.split("/"), seeds, smoke)) for r in run_ids]
+    return [[run_ids[i] for i in members] for members in plan(cfgs)]
 
 
 def prerequisite(run_id: str) -> str | None:
@@ -102,80 +147,89 @@ def budget(run_id: str) -> float:
 
 
 def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int | str, smoke: bool,
-          launch_until: float = float("inf"), experts: Path | None = None, gpus: tuple[str, ...] = ()) -> None:
-    """Train every unfinished run, `workers` processes at a time, starting none after
-    `launch_until` seconds (so that a time-limited call ends with finished runs, not killed
-    ones); append the sweep's wall-clock to runs/sweeps.jsonl. With `gpus` (CUDA device ids),
-    each worker gets the least busy of them to itself (CUDA_VISIBLE_DEVICES); without, all
-    workers share the visible devices."""
-    todo = sorted((r for r in run_ids if not (runs / r / "eval.json").exists()), key=budget, reverse=True)
-    print(f"table {table}: {len(run_ids) - len(todo)} of {len(run_ids)} runs done already; "
-          f"training {len(todo)} with {workers} worker(s)", flush=True)
+          launch_until: float = float("inf"), experts: Path | None = None, gpus: tuple[str, ...] = (),
+          alone: bool = False) -> None:
+    """Train every unfinished run, grouped (`plan_jobs`), `workers` groups at a time, starting
+    none after `launch_until` seconds (so that a time-limited call ends with finished runs, not
+    killed ones); append the sweep's wall-clock to runs/sweeps.jsonl. With `gpus` (CUDA device
+    ids), each worker gets the least busy of them to itself (CUDA_VISIBLE_DEVICES); without, all
+    workers share the visible devices. With `alone`, every run is its own job, as before groups."""
+    unfinished = [r for r in run_ids if not (runs / r / "eval.json").exists()]
+    todo = sorted(plan_jobs(unfinished, seeds, smoke, alone), key=lambda job: sum(map(budget, job)), reverse=True)
+    print(f"table {table}: {len(run_ids) - len(unfinished)} of {len(run_ids)} runs done already; "
+          f"training {len(unfinished)} in {len(todo)} group(s), {workers} at a time, {seeds} seeds each", flush=True)
     launched = 0
     per_gpu = -(-workers // max(len(gpus), 1))  # workers sharing one device
     env = {**CHILD_ENVIRON, "XLA_PYTHON_CLIENT_MEM_FRACTION": f"{0.9 / per_gpu:.3f}"}
     start = time.time()
-    active: list[tuple[str, subprocess.Popen]] = []  # each worker writes its own train.log
+    active: list[tuple[list[str], subprocess.Popen]] = []  # each worker writes its own train.log
     gpu_of: dict[str, str] = {}
     failed: list[str] = []
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # `timeout` stops the sweep: record it below
+    log_of = lambda job: (runs / job[0] if len(job) == 1 else group_folder(runs, job)) / "train.log"  # noqa: E731
     try:
         while todo or active:
             if todo and time.time() - start > launch_until:
-                print(f"[{time.time() - start:6.0f} s] --launch-until reached: {len(todo)} runs left for the next sweep",
-                      flush=True)
+                print(f"[{time.time() - start:6.0f} s] --launch-until reached: {sum(map(len, todo))} runs left for "
+                      "the next sweep", flush=True)
                 todo = []
-            waiting = {r for r in todo} | {r for r, _ in active}
-            todo = [r for r in todo if prerequisite(r) not in failed]
-            ready = [r for r in todo if prerequisite(r) not in waiting]
+            waiting = {r for job in todo for r in job} | {r for job, _ in active for r in job}
+            todo = [job for job in todo if prerequisite(job[0]) not in failed]
+            ready = [job for job in todo if prerequisite(job[0]) not in waiting]
             while ready and len(active) < workers:
-                run_id = ready.pop(0)
-                todo.remove(run_id)
-                (runs / run_id).mkdir(parents=True, exist_ok=True)
-                cmd = [sys.executable, str(Path(__file__).resolve()), "--runs", str(runs), "--seeds", str(seeds), "--one", run_id,
+                job = ready.pop(0)
+                todo.remove(job)
+                name = ",".join(job)
+                log_of(job).parent.mkdir(parents=True, exist_ok=True)
+                cmd = [sys.executable, str(Path(__file__).resolve()), "--runs", str(runs), "--seeds", str(seeds), "--one", name,
                        *(["--smoke"] if smoke else []), *(["--experts", str(experts)] if experts else [])]
                 if gpus:
-                    busy = [gpu_of[r] for r, _ in active]
-                    gpu_of[run_id] = min(gpus, key=busy.count)
-                child_env = {**env, "CUDA_VISIBLE_DEVICES": gpu_of[run_id]} if gpus else env
-                with open(runs / run_id / "train.log", "w") as log:  # the child keeps its own copy
-                    active.append((run_id, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=child_env)))
-                launched += 1
+                    busy = [gpu_of[",".join(j)] for j, _ in active]
+                    gpu_of[name] = min(gpus, key=busy.count)
+                child_env = {**env, "CUDA_VISIBLE_DEVICES": gpu_of[name]} if gpus else env
+                with open(log_of(job), "w") as log:  # the child keeps its own copy
+                    active.append((job, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=child_env)))
+                launched += len(job)
             time.sleep(2)
-            for run_id, proc in list(active):
+            for job, proc in list(active):
                 if proc.poll() is None:
                     continue
-                active.remove((run_id, proc))
+                active.remove((job, proc))
                 if proc.returncode:
-                    failed.append(run_id)
-                print(f"[{time.time() - start:6.0f} s] {run_id}: "
-                      f"{'FAILED (see ' + str(runs / run_id / 'train.log') + ')' if proc.returncode else 'done'}", flush=True)
+                    failed += job
+                print(f"[{time.time() - start:6.0f} s] {', '.join(job)}: "
+                      f"{'FAILED (see ' + str(log_of(job)) + ')' if proc.returncode else 'done'}", flush=True)
     finally:
+        interrupted = [r for job, _ in active for r in job]
         for _, proc in active:  # interrupted: these runs are retrained by the next sweep
             proc.terminate()
         seconds = time.time() - start
-        record = {"table": table, "runs": len(run_ids), "trained": launched - len(failed) - len(active),
-                  "failed": failed, "interrupted": [r for r, _ in active], "workers": workers, "seconds": seconds,
-                  "finished": time.strftime("%Y-%m-%d %H:%M:%S"), "gpus": list(gpus)}
+        record = {"table": table, "runs": len(run_ids), "trained": launched - len(failed) - len(interrupted),
+                  "failed": failed, "interrupted": interrupted, "workers": workers, "seconds": seconds,
+                  "seeds": seeds, "grouped": not alone, "finished": time.strftime("%Y-%m-%d %H:%M:%S"),
+                  "gpus": list(gpus)}
         devices = {(load(runs, *r.split("/")) or {}).get("device", "").lower() for r in run_ids} - {""}
         if devices == {"cpu"}:  # the workers' device (the parent keeps off it): CPU sweeps leave the GPU totals
             record["device"] = "cpu"
         with open(runs / "sweeps.jsonl", "a") as f:
             f.write(json.dumps(record) + "\n")
-        print(f"table {table}: {seconds:.0f} s wall-clock" + (f", {len(active)} runs interrupted" if active else ""), flush=True)
+        print(f"table {table}: {seconds:.0f} s wall-clock" + (f", {len(interrupted)} runs interrupted" if active else ""),
+              flush=True)
     if failed:
         sys.exit(1)
 
 
-def add_arguments(parser: argparse.ArgumentParser, runs: str, envs: tuple[str, ...]) -> None:
-    """The options every sweep script takes (`runs`: the default runs folder)."""
+def add_arguments(parser: argparse.ArgumentParser, runs: str, envs: tuple[str, ...], seeds: int = 5) -> None:
+    """The options every sweep script takes (`runs`: the default runs folder; `seeds`: the default seeds per run)."""
     parser.add_argument("--report", action="store_true", help="only write the result tables and curves")
     parser.add_argument("--force", action="store_true",
                         help="with --report: rewrite a table even where it would blank cells the committed one fills")
     parser.add_argument("--envs", default=",".join(envs), help=f"comma-separated subset of {', '.join(envs)}")
     parser.add_argument("--runs", type=Path, default=Path(runs))
     parser.add_argument("--workers", type=int, default=1, help="configurations trained at once")
-    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--seeds", type=int, default=seeds, help=f"seeds per run (default {seeds})")
+    parser.add_argument("--alone", action="store_true",
+                        help="train every run in its own program (default: runs that share shapes train as one group)")
     parser.add_argument("--smoke", action="store_true", help="tiny budgets: check the plumbing on a CPU")
     parser.add_argument("--gpus", type=lambda s: tuple(g for g in s.split(",") if g), default=(), metavar="IDS",
                         help="comma-separated CUDA device ids; each worker gets the least busy one to itself")
@@ -192,9 +246,11 @@ def chosen_envs(parser: argparse.ArgumentParser, args: argparse.Namespace, envs:
     """The envs of --envs; exit 2 naming the valid ones on an unknown env or --workers < 1."""
     names = [n.strip() for n in args.envs.split(",") if n.strip()]
     unknown = [n for n in names if n not in envs]
-    if unknown or args.workers < 1:
-        parser.exit(2, f"error: unknown env {unknown}; valid choices: {', '.join(envs)}\n" if unknown
-                    else "error: --workers must be at least 1\n")
+    if unknown:
+        parser.exit(2, f"error: unknown env {unknown}; valid choices: {', '.join(envs)}\n")
+    for option in ("workers", "seeds"):
+        if getattr(args, option) < 1:
+            parser.exit(2, f"error: --{option} must be at least 1, got {getattr(args, option)}\n")
     return names
 
 
@@ -222,18 +278,19 @@ def table_main(description: str, default_runs: str, envs: tuple[str, ...], table
         return
     names = chosen_envs(parser, args, envs)
     ids = chosen_runs(parser, args, run_ids(names))
-    sweep(args.runs, ids, args.workers, args.seeds, table, args.smoke, args.launch_until, args.experts, args.gpus)
+    sweep(args.runs, ids, args.workers, args.seeds, table, args.smoke, args.launch_until, args.experts, args.gpus,
+          args.alone)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description="train and evaluate one run of a sweep (a worker process)")
     parser.add_argument("--runs", type=Path, required=True)
     parser.add_argument("--seeds", type=int, default=5)
-    parser.add_argument("--one", required=True, help="env/label")
+    parser.add_argument("--one", required=True, help="env/label, or comma-separated env/labels of one group")
     parser.add_argument("--smoke", action="store_true")
     parser.add_argument("--experts", type=Path, default=None)
     args = parser.parse_args()
-    train_one(args.runs, args.one, args.seeds, args.smoke, args.experts)
+    train_one(args.runs, args.one.split(","), args.seeds, args.smoke, args.experts)
 
 
 if __name__ == "__main__":

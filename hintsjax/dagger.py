@@ -23,7 +23,7 @@ from flax import struct
 
 from hintsjax import envs, normalization
 from hintsjax.config import RunConfig
-from hintsjax.ppo import RunnerState, make_network, start_runner
+from hintsjax.ppo import Hyper, RunnerState, make_network, start_runner
 from hintsjax.trainer import Trainer, episode_metrics
 
 
@@ -94,7 +94,7 @@ def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
     T, N = ppo.rollout_length, ppo.num_envs
 
     def init(key: jax.Array) -> DaggerState:
-        runner = start_runner(key, env, env_params, network, N, optimizer.init)
+        runner = start_runner(key, env, env_params, network, N, optimizer.init, Hyper.of(cfg))
         return DaggerState(runner, Dataset.empty(dagger.buffer_size, env.state_size, env.action_size))
 
     def student(params: Any, obs: dict[str, jax.Array]) -> jax.Array:
@@ -137,7 +137,7 @@ def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
             "dataset_size": data.size,
             "env_steps": (state.update + 1) * ppo.batch_size,
         }
-        runner = RunnerState(params, opt_state, env_state, obs, key, runner.update + 1)
+        runner = RunnerState(params, opt_state, env_state, obs, key, runner.update + 1, runner.hyper)
         return DaggerState(runner, data), metrics
 
     return Trainer(cfg, env, network, init, update)

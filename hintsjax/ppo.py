@@ -14,11 +14,12 @@ from typing import Any, Callable
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import optax
 from flax import struct
 
 from hintsjax import envs, normalization
-from hintsjax.config import PPOConfig, RunConfig
+from hintsjax.config import RunConfig
 from hintsjax.networks import ActorCritic, lr_labels
 from hintsjax.trainer import Trainer, episode_metrics
 
@@ -39,6 +40,57 @@ class Transition:
 
 
 @struct.dataclass
+class Hyper:
+    """A configuration's numbers, as arrays in its runner state rather than constants in the
+    trace: configurations that differ only in these (and in their hint) train in one compiled
+    program, vmapped over a group of them (hintsjax.group), as rejax vmaps over its configs.
+
+    `hint_take` and `hint_keep` pick the agent's hint out of the env's: an env built for a group
+    computes every member's hint parts side by side (width U), and a member sees those at
+    `hint_take` where `hint_keep`, 0 elsewhere (its width padded to the group's). Trained alone,
+    a configuration takes its own hint's positions in order, all kept.
+    """
+
+    encoder_lr: jax.Array
+    actor_lr: jax.Array
+    critic_lr: jax.Array
+    max_grad_norm: jax.Array
+    clip_eps: jax.Array
+    vf_coef: jax.Array
+    ent_coef: jax.Array
+    gamma: jax.Array
+    gae_lambda: jax.Array
+    reward_scale: jax.Array
+    target_kl: jax.Array  # read only where ppo.target_kl is set (a group's members agree on that)
+    state_noise: jax.Array  # std of N(0, s^2) on the state the agent sees in training rollouts
+    hint_take: jax.Array  # int32[W] (W >= 1: [0] and not kept for agents without a hint)
+    hint_keep: jax.Array  # bool[W]
+
+    @classmethod
+    def of(cls, cfg: RunConfig, hint_take: Any = None, width: int | None = None) -> "Hyper":
+        """`cfg`'s numbers; its hint at positions `hint_take` of the env's (default: the first d),
+        padded to `width` (default: d, its own hint's width)."""
+        ppo, d = cfg.ppo, hint_width(cfg)
+        take = list(range(d)) if hint_take is None else list(hint_take)
+        width = max(d if width is None else width, 1)  # never empty: orbax stores no zero-size array
+        f32 = lambda x: np.asarray(x, np.float32)  # noqa: E731  (numpy: constants, also inside a trace)
+        return cls(
+            **{name: f32(getattr(ppo, name)) for name in (
+                "encoder_lr", "actor_lr", "critic_lr", "max_grad_norm", "clip_eps", "vf_coef", "ent_coef", "gamma",
+                "gae_lambda", "reward_scale")},
+            target_kl=f32(np.nan if ppo.target_kl is None else ppo.target_kl),
+            state_noise=f32(cfg.agent_spec.state_noise),
+            hint_take=np.asarray(take + [0] * (width - d), np.int32),
+            hint_keep=np.arange(width) < d,
+        )
+
+
+def hint_width(cfg: RunConfig) -> int:
+    """The width of the hint `cfg`'s agent sees (0 without one)."""
+    return envs.make_hint(cfg.env, cfg.effective_hint).dim
+
+
+@struct.dataclass
 class RunnerState:
     """Everything a run carries between updates; a checkpoint saves all of it."""
 
@@ -48,6 +100,7 @@ class RunnerState:
     obs: dict[str, jax.Array]  # current observation, batched [N]
     key: jax.Array
     update: jax.Array  # updates done so far
+    hyper: Hyper
 
 
 @struct.dataclass
@@ -147,34 +200,56 @@ def make_network(cfg: RunConfig, env: envs.Env) -> ActorCritic:
                        cfg.ppo.normalize_state)
 
 
-def make_optimizer(ppo: PPOConfig, params: Any) -> optax.GradientTransformation:
+def make_optimizer(hyper: Hyper, params: Any) -> optax.GradientTransformation:
     """Adam with the paper's per-part learning rates, after global-norm gradient clipping (the
-    normaliser's statistics, if any, are not trained)."""
-    rates = {"encoder": ppo.encoder_lr, "actor": ppo.actor_lr, "critic": ppo.critic_lr}
+    normaliser's statistics, if any, are not trained). The rates may be traced arrays."""
+    rates = {"encoder": hyper.encoder_lr, "actor": hyper.actor_lr, "critic": hyper.critic_lr}
     groups = {g: optax.adam(lr, eps=1e-5) for g, lr in rates.items()}
     if normalization.COLLECTION in params:  # only then: older checkpoints keep their optimiser state's shape
         groups["frozen"] = optax.set_to_zero()
-    return optax.chain(optax.clip_by_global_norm(ppo.max_grad_norm), optax.multi_transform(groups, lr_labels(params)))
+    return optax.chain(optax.clip_by_global_norm(hyper.max_grad_norm), optax.multi_transform(groups, lr_labels(params)))
 
 
-def observe_with_noise(obs: dict[str, jax.Array], key: jax.Array, noise: float) -> dict[str, jax.Array]:
-    """The agent's view of obs: the state plus N(0, noise^2) for PPO-x+N(0,1)."""
-    if noise <= 0.0 or "state" not in obs:
+def pick_hint(obs: dict[str, jax.Array], hyper: Hyper) -> dict[str, jax.Array]:
+    """obs with the configuration's hint picked out of the env's (`Hyper.hint_take`), padding 0."""
+    if "hint" not in obs:
         return obs
-    return {**obs, "state": obs["state"] + noise * jax.random.normal(key, obs["state"].shape)}
+    return {**obs, "hint": jnp.where(hyper.hint_keep, obs["hint"][..., hyper.hint_take], 0.0)}
+
+
+def observe(obs: dict[str, jax.Array], key: jax.Array, hyper: Hyper) -> dict[str, jax.Array]:
+    """The agent's view of obs in training: its hint, and the state plus N(0, s^2) (s is 0 but for
+    PPO-x+N(0,1); adding 0 x noise leaves the state as it was)."""
+    obs = pick_hint(obs, hyper)
+    if "state" not in obs:
+        return obs
+    return {**obs, "state": obs["state"] + hyper.state_noise * jax.random.normal(key, obs["state"].shape)}
 
 
 STARTS_TAG = 0x57A7  # folded into a rollout's key for its per-rollout starts (leaves the step keys as they were)
 
 
-def start_runner(
-    key: jax.Array, env: Any, env_params: Any, network: ActorCritic, num_envs: int, init_opt: Callable[[Any], Any]
-) -> RunnerState:
-    """A run's start: `num_envs` fresh episodes, fresh network params and `init_opt(params)`."""
+def start_envs(key: jax.Array, env: Any, env_params: Any, num_envs: int) -> tuple[jax.Array, jax.Array, envs.Timestep]:
+    """A run's start from its seed key: (network key, run key, `num_envs` fresh episodes)."""
     k_net, k_env, k_run = jax.random.split(key, 3)
-    ts = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_env, num_envs), env_params)
-    params = network.init(k_net, jax.tree.map(lambda x: x[:1], ts.obs))
-    return RunnerState(params, init_opt(params), ts.state, ts.obs, k_run, jnp.zeros((), jnp.int32))
+    return k_net, k_run, jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_env, num_envs), env_params)
+
+
+def start_params(k_net: jax.Array, network: ActorCritic, obs: dict[str, jax.Array], hyper: Hyper, width: int) -> Any:
+    """Fresh network params for observations like `obs` ([N, ...]) at hint width `width` (the
+    configuration's own: its first `width` picked hint positions)."""
+    seen = pick_hint(jax.tree.map(lambda x: x[:1], obs), hyper)
+    if "hint" in seen:
+        seen = {**seen, "hint": seen["hint"][..., :width]}
+    return network.init(k_net, seen)
+
+
+def start_runner(key: jax.Array, env: Any, env_params: Any, network: ActorCritic, num_envs: int,
+                 init_opt: Callable[[Any], Any], hyper: Hyper) -> RunnerState:
+    """A run's start: `num_envs` fresh episodes, fresh network params and `init_opt(params)`."""
+    k_net, k_run, ts = start_envs(key, env, env_params, num_envs)
+    params = start_params(k_net, network, ts.obs, hyper, int(np.sum(hyper.hint_keep)))  # a concrete Hyper (Hyper.of's)
+    return RunnerState(params, init_opt(params), ts.state, ts.obs, k_run, jnp.zeros((), jnp.int32), hyper)
 
 
 @dataclass(frozen=True)
@@ -192,17 +267,19 @@ class PPO:
     learn: Callable[[RunnerState, Transition, jax.Array, jax.Array, jax.Array], tuple[RunnerState, dict[str, jax.Array]]]
 
 
-def make_ppo(cfg: RunConfig) -> PPO:
-    """PPO's pieces for a validated RunConfig."""
+def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
+    """PPO's pieces for a validated RunConfig. Every number a table varies is read from the
+    state's `Hyper`, so the pieces serve any configuration of the same shapes; `hint` is the
+    env's hint (default: cfg's; a group's env computes every member's, see hintsjax.group)."""
     ppo = cfg.ppo
-    env = envs.AutoReset(cfg.make_env())
+    env = envs.AutoReset(envs.make(cfg.env, cfg.effective_hint if hint is None else hint, cfg.agent_spec.observe))
     env_params = envs.make_params(cfg.env, cfg.variant)
     network = make_network(cfg, env)
-    noise = cfg.agent_spec.state_noise
     T, N = ppo.rollout_length, ppo.num_envs
 
     def init(key: jax.Array) -> RunnerState:
-        return start_runner(key, env, env_params, network, N, lambda params: make_optimizer(ppo, params).init(params))
+        hyper = Hyper.of(cfg)
+        return start_runner(key, env, env_params, network, N, lambda params: make_optimizer(hyper, params).init(params), hyper)
 
     def rollout(state: RunnerState, key: jax.Array) -> tuple[RunnerState, Transition, jax.Array]:
         starts = None
@@ -213,11 +290,11 @@ def make_ppo(cfg: RunConfig) -> PPO:
         def step(carry, key):
             env_state, obs = carry
             k_noise, k_act, k_env, k_final = jax.random.split(key, 4)
-            seen = observe_with_noise(obs, k_noise, noise)
+            seen = observe(obs, k_noise, state.hyper)
             mean, log_std, value = network.apply(state.params, seen)
             action = mean + jnp.exp(log_std) * jax.random.normal(k_act, mean.shape)
             ts = jax.vmap(env.step, in_axes=(0, 0, 0, None, 0))(jax.random.split(k_env, N), env_state, action, env_params, starts)
-            final_value = network.apply(state.params, observe_with_noise(ts.final_obs, k_final, noise))[2]
+            final_value = network.apply(state.params, observe(ts.final_obs, k_final, state.hyper))[2]
             transition = Transition(
                 seen,
                 action,
@@ -233,10 +310,10 @@ def make_ppo(cfg: RunConfig) -> PPO:
 
         k_steps, k_last = jax.random.split(key)
         (env_state, obs), traj = jax.lax.scan(step, (state.env_state, state.obs), jax.random.split(k_steps, T))
-        last_value = network.apply(state.params, observe_with_noise(obs, k_last, noise))[2]
+        last_value = network.apply(state.params, observe(obs, k_last, state.hyper))[2]
         return state.replace(env_state=env_state, obs=obs), traj, last_value
 
-    def loss_fn(params, batch: Batch):
+    def loss_fn(params, batch: Batch, hyper: Hyper):
         mean, log_std, value = network.apply(params, batch.obs)
         advantage = (batch.advantage - batch.advantage.mean()) / (batch.advantage.std() + 1e-8)
         return clipped_surrogate_loss(
@@ -246,12 +323,13 @@ def make_ppo(cfg: RunConfig) -> PPO:
             value,
             batch.target,
             gaussian_entropy(log_std),
-            ppo.clip_eps,
-            ppo.vf_coef,
-            ppo.ent_coef,
+            hyper.clip_eps,
+            hyper.vf_coef,
+            hyper.ent_coef,
         )
 
     def learn(state: RunnerState, traj: Transition, last_value: jax.Array, reward: jax.Array, key: jax.Array):
+        hyper = state.hyper
         advantage, target = gae(
             reward,
             traj.value,
@@ -259,20 +337,20 @@ def make_ppo(cfg: RunConfig) -> PPO:
             traj.truncated,
             traj.final_value,
             last_value,
-            ppo.gamma,
-            ppo.gae_lambda,
+            hyper.gamma,
+            hyper.gae_lambda,
         )
         flat = lambda x: x.reshape((T * N,) + x.shape[2:])  # noqa: E731
         batch = jax.tree.map(flat, Batch(traj.obs, traj.action, traj.log_prob, advantage, target))
-        optimizer = make_optimizer(ppo, state.params)
+        optimizer = make_optimizer(hyper, state.params)
 
         def minibatch_step(carry, mb: Batch):
             params, opt_state, stopped = carry
-            (_, parts), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, mb)
+            (_, parts), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, mb, hyper)
             updates, new_opt_state = optimizer.update(grads, opt_state, params)
             new = (optax.apply_updates(params, updates), new_opt_state)
             if ppo.target_kl is not None:  # KL early stop: no step from here to the update's end
-                stopped = stopped | ~(parts["approx_kl"] <= 1.5 * ppo.target_kl)  # NaN stops too
+                stopped = stopped | ~(parts["approx_kl"] <= 1.5 * hyper.target_kl)  # NaN stops too
                 new = jax.tree.map(lambda old, step: jnp.where(stopped, old, step), (params, opt_state), new)
                 parts = {**parts, "kl_stopped": stopped.astype(jnp.float32)}
             return (*new, stopped), parts
@@ -296,14 +374,15 @@ def make_ppo(cfg: RunConfig) -> PPO:
     return PPO(env, env_params, network, init, rollout, learn)
 
 
-def make_trainer(cfg: RunConfig) -> Trainer:
-    """PPO's trainer: each update rolls out, then learns from the env's (scaled) reward."""
-    parts = make_ppo(cfg)
+def make_trainer(cfg: RunConfig, hint: str | None = None) -> Trainer:
+    """PPO's trainer: each update rolls out, then learns from the env's (scaled) reward. `hint`:
+    as make_ppo's."""
+    parts = make_ppo(cfg, hint)
 
     def update(state: RunnerState) -> tuple[RunnerState, dict[str, jax.Array]]:
         key, k_roll, k_epochs = jax.random.split(state.key, 3)
         state, traj, last_value = parts.rollout(state, k_roll)
-        state, metrics = parts.learn(state, traj, last_value, cfg.ppo.reward_scale * traj.reward, k_epochs)
+        state, metrics = parts.learn(state, traj, last_value, state.hyper.reward_scale * traj.reward, k_epochs)
         return state.replace(key=key), metrics
 
     return Trainer(cfg, parts.env, parts.network, parts.init, update)

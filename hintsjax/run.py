@@ -11,6 +11,7 @@ Bad input is reported in one line with the valid choices, exit status 2, nothing
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 import time
@@ -97,8 +98,56 @@ def compile_training(trainer: Trainer, keys: jax.Array, chunk: int) -> Compiled:
     return Compiled(init, run_chunk, chunk, time.perf_counter() - t, traced)
 
 
-def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = True) -> dict[str, Any]:
-    """Train all seeds (in chunks, with checkpoints), evaluate, plot; returns eval results.
+class GroupTooBig(RuntimeError):
+    """A group's compiled training program needs more memory than the device has."""
+
+
+def check_fits(compiled: Any, what: str) -> None:
+    """GroupTooBig if `compiled` (an XLA executable) needs more than 90 % of the device's memory
+    (only where the device reports both: GPUs do, the CPU does not)."""
+    stats = jax.devices()[0].memory_stats() or {}
+    analysis = compiled.memory_analysis()
+    if "bytes_limit" not in stats or analysis is None:
+        return
+    need = analysis.temp_size_in_bytes + analysis.argument_size_in_bytes + analysis.output_size_in_bytes
+    if need > 0.9 * stats["bytes_limit"]:
+        raise GroupTooBig(f"{what} needs {need / 2**30:.1f} GiB of the device's {stats['bytes_limit'] / 2**30:.1f} GiB")
+
+
+@dataclass
+class Training:
+    """A training run's progress: its compiled programs, state and timing (what `start` and `advance` share)."""
+
+    compiled: Compiled
+    state: Any
+    done: int  # updates in `state`
+    first: int  # updates this call started from (a resumed run's checkpoint)
+    before: float  # training seconds of earlier calls (resumed)
+    seconds: float = 0.0  # training seconds of this call
+
+
+def start(trainer: Trainer, cfg: RunConfig, run_dir: Path, resume: bool, label: str, check_memory: bool = False) -> Training:
+    """Compile `trainer`'s programs for cfg's seeds, then a fresh state or the newest checkpoint of run_dir."""
+    keys, num_devices = seed_keys(cfg)
+    total = cfg.ppo.num_updates
+    compiled = compile_training(trainer, keys, min(cfg.checkpoint_every, total))
+    if check_memory:
+        check_fits(compiled.run_chunk, label)
+    if resume:  # restored onto one device: placed as the compiled chunk expects (seeds sharded, if they are)
+        state, done = checkpoint.restore_latest(run_dir, cfg, trainer)
+        state = jax.device_put(state, compiled.run_chunk.input_shardings[0][0])
+    else:
+        state, done = compiled.init(keys), 0
+    print(f"{cfg.env} {label}: {cfg.seeds} seeds x {total} updates of {cfg.ppo.batch_size} env steps "
+          f"on {num_devices} {jax.default_backend()} device(s), compiled in {compiled.seconds:.1f} s -> {run_dir}",
+          flush=True)
+    return Training(compiled, state, done, done, seconds_trained(run_dir) if resume else 0.0)
+
+
+def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[dict[str, np.ndarray], int], None],
+            progress: bool, label: str) -> Training:
+    """Train to cfg's last update in chunks, checkpointing into run_dir; `write(metrics, after)`
+    gets each chunk's metrics ([S, n, ...] for n updates after `after`).
 
     The device never waits on the host: each chunk is dispatched before the previous one's
     metrics are written and its state checkpointed (in the background), so logging and saving
@@ -108,37 +157,23 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
     """
     from tqdm import tqdm
 
-    trainer = make_trainer(cfg)
-    keys, num_devices = seed_keys(cfg)
-    total = cfg.ppo.num_updates
-    compiled = compile_training(trainer, keys, min(cfg.checkpoint_every, total))
-    if resume:  # restored onto one device: placed as the compiled chunk expects (seeds sharded, if they are)
-        state, done = checkpoint.restore_latest(run_dir, cfg, trainer)
-        state = jax.device_put(state, compiled.run_chunk.input_shardings[0][0])
-    else:
-        state, done = compiled.init(keys), 0
-    print(f"{cfg.env} {cfg.label}: {cfg.seeds} seeds x {total} updates of {cfg.ppo.batch_size} env steps "
-          f"on {num_devices} {jax.default_backend()} device(s), compiled in {compiled.seconds:.1f} s -> {run_dir}",
-          flush=True)
-    log = RunLog(run_dir, resume_update=done)
-    before = seconds_trained(run_dir) if resume else 0.0  # kept work of earlier calls
-    first = done
-    bar = tqdm(total=total, initial=done, unit="upd", disable=not progress, desc=f"{cfg.env} {cfg.label}")
+    compiled, state, done, total = training.compiled, training.state, training.done, cfg.ppo.num_updates
+    bar = tqdm(total=total, initial=done, unit="upd", disable=not progress, desc=f"{cfg.env} {label}")
     t0 = saved = time.perf_counter()
 
     def save(state: Any, update: int) -> None:
         nonlocal saved
         checkpoint.save(run_dir, state, update)
         saved = time.perf_counter()
-        (run_dir / SECONDS_JSON).write_text(json.dumps({"update": update, "seconds": before + saved - t0,
+        (run_dir / SECONDS_JSON).write_text(json.dumps({"update": update, "seconds": training.before + saved - t0,
                                                          "compile_seconds": compiled.seconds,
                                                          "trace_seconds": compiled.trace_seconds}))
 
     def report(metrics: dict[str, jax.Array], after: int, n: int) -> None:
         metrics = {k: np.asarray(v)[:, :n] for k, v in metrics.items()}  # waits for that chunk only
-        log.write(metrics, after)
+        write(metrics, after)
         returns = metrics["episode_return"][:, -1]
-        bar.set_postfix(steps=int(metrics["env_steps"][0, -1]),
+        bar.set_postfix(steps=int(np.max(metrics["env_steps"][:, -1])),
                         ret=f"{np.nanmean(returns):.1f}" if not np.all(np.isnan(returns)) else "-")
         bar.update(n)
 
@@ -150,7 +185,7 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
                 following, metrics = compiled.run_chunk(state, np.int32(n))  # returns at once; the device works on
                 if pending is not None:
                     report(*pending)
-                if (done > first and time.perf_counter() - saved >= cfg.checkpoint_seconds
+                if (done > training.first and time.perf_counter() - saved >= cfg.checkpoint_seconds
                         and not checkpoint.saving(run_dir)):
                     save(state, done)  # the state this chunk started from: computed, copied off as the chunk runs
                 state, pending, done = following, (metrics, done, n), done + n
@@ -159,22 +194,73 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
                 save(state, total)
     finally:
         bar.close()
-        log.close()
-    train_seconds = time.perf_counter() - t0
+    return dataclasses.replace(training, state=state, done=done, seconds=time.perf_counter() - t0)
+
+
+def finish(cfg: RunConfig, run_dir: Path, params: Any, training: Training, extra: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Evaluate a run's seed-batched params, write its eval.json and learning curve, print the results."""
     variants = (cfg.variant, *cfg.eval_variants)
-    evaluations, eval_compile = evaluate_variants(cfg, state.params, variants, cfg.eval_episodes, cfg.stochastic_eval)
-    results = {"label": cfg.label, "env": cfg.env, "train_seconds_this_call": train_seconds,
-               "train_seconds": before + train_seconds,
+    evaluations, eval_compile = evaluate_variants(cfg, params, variants, cfg.eval_episodes, cfg.stochastic_eval)
+    compiled = training.compiled
+    results = {"label": cfg.label, "env": cfg.env, "train_seconds_this_call": training.seconds,
+               "train_seconds": training.before + training.seconds,
                "compile_seconds": {"train": compiled.seconds, "eval": eval_compile},
                "trace_seconds": {"train": compiled.trace_seconds},
-               "train_env_steps_per_s": (total - first) * cfg.ppo.batch_size * cfg.seeds / train_seconds,
-               "env_steps": total * cfg.ppo.batch_size, "evaluations": evaluations}
+               "train_env_steps_per_s": (training.done - training.first) * cfg.ppo.batch_size * cfg.seeds
+               / max(training.seconds, 1e-9),
+               "env_steps": cfg.ppo.num_updates * cfg.ppo.batch_size, **(extra or {}), "evaluations": evaluations}
     (run_dir / EVAL_JSON).write_text(json.dumps(results, indent=1))
     if (run_dir / METRICS_CSV).exists():
         plot_curves({cfg.label: read_curves(run_dir / METRICS_CSV)}, run_dir / CURVE_PNG, f"{cfg.env}: {cfg.label}")
     for ev in results["evaluations"]:
         print(f"{cfg.env}/{ev['variant']} {cfg.label}: {ev['mean']:.2f} +- {ev['std']:.2f}{metrics_text(ev)} "
               f"({ev['seeds']} seeds x {ev['episodes_per_seed']} episodes)  -> {run_dir}")
+    return results
+
+
+def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = True) -> dict[str, Any]:
+    """Train all seeds (in chunks, with checkpoints: see `advance`), evaluate, plot; returns eval results."""
+    training = start(make_trainer(cfg), cfg, run_dir, resume, cfg.label)
+    log = RunLog(run_dir, resume_update=training.done)
+    try:
+        training = advance(training, cfg, run_dir, log.write, progress, cfg.label)
+    finally:
+        log.close()
+    return finish(cfg, run_dir, training.state.params, training)
+
+
+def train_group(group_cfgs: list[RunConfig], group_dir: Path, cell_dirs: list[Path], resume: bool = False,
+                progress: bool = True) -> list[dict[str, Any]]:
+    """Train configurations that share a network's shapes together (hintsjax.group), all seeds of
+    all of them in one compiled program; checkpoints of the group go to group_dir. Each member
+    then gets what its own run would have written in its folder (cell_dirs, each holding its
+    config.yaml): metrics.csv, its final state as a checkpoint, eval.json, learning_curve.png.
+    GroupTooBig if the group's program would not fit on the device (before anything is written)."""
+    from hintsjax.group import cell_state, make_group, make_group_trainer
+
+    group = make_group(group_cfgs)
+    cfg = group.cfgs[0]
+    label = f"group of {len(group.cfgs)} ({', '.join(c.label for c in group.cfgs)})"
+    training = start(make_group_trainer(group), cfg, group_dir, resume, label, check_memory=len(group.cfgs) > 1)
+    logs = [RunLog(d, resume_update=training.done) for d in cell_dirs]
+
+    def write(metrics: dict[str, np.ndarray], after: int) -> None:  # [S, n, K]: one log per member
+        for k, log in enumerate(logs):
+            log.write({name: v[..., k] for name, v in metrics.items()}, after)
+
+    try:
+        training = advance(training, cfg, group_dir, write, progress, label)
+    finally:
+        for log in logs:
+            log.close()
+    results = []
+    members = [c.label for c in group.cfgs]
+    for k, (member, cell_dir) in enumerate(zip(group.cfgs, cell_dirs)):
+        state = cell_state(group, training.state, k)
+        if checkpoint.latest_update(cell_dir) != training.done:
+            checkpoint.save(cell_dir, state, training.done)
+        results.append(finish(member, cell_dir, state.params, training,
+                              {"group": members, "group_dir": str(group_dir)}))
     return results
 
 

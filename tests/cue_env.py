@@ -2,7 +2,8 @@
 
 At reset a cue c in {-1, +1} is drawn uniformly; the picture is a constant grey image and the
 state observation is [0.0], so neither reveals c. The hint `cue` is [c]. The episode is one
-step long (truncated at t = 1) with reward -(a - c)^2, a clipped to [-2, 2]. The best an agent
+step long (truncated at t = 1) with reward -(a - c)^2, a clipped to [-2, 2]. (A second hint,
+`cue_pair` = [c, -c], gives tests/test_group.py hints of several widths.) The best an agent
 blind to the hint can do is the constant action a = 0, whose expected return is -1; an agent
 that reads the hint can reach 0.
 
@@ -63,6 +64,12 @@ class CueEnv(Env):
 def cue(state: CueState, params: CueParams) -> jax.Array:
     """The episode's cue c in {-1, +1}: the right action."""
     return state.cue[None]
+
+
+@register_hint(NAME, "cue_pair", dim=2, unit="1")
+def cue_pair(state: CueState, params: CueParams) -> jax.Array:
+    """[c, -c]: the cue twice (a second hint of another width, for the group tests)."""
+    return jnp.stack([state.cue, -state.cue])
 
 
 envs.REGISTRY[NAME] = envs.EnvEntry(CueEnv, {"default": CueParams()})

@@ -228,8 +228,9 @@ def test_target_kl_stops_an_update_after_the_first_minibatch_whose_kl_exceeds_it
     off = make(None)
     state = jax.jit(off.init)(jax.random.key(0))
     _, traj, last_value = jax.jit(off.rollout)(state, jax.random.key(1))
-    learnt = {target: jax.jit(parts.learn)(state, traj, last_value, traj.reward, jax.random.key(2))
-              for target, parts in ((None, off), (1e9, make(1e9)), (1e-12, make(1e-12)))}
+    learnt = {target: jax.jit(parts.learn)(state.replace(hyper=jax.jit(parts.init)(jax.random.key(0)).hyper),
+                                           traj, last_value, traj.reward, jax.random.key(2))
+              for target, parts in ((None, off), (1e9, make(1e9)), (1e-12, make(1e-12)))}  # the target: a Hyper leaf
     for target, steps in ((None, 4), (1e9, 4), (1e-12, 1)):
         after, metrics = learnt[target]
         assert set(adam_counts(after.opt_state)) == {steps}

@@ -337,3 +337,47 @@ def test_classic_report_gives_iqm_cells_and_orderings_as_probabilities_of_improv
     classic_control.report(runs, force=True)
     table = (tmp_path / "results" / "classic_table2.md").read_text()
     assert f"| {row} |" in table and "IQM of seed means [95% CI]" in table
+
+
+def test_seeds_below_one_get_one_line(capsys):
+    import argparse
+
+    parser = argparse.ArgumentParser()
+    sweep.add_arguments(parser, "runs/x", ("pendulum",), seeds=20)
+    assert parser.parse_args([]).seeds == 20
+    with pytest.raises(SystemExit) as e:
+        sweep.chosen_envs(parser, parser.parse_args(["--seeds", "0"]), ("pendulum",))
+    assert e.value.code == 2 and capsys.readouterr().err == "error: --seeds must be at least 1, got 0\n"
+
+
+def test_plan_jobs_groups_the_classic_table_by_shape():
+    import classic_control
+
+    ids = [f"pendulum/{label}" for label in classic_control.table_runs(2, "pendulum")]
+    jobs = sweep.plan_jobs(ids, seeds=20, smoke=False)
+    assert sorted(map(len, jobs)) == [1, 1, 1, 1, 2, 6]  # references and PPO-RGB alone; PPO-x twice; HINTS-FC x 6
+    assert ["pendulum/ppo_state", "pendulum/ppo_noisy_state"] in jobs
+    assert sweep.plan_jobs(ids, 20, False, alone=True) == [[r] for r in ids]
+
+
+def test_a_group_trains_into_each_runs_folder_and_splits_when_too_big(tmp_path, monkeypatch):
+    """A sweep's group job writes each run's eval.json (with the group and the sweep's fields)
+    and keeps its checkpoints in the group's folder; a group that does not fit is split in halves."""
+    import cue_env  # noqa: F401  (tests/cue_env.py: the "cue" env and its hints)
+    from hintsjax import run
+
+    ids = ["cue/hints-fc-cue", "cue/hints-fc-cue_pair"]
+    sweep.train_one(tmp_path, ids, seeds=2, smoke=True, experts=None)
+    for run_id in ids:
+        result = json.loads((tmp_path / run_id / "eval.json").read_text())
+        assert result["group"] == [r.split("/")[1] for r in ids] and result["device"] and "wall_seconds" in result
+    folder = sweep.group_folder(tmp_path, ids)
+    assert json.loads((folder / "group.json").read_text())["runs"] == ids and (folder / "checkpoints").is_dir()
+
+    def too_big(compiled, what):
+        raise run.GroupTooBig(f"{what} needs 99 GiB")
+
+    monkeypatch.setattr(run, "check_fits", too_big)
+    sweep.train_one(tmp_path / "split", ids, seeds=2, smoke=True, experts=None)
+    for run_id in ids:
+        assert "group" not in json.loads((tmp_path / "split" / run_id / "eval.json").read_text())
