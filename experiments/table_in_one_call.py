@@ -52,7 +52,7 @@ def record(row: dict) -> None:
     RESULTS.write_text(json.dumps(rows, indent=1) + "\n")
 
 
-def table(env: str, seeds: int, alone: bool, workers: int, runs: Path, ceiling: float) -> dict:
+def table(env: str, seeds: int, alone: bool, workers: int, runs: Path) -> dict:
     import hintsjax
 
     labels = learner_rows(env)
@@ -69,11 +69,11 @@ def table(env: str, seeds: int, alone: bool, workers: int, runs: Path, ceiling: 
     epochs = run_config({"env": env, "agent": "hints"}).ppo.epochs
     groups = {tuple(r.get("group", [r["label"]])) for r in results}
     return {"env": env, "rows": labels, "seeds": seeds, "wall_s": round(wall, 1),
-            "env_steps_per_s": round(env_steps / wall), "ceiling_fraction": round(env_steps * epochs / wall / ceiling, 3),
+            "env_steps_per_s": round(env_steps / wall), "epochs": epochs,
             "device": jax.devices()[0].device_kind, "deterministic": hintsjax.deterministic_gpu_ops(),
             "platform": jax.default_backend(), "jax": jax.__version__, "grouped": not alone, "workers": workers,
             "groups": [list(g) for g in sorted(groups, key=len, reverse=True)],
-            "env_steps": env_steps, "ceiling_samples_per_s": round(ceiling),
+            "env_steps": env_steps,
             "train_seconds": {r["label"]: round(r["train_seconds"], 1) for r in results},
             "compile_seconds": {r["label"]: r["compile_seconds"] for r in results},
             "command": " ".join(["python", "experiments/classic_control.py", *cmd[2:]]).replace(str(runs), "<runs>")}
@@ -122,15 +122,22 @@ def main() -> None:
         print(json.dumps(row), flush=True)
         record(row)
         return
+    # This process measures the ceiling after the tables; until then it must not hold the
+    # device's memory (JAX preallocates 75 % of it on first use), which the workers need.
+    os.environ["XLA_PYTHON_CLIENT_PREALLOCATE"] = "false"
     sys.path.insert(0, str(HERE))
     from bench import bench_ceiling
 
-    ceiling = bench_ceiling(8192)["update_samples_per_s"]
-    print(f"ceiling: {ceiling:,.0f} samples/s", flush=True)
+    rows = []
     for seeds in [int(s) for s in args.seeds.split(",")]:
         with tempfile.TemporaryDirectory() as tmp:
             runs = args.keep / f"seeds{seeds}" if args.keep else Path(tmp)
-            row = table(args.env, seeds, args.alone, args.workers, runs, ceiling)
+            rows.append(table(args.env, seeds, args.alone, args.workers, runs))
+    ceiling = bench_ceiling(8192)["update_samples_per_s"]
+    print(f"ceiling: {ceiling:,.0f} samples/s", flush=True)
+    for row in rows:
+        row.update(ceiling_fraction=round(row["env_steps_per_s"] * row.pop("epochs") / ceiling, 3),
+                   ceiling_samples_per_s=round(ceiling))
         print(json.dumps({k: row[k] for k in ("env", "seeds", "wall_s", "env_steps_per_s", "ceiling_fraction")}),
               flush=True)
         record(row)

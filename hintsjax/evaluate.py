@@ -24,7 +24,7 @@ from flax import struct
 
 from hintsjax import envs
 from hintsjax.config import RunConfig, UsageError, env_params, fail, load_run_config
-from hintsjax.ppo import make_network
+from hintsjax.ppo import Hyper, make_network, pick_hint
 
 EVAL_TAG = 0xE7A1  # folded into a seed's key so evaluation draws differ from training's
 
@@ -40,22 +40,25 @@ class EvalResult:
 
 
 def make_task_evaluator(
-    cfg: RunConfig, num_episodes: int, stochastic: bool = False
-) -> Callable[[Any, jax.Array, Any], EvalResult]:
-    """`evaluate(params, key, task_params) -> EvalResult[E]` for one seed's params on any variant
-    of the env (its params are an argument, so one compiled program serves every variant)."""
-    env = cfg.make_env()
+    cfg: RunConfig, num_episodes: int, stochastic: bool = False, hint: str | None = None
+) -> Callable[..., EvalResult]:
+    """`evaluate(params, key, task_params[, pick]) -> EvalResult[E]` for one seed's params on any
+    variant of the env (its params are an argument, so one compiled program serves every variant).
+    With `hint` (a group's env hint, hintsjax.group) the agent sees the hint that `pick` (a member's
+    Hyper) picks out of it: one program then evaluates every member of a group."""
+    env = envs.make(cfg.env, cfg.effective_hint if hint is None else hint, cfg.agent_spec.observe)
     network = make_network(cfg, env)
     metrics_of = jax.vmap(env.metrics, in_axes=(0, None))
 
-    def evaluate(params: Any, key: jax.Array, task_params: Any) -> EvalResult:
+    def evaluate(params: Any, key: jax.Array, task_params: Any, pick: Hyper | None = None) -> EvalResult:
         k_reset, k_run = jax.random.split(key)
         ts = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_reset, num_episodes), task_params)
+        see = (lambda obs: obs) if pick is None else (lambda obs: pick_hint(obs, pick))  # noqa: E731
 
         def step(carry):
             t, state, obs, ret, length, metrics, alive = carry
             k_act, k_env = jax.random.split(jax.random.fold_in(k_run, t))
-            mean, log_std, _ = network.apply(params, obs)
+            mean, log_std, _ = network.apply(params, see(obs))
             action = mean + stochastic * jnp.exp(log_std) * jax.random.normal(k_act, mean.shape)
             ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
                 jax.random.split(k_env, num_episodes), state, action, task_params
@@ -133,6 +136,32 @@ def evaluate_variants(cfg: RunConfig, params: Any, variants: tuple[str | None, .
     compile_seconds = time.perf_counter() - t
     return [{"variant": v or envs.variant_names(cfg.env)[0], "stochastic": stochastic,
              **summarize(evaluate(params, keys, p))} for v, p in zip(variants, task_params)], compile_seconds
+
+
+def evaluate_group(group: Any, state: Any) -> tuple[list[list[dict]], float]:
+    """Evaluate every member of a group (hintsjax.group) from the group's seed-batched state
+    ([S, K, ...], hint axes padded) with one compiled program, each on its own variants, episodes
+    and sampling as its own run would; (per member its summaries per variant, compile seconds).
+    The program is the group env's (every member's hint parts) with the member's hint picked
+    and its padded weights (exact zeros) in place: what the member alone computes, its sums
+    over the hint axis padded with zero terms."""
+    cfg = group.cfgs[0]
+    if len({(c.eval_episodes, c.stochastic_eval) for c in group.cfgs}) > 1:  # not one program: each alone
+        from hintsjax.group import cell_state
+
+        results = [evaluate_variants(c, cell_state(group, state, k).params, (c.variant, *c.eval_variants),
+                                     c.eval_episodes, c.stochastic_eval) for k, c in enumerate(group.cfgs)]
+        return [r for r, _ in results], sum(t for _, t in results)
+    keys, params = eval_keys(cfg), state.params
+    t = time.perf_counter()
+    evaluate = jax.jit(jax.vmap(make_task_evaluator(cfg, cfg.eval_episodes, cfg.stochastic_eval, group.hint),
+                                in_axes=(0, 0, None, None)))
+    member = lambda k: jax.tree.map(lambda x: x[:, k], params)  # noqa: E731
+    evaluate = evaluate.lower(member(0), keys, envs.make_params(cfg.env, cfg.variant), group.hyper(0)).compile()
+    compile_seconds = time.perf_counter() - t
+    return [[{"variant": v or envs.variant_names(c.env)[0], "stochastic": c.stochastic_eval,
+              **summarize(evaluate(member(k), keys, envs.make_params(c.env, v), group.hyper(k)))}
+             for v in (c.variant, *c.eval_variants)] for k, c in enumerate(group.cfgs)], compile_seconds
 
 
 def evaluate_params(cfg: RunConfig, params: Any, variant: str | None, episodes: int, stochastic: bool) -> dict:

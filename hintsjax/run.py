@@ -27,7 +27,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from hintsjax import checkpoint, compilation_cache, expert
 from hintsjax.config import RunConfig, UsageError, fail, load_run_config, run_config, save_run_config
-from hintsjax.evaluate import evaluate_variants, metrics_text
+from hintsjax.evaluate import evaluate_group, evaluate_variants, metrics_text
 from hintsjax.algorithms import make_trainer
 from hintsjax.runlog import CURVE_PNG, METRICS_CSV, RunLog, plot_curves, read_curves
 from hintsjax.trainer import Trainer
@@ -197,10 +197,9 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
     return dataclasses.replace(training, state=state, done=done, seconds=time.perf_counter() - t0)
 
 
-def finish(cfg: RunConfig, run_dir: Path, params: Any, training: Training, extra: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Evaluate a run's seed-batched params, write its eval.json and learning curve, print the results."""
-    variants = (cfg.variant, *cfg.eval_variants)
-    evaluations, eval_compile = evaluate_variants(cfg, params, variants, cfg.eval_episodes, cfg.stochastic_eval)
+def finish(cfg: RunConfig, run_dir: Path, training: Training, evaluations: list[dict], eval_compile: float,
+           extra: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Write a run's eval.json (its evaluations and timings) and learning curve; print the results."""
     compiled = training.compiled
     results = {"label": cfg.label, "env": cfg.env, "train_seconds_this_call": training.seconds,
                "train_seconds": training.before + training.seconds,
@@ -226,7 +225,10 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
         training = advance(training, cfg, run_dir, log.write, progress, cfg.label)
     finally:
         log.close()
-    return finish(cfg, run_dir, training.state.params, training)
+    variants = (cfg.variant, *cfg.eval_variants)
+    evaluations, eval_compile = evaluate_variants(cfg, training.state.params, variants, cfg.eval_episodes,
+                                                  cfg.stochastic_eval)
+    return finish(cfg, run_dir, training, evaluations, eval_compile)
 
 
 def train_group(group_cfgs: list[RunConfig], group_dir: Path, cell_dirs: list[Path], resume: bool = False,
@@ -253,15 +255,14 @@ def train_group(group_cfgs: list[RunConfig], group_dir: Path, cell_dirs: list[Pa
     finally:
         for log in logs:
             log.close()
-    results = []
-    members = [c.label for c in group.cfgs]
-    for k, (member, cell_dir) in enumerate(zip(group.cfgs, cell_dirs)):
-        state = cell_state(group, training.state, k)
+    for k, cell_dir in enumerate(cell_dirs):
         if checkpoint.latest_update(cell_dir) != training.done:
-            checkpoint.save(cell_dir, state, training.done)
-        results.append(finish(member, cell_dir, state.params, training,
-                              {"group": members, "group_dir": str(group_dir)}))
-    return results
+            checkpoint.save(cell_dir, cell_state(group, training.state, k), training.done)
+    evaluations, eval_compile = evaluate_group(group, training.state)
+    rate = (training.done - training.first) * cfg.ppo.batch_size * cfg.seeds * len(group.cfgs) / max(training.seconds, 1e-9)
+    extra = {"group": [c.label for c in group.cfgs], "group_dir": str(group_dir), "group_env_steps_per_s": rate}
+    return [finish(member, cell_dir, training, member_evaluations, eval_compile, extra)
+            for member, cell_dir, member_evaluations in zip(group.cfgs, cell_dirs, evaluations)]
 
 
 def main_from_values(values: dict[str, Any]) -> int:

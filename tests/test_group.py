@@ -161,3 +161,16 @@ def test_train_group_writes_each_members_folder_as_its_own_run(tmp_path, capsys)
         assert update == UPDATES and state.obs["hint"].shape[-1] == ppo.hint_width(c)
     again = run.train_group(cfgs, tmp_path / "group", dirs, resume=True, progress=False)
     assert [r["evaluations"] for r in again] == [r["evaluations"] for r in results]
+
+
+def test_one_program_evaluates_every_member_as_its_own_run_would(hint_group):
+    """The group's evaluation (its env, each member's hint picked, padded weights in place) gives
+    each member's returns as evaluating the member's own params with its own env does."""
+    from hintsjax.evaluate import evaluate_group, evaluate_variants
+
+    g, together, _ = hint_group
+    evaluations, _ = evaluate_group(g, together)
+    for k, cfg in enumerate(g.cfgs):
+        alone, _ = evaluate_variants(cfg, group.cell_state(g, together, k).params, (None,), cfg.eval_episodes, False)
+        np.testing.assert_allclose(evaluations[k][0]["returns"], alone[0]["returns"], rtol=1e-5, atol=1e-6)
+    assert evaluations[0][0]["returns"] != evaluations[1][0]["returns"]
