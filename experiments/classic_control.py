@@ -245,12 +245,44 @@ def report(runs: Path, force: bool = False) -> None:
             plot_curves(env_curves, RESULTS / f"classic_curves_{env}.png", f"{env}: Table 2 agents, 5 seeds")
 
 
+def learners_report(runs: Path, envs: list[str], path: Path) -> None:
+    """The learner rows of Table 2 (and of Table 4 where run) of `envs` from a runs folder at any
+    seed count, with IQM [95% CI] and the orderings as probabilities of improvement."""
+    lines = [f"# Classic control at more seeds: the learner rows of Tables 2 and 4 ({runs})", "",
+             "Cells: mean ± std over all seeds x 50 evaluation episodes (in brackets the std of the per-seed means),",
+             "then the IQM of the per-seed means with a 95% stratified bootstrap interval (hintsjax/stats.py).",
+             "Wall-clock: the whole group's (compiles and evaluation included); the runs of a group train in one",
+             "program (hintsjax/group.py) and share it. Command and hardware: experiments/results/table_in_one_call.json.", ""]
+    for env in envs:
+        labels = [label for label in table_runs(2, env) if label not in REFERENCES]
+        labels += [label for label in table_runs(4, env) if label not in labels and load(runs, env, label)]
+        results = {label: load(runs, env, label) for label in labels}
+        seeds = sorted({len(r["evaluations"][0]["seed_means"]) for r in results.values() if r})
+        deploy = env == "pendulum"
+        lines += [f"## {env} ({', '.join(map(str, seeds))} seeds per row)", "",
+                  "| agent | ours | IQM [95% CI] | paper |" + (" swingto (ours) | swingto IQM | swingto (paper) |" if deploy else "")
+                  + " group wall-clock (s) |",
+                  "|---|---|---|---|" + ("---|---|---|" if deploy else "") + "---|"]
+        for label, result in results.items():
+            row = f"| {label} | {cell(result)} | {iqm_cell(result)} | {PAPER_TABLE2[env].get(label, '-')} |"
+            if deploy:
+                row += f" {cell(result, 1)} | {iqm_cell(result, 1)} | {PAPER_SWINGTO.get(label, '-')} |"
+            lines.append(row + f" {wall_clock(result)} |")
+        lines += ["", findings(runs, env), ""]
+    write_report(path, lines, force=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--table", type=int, choices=(2, 4), help="train the runs of this table")
     add_arguments(parser, "runs/classic", ENVS, seeds=20)
+    parser.add_argument("--learners-report", type=Path, default=None, metavar="FILE",
+                        help="write the learner rows of --envs from --runs (any seed count) with IQM and orderings")
     args = parser.parse_args()
     os.environ["JAX_PLATFORMS"] = "cpu"  # the parent only reads configs; workers get the devices
+    if args.learners_report:
+        learners_report(args.runs, chosen_envs(parser, args, ENVS), args.learners_report)
+        return
     if args.report:
         archive_runs(args.runs, [f"{env}/{label}" for env in ENVS for table in (2, 4) for label in table_runs(table, env)])
         report(args.runs, args.force)
