@@ -252,10 +252,11 @@ def learners_report(runs: Path, envs: list[str], path: Path) -> None:
              "Cells: mean ± std over all seeds x 50 evaluation episodes (in brackets the std of the per-seed means),",
              "then the IQM of the per-seed means with a 95% stratified bootstrap interval (hintsjax/stats.py).",
              "Wall-clock: the whole group's (compiles and evaluation included); the runs of a group train in one",
-             "program (hintsjax/group.py) and share it. Command and hardware: experiments/results/table_in_one_call.json.", ""]
+             "program (hintsjax/group.py) and share it. Command and hardware: experiments/results/table_in_one_call.json.",
+             f"Recorded sweep wall-clock in {runs}/sweeps.jsonl: Table 2 {sweep_seconds(runs, 2):.0f} s, Table 4 "
+             f"{sweep_seconds(runs, 4):.0f} s (a sweep stopped by a time limit and resumed counts its resumed call only).", ""]
     for env in envs:
         labels = [label for label in table_runs(2, env) if label not in REFERENCES]
-        labels += [label for label in table_runs(4, env) if label not in labels and load(runs, env, label)]
         results = {label: load(runs, env, label) for label in labels}
         seeds = sorted({len(r["evaluations"][0]["seed_means"]) for r in results.values() if r})
         deploy = env == "pendulum"
@@ -269,7 +270,32 @@ def learners_report(runs: Path, envs: list[str], path: Path) -> None:
                 row += f" {cell(result, 1)} | {iqm_cell(result, 1)} | {PAPER_SWINGTO.get(label, '-')} |"
             lines.append(row + f" {wall_clock(result)} |")
         lines += ["", findings(runs, env), ""]
+        cols = TABLE4_HINTS[env]
+        if all(load(runs, env, hints_run(scheme, h)) for scheme in SCHEMES for h in cols):
+            lines += [f"### {env}: Table 4 (conditioning schemes), IQM [95% CI] of the per-seed means", "",
+                      "| scheme | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
+            for scheme in SCHEMES:
+                lines.append(f"| {scheme} | " + " | ".join(iqm_cell(load(runs, env, hints_run(scheme, h))) for h in cols) + " |")
+            lines += ["", "Mean ± std (std of the seed means), for comparison with the paper's cells:", "",
+                      "| scheme | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
+            for scheme in SCHEMES:
+                lines.append(f"| {scheme} (ours) | " + " | ".join(cell(load(runs, env, hints_run(scheme, h))) for h in cols) + " |")
+                lines.append(f"| {scheme} (paper) | " + " | ".join(PAPER_TABLE4[scheme][env][h] for h in cols) + " |")
+            lines += ["", scheme_findings(runs, env), "", scheme_orderings(runs, env), ""]
     write_report(path, lines, force=True)
+
+
+def scheme_orderings(runs: Path, env: str) -> str:
+    """Per hint column of Table 4, the best scheme by IQM against each other scheme, as
+    probabilities of improvement over seeds."""
+    from hintsjax import stats
+
+    lines = []
+    for h in TABLE4_HINTS[env]:
+        results = {s: load(runs, env, hints_run(s, h)) for s in SCHEMES}
+        best = max(SCHEMES, key=lambda s: stats.iqm(results[s]["evaluations"][0]["seed_means"]))
+        lines += [f"- {h}: {ordering(best, results[best], other, results[other])}" for other in SCHEMES if other != best]
+    return "Best scheme per hint column (by IQM) against the others, P(best > other) [95% CI]:\n\n" + "\n".join(lines)
 
 
 def main() -> None:
