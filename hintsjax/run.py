@@ -296,6 +296,42 @@ def main_from_values(values: dict[str, Any]) -> int:
     return 0
 
 
+# Hydra's own flags that take the next argument as their value.
+HYDRA_VALUE_FLAGS = {"--config-name", "-cn", "--config-path", "-cp", "--config-dir", "-cd", "--cfg", "-c",
+                     "--package", "-p", "--experimental-rerun"}
+
+
+def config_keys() -> list[str]:
+    """Every key the command line accepts (conf/config.yaml's, nested ones as section.key)."""
+    import yaml
+
+    conf = yaml.safe_load((Path(__file__).parent / "conf" / "config.yaml").read_text())
+    conf = {k: v for k, v in conf.items() if k not in ("defaults", "hydra")}  # Hydra's own sections
+    return [*conf, *(f"{section}.{k}" for section, values in conf.items() if isinstance(values, dict) for k in values)]
+
+
+def check_overrides(argv: list[str]) -> None:
+    """UsageError for an argument that is not `key=value` with a known key, naming the closest
+    valid key (Hydra would print seven lines and exit 1)."""
+    import difflib
+
+    keys, skip = config_keys(), False
+    for arg in argv:
+        if skip or arg.startswith("-"):
+            skip = arg in HYDRA_VALUE_FLAGS and not skip
+            continue
+        if "=" not in arg:
+            raise UsageError(f"unexpected argument {arg!r}: give key=value pairs (e.g. env=pendulum)")
+        key = arg.split("=", 1)[0].lstrip("+~")
+        if key == "hydra" or key.startswith("hydra."):
+            continue
+        if key not in keys:
+            close = difflib.get_close_matches(key, keys, n=1)
+            hint = f"did you mean {close[0]!r}? " if close else ""
+            raise UsageError(f"unknown config key {key!r}; {hint}valid: {', '.join(k for k in keys if '.' not in k)}, "
+                             "ppo.<key>, dagger.<key>, gail.<key> (hintsjax/conf/config.yaml)")
+
+
 @hydra.main(version_base=None, config_path="conf", config_name="config")
 def _hydra_main(cfg: DictConfig) -> None:
     status = main_from_values(OmegaConf.to_container(cfg, resolve=True))
@@ -304,6 +340,10 @@ def _hydra_main(cfg: DictConfig) -> None:
 
 
 def main() -> None:
+    try:
+        check_overrides(sys.argv[1:])
+    except UsageError as e:
+        sys.exit(fail(e))
     _hydra_main()
 
 

@@ -53,6 +53,10 @@ BAD_RUN_ARGS = {
     "resume=no/such/run": "no run folder",
     "env=acrobot hint=torque": "valid choices: angular_velocity_1, angular_velocity_2, composite, goal_distance, joint, partial_state, state",
     "env=idp variant=swingto": "valid choices: standard",
+    "foo=1": "unknown config key 'foo'",
+    "sead=3": "did you mean 'seed'?",
+    "ppo.epoch=3": "did you mean 'ppo.epochs'?",
+    "env=pendulum extra": "unexpected argument 'extra'",
 }
 
 
