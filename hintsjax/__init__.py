@@ -1,6 +1,15 @@
 """hintsjax: HINTs (Human-INTuited cues for RL) in JAX. See README.md."""
 
 import os as _os
+from pathlib import Path as _Path
+
+# `hintsjax.envs` is the checkout's top-level envs/ folder (pyproject.toml's package-dir): an
+# editable install maps it there and a normal install copies it into hintsjax/envs. After a normal
+# install, a command run from the checkout's root imports this folder (the working directory comes
+# first on sys.path), which has no envs/ of its own: then the package also looks beside itself.
+_here = _Path(__file__).resolve().parent
+if not (_here / "envs").is_dir() and (_here.parent / "envs" / "__init__.py").is_file():
+    __path__.append(str(_here.parent))
 
 # Same seed, same result on a GPU too. Without this flag two processes training the same seed on
 # an H100 ended with different params (XLA autotunes GPU kernels per compile; measured with
