@@ -1,21 +1,25 @@
 """The paper's classic control tables (pendulum, acrobot, idp): Table 2 and Table 4, reproduced.
 
-    python experiments/classic_control.py --table 2 [--envs acrobot,idp] [--workers 4]
-    python experiments/classic_control.py --table 4 [--workers 4] [--launch-until 300]
+    python experiments/classic_control.py --table 2 [--envs acrobot,idp] [--seeds 20] [--workers 3]
+    python experiments/classic_control.py --table 4 [--workers 3] [--launch-until 300]
     python experiments/classic_control.py --report       # markdown tables and learning curves
+    python experiments/classic_control.py --learners-report FILE --runs runs/classic20 --envs pendulum
 
 Table 2: per env the converged references (expert PPO, DAgger, GAIL), PPO-RGB, PPO-x,
 PPO-x+N(0,1) and HINTS-FC with every hint the env registers. The expert's run exports its best
 seed as the env's expert (--experts, default the package's hintsjax/experts/<env>) when it
 finishes; that env's dagger and gail runs start only then.
 Table 4: HINTS with each scheme (fc, lc, ac, mc) times the table's hint columns.
-Every configuration is trained at the env's default budget (config.ENV_DEFAULTS) with 5 seeds
-vmapped in one call, then evaluated on 50 episodes per seed; its folder under --runs holds
-config.yaml, metrics.csv and eval.json. Finished folders are skipped, so an interrupted sweep
-resumes where it stopped. `--workers N` trains N configurations at once in separate processes
-(each gets 1/N of the GPU's memory): a 5-seed run leaves a big GPU mostly idle, and compiling is
-single-threaded, so several at once finish the sweep sooner. `--report` only reads finished
-folders and writes experiments/results/classic_table{2,4}.md and classic_curves_<env>.png.
+Every configuration is trained at the env's default budget (config.ENV_DEFAULTS) with --seeds
+seeds (default 20), then evaluated on 50 episodes per seed; its folder under --runs holds
+config.yaml, metrics.csv and eval.json. Runs that share a network's shapes train as one group,
+all their seeds in one compiled program (hintsjax/group.py; e.g. HINTS-FC with every hint), and
+`--alone` trains each in its own. Finished folders are skipped and groups resume from their
+checkpoints, so an interrupted sweep resumes where it stopped. `--workers N` trains N groups at
+once in separate processes (each gets 1/N of the GPU's memory, and a group that does not fit is
+split in halves). `--report` only reads finished folders and writes
+experiments/results/classic_table{2,4}.md and classic_curves_<env>.png (the 5-seed tables);
+`--learners-report` writes the learner rows of --envs at any seed count (the 20-seed tables).
 """
 
 from __future__ import annotations
