@@ -110,7 +110,7 @@ class Acrobot(MjxEnv):
     def transition(self, key, state: AcrobotState, action, params: AcrobotParams) -> Step:
         torque = jnp.clip(jnp.reshape(action, (1,)), -params.max_torque, params.max_torque)
         data = mjx.make_data(self.model).replace(qpos=state.qpos, qvel=state.qvel, ctrl=torque)
-        data = mjx.step(self.model, data)
+        data = self.physics.step(data)
         qpos = wrap_angle(data.qpos)
         limit = jnp.stack([params.max_speed_1, params.max_speed_2])
         qvel = jnp.clip(data.qvel, -limit, limit)

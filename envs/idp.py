@@ -122,7 +122,7 @@ class InvertedDoublePendulum(MjxEnv):
         """The state at (qpos, qvel) with MuJoCo's kinematics and constraint force computed."""
         f32 = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731
         data = mjx.make_data(self.model).replace(qpos=f32(qpos), qvel=f32(qvel))
-        return self._state(mjx.forward(self.model, data), jnp.asarray(t, jnp.int32))
+        return self._state(self.physics.forward(data), jnp.asarray(t, jnp.int32))
 
     def initial_state(self, key: jax.Array, params: IDPParams) -> IDPState:
         k_pos, k_vel = jax.random.split(key)
@@ -134,7 +134,7 @@ class InvertedDoublePendulum(MjxEnv):
     def transition(self, key, state: IDPState, action, params: IDPParams) -> Step:
         ctrl = jnp.clip(jnp.reshape(action, (1,)), -1.0, 1.0)
         data = mjx.make_data(self.model).replace(qpos=state.qpos, qvel=state.qvel, ctrl=ctrl)
-        data = jax.lax.fori_loop(0, params.frame_skip, lambda _, d: mjx.step(self.model, d), data)
+        data = jax.lax.fori_loop(0, params.frame_skip, lambda _, d: self.physics.step(d), data)
         next_state = self._state(data, state.t)
         x, y = next_state.tip[0], next_state.tip[1]
         terminated = y <= params.min_tip_height

@@ -137,7 +137,7 @@ class LocomotionEnv(MjxEnv):
         leaves it (with the contact forces filled in), and no step behind it."""
         f32 = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731
         data = mjx.make_data(self.model).replace(qpos=f32(qpos), qvel=f32(qvel))
-        data = mjx.rne_postconstraint(self.model, mjx.forward(self.model, data))
+        data = self.physics.rne_postconstraint(self.physics.forward(data))
         zero = jnp.zeros((), jnp.float32)
         return self._state(data, self.position(data), jnp.zeros(2, jnp.float32), zero, zero, t)
 
@@ -159,8 +159,8 @@ class LocomotionEnv(MjxEnv):
     def transition(self, key, state: LocomotionState, action, params: LocomotionParams) -> Step:
         ctrl = jnp.clip(jnp.reshape(action, (self.action_size,)), self.ctrl_range[:, 0], self.ctrl_range[:, 1])
         data = mjx.make_data(self.model).replace(qpos=state.qpos, qvel=state.qvel, ctrl=ctrl)
-        data = jax.lax.fori_loop(0, params.frame_skip, lambda _, d: mjx.step(self.model, d), data)
-        data = mjx.rne_postconstraint(self.model, data)
+        data = jax.lax.fori_loop(0, params.frame_skip, lambda _, d: self.physics.step(d), data)
+        data = self.physics.rne_postconstraint(data)
         position = self.position(data)
         velocity = (position - state.position) / self.dt
         reward, terminated = self.outcome(data, velocity, ctrl, params)

@@ -2,18 +2,41 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from importlib import resources
-from typing import Any
+from typing import Any, Callable
 
+import jax
 import mujoco
 from mujoco import mjx
 
 from hintsjax.envs.core import Env
 
 
+_PER_CLASS: dict[type, tuple[Any, Physics]] = {}  # an env class's MJX model and Physics, made once
+
+
 def load_asset(name: str) -> str:
     """The text of `envs/assets/<name>`: the Gymnasium models we build on, kept verbatim."""
     return resources.files("hintsjax.envs").joinpath("assets", name).read_text()
+
+
+@dataclass(frozen=True)
+class Physics:
+    """MJX's functions on one env class's model, each a `jax.jit` made once per class: every
+    call with the same shapes, in any program of the process (training's init, rollout and reset,
+    evaluation), reuses one trace of MJX's Python instead of tracing it again (the tracing, not
+    XLA's compile, was most of a warm start's compile time)."""
+
+    forward: Callable[[mjx.Data], mjx.Data]
+    step: Callable[[mjx.Data], mjx.Data]
+    rne_postconstraint: Callable[[mjx.Data], mjx.Data]
+
+
+def physics_of(model: Any) -> Physics:
+    """MJX's functions on `model`, jitted."""
+    return Physics(jax.jit(lambda d: mjx.forward(model, d)), jax.jit(lambda d: mjx.step(model, d)),
+                   jax.jit(lambda d: mjx.rne_postconstraint(model, d)))
 
 
 class MjxEnv(Env):
@@ -29,7 +52,10 @@ class MjxEnv(Env):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self.mj_model = self.make_mj_model()
-        self.model = mjx.put_model(self.mj_model)
+        if type(self) not in _PER_CLASS:  # the model depends on the class alone (its MJCF and options)
+            model = mjx.put_model(self.mj_model)
+            _PER_CLASS[type(self)] = model, physics_of(model)
+        self.model, self.physics = _PER_CLASS[type(self)]
         self.site_ids = {self.mj_model.site(i).name: i for i in range(self.mj_model.nsite)}
 
     @classmethod

@@ -114,7 +114,7 @@ class Pendulum(MjxEnv):
     def _mjx_data(self, state: PendulumState, torque: jax.Array) -> mjx.Data:
         data = mjx.make_data(self.model)
         data = data.replace(qpos=state.theta[None], qvel=state.dtheta[None], ctrl=torque[None])
-        return mjx.forward(self.model, data)
+        return self.physics.forward(data)
 
     def transition(self, key, state: PendulumState, action, params: PendulumParams) -> Step:
         torque = jnp.clip(jnp.reshape(action, ()), -params.max_torque, params.max_torque)
