@@ -103,9 +103,13 @@ class Env:
         return int(shape.shape[0])
 
     def observation(self, state: Any, params: Any) -> dict[str, jax.Array]:
-        """The dictionary observation, with only the keys in `self.observe`."""
+        """The dictionary observation, with only the keys in `self.observe`. The picture is drawn
+        by one `jax.jit` of `render` per env: a program that draws several (a step's and AutoReset's
+        fresh start) traces the drawing once."""
+        if "_render" not in self.__dict__:
+            self._render = jax.jit(self.render)
         build: dict[str, Callable[[], jax.Array]] = {
-            "pixels": lambda: self.render(state, params),
+            "pixels": lambda: self._render(state, params),
             "state": lambda: self.state_obs(state, params),
             "hint": lambda: self.hint(state, params),
         }
