@@ -295,3 +295,38 @@ def test_the_checkout_runs_without_the_editable_installs_finder():
               "sys.argv = ['hintsjax.run', 'env=nope']; import runpy; runpy.run_module('hintsjax.run', run_name='__main__')")
     out = subprocess.run([sys.executable, "-S", "-c", script], cwd=root, capture_output=True, text=True, timeout=300)
     assert out.returncode == 2 and out.stderr.startswith("error: unknown env 'nope'"), out.stderr[-500:]
+
+
+@pytest.mark.parametrize("where", ["root", "elsewhere"])
+def test_a_built_wheel_runs_from_the_checkout_root_and_from_elsewhere(where, tmp_path_factory):
+    """`pip wheel .` then the wheel installed without dependencies into a folder put first on
+    PYTHONPATH: `python -m hintsjax.run` answers a bad env with its one line, run from the
+    checkout's root (whose hintsjax/ shadows the installed one) and from another folder."""
+    root = Path(__file__).resolve().parents[1]
+    target = wheel_install(tmp_path_factory)
+    env = {**os.environ, "PYTHONPATH": str(target)}
+    cwd = root if where == "root" else tmp_path_factory.mktemp("elsewhere")
+    out = subprocess.run([sys.executable, "-m", "hintsjax.run", "env=nope"], cwd=cwd, env=env, capture_output=True,
+                         text=True, timeout=300)
+    assert out.returncode == 2 and out.stderr.startswith("error: unknown env 'nope'"), out.stderr[-500:]
+    if where == "elsewhere":  # the installed copy, not the checkout's
+        probe = subprocess.run([sys.executable, "-c", "import hintsjax.envs as e; print(e.__file__)"], cwd=cwd, env=env,
+                               capture_output=True, text=True, timeout=300)
+        assert probe.stdout.strip().startswith(str(target)), probe.stdout + probe.stderr
+
+
+_WHEEL: dict[str, Path] = {}
+
+
+def wheel_install(tmp_path_factory) -> Path:
+    """The project built as a wheel and installed (no dependencies) into a temporary folder, once."""
+    if "target" not in _WHEEL:
+        root = Path(__file__).resolve().parents[1]
+        wheels, target = tmp_path_factory.mktemp("wheels"), tmp_path_factory.mktemp("site")
+        pip = [sys.executable, "-m", "pip", "-q"]
+        subprocess.run([*pip, "wheel", "--no-deps", "-w", str(wheels), str(root)], check=True,
+                       capture_output=True, timeout=600)
+        subprocess.run([*pip, "install", "--no-deps", "--no-compile", "--target", str(target), *map(str, wheels.glob("*.whl"))],
+                       check=True, capture_output=True, timeout=600)
+        _WHEEL["target"] = target
+    return _WHEEL["target"]
