@@ -5,13 +5,13 @@
     params = envs.make_params("pendulum", variant="swingto")
     ts = env.reset(key, params)
 
-A new env is one module (dynamics, reward, picture and hints beside each other) plus one line
-in `REGISTRY`.
+A new env is one module (dynamics, reward, picture, hints and training defaults beside each
+other) plus one line in `REGISTRY`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import contextlib
@@ -28,21 +28,23 @@ from hintsjax.envs.hints import NO_HINT, Hint, hint_names, make_hint, register_c
 
 @dataclass(frozen=True)
 class EnvEntry:
-    """A registered env: its class and its named params variants (the first is the default)."""
+    """A registered env: its class, its named params variants (the first is the default) and its
+    training defaults (`TRAINING` beside the env; hintsjax/config.py reads them)."""
 
     cls: type[Env]
     variants: dict[str, Any]
+    training: dict[str, Any] = field(default_factory=dict)
 
 
 REGISTRY: dict[str, EnvEntry] = {
-    "pendulum": EnvEntry(pendulum.Pendulum, pendulum.VARIANTS),
-    "acrobot": EnvEntry(acrobot.Acrobot, acrobot.VARIANTS),
-    "idp": EnvEntry(idp.InvertedDoublePendulum, idp.VARIANTS),
-    "ant": EnvEntry(ant.Ant, ant.VARIANTS),
-    "ant_fast": EnvEntry(ant.AntFast, ant.VARIANTS),
-    "halfcheetah": EnvEntry(halfcheetah.HalfCheetah, halfcheetah.VARIANTS),
-    "humanoid": EnvEntry(humanoid.Humanoid, humanoid.VARIANTS),
-    "car_racing": EnvEntry(car_racing.CarRacing, car_racing.VARIANTS),
+    "pendulum": EnvEntry(pendulum.Pendulum, pendulum.VARIANTS, pendulum.TRAINING),
+    "acrobot": EnvEntry(acrobot.Acrobot, acrobot.VARIANTS, acrobot.TRAINING),
+    "idp": EnvEntry(idp.InvertedDoublePendulum, idp.VARIANTS, idp.TRAINING),
+    "ant": EnvEntry(ant.Ant, ant.VARIANTS, ant.TRAINING),
+    "ant_fast": EnvEntry(ant.AntFast, ant.VARIANTS, ant.FAST_TRAINING),
+    "halfcheetah": EnvEntry(halfcheetah.HalfCheetah, halfcheetah.VARIANTS, halfcheetah.TRAINING),
+    "humanoid": EnvEntry(humanoid.Humanoid, humanoid.VARIANTS, humanoid.TRAINING),
+    "car_racing": EnvEntry(car_racing.CarRacing, car_racing.VARIANTS, car_racing.TRAINING),
 }
 
 

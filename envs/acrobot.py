@@ -173,3 +173,10 @@ def full_state(state: AcrobotState, params: AcrobotParams) -> jax.Array:
     """[cos t1, sin t1, cos t2, sin t2, dt1, dt2]: the full state observation."""
     return observation(state)
 
+
+# Training defaults (hintsjax/config.py turns them into ENV_DEFAULTS): the hint, deploy variants and
+# PPO settings of this env's agents, `learners`: PPO settings for every agent but the references,
+# `references`: the expert's budget and PPO settings (expert_ppo and gail), dagger's steps, gail's reward.
+# 700 episodes of at most 500 steps (the paper's 700 episodes, counted at their length).
+TRAINING = dict(hint="composite", ppo=dict(total_env_steps=350_000, reward_scale=0.1),
+                references=dict(expert_steps=1_000_000))

@@ -593,3 +593,18 @@ def full_state(state: CarRacingState, params: CarRacingParams) -> jax.Array:
 
 
 register_composite(NAME, "composite", ("on_track", "curvature"))
+
+
+# Training defaults (hintsjax/config.py turns them into ENV_DEFAULTS): the hint, deploy variants and
+# PPO settings of this env's agents, `learners`: PPO settings for every agent but the references,
+# `references`: the expert's budget and PPO settings (expert_ppo and gail), dagger's steps, gail's reward.
+# 1000 episodes of 1000 steps (SPEC section 5); trained on the standard track, deployed on
+# hairpins. The paper conditions the car with scheme mc (scheme=mc).
+# The car's references run on its state (state_observation: speeds, steering, the track's
+# next centre points): PPO on the state reached 716 on standard tracks after 1 M steps (1
+# seed, 10 episodes), so the expert takes 2 M at the agents' settings. GAIL's reward is
+# -log(1 - D) > 0, as idp's: with the signed log odds a car could gain by leaving the
+# playfield, which ends the episode.
+TRAINING = dict(hint="composite", eval_variants=("hairpin",),
+                ppo=dict(total_env_steps=1_000_000, num_envs=128, starts_per_rollout=True),
+                references=dict(expert_steps=2_000_000, dagger_steps=250_000, gail_reward="original"))

@@ -86,3 +86,29 @@ register_hint(NAME, "goal_height", dim=1, unit="m")(torso_height_above_target)
 def full_state(state: LocomotionState, params) -> jax.Array:
     """The full state observation."""
     return state.obs
+
+
+# Training defaults (hintsjax/config.py turns them into ENV_DEFAULTS): the hint, deploy variants and
+# PPO settings of this env's agents, `learners`: PPO settings for every agent but the references,
+# `references`: the expert's budget and PPO settings (expert_ppo and gail), dagger's steps, gail's reward.
+# Humanoid's learners take the ant's KL early stop and its 256 envs per seed (rollouts of 4
+# steps: each update waits on 4 latency-bound MJX steps instead of 8). Its references follow
+# the ant's: the expert is PPO on the state for 20 M steps (2x the learners'), 1024 envs per
+# seed in batches of 8192, minibatches of 1024, 8 epochs; 50 M would take 3 h of GPU (5 seeds).
+# Every humanoid agent learns from rewards x 0.1 and normalises the state (its contact
+# forces run to thousands); GAIL's discriminator reads it standardised by the demonstrations'
+# statistics (gail.normalize_state) and is held smooth by an R1 penalty of 10 on the expert's
+# pairs (gail.grad_penalty): without it D told the pairs apart perfectly within 200 updates, its
+# reward -log(1 - D) went flat near 0 and GAIL scored 447; with it, 7334 (5 seeds x 50
+# episodes, H200, 2026-11-23). The expert's PPO at 5 M steps, 2 seeds (H200; evaluation 2 x 10
+# episodes, in brackets the training return at the end): as listed 5617 (3897); without the
+# entropy bonus 4923 (4061), its approx. KL rising to 0.7; without the bonus and the
+# normaliser 513 (460); without the bonus, the normaliser and the reward scale 124 (118).
+# The first 20 M run, with neither normaliser nor reward scale, was at 555 after 13.5 M
+# steps, its std grown to 38 (the actions are clipped to +-0.4).
+TRAINING = dict(hint="velocity", ppo=dict(total_env_steps=10_000_000, num_envs=256, encoder_lr=3e-4, epochs=4,
+                                          reward_scale=0.1, normalize_state=True),
+                learners=dict(target_kl=0.05),
+                references=dict(expert_steps=20_000_000, dagger_steps=250_000, gail_reward="original",
+                                gail_normalize_state=True, gail_grad_penalty=10.0, num_envs=1024,
+                                batch_size=8192, minibatch_size=1024, epochs=8))

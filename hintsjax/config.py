@@ -3,7 +3,8 @@
 Choices (env, agent, scheme, hint, variants) are validated against the registries here, so a
 bad name fails before anything is built or written, with a one-line message that lists the
 valid choices. Per-env defaults (budget, actor learning rate, default hint, deploy variants)
-live in `ENV_DEFAULTS`; a config value of `None` means "the env's default".
+live beside each env (`TRAINING` in envs/<env>.py) and are gathered in `ENV_DEFAULTS`; a config
+value of `None` means "the env's default".
 """
 
 from __future__ import annotations
@@ -155,10 +156,9 @@ def env_params(env: str, variant: str | None) -> Any:
         raise UsageError(str(e)) from None
 
 
-# Per-env defaults, overriding PPOConfig's: the paper's budgets and Table 5's actor rates.
-# "agents" holds per-agent overrides on top, for the converged references (tier 3): the expert
-# trains PPO on the state for 5x the hint agents' budget; DAgger's rounds of 1024 steps
-# aggregate every visited state (buffer = budget); GAIL gets the expert's budget.
+# "agents" holds per-agent overrides on top of an env's defaults, for the converged references
+# (tier 3): the expert trains PPO on the state for 5x the hint agents' budget; DAgger's rounds of
+# 1024 steps aggregate every visited state (buffer = budget); GAIL gets the expert's budget.
 def _references(expert_steps: int, dagger_steps: int = 100_000, gail_reward: str = "logit",
                 gail_normalize_state: bool = False, gail_grad_penalty: float = 0.0, **expert_ppo: Any) -> dict[str, Any]:
     return {
@@ -175,103 +175,22 @@ def _learners(**ppo: Any) -> dict[str, Any]:
     return {name: dict(ppo=ppo) for name in AGENTS if name not in _references(0)}
 
 
-ENV_DEFAULTS: dict[str, dict[str, Any]] = {
-    # The expert's (and GAIL's) PPO is tuned for the state pendulum. With 16 envs x 64 steps a
-    # batch holds one phase of the 16 synchronised 200-step episodes (all swinging up, then all
-    # balancing), and the greedy policy swung between good and failing from one evaluation to
-    # the next (at 102,400 steps seeds -550, -1076, -264). Rollouts of exactly one episode
-    # (16 x 200 = batch 3200), gamma 0.95, actor lr 3e-4 and 10 epochs of minibatches of 200
-    # reach, without the entropy bonus, -185, -177, -155, -163, -173 at 102,400 steps (5 seeds,
-    # 20 greedy episodes each; tests/test_imitation.py's pendulum_expert_returns). Over the full
-    # 1 M, the entropy bonus 0.01 holds up better: 5 seeds x 50 episodes -153 +- 83 against
-    # -173 +- 101 without (one H100 run each; on CPU -168 +- 99 against -376 +- 461, where one
-    # seed failed late), so the expert and GAIL keep it.
-    "pendulum": dict(
-        hint="composite",
-        eval_variants=("swingto",),
-        ppo=dict(total_env_steps=200_000, actor_lr=1e-3, reward_scale=0.1),
-        agents=_references(1_000_000, num_envs=16, batch_size=3200, minibatch_size=200, epochs=10,
-                           gamma=0.95, ent_coef=0.01, actor_lr=3e-4),
-    ),
-    # 700 episodes of at most 500 steps (the paper's 700 episodes, counted at their length).
-    "acrobot": dict(hint="composite", ppo=dict(total_env_steps=350_000, reward_scale=0.1), agents=_references(1_000_000)),
-    # Early IDP episodes last ~10 steps, so an episode count would be a tiny budget: we count
-    # 200 full-length episodes (200 K steps), the pendulum's budget. 128 envs per seed (rollouts
-    # of 8 steps per 1024-transition batch): MJX's RK4 with the rail's constraint solver is
-    # kernel-launch bound at small batches on a GPU (16 envs x 5 seeds ran ~6 K steps/s).
-    # Its expert and GAIL step 512 envs per seed in batches of 4096 (4x fewer sequential steps).
-    # GAIL's reward is Ho and Ermon's -log(1 - D) > 0 here: with the signed log odds, mostly
-    # negative at first, ending an episode early pays, and idp's episodes end by falling (GAIL
-    # scored 71 that way; measured in experiments/results/classic_table2.md).
-    "idp": dict(hint="composite", ppo=dict(total_env_steps=200_000, num_envs=128, reward_scale=0.1),
-                agents=_references(1_000_000, gail_reward="original", num_envs=512, batch_size=4096)),
-    # Locomotion (SPEC section 5): 1k, 5k and 10k episodes, counted at their full 1000 steps
-    # (early episodes end in a few dozen steps when the robot falls, as on idp).
-    # HalfCheetah's pixel agents at Table 5's encoder rate 1e-3 and 8 epochs drifted from their
-    # rollout policy as training went on (approx. KL 0.2 to 0.8 per update, PPO on the state 0.05);
-    # encoder 3e-4 and 4 epochs kept it near 0.02 in 250 K-step tests and below 0.1 over the full
-    # 1 M of the Table 3 runs (experiments/results/locomotion_ppo_stability.md).
-    # A deviation from Table 5's encoder rate, for every cheetah agent alike.
-    # Its expert: PPO on the state for 5 M steps, 512 envs per seed in batches of 4096 and 8
-    # epochs; DAgger aggregates 250 K expert-labelled steps.
-    "halfcheetah": dict(hint="velocity", ppo=dict(total_env_steps=1_000_000, num_envs=128, encoder_lr=3e-4, epochs=4),
-                        agents=_references(5_000_000, dagger_steps=250_000, num_envs=512, batch_size=4096, epochs=8)),
-    # Ant steps 256 envs per seed (rollouts of 4 steps per 1024-transition batch): each of its
-    # steps is 5 RK4 substeps with 25 floor contacts, latency-bound at these sizes on a GPU, so
-    # half the rollout length nearly halves a 5 M-step run (a speed choice, SPEC section 5).
-    # At Table 5's rates (encoder 1e-3, 8 epochs) every ant hint agent's PPO blew up as the
-    # cheetah's had (approx. KL above 0.5 by update 115 to 360, then std runaway to saturated
-    # actions; experiments/results/locomotion_ppo_stability.md), so the ant and humanoid take the
-    # cheetah's encoder 3e-4 and 4 epochs, every agent alike.
-    # Even so, the ant's pixel agents blew up (approx. KL > 0.5 in 6 to 57% of updates;
-    # hints-fc-state scored -952 +- 2407). A KL early stop (ppo.target_kl 0.05, as in
-    # Stable-Baselines3) held the same run to 11% and 2318 +- 808, every seed above 1600 (the
-    # stability notes), so the ant's learners take it (its references, PPO on the state, were
-    # stable without).
-    # Ant's expert: PPO on the state for 10 M steps (2x the hint agents', what fits one GPU lease
-    # beside the Table 3 rows), 1024 envs per seed in batches of 8192, minibatches of 1024, 8
-    # epochs. Not tuned further: it scored 5694 (5 seeds x 50 episodes).
-    # Ant and Humanoid episodes end when the robot falls, so their GAIL is paid Ho and Ermon's
-    # -log(1 - D) > 0, as idp's is: with the signed log odds, falling early would pay.
-    "ant": dict(hint="speed", ppo=dict(total_env_steps=5_000_000, num_envs=256, encoder_lr=3e-4, epochs=4),
-                agents={**_learners(target_kl=0.05),
-                        **_references(10_000_000, dagger_steps=250_000, gail_reward="original", num_envs=1024,
-                                      batch_size=8192, minibatch_size=1024, epochs=8)}),
-    # Humanoid's learners take the ant's KL early stop and its 256 envs per seed (rollouts of 4
-    # steps: each update waits on 4 latency-bound MJX steps instead of 8). Its references follow
-    # the ant's: the expert is PPO on the state for 20 M steps (2x the learners'), 1024 envs per
-    # seed in batches of 8192, minibatches of 1024, 8 epochs; 50 M would take 3 h of GPU (5 seeds).
-    # Every humanoid agent learns from rewards x 0.1 and normalises the state (its contact
-    # forces run to thousands); GAIL's discriminator reads it standardised by the demonstrations'
-    # statistics (gail.normalize_state) and is held smooth by an R1 penalty of 10 on the expert's
-    # pairs (gail.grad_penalty): without it D told the pairs apart perfectly within 200 updates, its
-    # reward -log(1 - D) went flat near 0 and GAIL scored 447; with it, 7334 (5 seeds x 50
-    # episodes, H200, 2026-11-23). The expert's PPO at 5 M steps, 2 seeds (H200; evaluation 2 x 10
-    # episodes, in brackets the training return at the end): as listed 5617 (3897); without the
-    # entropy bonus 4923 (4061), its approx. KL rising to 0.7; without the bonus and the
-    # normaliser 513 (460); without the bonus, the normaliser and the reward scale 124 (118).
-    # The first 20 M run, with neither normaliser nor reward scale, was at 555 after 13.5 M
-    # steps, its std grown to 38 (the actions are clipped to +-0.4).
-    "humanoid": dict(hint="velocity", ppo=dict(total_env_steps=10_000_000, num_envs=256, encoder_lr=3e-4, epochs=4,
-                                               reward_scale=0.1, normalize_state=True),
-                     agents={**_learners(target_kl=0.05),
-                             **_references(20_000_000, dagger_steps=250_000, gail_reward="original",
-                                           gail_normalize_state=True, gail_grad_penalty=10.0, num_envs=1024,
-                                           batch_size=8192, minibatch_size=1024, epochs=8)}),
-    # 1000 episodes of 1000 steps (SPEC section 5); trained on the standard track, deployed on
-    # hairpins. The paper conditions the car with scheme mc (scheme=mc).
-    # The car's references run on its state (state_observation: speeds, steering, the track's
-    # next centre points): PPO on the state reached 716 on standard tracks after 1 M steps (1
-    # seed, 10 episodes), so the expert takes 2 M at the agents' settings. GAIL's reward is
-    # -log(1 - D) > 0, as idp's: with the signed log odds a car could gain by leaving the
-    # playfield, which ends the episode.
-    "car_racing": dict(hint="composite", eval_variants=("hairpin",),
-                       ppo=dict(total_env_steps=1_000_000, num_envs=128, starts_per_rollout=True),
-                       agents=_references(2_000_000, dagger_steps=250_000, gail_reward="original")),
-}
-# The fast-physics ant (envs/ant.py AntFast) trains as the ant does, with each env's next start
-# drawn once per rollout (ppo.starts_per_rollout), as its throughput figure is measured.
-ENV_DEFAULTS["ant_fast"] = {**ENV_DEFAULTS["ant"], "ppo": {**ENV_DEFAULTS["ant"]["ppo"], "starts_per_rollout": True}}
+
+
+def _env_defaults(training: dict[str, Any]) -> dict[str, Any]:
+    """An env's training defaults as RunConfig layers: its own settings, and per agent those of
+    `learners` (every agent but the references) and of `references` (`_references`' arguments)."""
+    training = dict(training)
+    agents = _learners(**training.pop("learners")) if "learners" in training else {}
+    if "references" in training:
+        references = dict(training.pop("references"))
+        agents.update(_references(references.pop("expert_steps"), **references))
+    return {**training, "agents": agents}
+
+
+# Per env, defaults over PPOConfig's: the paper's budgets and Table 5's actor rates, and why each
+# deviates where it does, live beside the env (`TRAINING` in envs/<env>.py, the registry's `training`).
+ENV_DEFAULTS: dict[str, dict[str, Any]] = {name: _env_defaults(entry.training) for name, entry in envs.REGISTRY.items()}
 
 
 @dataclass(frozen=True)

@@ -330,3 +330,21 @@ def wheel_install(tmp_path_factory) -> Path:
                        check=True, capture_output=True, timeout=600)
         _WHEEL["target"] = target
     return _WHEEL["target"]
+
+
+SHIPPED_ENVS = ("pendulum", "acrobot", "idp", "ant", "ant_fast", "halfcheetah", "humanoid", "car_racing")
+
+
+@pytest.mark.parametrize("name", SHIPPED_ENVS)
+def test_each_env_carries_its_training_defaults_beside_it(name):
+    """An env's defaults live in its module (`TRAINING`, the registry's `training`); the config's
+    ENV_DEFAULTS is built from them, with the references' per-agent layers."""
+    from hintsjax import config, envs
+
+    training = envs.REGISTRY[name].training
+    assert training["hint"] in envs.hint_names(name)
+    defaults = config.ENV_DEFAULTS[name]
+    assert defaults["hint"] == training["hint"] and defaults["ppo"] == training["ppo"]
+    expert = training["references"]["expert_steps"]
+    assert defaults["agents"]["expert_ppo"]["ppo"]["total_env_steps"] == expert
+    assert set(defaults["agents"]) >= {"expert_ppo", "dagger", "gail"}
