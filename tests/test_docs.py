@@ -32,9 +32,23 @@ def test_the_readme_is_short_and_reaches_every_doc():
 def test_every_envs_resolved_configuration_matches_the_snapshot():
     """The resolved config of every shipped env x agent, as `python -m hintsjax.run env=E agent=A`
     resolves it, equals the stored snapshot (tests/data/resolved_configs.json). A deliberate change
-    of defaults regenerates the snapshot and says so in its commit."""
+    of defaults regenerates it (`python tests/test_docs.py`) and says so in its commit."""
     from hintsjax import config
 
     snapshot = json.loads(SNAPSHOT.read_text())
     resolved = {key: config.to_dict(config.run_config(dict(zip(("env", "agent"), key.split("/"))))) for key in snapshot}
     assert json.loads(json.dumps(resolved, sort_keys=True)) == snapshot
+
+
+def write_snapshot() -> None:
+    """Regenerate the snapshot: `python tests/test_docs.py` (after a deliberate change of defaults)."""
+    from hintsjax import config
+    from hintsjax.agents import AGENTS
+
+    shipped = ("pendulum", "acrobot", "idp", "ant", "ant_fast", "halfcheetah", "humanoid", "car_racing")
+    resolved = {f"{e}/{a}": config.to_dict(config.run_config({"env": e, "agent": a})) for e in shipped for a in AGENTS}
+    SNAPSHOT.write_text(json.dumps(resolved, indent=1, sort_keys=True) + "\n")
+
+
+if __name__ == "__main__":
+    write_snapshot()
