@@ -66,6 +66,9 @@ class Env:
             raise ValueError(f"unknown observation keys {sorted(unknown)}; valid: {OBS_KEYS}")
         self.hint = hint
         self.observe = tuple(observe)
+        # The picture through one jax.jit per env: a program that draws several (a step's and
+        # AutoReset's fresh start) traces the drawing once.
+        self._render = jax.jit(self.render)
 
     # -- the four pieces each env supplies ---------------------------------------------------
     def default_params(self) -> Any:
@@ -103,11 +106,7 @@ class Env:
         return int(shape.shape[0])
 
     def observation(self, state: Any, params: Any) -> dict[str, jax.Array]:
-        """The dictionary observation, with only the keys in `self.observe`. The picture is drawn
-        by one `jax.jit` of `render` per env: a program that draws several (a step's and AutoReset's
-        fresh start) traces the drawing once."""
-        if "_render" not in self.__dict__:
-            self._render = jax.jit(self.render)
+        """The dictionary observation, with only the keys in `self.observe`."""
         build: dict[str, Callable[[], jax.Array]] = {
             "pixels": lambda: self._render(state, params),
             "state": lambda: self.state_obs(state, params),

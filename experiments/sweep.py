@@ -63,6 +63,11 @@ def run_values(env: str, label: str, seeds: int, smoke: bool = False, experts: P
     return {**values, "agent": "hints", "scheme": scheme, "hint": hint}
 
 
+def job_folder(runs: Path, run_ids: list[str]) -> Path:
+    """Where a job keeps its checkpoints and train.log: a single run's own folder, or its group's."""
+    return runs / run_ids[0] if len(run_ids) == 1 else group_folder(runs, run_ids)
+
+
 def group_folder(runs: Path, run_ids: list[str]) -> Path:
     """Where a group of runs keeps its checkpoints and log: named by its runs, so that another
     set of runs never resumes from it."""
@@ -88,7 +93,7 @@ def train_one(runs: Path, run_ids: list[str], seeds: int, smoke: bool, experts: 
         cfgs.append(cfg)
         (runs / run_id).mkdir(parents=True, exist_ok=True)
         save_run_config(runs / run_id, cfg)
-    folder = runs / run_ids[0] if len(run_ids) == 1 else group_folder(runs, run_ids)
+    folder = job_folder(runs, run_ids)
     # An interrupted run (killed by a time limit) goes on from its newest checkpoint; its
     # wall-clock counts the kept work of earlier calls, not what was lost after their last checkpoint.
     resume = checkpoint.latest_update(folder) is not None
@@ -166,7 +171,7 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int |
     gpu_of: dict[str, str] = {}
     failed: list[str] = []
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # `timeout` stops the sweep: record it below
-    log_of = lambda job: (runs / job[0] if len(job) == 1 else group_folder(runs, job)) / "train.log"  # noqa: E731
+    log_of = lambda job: job_folder(runs, job) / "train.log"  # noqa: E731
     try:
         while todo or active:
             if todo and time.time() - start > launch_until:

@@ -134,8 +134,13 @@ def evaluate_variants(cfg: RunConfig, params: Any, variants: tuple[str | None, .
     evaluate = jax.jit(jax.vmap(make_task_evaluator(cfg, episodes, stochastic), in_axes=(0, 0, None)))
     evaluate = evaluate.lower(params, keys, task_params[0]).compile()
     compile_seconds = time.perf_counter() - t
-    return [{"variant": v or envs.variant_names(cfg.env)[0], "stochastic": stochastic,
-             **summarize(evaluate(params, keys, p))} for v, p in zip(variants, task_params)], compile_seconds
+    summaries = [variant_summary(cfg, v, stochastic, evaluate(params, keys, p)) for v, p in zip(variants, task_params)]
+    return summaries, compile_seconds
+
+
+def variant_summary(cfg: RunConfig, variant: str | None, stochastic: bool, result: EvalResult) -> dict[str, Any]:
+    """An evaluation's summary (`summarize`) under the name of its variant (None: the env's default)."""
+    return {"variant": variant or envs.variant_names(cfg.env)[0], "stochastic": stochastic, **summarize(result)}
 
 
 def evaluate_group(group: Any, state: Any) -> tuple[list[list[dict]], float]:
@@ -159,9 +164,10 @@ def evaluate_group(group: Any, state: Any) -> tuple[list[list[dict]], float]:
     member = lambda k: jax.tree.map(lambda x: x[:, k], params)  # noqa: E731
     evaluate = evaluate.lower(member(0), keys, envs.make_params(cfg.env, cfg.variant), group.hyper(0)).compile()
     compile_seconds = time.perf_counter() - t
-    return [[{"variant": v or envs.variant_names(c.env)[0], "stochastic": c.stochastic_eval,
-              **summarize(evaluate(member(k), keys, envs.make_params(c.env, v), group.hyper(k)))}
-             for v in (c.variant, *c.eval_variants)] for k, c in enumerate(group.cfgs)], compile_seconds
+    summaries = [[variant_summary(c, v, c.stochastic_eval,
+                                  evaluate(member(k), keys, envs.make_params(c.env, v), group.hyper(k)))
+                  for v in (c.variant, *c.eval_variants)] for k, c in enumerate(group.cfgs)]
+    return summaries, compile_seconds
 
 
 def evaluate_params(cfg: RunConfig, params: Any, variant: str | None, episodes: int, stochastic: bool) -> dict:

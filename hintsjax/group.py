@@ -104,14 +104,14 @@ def make_group(cfgs: Sequence[RunConfig]) -> Group:
     """The group of validated configurations; UsageError naming what differs if they cannot share one."""
     cfgs = tuple(cfgs)
     check_group(cfgs)
+    hints = [envs.make_hint(cfg.env, cfg.effective_hint) for cfg in cfgs]
     parts: list[envs.hints.HintSpec] = []
-    for cfg in cfgs:
-        parts += [p for p in envs.make_hint(cfg.env, cfg.effective_hint).parts if p not in parts]
+    for hint in hints:
+        parts += [p for p in hint.parts if p not in parts]
     offsets, at = {}, 0
     for p in parts:
         offsets[p.name], at = range(at, at + p.dim), at + p.dim
-    takes = tuple(tuple(i for p in envs.make_hint(cfg.env, cfg.effective_hint).parts for i in offsets[p.name])
-                  for cfg in cfgs)
+    takes = tuple(tuple(i for p in hint.parts for i in offsets[p.name]) for hint in hints)
     return Group(cfgs, "+".join(p.name for p in parts) or envs.NO_HINT, takes)
 
 

@@ -42,11 +42,12 @@ def test_every_envs_resolved_configuration_matches_the_snapshot():
 
 def write_snapshot() -> None:
     """Regenerate the snapshot: `python tests/test_docs.py` (after a deliberate change of defaults)."""
+    from test_cli import SHIPPED_ENVS
+
     from hintsjax import config
     from hintsjax.agents import AGENTS
 
-    shipped = ("pendulum", "acrobot", "idp", "ant", "ant_fast", "halfcheetah", "humanoid", "car_racing")
-    resolved = {f"{e}/{a}": config.to_dict(config.run_config({"env": e, "agent": a})) for e in shipped for a in AGENTS}
+    resolved = {f"{e}/{a}": config.to_dict(config.run_config({"env": e, "agent": a})) for e in SHIPPED_ENVS for a in AGENTS}
     SNAPSHOT.write_text(json.dumps(resolved, indent=1, sort_keys=True) + "\n")
 
 
