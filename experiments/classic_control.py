@@ -324,7 +324,7 @@ def main() -> None:
     if args.table == 4:  # the fc row is Table 2's
         run_ids = [r for r in run_ids if "-fc-" not in r or not (args.runs / r / "eval.json").exists()]
     sweep(args.runs, run_ids, args.workers, args.seeds, args.table, args.smoke, args.launch_until, args.experts, args.gpus,
-          args.alone)
+          args.group_size)
 
 
 if __name__ == "__main__":

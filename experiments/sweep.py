@@ -28,7 +28,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 from report import archive_runs, load
 
@@ -123,15 +123,16 @@ def train_one(runs: Path, run_ids: list[str], seeds: int, smoke: bool, experts: 
             print(f"exported the expert to {exported}", flush=True)
 
 
-def plan_jobs(run_ids: list[str], seeds: int, smoke: bool, alone: bool = False) -> list[list[str]]:
-    """The runs partitioned into groups that train together (each its own job with `alone`)."""
+def plan_jobs(run_ids: list[str], seeds: int, smoke: bool, group_size: int = 0) -> list[list[str]]:
+    """The runs partitioned into groups that train together, each cut into parts of at most
+    `group_size` runs (0: no limit; 1: every run its own job). Smaller groups suit calls with a
+    time limit: each part is a job that finishes on its own."""
     from hintsjax.config import run_config
     from hintsjax.group import plan
 
-    if alone:
-        return [[r] for r in run_ids]
     cfgs = [run_config(run_values(*r.split("/"), seeds, smoke)) for r in run_ids]
-    return [[run_ids[i] for i in members] for members in plan(cfgs)]
+    size = group_size or len(run_ids)
+    return [[run_ids[i] for i in members[k:k + size]] for members in plan(cfgs) for k in range(0, len(members), size)]
 
 
 def prerequisite(run_id: str) -> str | None:
@@ -151,16 +152,24 @@ def budget(run_id: str) -> float:
     return cfg.ppo.total_env_steps * (1.0 if cfg.agent_spec.pixels else 0.3)
 
 
+def stopped(*_: Any) -> None:
+    """SIGTERM: end the sweep (its `finally` records it). Later SIGTERMs are ignored: `timeout`
+    signals the sweep and then its whole process group, and a second exit raised inside the
+    `finally` would lose the record."""
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    sys.exit(143)
+
+
 def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int | str, smoke: bool,
           launch_until: float = float("inf"), experts: Path | None = None, gpus: tuple[str, ...] = (),
-          alone: bool = False) -> None:
+          group_size: int = 0) -> None:
     """Train every unfinished run, grouped (`plan_jobs`), `workers` groups at a time, starting
     none after `launch_until` seconds (so that a time-limited call ends with finished runs, not
     killed ones); append the sweep's wall-clock to runs/sweeps.jsonl. With `gpus` (CUDA device
     ids), each worker gets the least busy of them to itself (CUDA_VISIBLE_DEVICES); without, all
-    workers share the visible devices. With `alone`, every run is its own job, as before groups."""
+    workers share the visible devices. `group_size` caps the runs of a group (`plan_jobs`)."""
     unfinished = [r for r in run_ids if not (runs / r / "eval.json").exists()]
-    todo = sorted(plan_jobs(unfinished, seeds, smoke, alone), key=lambda job: sum(map(budget, job)), reverse=True)
+    todo = sorted(plan_jobs(unfinished, seeds, smoke, group_size), key=lambda job: sum(map(budget, job)), reverse=True)
     print(f"table {table}: {len(run_ids) - len(unfinished)} of {len(run_ids)} runs done already; "
           f"training {len(unfinished)} in {len(todo)} group(s), {workers} at a time, {seeds} seeds each", flush=True)
     launched = 0
@@ -170,7 +179,7 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int |
     active: list[tuple[list[str], subprocess.Popen]] = []  # each worker writes its own train.log
     gpu_of: dict[str, str] = {}
     failed: list[str] = []
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # `timeout` stops the sweep: record it below
+    signal.signal(signal.SIGTERM, stopped)  # `timeout` stops the sweep: record it below
     log_of = lambda job: job_folder(runs, job) / "train.log"  # noqa: E731
     try:
         while todo or active:
@@ -211,7 +220,7 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int |
         seconds = time.time() - start
         record = {"table": table, "runs": len(run_ids), "trained": launched - len(failed) - len(interrupted),
                   "failed": failed, "interrupted": interrupted, "workers": workers, "seconds": seconds,
-                  "seeds": seeds, "grouped": not alone, "finished": time.strftime("%Y-%m-%d %H:%M:%S"),
+                  "seeds": seeds, "grouped": group_size != 1, "finished": time.strftime("%Y-%m-%d %H:%M:%S"),
                   "gpus": list(gpus)}
         devices = {(load(runs, *r.split("/")) or {}).get("device", "").lower() for r in run_ids} - {""}
         if devices == {"cpu"}:  # the workers' device (the parent keeps off it): CPU sweeps leave the GPU totals
@@ -233,8 +242,10 @@ def add_arguments(parser: argparse.ArgumentParser, runs: str, envs: tuple[str, .
     parser.add_argument("--runs", type=Path, default=Path(runs))
     parser.add_argument("--workers", type=int, default=1, help="configurations trained at once")
     parser.add_argument("--seeds", type=int, default=seeds, help=f"seeds per run (default {seeds})")
-    parser.add_argument("--alone", action="store_true",
+    parser.add_argument("--alone", action="store_const", const=1, default=0, dest="group_size",
                         help="train every run in its own program (default: runs that share shapes train as one group)")
+    parser.add_argument("--group-size", type=int, default=0, metavar="N",
+                        help="at most N runs per group (default: no limit), e.g. so that each group ends within a time limit")
     parser.add_argument("--smoke", action="store_true", help="tiny budgets: check the plumbing on a CPU")
     parser.add_argument("--gpus", type=lambda s: tuple(g for g in s.split(",") if g), default=(), metavar="IDS",
                         help="comma-separated CUDA device ids; each worker gets the least busy one to itself")
@@ -248,7 +259,7 @@ def add_arguments(parser: argparse.ArgumentParser, runs: str, envs: tuple[str, .
 
 
 def chosen_envs(parser: argparse.ArgumentParser, args: argparse.Namespace, envs: tuple[str, ...]) -> list[str]:
-    """The envs of --envs; exit 2 naming the valid ones on an unknown env or --workers < 1."""
+    """The envs of --envs; exit 2 naming the valid ones on an unknown env, --workers or --seeds < 1, --group-size < 0."""
     names = [n.strip() for n in args.envs.split(",") if n.strip()]
     unknown = [n for n in names if n not in envs]
     if unknown:
@@ -256,6 +267,8 @@ def chosen_envs(parser: argparse.ArgumentParser, args: argparse.Namespace, envs:
     for option in ("workers", "seeds"):
         if getattr(args, option) < 1:
             parser.exit(2, f"error: --{option} must be at least 1, got {getattr(args, option)}\n")
+    if args.group_size < 0:
+        parser.exit(2, f"error: --group-size must be at least 1 (or 0 for no limit), got {args.group_size}\n")
     return names
 
 
@@ -284,7 +297,7 @@ def table_main(description: str, default_runs: str, envs: tuple[str, ...], table
     names = chosen_envs(parser, args, envs)
     ids = chosen_runs(parser, args, run_ids(names))
     sweep(args.runs, ids, args.workers, args.seeds, table, args.smoke, args.launch_until, args.experts, args.gpus,
-          args.alone)
+          args.group_size)
 
 
 def main() -> None:

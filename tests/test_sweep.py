@@ -348,6 +348,10 @@ def test_seeds_below_one_get_one_line(capsys):
     with pytest.raises(SystemExit) as e:
         sweep.chosen_envs(parser, parser.parse_args(["--seeds", "0"]), ("pendulum",))
     assert e.value.code == 2 and capsys.readouterr().err == "error: --seeds must be at least 1, got 0\n"
+    assert parser.parse_args(["--alone"]).group_size == 1 and parser.parse_args([]).group_size == 0
+    with pytest.raises(SystemExit) as e:
+        sweep.chosen_envs(parser, parser.parse_args(["--group-size", "-1"]), ("pendulum",))
+    assert e.value.code == 2 and capsys.readouterr().err.startswith("error: --group-size must be at least 1")
 
 
 def test_plan_jobs_groups_the_classic_table_by_shape():
@@ -357,7 +361,10 @@ def test_plan_jobs_groups_the_classic_table_by_shape():
     jobs = sweep.plan_jobs(ids, seeds=20, smoke=False)
     assert sorted(map(len, jobs)) == [1, 1, 1, 1, 2, 6]  # references and PPO-RGB alone; PPO-x twice; HINTS-FC x 6
     assert ["pendulum/ppo_state", "pendulum/ppo_noisy_state"] in jobs
-    assert sweep.plan_jobs(ids, 20, False, alone=True) == [[r] for r in ids]
+    assert sweep.plan_jobs(ids, 20, False, group_size=1) == [[r] for r in ids]
+    capped = sweep.plan_jobs(ids, 20, False, group_size=4)
+    assert sorted(map(len, capped)) == [1, 1, 1, 1, 2, 2, 4]  # HINTS-FC x 6 cut into 4 + 2
+    assert sorted(r for job in capped for r in job) == sorted(ids)
 
 
 def test_a_group_trains_into_each_runs_folder_and_splits_when_too_big(tmp_path, monkeypatch):
