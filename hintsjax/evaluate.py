@@ -124,17 +124,26 @@ def metrics_text(summary: dict[str, Any]) -> str:
     return "".join(f"  {n} {summary[n + '_mean']:.2f} +- {summary[n + '_std']:.2f}" for n in names)
 
 
-def evaluate_variants(cfg: RunConfig, params: Any, variants: tuple[str | None, ...], episodes: int,
-                      stochastic: bool) -> tuple[list[dict], float]:
-    """Evaluate seed-batched params on each variant, all seeds x episodes in one call per variant
-    of one program compiled once; (one summary per variant, seconds spent compiling)."""
-    keys = eval_keys(cfg)
-    task_params = [envs.make_params(cfg.env, v) for v in variants]
+def compile_evaluator(cfg: RunConfig, params: Any, variant: str | None, episodes: int, stochastic: bool) -> tuple[Any, float]:
+    """The evaluation program for seed-batched params shaped like `params` (arrays, or
+    jax.ShapeDtypeStructs with their shardings: it can compile before training has finished, e.g.
+    in a thread while it runs), `evaluate(params, keys, task_params)` for any variant of the env;
+    (that executable, seconds spent compiling)."""
     t = time.perf_counter()
     evaluate = jax.jit(jax.vmap(make_task_evaluator(cfg, episodes, stochastic), in_axes=(0, 0, None)))
-    evaluate = evaluate.lower(params, keys, task_params[0]).compile()
-    compile_seconds = time.perf_counter() - t
-    summaries = [variant_summary(cfg, v, stochastic, evaluate(params, keys, p)) for v, p in zip(variants, task_params)]
+    compiled = evaluate.lower(params, eval_keys(cfg), envs.make_params(cfg.env, variant)).compile()
+    return compiled, time.perf_counter() - t
+
+
+def evaluate_variants(cfg: RunConfig, params: Any, variants: tuple[str | None, ...], episodes: int,
+                      stochastic: bool, compiled: tuple[Any, float] | None = None) -> tuple[list[dict], float]:
+    """Evaluate seed-batched params on each variant, all seeds x episodes in one call per variant
+    of one program compiled once (`compiled`, from `compile_evaluator`, if given); (one summary
+    per variant, seconds spent compiling)."""
+    evaluate, compile_seconds = compiled or compile_evaluator(cfg, params, variants[0], episodes, stochastic)
+    keys = eval_keys(cfg)
+    summaries = [variant_summary(cfg, v, stochastic, evaluate(params, keys, envs.make_params(cfg.env, v)))
+                 for v in variants]
     return summaries, compile_seconds
 
 

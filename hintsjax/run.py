@@ -15,6 +15,7 @@ import dataclasses
 import json
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -27,7 +28,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from hintsjax import checkpoint, compilation_cache, expert
 from hintsjax.config import RunConfig, UsageError, fail, load_run_config, run_config, save_run_config
-from hintsjax.evaluate import evaluate_group, evaluate_variants, metrics_text
+from hintsjax.evaluate import compile_evaluator, evaluate_group, evaluate_variants, metrics_text
 from hintsjax.algorithms import make_trainer
 from hintsjax.runlog import CURVE_PNG, METRICS_CSV, RunLog, plot_curves, read_curves
 from hintsjax.trainer import Trainer
@@ -221,13 +222,19 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
     """Train all seeds (in chunks, with checkpoints: see `advance`), evaluate, plot; returns eval results."""
     training = start(make_trainer(cfg), cfg, run_dir, resume, cfg.label)
     log = RunLog(run_dir, resume_update=training.done)
-    try:
-        training = advance(training, cfg, run_dir, log.write, progress, cfg.label)
-    finally:
-        log.close()
     variants = (cfg.variant, *cfg.eval_variants)
+    shapes = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=x.sharding), training.state.params)
+    # The evaluation program compiles on the host while the device trains (it needs only the
+    # params' shapes), so its compile adds nothing to the wall-clock of a run that trains longer.
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        evaluator = pool.submit(compile_evaluator, cfg, shapes, variants[0], cfg.eval_episodes, cfg.stochastic_eval)
+        try:
+            training = advance(training, cfg, run_dir, log.write, progress, cfg.label)
+        finally:
+            log.close()
+        compiled = evaluator.result()
     evaluations, eval_compile = evaluate_variants(cfg, training.state.params, variants, cfg.eval_episodes,
-                                                  cfg.stochastic_eval)
+                                                  cfg.stochastic_eval, compiled)
     return finish(cfg, run_dir, training, evaluations, eval_compile)
 
 
