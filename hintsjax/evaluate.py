@@ -124,14 +124,18 @@ def metrics_text(summary: dict[str, Any]) -> str:
     return "".join(f"  {n} {summary[n + '_mean']:.2f} +- {summary[n + '_std']:.2f}" for n in names)
 
 
-def compile_evaluator(cfg: RunConfig, params: Any, variant: str | None, episodes: int, stochastic: bool) -> tuple[Any, float]:
+def compile_evaluator(cfg: RunConfig, params: Any, variant: str | None, episodes: int, stochastic: bool,
+                      hint: str | None = None, pick: Hyper | None = None) -> tuple[Any, float]:
     """The evaluation program for seed-batched params shaped like `params` (arrays, or
     jax.ShapeDtypeStructs with their shardings: it can compile before training has finished, e.g.
-    in a thread while it runs), `evaluate(params, keys, task_params)` for any variant of the env;
-    (that executable, seconds spent compiling)."""
+    in a thread while it runs), `evaluate(params, keys, task_params)` for any variant of the env,
+    or with a group's `hint` and a member's `pick` (`evaluate_group`) `evaluate(params, keys,
+    task_params, pick)` for any member; (that executable, seconds spent compiling)."""
     t = time.perf_counter()
-    evaluate = jax.jit(jax.vmap(make_task_evaluator(cfg, episodes, stochastic), in_axes=(0, 0, None)))
-    compiled = evaluate.lower(params, eval_keys(cfg), envs.make_params(cfg.env, variant)).compile()
+    picked = () if pick is None else (pick,)
+    evaluate = jax.jit(jax.vmap(make_task_evaluator(cfg, episodes, stochastic, hint),
+                                in_axes=(0, 0, None) + (None,) * len(picked)))
+    compiled = evaluate.lower(params, eval_keys(cfg), envs.make_params(cfg.env, variant), *picked).compile()
     return compiled, time.perf_counter() - t
 
 
@@ -167,12 +171,9 @@ def evaluate_group(group: Any, state: Any) -> tuple[list[list[dict]], float]:
                                      c.eval_episodes, c.stochastic_eval) for k, c in enumerate(group.cfgs)]
         return [r for r, _ in results], sum(t for _, t in results)
     keys, params = eval_keys(cfg), state.params
-    t = time.perf_counter()
-    evaluate = jax.jit(jax.vmap(make_task_evaluator(cfg, cfg.eval_episodes, cfg.stochastic_eval, group.hint),
-                                in_axes=(0, 0, None, None)))
     member = lambda k: jax.tree.map(lambda x: x[:, k], params)  # noqa: E731
-    evaluate = evaluate.lower(member(0), keys, envs.make_params(cfg.env, cfg.variant), group.hyper(0)).compile()
-    compile_seconds = time.perf_counter() - t
+    evaluate, compile_seconds = compile_evaluator(cfg, member(0), cfg.variant, cfg.eval_episodes, cfg.stochastic_eval,
+                                                  group.hint, group.hyper(0))
     summaries = [[variant_summary(c, v, c.stochastic_eval,
                                   evaluate(member(k), keys, envs.make_params(c.env, v), group.hyper(k)))
                   for v in (c.variant, *c.eval_variants)] for k, c in enumerate(group.cfgs)]
