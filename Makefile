@@ -1,12 +1,13 @@
 # make run   : set up (first time) and train the default agent (pendulum, composite hint, FiLM) on CPU
 # make test  : set up (first time) and run the test suite (slow tests: make test-slow)
+# make lint  : set up (first time) and run ruff (pinned in pyproject.toml) over the repository
 # make bench : environment and training throughput (meant for a GPU)
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: setup run test test-slow bench clean
+.PHONY: setup run test test-slow lint bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -29,6 +30,9 @@ test: setup
 
 test-slow: setup
 	$(BIN)/python -m pytest -q -m slow -n 2 --dist loadfile
+
+lint: setup
+	$(BIN)/ruff check .
 
 BENCH_ENVS ?= pendulum,acrobot,idp,halfcheetah,ant,ant_fast,humanoid,car_racing
 bench: setup

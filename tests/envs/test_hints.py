@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from hintsjax import envs
-from hintsjax.envs.pendulum import PendulumState
 from hintsjax.envs import hints as hints_module
 from hintsjax.envs.pendulum import PendulumState, wrap_angle
 
