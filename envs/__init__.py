@@ -29,7 +29,7 @@ from hintsjax.envs.hints import NO_HINT, Hint, hint_names, make_hint, register_c
 @dataclass(frozen=True)
 class EnvEntry:
     """A registered env: its class, its named params variants (the first is the default) and its
-    training defaults (`TRAINING` beside the env; hintsjax/config.py reads them)."""
+    training defaults (`TRAINING` beside the env; hintsjax/env_defaults.py reads them)."""
 
     cls: type[Env]
     variants: dict[str, Any]

@@ -35,7 +35,8 @@ import numpy as np
 import optax
 
 from hintsjax import compilation_cache, envs
-from hintsjax.config import ENV_DEFAULTS, run_config
+from hintsjax.config import run_config
+from hintsjax.env_defaults import ENV_DEFAULTS
 from hintsjax.ppo import Hyper, gaussian_log_prob, make_network, make_optimizer, make_trainer
 
 

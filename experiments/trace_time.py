@@ -17,7 +17,8 @@ import numpy as np
 
 from hintsjax import envs
 from hintsjax.algorithms import make_trainer
-from hintsjax.config import ENV_DEFAULTS, run_config
+from hintsjax.config import run_config
+from hintsjax.env_defaults import ENV_DEFAULTS
 from hintsjax.evaluate import eval_keys, make_task_evaluator
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from hintsjax.envs.hints import NO_HINT
+
 
 @dataclass(frozen=True)
 class AgentSpec:
@@ -32,6 +34,21 @@ class AgentSpec:
         """True when a conditioning scheme joins pixels and hint."""
         return self.pixels and self.hint
 
+    def hint_for(self, hint: str) -> str:
+        """The hint the env computes when a run asks for `hint`: none without a hint input, `state` for HINTS-x."""
+        if not self.hint:
+            return NO_HINT
+        return self.hint_override or hint
+
+    def label(self, name: str, scheme: str, hint: str) -> str:
+        """Short name of agent `name` for tables: name[-scheme][-hint], the parts that vary it."""
+        parts = [name]
+        if self.conditioned:
+            parts.append(scheme)
+        if self.hint and not self.hint_override:
+            parts.append(hint)
+        return "-".join(parts)
+
 
 AGENTS: dict[str, AgentSpec] = {
     "ppo_rgb": AgentSpec(pixels=True),
@@ -41,7 +58,7 @@ AGENTS: dict[str, AgentSpec] = {
     "hints_state": AgentSpec(pixels=True, hint=True, hint_override="state"),
     "hints": AgentSpec(pixels=True, hint=True),
     # The converged references (tier 3). expert_ppo is PPO on the state at the env's expert
-    # budget (config.ENV_DEFAULTS[env]["agents"]); dagger and gail learn from its exported policy.
+    # budget (env_defaults.ENV_DEFAULTS[env]["agents"]); dagger and gail learn from its exported policy.
     "expert_ppo": AgentSpec(state=True),
     "dagger": AgentSpec(state=True, algorithm="dagger"),
     "gail": AgentSpec(state=True, algorithm="gail"),

@@ -17,7 +17,8 @@ from pathlib import Path
 import jax
 import orbax.checkpoint as ocp
 
-from hintsjax.config import RunConfig, UsageError
+from hintsjax.config import RunConfig
+from hintsjax.errors import UsageError
 
 CHECKPOINTS = "checkpoints"
 

@@ -1,16 +1,13 @@
-"""Frozen configuration: PPO's settings, one run's choices, and their validation.
+"""One run's configuration: the schema (RunConfig and its sections), its layers and validation.
 
 Choices (env, agent, scheme, hint, variants) are validated against the registries here, so a
 bad name fails before anything is built or written, with a one-line message that lists the
-valid choices. Per-env defaults (budget, actor learning rate, default hint, deploy variants)
-live beside each env (`TRAINING` in envs/<env>.py) and are gathered in `ENV_DEFAULTS`; a config
-value of `None` means "the env's default".
+valid choices. A config value of `None` means "the env's default" (hintsjax.env_defaults).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -21,131 +18,14 @@ import yaml
 
 from hintsjax import envs
 from hintsjax.agents import AGENTS, AgentSpec
+from hintsjax.algorithm_settings import DaggerConfig, GailConfig, PPOConfig
 from hintsjax.conditioning import SCHEMES
+from hintsjax.env_defaults import ENV_DEFAULTS
 from hintsjax.envs.errors import ChoiceError, choose
+from hintsjax.errors import UsageError, fail as fail, require_positive  # fail: hintsjax/run.py imports it from here
 
 
 CONFIG_YAML = "config.yaml"  # a run folder's resolved config
-
-
-class UsageError(ValueError):
-    """Bad input from the user: reported in one line, exit status 2."""
-
-
-def require_positive(obj: Any, names: tuple[str, ...], prefix: str = "") -> None:
-    """UsageError naming the first of `names` (numbers, or tuples of widths) that is not positive."""
-    for name in names:
-        value = getattr(obj, name)
-        if isinstance(value, tuple) and not all(w > 0 for w in value):
-            raise UsageError(f"{prefix}{name} widths must be positive, got {list(value)}")
-        if not isinstance(value, tuple) and value <= 0:
-            raise UsageError(f"{prefix}{name} must be positive, got {value}")
-
-
-@dataclass(frozen=True)
-class PPOConfig:
-    """PPO settings (SPEC section 5). The budget is counted in environment steps."""
-
-    total_env_steps: int = 200_000
-    num_envs: int = 16  # a speed choice: it does not change the budget
-    batch_size: int = 1024  # transitions per update: num_envs * rollout length
-    epochs: int = 8
-    minibatch_size: int = 256
-    gamma: float = 0.99
-    gae_lambda: float = 0.95
-    clip_eps: float = 0.2
-    vf_coef: float = 0.5
-    ent_coef: float = 0.01
-    max_grad_norm: float = 0.5
-    encoder_lr: float = 1e-3
-    actor_lr: float = 3e-4
-    critic_lr: float = 1e-3
-    hint_width: int = 64
-    hidden: tuple[int, ...] = (256, 256)
-    reward_scale: float = 1.0  # rewards are multiplied by this for learning (not for logging)
-    # Draw each env's next start once per rollout rather than on every step (AutoReset.step's
-    # `fresh`): for envs whose reset is dear (the car's track is 800 sequential trace steps).
-    starts_per_rollout: bool = False
-    # KL early stop (as Stable-Baselines3's target_kl): within an update, once a minibatch's approx.
-    # KL from the rollout policy exceeds 1.5 x target_kl, that minibatch and the rest of the
-    # update's epochs take no step. None: off (Table 5 has none).
-    target_kl: float | None = None
-    # State agents: normalise the state by its running mean and std (hintsjax.normalization).
-    normalize_state: bool = False
-
-    @property
-    def rollout_length(self) -> int:
-        return self.batch_size // self.num_envs
-
-    @property
-    def num_updates(self) -> int:
-        return self.total_env_steps // self.batch_size
-
-    @property
-    def num_minibatches(self) -> int:
-        return self.batch_size // self.minibatch_size
-
-    def validate(self) -> None:
-        require_positive(self, ("total_env_steps", "num_envs", "batch_size", "epochs", "minibatch_size", "hint_width"), "ppo.")
-        if self.batch_size % self.num_envs:
-            raise UsageError(f"ppo.batch_size ({self.batch_size}) must be a multiple of ppo.num_envs ({self.num_envs})")
-        if self.batch_size % self.minibatch_size:
-            raise UsageError(
-                f"ppo.batch_size ({self.batch_size}) must be a multiple of ppo.minibatch_size ({self.minibatch_size})"
-            )
-        if self.total_env_steps < self.batch_size:
-            raise UsageError(
-                f"ppo.total_env_steps ({self.total_env_steps}) is less than one update's batch ({self.batch_size})"
-            )
-        require_positive(self, ("hidden",), "ppo.")
-        if self.target_kl is not None and not self.target_kl > 0:
-            raise UsageError(f"ppo.target_kl ({self.target_kl}) must be positive, or null for no KL early stop")
-
-
-@dataclass(frozen=True)
-class DaggerConfig:
-    """DAgger (Ross et al. 2011). Each round rolls out ppo.batch_size steps (ppo.num_envs envs)
-    with the beta-mixture of expert and student, labels every visited state with the expert's
-    action, adds them to the aggregated dataset and regresses the student on it."""
-
-    beta_decay: float = 0.5  # beta_i = beta_decay ** i: round 0 acts as the expert alone
-    buffer_size: int = 200_000  # the aggregated dataset's capacity; the oldest rows go first when full
-    grad_steps: int = 32  # student minibatch steps per round (minibatches of ppo.minibatch_size)
-    lr: float = 1e-3
-
-    def validate(self) -> None:
-        if not 0.0 <= self.beta_decay <= 1.0:
-            raise UsageError(f"dagger.beta_decay must be in [0, 1], got {self.beta_decay}")
-        require_positive(self, ("buffer_size", "grad_steps", "lr"), "dagger.")
-
-
-GAIL_REWARDS = ("logit", "original")
-
-
-@dataclass(frozen=True)
-class GailConfig:
-    """GAIL (Ho and Ermon 2016): PPO on the reward of a discriminator D(s, a) trained to tell
-    the expert's (state, action) pairs from the policy's."""
-
-    demonstrations: int = 16  # expert episodes, rolled out once at the start of training
-    disc_hidden: tuple[int, ...] = (256, 256)
-    disc_lr: float = 3e-4
-    disc_steps: int = 4  # discriminator minibatch steps per PPO update (minibatches of ppo.minibatch_size)
-    # "logit": log D - log(1 - D), the log odds; mostly negative while the discriminator wins, so
-    # ending an episode early pays (idp's agents learn to fall).
-    # "original": -log(1 - D) > 0, Ho and Ermon's, which pays for every step alive (an agent
-    # then avoids a task's terminating goal, e.g. acrobot's).
-    reward: str = "logit"
-    # D reads the state standardised by the demonstrations' mean and variance (gail.py).
-    normalize_state: bool = False
-    grad_penalty: float = 0.0  # weight of D's R1 gradient penalty on the expert's pairs (gail.py)
-
-    def validate(self) -> None:
-        require_positive(self, ("demonstrations", "disc_steps", "disc_lr", "disc_hidden"), "gail.")
-        if self.grad_penalty < 0:
-            raise UsageError(f"gail.grad_penalty must be 0 or more, got {self.grad_penalty}")
-        if self.reward not in GAIL_REWARDS:
-            raise UsageError(f"unknown gail.reward {self.reward!r}; valid: {', '.join(GAIL_REWARDS)}")
 
 
 def env_params(env: str, variant: str | None) -> Any:
@@ -154,43 +34,6 @@ def env_params(env: str, variant: str | None) -> Any:
         return envs.make_params(env, variant)
     except ChoiceError as e:
         raise UsageError(str(e)) from None
-
-
-# "agents" holds per-agent overrides on top of an env's defaults, for the converged references
-# (tier 3): the expert trains PPO on the state for 5x the hint agents' budget; DAgger's rounds of
-# 1024 steps aggregate every visited state (buffer = budget); GAIL gets the expert's budget.
-def _references(expert_steps: int, dagger_steps: int = 100_000, gail_reward: str = "logit",
-                gail_normalize_state: bool = False, gail_grad_penalty: float = 0.0, **expert_ppo: Any) -> dict[str, Any]:
-    return {
-        "expert_ppo": dict(ppo=dict(total_env_steps=expert_steps, **expert_ppo)),
-        "dagger": dict(ppo=dict(total_env_steps=dagger_steps), dagger=dict(buffer_size=dagger_steps)),
-        "gail": dict(ppo=dict(total_env_steps=expert_steps, **expert_ppo),
-                     gail=dict(reward=gail_reward, normalize_state=gail_normalize_state,
-                               grad_penalty=gail_grad_penalty)),
-    }
-
-
-def _learners(**ppo: Any) -> dict[str, Any]:
-    """PPO settings for every agent but the converged references (which `_references` sets)."""
-    return {name: dict(ppo=ppo) for name in AGENTS if name not in _references(0)}
-
-
-
-
-def _env_defaults(training: dict[str, Any]) -> dict[str, Any]:
-    """An env's training defaults as RunConfig layers: its own settings, and per agent those of
-    `learners` (every agent but the references) and of `references` (`_references`' arguments)."""
-    training = dict(training)
-    agents = _learners(**training.pop("learners")) if "learners" in training else {}
-    if "references" in training:
-        references = dict(training.pop("references"))
-        agents.update(_references(references.pop("expert_steps"), **references))
-    return {**training, "agents": agents}
-
-
-# Per env, defaults over PPOConfig's: the paper's budgets and Table 5's actor rates, and why each
-# deviates where it does, live beside the env (`TRAINING` in envs/<env>.py, the registry's `training`).
-ENV_DEFAULTS: dict[str, dict[str, Any]] = {name: _env_defaults(entry.training) for name, entry in envs.REGISTRY.items()}
 
 
 @dataclass(frozen=True)
@@ -221,21 +64,12 @@ class RunConfig:
     @property
     def effective_hint(self) -> str:
         """The hint the env computes: none for agents without one, `state` for HINTS-x."""
-        spec = self.agent_spec
-        if not spec.hint:
-            return envs.NO_HINT
-        return spec.hint_override or self.hint
+        return self.agent_spec.hint_for(self.hint)
 
     @property
     def label(self) -> str:
         """Short name for tables: agent[-scheme][-hint]."""
-        spec = self.agent_spec
-        parts = [self.agent]
-        if spec.conditioned:
-            parts.append(self.scheme)
-        if spec.hint and not spec.hint_override:
-            parts.append(self.hint)
-        return "-".join(parts)
+        return self.agent_spec.label(self.agent, self.scheme, self.hint)
 
     def seed_keys(self) -> jax.Array:
         """[S] PRNG keys of the run's seeds: seed i is key(seed + i)."""
@@ -344,12 +178,6 @@ def to_dict(cfg: RunConfig) -> dict[str, Any]:
         return x
 
     return plain(dataclasses.asdict(cfg))
-
-
-def fail(error: Exception) -> int:
-    """Report bad input in one line; the exit status for it."""
-    print(f"error: {error}", file=sys.stderr)
-    return 2
 
 
 def save_run_config(run_dir: Path, cfg: RunConfig) -> None:

@@ -23,7 +23,8 @@ import numpy as np
 from flax import struct
 
 from hintsjax import envs
-from hintsjax.config import RunConfig, UsageError, env_params, fail, load_run_config
+from hintsjax.config import RunConfig, env_params, load_run_config
+from hintsjax.errors import UsageError, fail
 from hintsjax.ppo import Hyper, make_network, pick_hint
 
 EVAL_TAG = 0xE7A1  # folded into a seed's key so evaluation draws differ from training's

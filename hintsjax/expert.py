@@ -26,7 +26,8 @@ from flax import struct
 
 from hintsjax import normalization
 from hintsjax.checkpoint import on_this_device, require_same_arrays
-from hintsjax.config import RunConfig, UsageError, fail, load_run_config, to_dict
+from hintsjax.config import RunConfig, load_run_config, to_dict
+from hintsjax.errors import UsageError, fail
 from hintsjax.networks import MLP
 
 EXPERTS_DIR = Path(__file__).resolve().parent / "experts"  # the packaged experts, one folder per env

@@ -22,7 +22,8 @@ import jax.numpy as jnp
 import optax
 from flax import struct
 
-from hintsjax.config import GailConfig, RunConfig
+from hintsjax.algorithm_settings import GailConfig
+from hintsjax.config import RunConfig
 from hintsjax.networks import MLP
 from hintsjax.normalization import normalize
 from hintsjax.ppo import RunnerState, make_ppo

@@ -21,7 +21,8 @@ import jax
 import jax.numpy as jnp
 
 from hintsjax import envs, ppo
-from hintsjax.config import RunConfig, UsageError
+from hintsjax.config import RunConfig
+from hintsjax.errors import UsageError
 from hintsjax.ppo import Hyper, RunnerState
 from hintsjax.trainer import Trainer
 

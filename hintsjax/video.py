@@ -22,7 +22,8 @@ import numpy as np
 from flax import struct
 
 from hintsjax import envs
-from hintsjax.config import RunConfig, UsageError, env_params, fail, load_run_config
+from hintsjax.config import RunConfig, env_params, load_run_config
+from hintsjax.errors import UsageError, fail
 from hintsjax.evaluate import eval_keys
 from hintsjax.ppo import make_network
 

@@ -15,7 +15,8 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from hintsjax import config, envs
+from hintsjax import envs
+from hintsjax.env_defaults import ENV_DEFAULTS
 from hintsjax.envs.core import Env, Step
 
 NAME = "countdown"
@@ -55,4 +56,4 @@ class CountdownEnv(Env):
 
 
 envs.REGISTRY[NAME] = envs.EnvEntry(CountdownEnv, {"default": ()})
-config.ENV_DEFAULTS[NAME] = dict(hint="none")
+ENV_DEFAULTS[NAME] = dict(hint="none")

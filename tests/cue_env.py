@@ -8,7 +8,7 @@ blind to the hint can do is the constant action a = 0, whose expected return is 
 that reads the hint can reach 0.
 
 Importing this module registers the env (`envs.REGISTRY["cue"]`), its hint and its defaults
-(`hintsjax.config.ENV_DEFAULTS["cue"]`), so `run_config({"env": "cue", ...})` works.
+(`hintsjax.env_defaults.ENV_DEFAULTS["cue"]`), so `run_config({"env": "cue", ...})` works.
 """
 
 from __future__ import annotations
@@ -17,7 +17,8 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from hintsjax import config, envs
+from hintsjax import envs
+from hintsjax.env_defaults import ENV_DEFAULTS
 from hintsjax.envs.core import Env, Step
 from hintsjax.envs.hints import register_hint
 
@@ -73,4 +74,4 @@ def cue_pair(state: CueState, params: CueParams) -> jax.Array:
 
 
 envs.REGISTRY[NAME] = envs.EnvEntry(CueEnv, {"default": CueParams()})
-config.ENV_DEFAULTS[NAME] = dict(hint="cue", ppo=dict(actor_lr=1e-3))
+ENV_DEFAULTS[NAME] = dict(hint="cue", ppo=dict(actor_lr=1e-3))

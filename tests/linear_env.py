@@ -15,7 +15,8 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from hintsjax import config, envs
+from hintsjax import envs
+from hintsjax.env_defaults import ENV_DEFAULTS
 from hintsjax.envs.core import Env, Step
 
 NAME = "linear"
@@ -76,4 +77,4 @@ class LinearExpert:
 EXPERT = LinearExpert(jnp.asarray(GAINS, jnp.float32), jnp.asarray([-2.0], jnp.float32))
 
 envs.REGISTRY[NAME] = envs.EnvEntry(LinearEnv, {"default": LinearParams(), "terminating": LinearParams(0.3)})
-config.ENV_DEFAULTS[NAME] = dict(ppo=dict(hidden=(32, 32)))
+ENV_DEFAULTS[NAME] = dict(ppo=dict(hidden=(32, 32)))

@@ -15,7 +15,7 @@ import pytest
 import yaml
 
 from hintsjax import checkpoint, run
-from hintsjax.config import UsageError
+from hintsjax.errors import UsageError
 from hintsjax.evaluate import main as evaluate_main
 
 TINY = [
@@ -337,13 +337,14 @@ SHIPPED_ENVS = ("pendulum", "acrobot", "idp", "ant", "ant_fast", "halfcheetah", 
 
 @pytest.mark.parametrize("name", SHIPPED_ENVS)
 def test_each_env_carries_its_training_defaults_beside_it(name):
-    """An env's defaults live in its module (`TRAINING`, the registry's `training`); the config's
+    """An env's defaults live in its module (`TRAINING`, the registry's `training`);
     ENV_DEFAULTS is built from them, with the references' per-agent layers."""
-    from hintsjax import config, envs
+    from hintsjax import envs
+    from hintsjax.env_defaults import ENV_DEFAULTS
 
     training = envs.REGISTRY[name].training
     assert training["hint"] in envs.hint_names(name)
-    defaults = config.ENV_DEFAULTS[name]
+    defaults = ENV_DEFAULTS[name]
     assert defaults["hint"] == training["hint"] and defaults["ppo"] == training["ppo"]
     expert = training["references"]["expert_steps"]
     assert defaults["agents"]["expert_ppo"]["ppo"]["total_env_steps"] == expert

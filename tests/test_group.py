@@ -17,7 +17,8 @@ import pytest
 import cue_env  # noqa: F401  (registers the test env "cue" and its hints cue [1] and cue_pair [2])
 import linear_env  # noqa: F401  (registers the test env "linear")
 from hintsjax import checkpoint, group, ppo, run
-from hintsjax.config import UsageError, run_config, save_run_config
+from hintsjax.config import run_config, save_run_config
+from hintsjax.errors import UsageError
 
 UPDATES = 3
 TINY_PPO = {"total_env_steps": 3 * 64, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 2}

@@ -16,6 +16,8 @@ import pytest
 
 import linear_env  # registers the "linear" env (tests/ is on sys.path)
 from hintsjax import config, dagger, expert, gail
+from hintsjax.algorithm_settings import GAIL_REWARDS
+from hintsjax.errors import UsageError
 from hintsjax.algorithms import make_trainer
 
 # 24 rounds of 128 steps (8 envs x 16) and 64 student steps per round on minibatches of 64.
@@ -121,7 +123,7 @@ def test_gail_discriminator_separates_expert_from_random_pairs():
     _, after = gail.discriminator_loss(disc, params, expert_pairs, random_pairs)
     assert after["disc_loss"] < 0.5 * before["disc_loss"]
     assert after["disc_expert_acc"] > 0.9 and after["disc_policy_acc"] > 0.9
-    for kind in config.GAIL_REWARDS:
+    for kind in GAIL_REWARDS:
         r_expert = gail.gail_reward(disc.apply(params, expert_pairs)[..., 0], kind)
         r_random = gail.gail_reward(disc.apply(params, random_pairs)[..., 0], kind)
         assert r_expert.mean() > r_random.mean() + 1.0, kind
@@ -200,19 +202,19 @@ def test_export_keeps_the_best_seed_and_load_acts_like_it(expert_run, tmp_path):
 def test_expert_errors_name_the_problem(expert_run, tmp_path):
     _, run_dir = expert_run
     out = expert.export(run_dir, tmp_path / "expert")
-    with pytest.raises(config.UsageError, match="is for linear, not pendulum"):
+    with pytest.raises(UsageError, match="is for linear, not pendulum"):
         expert.load("pendulum", out)
-    with pytest.raises(config.UsageError, match="no expert for linear at .*packaged: .*pendulum"):
+    with pytest.raises(UsageError, match="no expert for linear at .*packaged: .*pendulum"):
         expert.load("linear", tmp_path / "nowhere")
     meta = json.loads((out / expert.EXPERT_JSON).read_text())
     (out / expert.EXPERT_JSON).write_text(json.dumps({**meta, "hidden": [8, 8]}))  # the policy is wider
-    with pytest.raises(config.UsageError, match=r"does not match expert.json: its \d+ arrays differ in shape"):
+    with pytest.raises(UsageError, match=r"does not match expert.json: its \d+ arrays differ in shape"):
         expert.load("linear", out)  # refused from the stored shapes, before any array is read
     (out / expert.EXPERT_JSON).write_text(json.dumps(meta))
     for f in (out / expert.POLICY).rglob("*"):
         if f.is_file():
             f.write_bytes(b"garbage")
-    with pytest.raises(config.UsageError, match="corrupt"):
+    with pytest.raises(UsageError, match="corrupt"):
         expert.load("linear", out)
 
 
@@ -273,7 +275,7 @@ def pendulum_expert_returns(total_env_steps: int, seeds: int = 3) -> list[float]
 
 @pytest.mark.slow
 def test_expert_ppo_learns_the_state_pendulum():
-    """expert_ppo's tuned settings (config.ENV_DEFAULTS["pendulum"]) at the hint agents' pendulum
+    """expert_ppo's tuned settings (hintsjax.env_defaults.ENV_DEFAULTS["pendulum"]) at the hint agents' pendulum
     budget (200 K steps) swing the rod up and hold it, far from a random policy's -1200 (measured:
     seeds -157, -179, -151). The expert itself trains 1 M steps."""
     returns = pendulum_expert_returns(200_000)

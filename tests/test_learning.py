@@ -16,6 +16,7 @@ import pytest
 
 import cue_env  # registers the "cue" env, its hint and its defaults (tests/ is on sys.path)
 from hintsjax import config, ppo
+from hintsjax.errors import UsageError
 
 # -- learning -----------------------------------------------------------------------------------
 
@@ -243,5 +244,5 @@ def test_target_kl_stops_an_update_after_the_first_minibatch_whose_kl_exceeds_it
 
 
 def test_target_kl_must_be_positive():
-    with pytest.raises(config.UsageError, match="target_kl"):
+    with pytest.raises(UsageError, match="target_kl"):
         config.run_config(dict(env="cue", agent="hints_blind", ppo={**SMALL_PPO, "target_kl": 0.0}))

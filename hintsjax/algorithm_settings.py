@@ -1,0 +1,116 @@
+"""Each training algorithm's settings: PPO's, DAgger's and GAIL's, the `ppo`, `dagger` and `gail`
+sections of a RunConfig (hintsjax.config). Per-env values over these defaults live beside each
+env (hintsjax.env_defaults)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from hintsjax.errors import UsageError, require_positive
+
+
+@dataclass(frozen=True)
+class PPOConfig:
+    """PPO settings (SPEC section 5). The budget is counted in environment steps."""
+
+    total_env_steps: int = 200_000
+    num_envs: int = 16  # a speed choice: it does not change the budget
+    batch_size: int = 1024  # transitions per update: num_envs * rollout length
+    epochs: int = 8
+    minibatch_size: int = 256
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip_eps: float = 0.2
+    vf_coef: float = 0.5
+    ent_coef: float = 0.01
+    max_grad_norm: float = 0.5
+    encoder_lr: float = 1e-3
+    actor_lr: float = 3e-4
+    critic_lr: float = 1e-3
+    hint_width: int = 64
+    hidden: tuple[int, ...] = (256, 256)
+    reward_scale: float = 1.0  # rewards are multiplied by this for learning (not for logging)
+    # Draw each env's next start once per rollout rather than on every step (AutoReset.step's
+    # `fresh`): for envs whose reset is dear (the car's track is 800 sequential trace steps).
+    starts_per_rollout: bool = False
+    # KL early stop (as Stable-Baselines3's target_kl): within an update, once a minibatch's approx.
+    # KL from the rollout policy exceeds 1.5 x target_kl, that minibatch and the rest of the
+    # update's epochs take no step. None: off (Table 5 has none).
+    target_kl: float | None = None
+    # State agents: normalise the state by its running mean and std (hintsjax.normalization).
+    normalize_state: bool = False
+
+    @property
+    def rollout_length(self) -> int:
+        return self.batch_size // self.num_envs
+
+    @property
+    def num_updates(self) -> int:
+        return self.total_env_steps // self.batch_size
+
+    @property
+    def num_minibatches(self) -> int:
+        return self.batch_size // self.minibatch_size
+
+    def validate(self) -> None:
+        require_positive(self, ("total_env_steps", "num_envs", "batch_size", "epochs", "minibatch_size", "hint_width"), "ppo.")
+        if self.batch_size % self.num_envs:
+            raise UsageError(f"ppo.batch_size ({self.batch_size}) must be a multiple of ppo.num_envs ({self.num_envs})")
+        if self.batch_size % self.minibatch_size:
+            raise UsageError(
+                f"ppo.batch_size ({self.batch_size}) must be a multiple of ppo.minibatch_size ({self.minibatch_size})"
+            )
+        if self.total_env_steps < self.batch_size:
+            raise UsageError(
+                f"ppo.total_env_steps ({self.total_env_steps}) is less than one update's batch ({self.batch_size})"
+            )
+        require_positive(self, ("hidden",), "ppo.")
+        if self.target_kl is not None and not self.target_kl > 0:
+            raise UsageError(f"ppo.target_kl ({self.target_kl}) must be positive, or null for no KL early stop")
+
+
+@dataclass(frozen=True)
+class DaggerConfig:
+    """DAgger (Ross et al. 2011). Each round rolls out ppo.batch_size steps (ppo.num_envs envs)
+    with the beta-mixture of expert and student, labels every visited state with the expert's
+    action, adds them to the aggregated dataset and regresses the student on it."""
+
+    beta_decay: float = 0.5  # beta_i = beta_decay ** i: round 0 acts as the expert alone
+    buffer_size: int = 200_000  # the aggregated dataset's capacity; the oldest rows go first when full
+    grad_steps: int = 32  # student minibatch steps per round (minibatches of ppo.minibatch_size)
+    lr: float = 1e-3
+
+    def validate(self) -> None:
+        if not 0.0 <= self.beta_decay <= 1.0:
+            raise UsageError(f"dagger.beta_decay must be in [0, 1], got {self.beta_decay}")
+        require_positive(self, ("buffer_size", "grad_steps", "lr"), "dagger.")
+
+
+GAIL_REWARDS = ("logit", "original")
+
+
+@dataclass(frozen=True)
+class GailConfig:
+    """GAIL (Ho and Ermon 2016): PPO on the reward of a discriminator D(s, a) trained to tell
+    the expert's (state, action) pairs from the policy's."""
+
+    demonstrations: int = 16  # expert episodes, rolled out once at the start of training
+    disc_hidden: tuple[int, ...] = (256, 256)
+    disc_lr: float = 3e-4
+    disc_steps: int = 4  # discriminator minibatch steps per PPO update (minibatches of ppo.minibatch_size)
+    # "logit": log D - log(1 - D), the log odds; mostly negative while the discriminator wins, so
+    # ending an episode early pays (idp's agents learn to fall).
+    # "original": -log(1 - D) > 0, Ho and Ermon's, which pays for every step alive (an agent
+    # then avoids a task's terminating goal, e.g. acrobot's).
+    reward: str = "logit"
+    # D reads the state standardised by the demonstrations' mean and variance (gail.py).
+    normalize_state: bool = False
+    grad_penalty: float = 0.0  # weight of D's R1 gradient penalty on the expert's pairs (gail.py)
+
+    def validate(self) -> None:
+        require_positive(self, ("demonstrations", "disc_steps", "disc_lr", "disc_hidden"), "gail.")
+        if self.grad_penalty < 0:
+            raise UsageError(f"gail.grad_penalty must be 0 or more, got {self.grad_penalty}")
+        if self.reward not in GAIL_REWARDS:
+            raise UsageError(f"unknown gail.reward {self.reward!r}; valid: {', '.join(GAIL_REWARDS)}")
+
