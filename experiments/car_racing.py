@@ -17,8 +17,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from report import (apart_text, cell, curve_lines, footer, load, metric_cell, metric_of, references_note,
-                    training_cell, wall_clock, write_report)
+from report import (apart_text, cell, curve_lines, footer, load, markdown_table, metric_cell, metric_of,
+                    references_note, training_cell, wall_clock, write_report)
 from sweep import hints_run, table_main
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -87,9 +87,7 @@ def report(runs: Path, force: bool = False) -> None:
     ]
     for env in ENVS:
         steps = run_config({"env": env}).ppo.total_env_steps
-        lines += [f"## {env} ({steps / 1e6:g} M env steps per seed)", "",
-                  "| agent | return standard | paper | return hairpin | paper | P standard | paper | P hairpin | paper "
-                  "| training return, last 10% | wall-clock (s) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+        rows = []
         for label in table_runs(env):
             result, paper = load(runs, env, label), PAPER.get(label, {})
             row = [label]
@@ -97,7 +95,10 @@ def report(runs: Path, force: bool = False) -> None:
                 row += [cell(result, i), paper.get(variant, "-")]
             for i, variant in enumerate(VARIANTS):
                 row += [metric_cell(result, "progress", i, percent=True), paper.get(f"P {variant}", "-")]
-            lines.append(f"| {' | '.join(row)} | {training_cell(runs, env, label)} | {wall_clock(result)} |")
+            rows.append([*row, training_cell(runs, env, label), wall_clock(result)])
+        lines += [f"## {env} ({steps / 1e6:g} M env steps per seed)", ""]
+        lines += markdown_table(["agent", "return standard", "paper", "return hairpin", "paper", "P standard", "paper",
+                                 "P hairpin", "paper", "training return, last 10%", "wall-clock (s)"], rows)
         lines += ["", findings(runs, env), "", references_note(runs, env, REFERENCES), ""]
         learners = [label for label in table_runs(env) if label not in REFERENCES]  # at the table's budget
         lines += curve_lines(runs, env, learners, RESULTS / f"car_curves_{env}.png",

@@ -27,9 +27,10 @@ from __future__ import annotations
 import argparse
 import os
 from pathlib import Path
+from typing import Callable
 
-from report import (archive_runs, cell, iqm_cell, load, mean_of, metrics_path, ordering, refuse_lost_cells,
-                    sweep_seconds, wall_clock, write_report)
+from report import (archive_runs, cell, iqm_cell, load, markdown_table, mean_of, metrics_path, ordering,
+                    refuse_lost_cells, sweep_seconds, wall_clock, write_report)
 from sweep import add_arguments, chosen_envs, chosen_runs, hints_run, sweep
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -113,6 +114,25 @@ def table_runs(table: int, env: str) -> list[str]:
 # -- the report ----------------------------------------------------------------------------------
 
 
+# The rows a Table 4 shows per scheme: (row label after the scheme's name, the cell of a run).
+ROW_OURS = (" (ours)", cell)
+ROW_OURS_IQM = (" (ours, IQM [95% CI])", iqm_cell)
+ROW_IQM = ("", iqm_cell)
+ROW_PAPER = (" (paper)", None)  # the paper's cell (PAPER_TABLE4), not a run's
+
+
+def scheme_table(runs: Path, env: str, *kinds: tuple[str, Callable[[dict | None], str] | None]) -> list[str]:
+    """Table 4 of one env as markdown: its hint columns across, and per scheme one row of each of `kinds`."""
+    cols = TABLE4_HINTS[env]
+
+    def row(scheme: str, suffix: str, cell_of) -> list[str]:
+        if cell_of is None:
+            return [scheme + suffix, *(PAPER_TABLE4[scheme][env][h] for h in cols)]
+        return [scheme + suffix, *(cell_of(load(runs, env, hints_run(scheme, h))) for h in cols)]
+
+    return markdown_table(["scheme", *cols], [row(scheme, *kind) for scheme in SCHEMES for kind in kinds])
+
+
 def findings(runs: Path, env: str) -> str:
     """O1 (hints vs vision only) and O5 (composite vs partial and full state), as numbers."""
     rgb = mean_of(load(runs, env, "ppo_rgb"))
@@ -189,16 +209,15 @@ def report(runs: Path, force: bool = False) -> None:
     for env in ENVS:
         lines += [f"## {env}", ""]
         deploy = env == "pendulum"
-        header = ("| agent | ours | paper |" + (" swingto deploy (ours) | swingto (paper) |" if deploy else "")
-                  + " wall-clock (s) | IQM of seed means [95% CI] |")
-        lines += [header, "|" + "---|" * (header.count("|") - 1)]
+        header = ["agent", "ours", "paper", *(["swingto deploy (ours)", "swingto (paper)"] if deploy else []),
+                  "wall-clock (s)", "IQM of seed means [95% CI]"]
+        rows = []
         for label in table_runs(2, env):
             result = load(runs, env, label)
-            row = f"| {label} | {cell(result)} | {PAPER_TABLE2[env].get(label, '-')} |"
-            if deploy:
-                row += f" {cell(result, 1)} | {PAPER_SWINGTO.get(label, '-')} |"
-            row += f" {wall_clock(result)} | {iqm_cell(result)} |"
-            lines.append(row)
+            deployed = [cell(result, 1), PAPER_SWINGTO.get(label, "-")] if deploy else []
+            rows.append([label, cell(result), PAPER_TABLE2[env].get(label, "-"), *deployed, wall_clock(result),
+                         iqm_cell(result)])
+        lines += markdown_table(header, rows)
         lines += ["", findings(runs, env), "", f"![{env} learning curves](classic_curves_{env}.png)", ""]
         curves[env] = {label: read_curves(path) for label in table_runs(2, env)
                        if label not in REFERENCES and (path := metrics_path(runs, env, label)) is not None}
@@ -227,15 +246,7 @@ def report(runs: Path, force: bool = False) -> None:
              "The paper's Table 4 is on another scale than its Table 2 (its acrobot floor is -2500 = 5 x -500),",
              "so compare orderings, not values. The fc row shares its runs with Table 2.", ""]
     for env in ENVS:
-        cols = TABLE4_HINTS[env]
-        lines += [f"## {env}", "", "| scheme | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
-        for scheme in SCHEMES:
-            ours = [cell(load(runs, env, hints_run(scheme, h))) for h in cols]
-            lines.append(f"| {scheme} (ours) | " + " | ".join(ours) + " |")
-            lines.append(f"| {scheme} (ours, IQM [95% CI]) | "
-                         + " | ".join(iqm_cell(load(runs, env, hints_run(scheme, h))) for h in cols) + " |")
-            lines.append(f"| {scheme} (paper) | " + " | ".join(PAPER_TABLE4[scheme][env][h] for h in cols) + " |")
-        lines.append("")
+        lines += [f"## {env}", "", *scheme_table(runs, env, ROW_OURS, ROW_OURS_IQM, ROW_PAPER), ""]
         lines += [scheme_findings(runs, env), ""]
     lines.append(f"Sweep wall-clock recorded for the Table 4 runs not already in Table 2: {sweep_seconds(runs, 4):.0f} s "
                  "over the GPU calls that trained them (one call also trained Table 2's references and counts for both).")
@@ -264,27 +275,20 @@ def learners_report(runs: Path, envs: list[str], path: Path) -> None:
         results = {label: load(runs, env, label) for label in labels}
         seeds = sorted({len(r["evaluations"][0]["seed_means"]) for r in results.values() if r})
         deploy = env == "pendulum"
-        lines += [f"## {env} ({', '.join(map(str, seeds))} seeds per row)", "",
-                  "| agent | ours | IQM [95% CI] | paper |" + (" swingto (ours) | swingto IQM | swingto (paper) |" if deploy else "")
-                  + " group wall-clock (s) |",
-                  "|---|---|---|---|" + ("---|---|---|" if deploy else "") + "---|"]
+        header = ["agent", "ours", "IQM [95% CI]", "paper",
+                  *(["swingto (ours)", "swingto IQM", "swingto (paper)"] if deploy else []), "group wall-clock (s)"]
+        rows = []
         for label, result in results.items():
-            row = f"| {label} | {cell(result)} | {iqm_cell(result)} | {PAPER_TABLE2[env].get(label, '-')} |"
-            if deploy:
-                row += f" {cell(result, 1)} | {iqm_cell(result, 1)} | {PAPER_SWINGTO.get(label, '-')} |"
-            lines.append(row + f" {wall_clock(result)} |")
-        lines += ["", findings(runs, env), ""]
-        cols = TABLE4_HINTS[env]
-        if all(load(runs, env, hints_run(scheme, h)) for scheme in SCHEMES for h in cols):
+            deployed = [cell(result, 1), iqm_cell(result, 1), PAPER_SWINGTO.get(label, "-")] if deploy else []
+            rows.append([label, cell(result), iqm_cell(result), PAPER_TABLE2[env].get(label, "-"), *deployed,
+                         wall_clock(result)])
+        lines += [f"## {env} ({', '.join(map(str, seeds))} seeds per row)", "", *markdown_table(header, rows), ""]
+        lines += [findings(runs, env), ""]
+        if all(load(runs, env, hints_run(scheme, h)) for scheme in SCHEMES for h in TABLE4_HINTS[env]):
             lines += [f"### {env}: Table 4 (conditioning schemes), IQM [95% CI] of the per-seed means", "",
-                      "| scheme | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
-            for scheme in SCHEMES:
-                lines.append(f"| {scheme} | " + " | ".join(iqm_cell(load(runs, env, hints_run(scheme, h))) for h in cols) + " |")
-            lines += ["", "Mean ± std (std of the seed means), for comparison with the paper's cells:", "",
-                      "| scheme | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
-            for scheme in SCHEMES:
-                lines.append(f"| {scheme} (ours) | " + " | ".join(cell(load(runs, env, hints_run(scheme, h))) for h in cols) + " |")
-                lines.append(f"| {scheme} (paper) | " + " | ".join(PAPER_TABLE4[scheme][env][h] for h in cols) + " |")
+                      *scheme_table(runs, env, ROW_IQM), "",
+                      "Mean ± std (std of the seed means), for comparison with the paper's cells:", "",
+                      *scheme_table(runs, env, ROW_OURS, ROW_PAPER)]
             lines += ["", scheme_findings(runs, env), "", scheme_orderings(runs, env), ""]
     write_report(path, lines, force=True)
 

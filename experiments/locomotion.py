@@ -15,8 +15,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from report import (KEPT, apart_text, cell, cell_stats, curve_lines, footer, kept_rows, kl_cell, load, metrics_path,
-                    references_note, trained_ppo, training_cell, wall_clock, write_report)
+from report import (KEPT, apart_text, cell, cell_stats, curve_lines, footer, kept_rows, kl_cell, load, markdown_table,
+                    metrics_path, references_note, trained_ppo, training_cell, wall_clock, write_report)
 from sweep import hints_run, table_main
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -81,19 +81,19 @@ def table_runs(env: str) -> list[str]:
     return [*REFERENCES, *BASELINES, *(hints_run("fc", h) for h in HINTS[env])]
 
 
-def kept_row(runs: Path, env: str, label: str, kept: dict[tuple[str, str], str]) -> str | None:
+def kept_row(runs: Path, env: str, label: str, kept: dict[tuple[str, str], list[str]]) -> list[str] | None:
     """The previous report's row of a run that neither runs/ nor the archive holds (not even begun)."""
     if load(runs, env, label) is None and metrics_path(runs, env, label) is None:
         return kept.get((env, label))
     return None
 
 
-def findings(runs: Path, env: str, kept: dict[tuple[str, str], str]) -> str:
+def findings(runs: Path, env: str, kept: dict[tuple[str, str], list[str]]) -> str:
     """The paper's claims for these rows, as numbers: hints beat vision only, and (but for the
     cheetah) beat PPO on the state. A row kept from the previous report counts with its mean."""
     def stats(label: str) -> tuple[float, float] | None:
         row = kept_row(runs, env, label, kept)
-        return cell_stats(cell(load(runs, env, label)) if row is None else row.split("|")[2])
+        return cell_stats(cell(load(runs, env, label)) if row is None else row[1])
 
     rgb, state = stats("ppo_rgb"), stats("ppo_state")
     hints = {h: stats(hints_run("fc", h)) for h in HINTS[env]}
@@ -119,7 +119,8 @@ def ppo_text(ppo) -> str:
             + (", the state normalised" if ppo.normalize_state else ""))
 
 
-def settings_lines(runs: Path, env: str, labels: list[str], kept: dict[tuple[str, str], str] | None = None) -> list[str]:
+def settings_lines(runs: Path, env: str, labels: list[str],
+                   kept: dict[tuple[str, str], list[str]] | None = None) -> list[str]:
     """The PPO settings the rows were trained with (each run's config.yaml), grouped when they
     differ; rows not yet run are listed at today's defaults (config.ENV_DEFAULTS), as are kept
     rows (the previous report listed them so)."""
@@ -157,17 +158,17 @@ def report(runs: Path, force: bool = False) -> None:
     for env in ENVS:
         learners = [label for label in table_runs(env) if label not in REFERENCES]  # at the table's budget
         lines += [f"## {env} ({run_config({'env': env}).ppo.total_env_steps / 1e6:g} M env steps per seed)", "",
-                  *settings_lines(runs, env, learners, kept), "",
-                  "| agent | ours | paper | training return, last 10% | updates with KL > 0.5 | wall-clock (s) |",
-                  "|---|---|---|---|---|---|"]
+                  *settings_lines(runs, env, learners, kept), ""]
+        rows = []
         for label in table_runs(env):
             if (row := kept_row(runs, env, label, kept)) is not None:
-                lines.append(row)
+                rows.append(row)
                 continue
             result = load(runs, env, label)
-            lines.append(f"| {label} | {cell(result)} | {PAPER[env].get(label, '-')} | {training_cell(runs, env, label)} "
-                         f"| {kl_cell(runs, env, label)} "
-                         f"| {wall_clock(result)} |")
+            rows.append([label, cell(result), PAPER[env].get(label, "-"), training_cell(runs, env, label),
+                         kl_cell(runs, env, label), wall_clock(result)])
+        lines += markdown_table(["agent", "ours", "paper", "training return, last 10%", "updates with KL > 0.5",
+                                 "wall-clock (s)"], rows)
         lines += ["", findings(runs, env, kept), "", references_note(runs, env, REFERENCES), ""]
         lines += [NOTES[env], ""] if env in NOTES else []
         lines += curve_lines(runs, env, learners, RESULTS / f"locomotion_curves_{env}.png", f"{env}: Table 3 agents, 5 seeds",

@@ -1,8 +1,9 @@
 """Reading finished runs into the result tables, and the committed archive of what they need.
 
 The readers (`load`, `cell`, `metric_cell`, `training_cell`, `kl_cell`, `wall_clock`,
-`sweep_seconds`) build the tables of classic_control.py, locomotion.py and car_racing.py;
-`write_report` writes one, refusing to blank cells that the committed one fills.
+`sweep_seconds`) give the cells of the tables of classic_control.py, locomotion.py and
+car_racing.py; `markdown_table` renders every table of them, and `write_report` writes a report,
+refusing to blank cells that the committed one fills.
 
 runs/ is not committed (checkpoints, full logs). What the tables need of each finished run is
 kept in the committed archive experiments/results/runs/<sweep>/<env>/<label>/ (`archive_runs`,
@@ -318,26 +319,36 @@ KEPT = "†"  # marks a row kept from the committed report: its run predates the
 ARCHIVED_SUFFIX = "_archived"  # curve_lines' figure of the runs beside kept ones
 
 
+def table_line(cells: list[str]) -> str:
+    """One line of a markdown table: `| a | b |`."""
+    return "| " + " | ".join(cells) + " |"
+
+
+def markdown_table(header: list[str], rows: list[list[str]]) -> list[str]:
+    """The lines of a markdown table: its header, the rule under it, then one line per row of cells."""
+    return [table_line(header), "|" + "---|" * len(header), *map(table_line, rows)]
+
+
 def table_rows(text: str):
-    """(section heading, row label without KEPT, its cells, the line) of every row of a report's
-    markdown tables, header rows included."""
+    """(section heading, row label without KEPT, its cells) of every row of a report's markdown
+    tables, header rows included."""
     section = ""
     for line in text.splitlines():
         if line.startswith("## "):
             section = line[3:].split(" (")[0]
         elif line.startswith("| ") and not line.startswith("|---"):
             label, *cells = [part.strip() for part in line.strip().strip("|").split("|")]
-            yield section, label.removesuffix(KEPT).strip(), cells, line
+            yield section, label.removesuffix(KEPT).strip(), cells
 
 
-def kept_rows(path: Path) -> dict[tuple[str, str], str]:
-    """The table rows of the committed report at `path`, by (section heading, agent label), each
-    with its label marked KEPT. A report keeps the row of a run that is neither in runs/ nor in the
-    archive (one trained before the archive existed, whose run folder was lost) instead of
-    blanking it."""
+def kept_rows(path: Path) -> dict[tuple[str, str], list[str]]:
+    """The table rows (label, then cells) of the committed report at `path`, by (section heading,
+    agent label), each with its label marked KEPT. A report keeps the row of a run that is neither
+    in runs/ nor in the archive (one trained before the archive existed, whose run folder was lost)
+    instead of blanking it."""
     text = path.read_text() if path.exists() else ""
-    return {(section, label): f"| {label} {KEPT} |" + line.split("|", 2)[2]
-            for section, label, cells, line in table_rows(text) if label != "agent" and cells[0] != "-"}
+    return {(section, label): [f"{label} {KEPT}", *cells]
+            for section, label, cells in table_rows(text) if label != "agent" and cells[0] != "-"}
 
 
 def cell_stats(text: str) -> tuple[float, float] | None:
@@ -355,7 +366,7 @@ def apart_text(a: tuple[float, float], b: tuple[float, float]) -> str:
 
 def table_cells(text: str) -> dict[tuple[str, str, int], str]:
     """Every cell of a report's markdown tables, by (section heading, row label, column)."""
-    return {(section, label, i): c for section, label, cells, _ in table_rows(text) for i, c in enumerate(cells, 1)}
+    return {(section, label, i): c for section, label, cells in table_rows(text) for i, c in enumerate(cells, 1)}
 
 
 def lost_cells(old: str, new: str) -> list[str]:
