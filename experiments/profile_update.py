@@ -1,0 +1,163 @@
+"""Where one training chunk of a cell spends its GPU time: a kernel table from JAX's profiler.
+
+    python experiments/profile_update.py [--env pendulum] [--seeds 5] [--updates 10] [--top 25]
+                                         [--variants base,nodet,...] [--out DIR]
+
+For each variant (a fresh process, since XLA_FLAGS are read at start-up) it compiles the cell's
+chunk program (`run.compile_training`, what `python -m hintsjax.run` runs), times `--updates`
+updates back to back (best of 3), then records one chunk under `jax.profiler.trace` and sums the
+GPU kernels' time by name: the device's busy fraction (the union of kernel intervals over the
+chunk's wall time) says whether the chunk is bound by the GPU's work or by launching it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gzip
+import hashlib
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections import defaultdict
+from pathlib import Path
+
+# name -> (extra XLA flags, {scan length: unroll}); a variant runs in its own process with its
+# flags appended, and its scans of those lengths unrolled (the pendulum's rollout and GAE scan 64
+# steps, an epoch 4 minibatches, an update 8 epochs)
+VARIANTS = {
+    "base": ("", {}),
+    "nodet": ("--xla_gpu_deterministic_ops=false", {}),
+    "cmdbuf": ("--xla_gpu_enable_command_buffer=FUSION,CUBLAS,CUBLASLT,CUSTOM_CALL,CUDNN,WHILE,CONDITIONAL", {}),
+    "nocmdbuf": ("--xla_gpu_enable_command_buffer=", {}),
+    # deterministic without --xla_gpu_deterministic_ops: no non-deterministic ops (scatter's
+    # atomics), kernels chosen without autotuning (the same in every process) or with it
+    "excl_at0": ("--xla_gpu_deterministic_ops=false --xla_gpu_exclude_nondeterministic_ops=true "
+                 "--xla_gpu_autotune_level=0", {}),
+    "excl": ("--xla_gpu_deterministic_ops=false --xla_gpu_exclude_nondeterministic_ops=true", {}),
+    "at0": ("--xla_gpu_deterministic_ops=false --xla_gpu_autotune_level=0", {}),
+    "excl_at0_unroll_learn": ("--xla_gpu_deterministic_ops=false --xla_gpu_exclude_nondeterministic_ops=true "
+                              "--xla_gpu_autotune_level=0", {4: 4}),
+    "unroll_rollout": ("", {64: 8}),
+    "unroll_learn": ("", {4: 4}),
+    "unroll_both": ("", {64: 8, 4: 4}),
+}
+
+
+def unroll_scans(unroll: dict[int, int]) -> None:
+    """Make every later `jax.lax.scan` of a length in `unroll` unroll that many steps."""
+    import jax
+
+    scan = jax.lax.scan
+
+    def patched(f, init, xs=None, length=None, **kw):
+        n = length if length is not None else jax.tree.leaves(xs)[0].shape[0]
+        return scan(f, init, xs, length, **{**kw, "unroll": unroll.get(n, kw.get("unroll", 1))})
+
+    jax.lax.scan = patched
+
+
+def kernel_table(trace_dir: Path, top: int) -> dict:
+    """Sum the GPU events of the newest perfetto trace under trace_dir by name."""
+    path = max(trace_dir.rglob("*.trace.json.gz"), key=os.path.getmtime)
+    events = json.loads(gzip.open(path).read())["traceEvents"]
+    gpu_pids = {e["pid"] for e in events if e.get("ph") == "M" and e.get("name") == "process_name"
+                and "/device:GPU" in str(e.get("args", {}).get("name", ""))}
+    kernels = [e for e in events if e.get("ph") == "X" and e.get("pid") in gpu_pids and "dur" in e]
+    if not kernels:
+        return {"note": "no GPU events in the trace"}
+    by_name: dict[str, list[float]] = defaultdict(lambda: [0.0, 0])
+    for e in kernels:
+        by_name[e["name"]][0] += e["dur"]
+        by_name[e["name"]][1] += 1
+    intervals = sorted((e["ts"], e["ts"] + e["dur"]) for e in kernels)
+    busy, end = 0.0, intervals[0][0]
+    for a, b in intervals:
+        if b > end:
+            busy += b - max(a, end)
+            end = b
+    span = intervals[-1][1] - intervals[0][0]
+    rows = sorted(by_name.items(), key=lambda kv: -kv[1][0])
+    return {"span_ms": span / 1e3, "busy_ms": busy / 1e3, "busy_fraction": busy / span, "events": len(kernels),
+            "top": [{"name": n[:120], "ms": t / 1e3, "count": c} for n, (t, c) in rows[:top]]}
+
+
+def one(args: argparse.Namespace) -> dict:
+    import jax
+    import numpy as np
+
+    from hintsjax import run
+    from hintsjax.algorithms import make_trainer
+    from hintsjax.config import run_config
+
+    unroll_scans(VARIANTS[args.variant][1])
+    cfg = run_config({"env": args.env, "agent": "hints", "scheme": "fc", "seeds": args.seeds,
+                      "checkpoint_every": args.updates})
+    keys = cfg.seed_keys()
+    compiled = run.compile_training(make_trainer(cfg), keys, args.updates)
+    state = compiled.init(keys)
+    n = np.int32(args.updates)
+    state, _ = jax.block_until_ready(compiled.run_chunk(state, n))
+    # the params after one chunk from the seeds' start: equal digests from two processes mean
+    # the variant's compiled program is reproducible
+    digest = hashlib.sha256(b"".join(np.asarray(x).tobytes() for x in jax.tree.leaves(state.params))).hexdigest()[:16]
+    times = []
+    for _ in range(3):
+        t = time.perf_counter()
+        state, _ = jax.block_until_ready(compiled.run_chunk(state, n))
+        times.append(time.perf_counter() - t)
+    with tempfile.TemporaryDirectory() as folder:
+        with jax.profiler.trace(folder, create_perfetto_trace=True):
+            state, _ = jax.block_until_ready(compiled.run_chunk(state, n))
+        table = kernel_table(Path(folder), args.top)
+    per_update = min(times) / args.updates
+    return {"variant": args.variant, "unroll": VARIANTS[args.variant][1], "xla_flags": os.environ.get("XLA_FLAGS", ""), "device": jax.devices()[0].device_kind,
+            "compile_s": compiled.seconds, "digest": digest, "update_ms": 1e3 * per_update,
+            "env_steps_per_s": cfg.seeds * cfg.ppo.batch_size / per_update, "kernels": table}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--env", default="pendulum")
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--updates", type=int, default=10)
+    parser.add_argument("--top", type=int, default=25)
+    parser.add_argument("--variants", default="base,nodet",
+                        help=f"comma-separated of {', '.join(VARIANTS)} (one twice: is it reproducible?)")
+    parser.add_argument("--variant", default=None, help=argparse.SUPPRESS)  # set in the child process
+    parser.add_argument("--out", default=None, help="write every variant's result as JSON into this folder")
+    args = parser.parse_args()
+    if args.variant is not None:
+        print("RESULT " + json.dumps(one(args)), flush=True)
+        return
+    names = [v for v in args.variants.split(",") if v]
+    unknown = [v for v in names if v not in VARIANTS]
+    if unknown:
+        parser.exit(2, f"error: unknown variant(s) {unknown}; valid: {', '.join(VARIANTS)}\n")
+    results = []
+    for name in names:
+        env = {**os.environ, "XLA_FLAGS": (os.environ.get("XLA_FLAGS", "") + " " + VARIANTS[name][0]).strip()}
+        cmd = [sys.executable, __file__, "--variant", name, "--env", args.env, "--seeds", str(args.seeds),
+               "--updates", str(args.updates), "--top", str(args.top)]
+        out = subprocess.run(cmd, env=env, capture_output=True, text=True)
+        lines = [line for line in out.stdout.splitlines() if line.startswith("RESULT ")]
+        if not lines:
+            print(f"{name}: failed\n{out.stderr[-3000:]}", flush=True)
+            continue
+        r = json.loads(lines[-1][len("RESULT "):])
+        results.append(r)
+        k = r["kernels"]
+        print(f"\n== {name} ({r['xla_flags']}): {r['update_ms']:.1f} ms/update = {r['env_steps_per_s']:,.0f} env steps/s, "
+              f"compile {r['compile_s']:.1f} s, params digest {r['digest']}; GPU busy {k.get('busy_ms', 0):.1f} of {k.get('span_ms', 0):.1f} ms "
+              f"({k.get('busy_fraction', 0):.0%}), {k.get('events', 0)} kernels", flush=True)
+        for row in k.get("top", []):
+            print(f"  {row['ms']:9.2f} ms {row['count']:7d}x  {row['name']}")
+    if args.out:
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        (Path(args.out) / f"profile_{args.env}.json").write_text(json.dumps(results, indent=1))
+
+
+if __name__ == "__main__":
+    main()
