@@ -1,4 +1,4 @@
-# make run   : set up (first time) and train the default agent (pendulum, composite hint, FiLM) on CPU
+# make run   : set up (first time), train a first agent on CPU (pendulum, composite hint, FiLM) and show it
 # make test  : set up (first time) and run the test suite (slow tests: make test-slow)
 # make lint  : set up (first time) and run ruff (pinned in pyproject.toml) over the repository
 # make bench : environment and training throughput (meant for a GPU)
@@ -17,10 +17,10 @@ $(STAMP): pyproject.toml
 
 setup: $(STAMP)
 
-# A CPU-sized budget: 1 seed, 50 updates of 1024 transitions (about 5 minutes on 2 cores).
+# A first agent that learns on CPU (python -m hintsjax.quickstart): pendulum, composite hint, FiLM,
+# one seed, 50 updates of 1024 env steps, evaluated beside a random policy, with a GIF of one episode.
 run: setup
-	$(BIN)/python -m hintsjax.run env=pendulum agent=hints hint=composite scheme=fc \
-		seeds=1 eval_episodes=20 ppo.total_env_steps=51200 ppo.epochs=4 checkpoint_every=5
+	$(BIN)/python -m hintsjax.quickstart
 
 # Two processes, one test file each at a time (module fixtures stay shared): compiling is
 # single-threaded, so this takes 9 to 11 minutes on 2 cores (before the locomotion and car

@@ -173,7 +173,7 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
     def report(metrics: dict[str, jax.Array], after: int, n: int) -> None:
         metrics = {k: np.asarray(v)[:, :n] for k, v in metrics.items()}  # waits for that chunk only
         write(metrics, after)
-        returns = metrics["episode_return"][:, -1]
+        returns = metrics["episode_return"]  # the chunk's updates (NaN where no episode ended in one)
         bar.set_postfix(steps=int(np.max(metrics["env_steps"][:, -1])),
                         ret=f"{np.nanmean(returns):.1f}" if not np.all(np.isnan(returns)) else "-")
         bar.update(n)

@@ -96,6 +96,18 @@ def test_bad_imitation_settings_exit_2_with_one_line_and_write_nothing(arg, tmp_
     assert not (tmp_path / "runs").exists()
 
 
+@pytest.mark.parametrize("argv", [["--updates", "0"], ["--updates", "-3"]])
+def test_quickstart_refuses_an_empty_budget_before_writing(argv, tmp_path, capsys):
+    from hintsjax import quickstart
+
+    with pytest.raises(SystemExit) as exit_:
+        quickstart.main([*argv, "--out-dir", str(tmp_path / "runs")])
+    assert exit_.value.code == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines == [f"error: --updates must be at least 1, got {argv[1]}"]
+    assert not (tmp_path / "runs").exists()
+
+
 @pytest.fixture(scope="module")
 def finished_run(tmp_path_factory) -> Path:
     """A complete tiny run (4 updates, checkpoints at 2 and 4), made in-process."""

@@ -1,0 +1,85 @@
+"""`make run`: a first agent that learns on a laptop's CPU in about four and a half minutes.
+
+    python -m hintsjax.quickstart [--updates 50] [--out-dir runs]
+
+Trains the paper's main agent on the pendulum (64x64 pictures plus the composite hint, FiLM
+conditioning; PPO's default settings, one seed) for `--updates` updates of 1024 env steps, a
+quarter of the paper's budget, which is where a HINTS agent has left a random policy far behind
+on 2 CPU cores (a vision-only agent has not: experiments/results/classic_seeds20.md). Then it
+evaluates the agent on 20 swing-up episodes beside a random policy (the same agent before
+training, sampling its actions from N(0, 1)), writes a GIF of one episode with the hint drawn
+beside the picture, and prints where the run folder, learning curve and GIF are.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import jax
+
+from hintsjax import compilation_cache, run, video
+from hintsjax.algorithms import make_trainer
+from hintsjax.config import run_config, save_run_config
+from hintsjax.evaluate import eval_keys, evaluate_params
+
+SETTINGS = {"env": "pendulum", "agent": "hints", "hint": "composite", "scheme": "fc", "seeds": 1, "eval_episodes": 20,
+            "checkpoint_every": 10}
+BASELINE_JSON = "random_policy.json"
+
+
+def random_policy(cfg, variant: str | None) -> dict:
+    """The run's agent before training (its seeds' initial params), sampling its actions: a
+    Gaussian random policy, evaluated on the same episodes as the trained agent."""
+    initial = jax.jit(jax.vmap(make_trainer(cfg).init))(cfg.seed_keys())
+    return evaluate_params(cfg, initial.params, variant, cfg.eval_episodes, stochastic=True)
+
+
+def swing_up_gif(cfg, run_dir: Path, candidates: int = 8) -> Path:
+    """A GIF of seed 0's trained agent on the episode, of `candidates` evaluation starts, that
+    begins farthest from upright (its first reward the lowest): the one with the most to show."""
+    from hintsjax import checkpoint
+
+    state, _ = checkpoint.restore_latest(run_dir, cfg)
+    params = jax.tree.map(lambda x: x[0], state.params)
+    env = cfg.make_env()
+    steps = min(env.max_steps, video.MAX_STEPS)
+    key = eval_keys(cfg)[0]
+    episodes = [video.rollout(cfg, params, cfg.variant, steps, jax.random.fold_in(key, i)) for i in range(candidates)]
+    episode = min(episodes, key=lambda e: float(e.rewards[0])).cut()
+    out = run_dir / "swing-up.gif"
+    video.write_gif(video.compose_frames(episode, video.hint_labels(env.hint), 4, env.max_steps), out, 25)
+    print(f"{out}: {int(episode.valid.sum())} frames, return {float(episode.rewards.sum()):.2f}")
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m hintsjax.quickstart", description=__doc__.splitlines()[0])
+    parser.add_argument("--updates", type=int, default=50, help="updates of 1024 env steps (default: 50)")
+    parser.add_argument("--out-dir", type=Path, default=Path("runs"), help="where the run folder goes (default: runs)")
+    args = parser.parse_args(argv)
+    if args.updates < 1:
+        parser.exit(2, f"error: --updates must be at least 1, got {args.updates}\n")
+    t = time.perf_counter()
+    cfg = run_config({**SETTINGS, "ppo": {"total_env_steps": 1024 * args.updates}})
+    compilation_cache.enable(compilation_cache.folder(True))
+    run_dir = run.new_run_dir(str(args.out_dir), f"quickstart-{time.strftime('%Y%m%d-%H%M%S')}", cfg)
+    save_run_config(run_dir, cfg)
+    trained = run.train(cfg, run_dir)["evaluations"][0]
+    baseline = random_policy(cfg, cfg.variant)
+    (run_dir / BASELINE_JSON).write_text(json.dumps(baseline, indent=1))
+    gif = swing_up_gif(cfg, run_dir)
+    print(f"\n{cfg.env}/{trained['variant']}, {cfg.eval_episodes} episodes each ({time.perf_counter() - t:.0f} s in all):\n"
+          f"  trained agent ({cfg.label}, {cfg.ppo.total_env_steps} env steps): "
+          f"{trained['mean']:8.1f} +- {trained['std']:.1f}\n"
+          f"  random policy (the agent before training, sampling its actions): "
+          f"{baseline['mean']:8.1f} +- {baseline['std']:.1f}\n"
+          f"run folder:     {run_dir}\nlearning curve: {run_dir / run.CURVE_PNG}\none episode:    {gif}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
