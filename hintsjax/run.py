@@ -23,6 +23,7 @@ from typing import Any, Callable
 
 import hydra
 import jax
+import jax.numpy as jnp
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
@@ -115,6 +116,47 @@ def check_fits(compiled: Any, what: str) -> None:
         raise GroupTooBig(f"{what} needs {need / 2**30:.1f} GiB of the device's {stats['bytes_limit'] / 2**30:.1f} GiB")
 
 
+class NonFiniteError(RuntimeError):
+    """Training went NaN or infinite: the run stopped without saving that state, so its newest
+    checkpoint is the last good one (NONFINITE_JSON in the run folder says where and what)."""
+
+
+# Losses that every sound update keeps finite (episode_return is NaN where no episode ended). A
+# non-finite parameter makes the next update's losses non-finite, so checking them on the host
+# finds it one update later at most, without adding anything to the compiled training program;
+# a checkpoint is written only of params that are all finite (`finite_seeds`).
+FINITE_METRICS = ("policy_loss", "value_loss", "entropy")
+NONFINITE_JSON = "nonfinite.json"
+
+
+@jax.jit
+def finite_seeds(params: Any) -> jax.Array:
+    """[S] bool: whether every parameter of each seed (of every member, for a group) is finite."""
+    return jnp.stack([jnp.isfinite(x).reshape(x.shape[0], -1).all(axis=1) for x in jax.tree.leaves(params)]).all(axis=0)
+
+
+def first_nonfinite(metrics: dict[str, np.ndarray], after: int) -> dict[str, Any] | None:
+    """The first update of a chunk's metrics ([S, n] or a group's [S, n, K], `after` updates
+    before it) with a loss that is not finite: its update, the loss, the seeds (and members)."""
+    for u in range(next(iter(metrics.values())).shape[1]):
+        for name in FINITE_METRICS:
+            if name in metrics:
+                bad = ~np.isfinite(metrics[name][:, u])
+                if bad.any():
+                    found = {"update": after + u + 1, "quantity": name,
+                             "seeds": np.flatnonzero(bad.reshape(len(bad), -1).any(axis=1)).tolist()}
+                    return found if bad.ndim == 1 else {**found, "members": np.flatnonzero(bad.any(axis=0)).tolist()}
+    return None
+
+
+def stop_nonfinite(run_dir: Path, label: str, found: dict[str, Any]) -> None:
+    """Record `found` in the run folder and raise NonFiniteError."""
+    (run_dir / NONFINITE_JSON).write_text(json.dumps(found) + "\n")
+    where = f"seed(s) {found['seeds']}" + (f", member(s) {found['members']}" if "members" in found else "")
+    raise NonFiniteError(f"{label}: {found['quantity']} is not finite after update {found['update']} ({where}); "
+                         f"training stopped without saving it")
+
+
 @dataclass
 class Training:
     """A training run's progress: its compiled programs, state and timing (what `start` and `advance` share)."""
@@ -164,6 +206,10 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
 
     def save(state: Any, update: int) -> None:
         nonlocal saved
+        finite = np.asarray(finite_seeds(state.params))
+        if not finite.all():
+            stop_nonfinite(run_dir, label, {"update": update, "quantity": "params",
+                                            "seeds": np.flatnonzero(~finite).tolist()})
         checkpoint.save(run_dir, state, update)
         saved = time.perf_counter()
         (run_dir / SECONDS_JSON).write_text(json.dumps({"update": update, "seconds": training.before + saved - t0,
@@ -173,6 +219,9 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
     def report(metrics: dict[str, jax.Array], after: int, n: int) -> None:
         metrics = {k: np.asarray(v)[:, :n] for k, v in metrics.items()}  # waits for that chunk only
         write(metrics, after)
+        found = first_nonfinite(metrics, after)
+        if found is not None:
+            stop_nonfinite(run_dir, label, found)
         returns = metrics["episode_return"]  # the chunk's updates (NaN where no episode ended in one)
         bar.set_postfix(steps=int(np.max(metrics["env_steps"][:, -1])),
                         ret=f"{np.nanmean(returns):.1f}" if not np.all(np.isnan(returns)) else "-")
@@ -299,6 +348,12 @@ def main_from_values(values: dict[str, Any]) -> int:
         return fail(e)
     except checkpoint.CheckpointWriteError as e:  # the newest complete checkpoint stays; resume from it
         print(f"error: {e}", file=sys.stderr)
+        return 1
+    except NonFiniteError as e:  # its checkpoints were all written before it went non-finite
+        good = checkpoint.latest_update(run_dir)
+        record = json.loads((run_dir / NONFINITE_JSON).read_text())
+        (run_dir / NONFINITE_JSON).write_text(json.dumps({**record, "last_good_checkpoint": good}) + "\n")
+        print(f"error: {e}; last good checkpoint: {f'update {good}' if good else 'none'} ({run_dir})", file=sys.stderr)
         return 1
     return 0
 

@@ -125,3 +125,65 @@ def test_a_run_resumed_at_its_last_update_only_evaluates(tmp_path):
     again = json.loads((folder / run.EVAL_JSON).read_text())
     assert again["evaluations"] == first["evaluations"] and (folder / "metrics.csv").read_text() == rows
     assert checkpoint.latest_update(folder) == 5
+
+
+def nonfinite_values(tmp_path, **ppo) -> dict:
+    """A 5-update run on the linear test env, checkpointed every 2 updates."""
+    return {"env": "linear", "agent": "ppo_state", "seeds": 2, "eval_episodes": 2, "checkpoint_every": 2,
+            "out_dir": str(tmp_path), "name": "nan", "ppo": {**TINY_PPO, **ppo}}
+
+
+def test_a_run_that_goes_non_finite_stops_keeps_its_last_good_checkpoint_and_says_where(tmp_path, monkeypatch, capsys):
+    """Every seed's params turn NaN at the end of update 3: update 4's losses are NaN, the run stops
+    there with one line and exit 1, its newest checkpoint is update 2's (all finite), nothing of
+    update 3 or later is saved and nothing is evaluated; nonfinite.json says what and where."""
+    import jax.numpy as jnp
+
+    real = run.make_trainer
+
+    def poisoned(cfg):
+        trainer = real(cfg)
+
+        def update(state):
+            state, metrics = trainer.update(state)
+            bad = state.update == 3
+            return state.replace(params=jax.tree.map(lambda x: jnp.where(bad, jnp.nan, x), state.params)), metrics
+
+        return run.dataclasses.replace(trainer, update=update)
+
+    monkeypatch.setattr(run, "make_trainer", poisoned)
+    assert run.main_from_values(nonfinite_values(tmp_path)) == 1
+    err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]  # the rest: the progress bar
+    assert len(err) == 1 and err[0].startswith("error: ") and "not finite after update 4" in err[0], err
+    assert "last good checkpoint: update 2" in err[0] and "Traceback" not in err[0]
+    folder = tmp_path / "nan"
+    record = json.loads((folder / run.NONFINITE_JSON).read_text())
+    assert record == {"update": 4, "quantity": "policy_loss", "seeds": [0, 1], "last_good_checkpoint": 2}
+    assert checkpoint.latest_update(folder) == 2 and not (folder / run.EVAL_JSON).exists()
+    cfg = run.load_run_config(folder)
+    state, _ = checkpoint.restore_latest(folder, cfg)
+    assert all(np.isfinite(np.asarray(x)).all() for x in jax.tree.leaves(state.params))
+
+
+def test_a_checkpoint_of_non_finite_params_is_never_written(tmp_path):
+    """The check beside the losses: params that are not finite are refused at the save, whatever
+    the losses said (one seed's NaN names that seed)."""
+    cfg = run_config({"env": "linear", "agent": "ppo_state", "seeds": 2, "ppo": TINY_PPO})
+    state = jax.jit(jax.vmap(make_trainer(cfg).init))(cfg.seed_keys())
+    assert np.asarray(run.finite_seeds(state.params)).tolist() == [True, True]
+    poisoned = jax.tree.map(lambda x: x.at[1].set(np.inf), state.params)
+    assert np.asarray(run.finite_seeds(poisoned)).tolist() == [True, False]
+    found = run.first_nonfinite({"policy_loss": np.array([[0.1, 0.2], [0.3, np.nan]]),
+                                 "episode_return": np.full((2, 2), np.nan)}, after=6)
+    assert found == {"update": 8, "quantity": "policy_loss", "seeds": [1]}
+    group = run.first_nonfinite({"value_loss": np.array([[[0.1, 0.1, np.inf]], [[0.2, 0.2, 0.2]]])}, after=0)
+    assert group == {"update": 1, "quantity": "value_loss", "seeds": [0], "members": [2]}
+
+
+def test_a_learning_rate_that_blows_up_is_caught_by_the_same_check(tmp_path, capsys):
+    """No injection: learning rates of 1e30 drive the params to infinity within the first update."""
+    values = nonfinite_values(tmp_path, encoder_lr=1e30, actor_lr=1e30, critic_lr=1e30)
+    assert run.main_from_values(values) == 1
+    err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+    assert len(err) == 1 and "is not finite after update 1" in err[0] and "last good checkpoint: none" in err[0], err
+    assert checkpoint.latest_update(tmp_path / "nan") is None
