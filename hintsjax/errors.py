@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import sys
 from typing import Any
 
@@ -11,13 +12,24 @@ class UsageError(ValueError):
 
 
 def require_positive(obj: Any, names: tuple[str, ...], prefix: str = "") -> None:
-    """UsageError naming the first of `names` (numbers, or tuples of widths) that is not positive."""
+    """UsageError naming the first of `names` (numbers, or tuples of widths) that is not a
+    positive finite number (NaN and infinity included)."""
     for name in names:
         value = getattr(obj, name)
         if isinstance(value, tuple) and not all(w > 0 for w in value):
             raise UsageError(f"{prefix}{name} widths must be positive, got {list(value)}")
-        if not isinstance(value, tuple) and value <= 0:
-            raise UsageError(f"{prefix}{name} must be positive, got {value}")
+        if not isinstance(value, tuple) and not 0 < value < math.inf:
+            kind = "a positive finite number" if isinstance(value, float) else "positive"
+            raise UsageError(f"{prefix}{name} must be {kind}, got {value}")
+
+
+def require_range(obj: Any, ranges: dict[str, tuple[float, float]], prefix: str = "") -> None:
+    """UsageError naming the first of `ranges`' numbers that is not a finite number in its closed
+    [low, high] (high may be infinity: any finite number from low up)."""
+    for name, (low, high) in ranges.items():
+        value = getattr(obj, name)
+        if not (low <= value <= high and math.isfinite(value)):
+            raise UsageError(f"{prefix}{name} must be a finite number in [{low}, {high}], got {value}")
 
 
 def fail(error: Exception) -> int:

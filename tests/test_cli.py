@@ -57,6 +57,9 @@ BAD_RUN_ARGS = {
     "sead=3": "did you mean 'seed'?",
     "ppo.epoch=3": "did you mean 'ppo.epochs'?",
     "env=pendulum extra": "unexpected argument 'extra'",
+    "ppo.actor_lr=nan": "ppo.actor_lr must be a positive finite number, got nan",
+    "ppo.actor_lr=abc": "actor_lr must be float, got 'abc'",
+    "ppo.gamma=1.5": "ppo.gamma must be a finite number in [0.0, 1.0], got 1.5",
 }
 
 
@@ -79,6 +82,54 @@ BAD_IMITATION_VALUES = {
     "gail.demonstrations=0": "gail.demonstrations must be positive",
     "dagger.nope=1": "unknown config keys ['dagger.nope']",
 }
+
+
+# Settings as Hydra hands them over (numbers already parsed), checked in-process: one line each.
+BAD_SETTINGS = {
+    "ppo.actor_lr=-0.001": "ppo.actor_lr must be a positive finite number, got -0.001",
+    "ppo.encoder_lr=inf": "ppo.encoder_lr must be a positive finite number, got inf",
+    "ppo.critic_lr=0": "ppo.critic_lr must be positive, got 0",
+    "ppo.max_grad_norm=0.0": "ppo.max_grad_norm must be a positive finite number, got 0.0",
+    "ppo.clip_eps=-0.2": "ppo.clip_eps must be a positive finite number, got -0.2",
+    "ppo.reward_scale=nan": "ppo.reward_scale must be a positive finite number, got nan",
+    "ppo.gae_lambda=-0.1": "ppo.gae_lambda must be a finite number in [0.0, 1.0], got -0.1",
+    "ppo.ent_coef=nan": "ppo.ent_coef must be a finite number in [0.0, inf], got nan",
+    "ppo.vf_coef=-1": "ppo.vf_coef must be a finite number in [0.0, inf], got -1",
+    "ppo.epochs=0": "ppo.epochs must be positive, got 0",
+    "ppo.epochs=2.5": "epochs must be int, got 2.5",
+    "ppo.total_env_steps=10": "ppo.total_env_steps (10) is less than one update's batch (1024)",
+    "ppo.hidden=[0]": "ppo.hidden widths must be positive, got [0]",
+    "ppo.target_kl=-1": "ppo.target_kl (-1) must be positive, or null for no KL early stop",
+    "eval_episodes=0": "eval_episodes must be positive, got 0",
+    "checkpoint_every=0": "checkpoint_every must be positive, got 0",
+    "checkpoint_seconds=-1": "checkpoint_seconds must be 0 or more, got -1",
+    "seeds=2.5": "seeds must be int, got 2.5",
+    "stochastic_eval=maybe": "stochastic_eval must be bool, got 'maybe'",
+    "eval_variants=[nope]": "unknown variant 'nope' for pendulum; valid choices: swingto, swingup",
+    "scheme=FC": "unknown scheme 'FC'; valid choices: ac, fc, lc, mc",
+    "env=car_racing hint=torque": "unknown hint 'torque' for env 'car_racing'",
+    "gail.disc_lr=nan": "gail.disc_lr must be a positive finite number, got nan",
+}
+
+
+def parsed(text: str):
+    """A command-line value as Hydra parses it (numbers, lists, or the string)."""
+    return yaml.safe_load(text.replace("nan", ".nan").replace("inf", ".inf")) if text != "maybe" else text
+
+
+@pytest.mark.parametrize("arg", list(BAD_SETTINGS))
+def test_bad_settings_exit_2_with_one_line_and_write_nothing(arg, tmp_path, capsys):
+    values = {"env": "pendulum", "out_dir": str(tmp_path / "runs")}
+    for item in arg.split():
+        key, text = item.split("=")
+        section, _, name = key.rpartition(".")
+        if section:
+            values["agent"] = "gail" if section == "gail" else values.get("agent", "hints")
+        (values.setdefault(section, {}) if section else values)[name or key] = parsed(text)
+    assert run.main_from_values(values) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and BAD_SETTINGS[arg] in lines[0], lines
+    assert not (tmp_path / "runs").exists()
 
 
 @pytest.mark.parametrize("arg", list(BAD_IMITATION_VALUES))
@@ -115,6 +166,41 @@ def finished_run(tmp_path_factory) -> Path:
     values = tiny_values(out_dir=str(root / "runs"), name="full")
     assert run.main_from_values(values) == 0
     return root / "runs" / "full"
+
+
+def state_arrays(run_dir: Path) -> list[np.ndarray]:
+    """Every array of a run's newest checkpoint (params, optimiser state, env state, key, update)."""
+    state, _ = checkpoint.restore_latest(run_dir, run.load_run_config(run_dir))
+    return [np.asarray(jax.random.key_data(x) if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key) else x)
+            for x in jax.tree.leaves(state)]
+
+
+def logged_returns(run_dir: Path) -> list[tuple[str, str, str]]:
+    """metrics.csv's update, seed and episode return columns, as written."""
+    import csv
+
+    with (run_dir / "metrics.csv").open() as f:
+        return [(r["update"], r["seed"], r["episode_return"]) for r in csv.DictReader(f)]
+
+
+@pytest.mark.parametrize("when", ["after", "during"])
+def test_a_run_killed_with_sigkill_resumes_to_the_uninterrupted_end_bit_for_bit(when, finished_run, tmp_path):
+    """SIGKILL once the first checkpoint is written (`after`), or while the second is being written
+    in the background (`during`): the resumed run (the real command) ends with the uninterrupted
+    run's state, every array equal bit for bit, and logs the same returns; a checkpoint the kill
+    cut short is never read."""
+    values = tiny_values(out_dir=str(tmp_path), name="killed")
+    killed = subprocess.run([sys.executable, str(Path(__file__).parent / "killed_run.py"), when, json.dumps(values)],
+                            cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert killed.returncode == -9, killed.stderr[-2000:]
+    folder = tmp_path / "killed"
+    # after: the first checkpoint (update 2); during: 2, or 4 where the writer finished before the kill
+    assert checkpoint.latest_update(folder) in ((2,) if when == "after" else (2, 4))
+    resumed = cli(f"resume={folder}", cwd=tmp_path)
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    for a, b in zip(state_arrays(folder), state_arrays(finished_run), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert logged_returns(folder) == logged_returns(finished_run)
 
 
 def test_run_folder_holds_everything(finished_run):

@@ -1,0 +1,40 @@
+"""A run killed with SIGKILL, as a crash or the kernel's out-of-memory killer would: no clean-up,
+no `finally` blocks, no flushed files. Used by tests/test_cli.py.
+
+    python tests/killed_run.py after|during '<run values as JSON>'
+
+`after`: killed once the first checkpoint is completely written. `during`: killed as soon as the
+second checkpoint has been handed to the background writer, so its files are (most likely)
+half-written.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+
+from hintsjax import checkpoint, run
+
+
+def main() -> None:
+    mode, values = sys.argv[1], json.loads(sys.argv[2])
+    real, saves = checkpoint.save, []
+
+    def save_then_die(run_dir, state, update):
+        real(run_dir, state, update)
+        saves.append(update)
+        if mode == "after" and len(saves) == 1:
+            checkpoint.flush(run_dir)  # wait for the files, then die
+            os.kill(os.getpid(), signal.SIGKILL)
+        if mode == "during" and len(saves) == 2:
+            os.kill(os.getpid(), signal.SIGKILL)
+
+    checkpoint.save = save_then_die
+    run.main_from_values(values)
+    sys.exit("the run ended without being killed")
+
+
+if __name__ == "__main__":
+    main()
