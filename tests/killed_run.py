@@ -2,10 +2,12 @@
 no `finally` blocks, no flushed files. Used by tests/test_cli.py.
 
     python tests/killed_run.py after|during '<run values as JSON>'
+    python tests/killed_run.py group <folder>
 
 `after`: killed once the first checkpoint is completely written. `during`: killed as soon as the
 second checkpoint has been handed to the background writer, so its files are (most likely)
-half-written.
+half-written. `group`: tests/test_group.py's group of two cue-env configurations (`killed_group`)
+trained into <folder>, killed once the group's first checkpoint is written.
 """
 
 from __future__ import annotations
@@ -14,25 +16,31 @@ import json
 import os
 import signal
 import sys
+from pathlib import Path
 
 from hintsjax import checkpoint, run
 
 
 def main() -> None:
-    mode, values = sys.argv[1], json.loads(sys.argv[2])
+    mode = sys.argv[1]
     real, saves = checkpoint.save, []
 
     def save_then_die(run_dir, state, update):
         real(run_dir, state, update)
         saves.append(update)
-        if mode == "after" and len(saves) == 1:
+        if mode in ("after", "group") and len(saves) == 1:
             checkpoint.flush(run_dir)  # wait for the files, then die
             os.kill(os.getpid(), signal.SIGKILL)
         if mode == "during" and len(saves) == 2:
             os.kill(os.getpid(), signal.SIGKILL)
 
     checkpoint.save = save_then_die
-    run.main_from_values(values)
+    if mode == "group":
+        from test_group import killed_group
+
+        run.train_group(*killed_group(Path(sys.argv[2])), progress=False)
+    else:
+        run.main_from_values(json.loads(sys.argv[2]))
     sys.exit("the run ended without being killed")
 
 

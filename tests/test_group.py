@@ -9,6 +9,7 @@ the padded hint axis adds terms that are exact zeros. After 3 updates every para
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -175,3 +176,34 @@ def test_one_program_evaluates_every_member_as_its_own_run_would(hint_group):
         alone, _ = evaluate_variants(cfg, group.cell_state(g, together, k).params, (None,), cfg.eval_episodes, False)
         np.testing.assert_allclose(evaluations[k][0]["returns"], alone[0]["returns"], rtol=1e-5, atol=1e-6)
     assert evaluations[0][0]["returns"] != evaluations[1][0]["returns"]
+
+
+def killed_group(folder: Path) -> tuple[list, Path, list[Path]]:
+    """A group of two cue-env configurations with its members' folders under `folder`:
+    run.train_group's (configs, group folder, member folders)."""
+    cfgs = [cue_cfg(h) for h in ("cue", "cue_pair")]
+    dirs = [folder / c.label for c in cfgs]
+    for d, c in zip(dirs, cfgs):
+        d.mkdir(parents=True, exist_ok=True)
+        save_run_config(d, c)
+    return cfgs, folder / "group", dirs
+
+
+def test_a_group_killed_with_sigkill_resumes_to_the_uninterrupted_end_bit_for_bit(tmp_path):
+    """The group trained in a subprocess is killed with SIGKILL once its first checkpoint is
+    written (tests/killed_run.py); resumed, every member's final state equals, bit for bit, that
+    of the same group trained without interruption."""
+    import subprocess
+    import sys
+
+    killed = subprocess.run([sys.executable, str(Path(__file__).parent / "killed_run.py"), "group", str(tmp_path / "killed")],
+                            cwd=Path(__file__).parent, capture_output=True, text=True, timeout=600)
+    assert killed.returncode == -9, killed.stderr[-2000:]
+    cfgs, group_dir, dirs = killed_group(tmp_path / "killed")
+    assert checkpoint.latest_update(group_dir) == 2
+    run.train_group(cfgs, group_dir, dirs, resume=True, progress=False)
+    _, whole_dir, whole_dirs = killed_group(tmp_path / "whole")
+    run.train_group(cfgs, whole_dir, whole_dirs, progress=False)
+    for cfg, d, w in zip(cfgs, dirs, whole_dirs):
+        for a, b in zip(arrays(checkpoint.restore_latest(d, cfg)[0]), arrays(checkpoint.restore_latest(w, cfg)[0]), strict=True):
+            np.testing.assert_array_equal(a, b)
