@@ -1,4 +1,4 @@
-"""`make run`: a first agent that learns on a laptop's CPU in about four and a half minutes.
+"""`make run`: a first agent that learns on a laptop's CPU in under three minutes.
 
     python -m hintsjax.quickstart [--updates 50] [--out-dir runs]
 
@@ -23,7 +23,7 @@ import jax
 
 from hintsjax import compilation_cache, run, video
 from hintsjax.algorithms import make_trainer
-from hintsjax.config import run_config, save_run_config
+from hintsjax.config import RunConfig, run_config, save_run_config
 from hintsjax.evaluate import eval_keys, evaluate_params
 
 SETTINGS = {"env": "pendulum", "agent": "hints", "hint": "composite", "scheme": "fc", "seeds": 1, "eval_episodes": 20,
@@ -31,14 +31,14 @@ SETTINGS = {"env": "pendulum", "agent": "hints", "hint": "composite", "scheme": 
 BASELINE_JSON = "random_policy.json"
 
 
-def random_policy(cfg, variant: str | None) -> dict:
+def random_policy(cfg: RunConfig, variant: str | None) -> dict:
     """The run's agent before training (its seeds' initial params), sampling its actions: a
     Gaussian random policy, evaluated on the same episodes as the trained agent."""
     initial = jax.jit(jax.vmap(make_trainer(cfg).init))(cfg.seed_keys())
     return evaluate_params(cfg, initial.params, variant, cfg.eval_episodes, stochastic=True)
 
 
-def swing_up_gif(cfg, run_dir: Path, candidates: int = 8) -> Path:
+def swing_up_gif(cfg: RunConfig, run_dir: Path, candidates: int = 8) -> Path:
     """A GIF of seed 0's trained agent on the episode, of `candidates` evaluation starts, that
     begins farthest from upright (its first reward the lowest): the one with the most to show."""
     from hintsjax import checkpoint
