@@ -65,8 +65,8 @@ class PPOConfig:
             raise UsageError(
                 f"ppo.total_env_steps ({self.total_env_steps}) is less than one update's batch ({self.batch_size})"
             )
-        require_positive(self, ("hidden",), "ppo.")
-        require_positive(self, ("encoder_lr", "actor_lr", "critic_lr", "max_grad_norm", "clip_eps", "reward_scale"), "ppo.")
+        require_positive(self, ("hidden", "encoder_lr", "actor_lr", "critic_lr", "max_grad_norm", "clip_eps", "reward_scale"),
+                         "ppo.")
         require_range(self, {"gamma": (0.0, 1.0), "gae_lambda": (0.0, 1.0), "vf_coef": (0.0, math.inf),
                              "ent_coef": (0.0, math.inf)}, "ppo.")
         if self.target_kl is not None and not self.target_kl > 0:

@@ -22,7 +22,7 @@ from hintsjax.algorithm_settings import DaggerConfig, GailConfig, PPOConfig
 from hintsjax.conditioning import SCHEMES
 from hintsjax.env_defaults import ENV_DEFAULTS
 from hintsjax.envs.errors import ChoiceError, choose
-from hintsjax.errors import UsageError, fail as fail, require_positive  # fail: hintsjax/run.py imports it from here
+from hintsjax.errors import UsageError, require_positive
 
 
 CONFIG_YAML = "config.yaml"  # a run folder's resolved config

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import jax
 
-from hintsjax import compilation_cache, run, video
+from hintsjax import checkpoint, compilation_cache, run, video
 from hintsjax.algorithms import make_trainer
 from hintsjax.config import RunConfig, run_config, save_run_config
 from hintsjax.evaluate import eval_keys, evaluate_params
@@ -41,8 +41,6 @@ def random_policy(cfg: RunConfig, variant: str | None) -> dict:
 def swing_up_gif(cfg: RunConfig, run_dir: Path, candidates: int = 8) -> Path:
     """A GIF of seed 0's trained agent on the episode, of `candidates` evaluation starts, that
     begins farthest from upright (its first reward the lowest): the one with the most to show."""
-    from hintsjax import checkpoint
-
     state, _ = checkpoint.restore_latest(run_dir, cfg)
     params = jax.tree.map(lambda x: x[0], state.params)
     env = cfg.make_env()

@@ -28,9 +28,10 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from hintsjax import checkpoint, compilation_cache, expert
-from hintsjax.config import RunConfig, UsageError, fail, load_run_config, run_config, save_run_config
+from hintsjax.config import RunConfig, load_run_config, run_config, save_run_config
 from hintsjax.evaluate import compile_evaluator, evaluate_group, evaluate_variants, metrics_text
 from hintsjax.algorithms import make_trainer
+from hintsjax.errors import UsageError, fail
 from hintsjax.runlog import CURVE_PNG, METRICS_CSV, RunLog, plot_curves, read_curves
 from hintsjax.trainer import Trainer
 
@@ -120,6 +121,10 @@ class NonFiniteError(RuntimeError):
     """Training went NaN or infinite: the run stopped without saving that state, so its newest
     checkpoint is the last good one (NONFINITE_JSON in the run folder says where and what)."""
 
+    def __init__(self, message: str, found: dict[str, Any]):
+        super().__init__(message)
+        self.found = found  # what NONFINITE_JSON holds
+
 
 # Losses that every sound update keeps finite (episode_return is NaN where no episode ended). A
 # non-finite parameter makes the next update's losses non-finite, so checking them on the host
@@ -154,7 +159,7 @@ def stop_nonfinite(run_dir: Path, label: str, found: dict[str, Any]) -> None:
     (run_dir / NONFINITE_JSON).write_text(json.dumps(found) + "\n")
     where = f"seed(s) {found['seeds']}" + (f", member(s) {found['members']}" if "members" in found else "")
     raise NonFiniteError(f"{label}: {found['quantity']} is not finite after update {found['update']} ({where}); "
-                         f"training stopped without saving it")
+                         f"training stopped without saving it", found)
 
 
 @dataclass
@@ -204,9 +209,10 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
     bar = tqdm(total=total, initial=done, unit="upd", disable=not progress, desc=f"{cfg.env} {label}")
     t0 = saved = time.perf_counter()
 
-    def save(state: Any, update: int) -> None:
+    def save(state: Any, update: int, finite: jax.Array) -> None:
+        """Checkpoint `state` unless `finite` (its finite_seeds) says some seed's params are not."""
         nonlocal saved
-        finite = np.asarray(finite_seeds(state.params))
+        finite = np.asarray(finite)
         if not finite.all():
             stop_nonfinite(run_dir, label, {"update": update, "quantity": "params",
                                             "seeds": np.flatnonzero(~finite).tolist()})
@@ -228,20 +234,23 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
         bar.update(n)
 
     pending = None  # (metrics, updates before, length) of the chunk dispatched last
+    finite = None  # finite_seeds of `state` once a chunk has made it (the state a call starts from is never saved)
     try:
         with checkpoint.writing(run_dir):
             while done < total:
                 n = min(compiled.chunk, total - done)
                 following, metrics = compiled.run_chunk(state, np.int32(n))  # returns at once; the device works on
+                # queued behind the chunk, so reading it once the chunk has run never stalls the device
+                following_finite = finite_seeds(following.params)
                 if pending is not None:
                     report(*pending)
                 if (done > training.first and time.perf_counter() - saved >= cfg.checkpoint_seconds
                         and not checkpoint.saving(run_dir)):
-                    save(state, done)  # the state this chunk started from: computed, copied off as the chunk runs
-                state, pending, done = following, (metrics, done, n), done + n
+                    save(state, done, finite)  # the state this chunk started from: computed, copied off as the chunk runs
+                state, finite, pending, done = following, following_finite, (metrics, done, n), done + n
             if pending is not None:  # something was trained (a run resumed at its end only evaluates)
                 report(*pending)
-                save(state, total)
+                save(state, total, finite)
     finally:
         bar.close()
     return dataclasses.replace(training, state=state, done=done, seconds=time.perf_counter() - t0)
@@ -350,9 +359,8 @@ def main_from_values(values: dict[str, Any]) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 1
     except NonFiniteError as e:  # its checkpoints were all written before it went non-finite
-        good = checkpoint.latest_update(run_dir)
-        record = json.loads((run_dir / NONFINITE_JSON).read_text())
-        (run_dir / NONFINITE_JSON).write_text(json.dumps({**record, "last_good_checkpoint": good}) + "\n")
+        good = checkpoint.latest_update(run_dir)  # read once the background writes are done
+        (run_dir / NONFINITE_JSON).write_text(json.dumps({**e.found, "last_good_checkpoint": good}) + "\n")
         print(f"error: {e}; last good checkpoint: {f'update {good}' if good else 'none'} ({run_dir})", file=sys.stderr)
         return 1
     return 0

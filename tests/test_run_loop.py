@@ -3,6 +3,7 @@ settings and its bad folders, and a failed background checkpoint write."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -149,7 +150,7 @@ def test_a_run_that_goes_non_finite_stops_keeps_its_last_good_checkpoint_and_say
             bad = state.update == 3
             return state.replace(params=jax.tree.map(lambda x: jnp.where(bad, jnp.nan, x), state.params)), metrics
 
-        return run.dataclasses.replace(trainer, update=update)
+        return dataclasses.replace(trainer, update=update)
 
     monkeypatch.setattr(run, "make_trainer", poisoned)
     assert run.main_from_values(nonfinite_values(tmp_path)) == 1
