@@ -21,11 +21,9 @@ from hintsjax import run
 from hintsjax.config import run_config
 from hintsjax.group import make_group, make_group_trainer
 
-HINTS = {"pendulum": ("angular_velocity", "torque", "goal_distance", "composite", "partial_state", "state"),
-         "acrobot": ("angular_velocity_1", "angular_velocity_2", "joint", "goal_distance", "composite",
-                     "partial_state", "state"),
-         "idp": ("angular_velocity_1", "angular_velocity_2", "joint", "goal_distance", "composite",
-                 "partial_state", "state")}
+from classic_control import TABLE2_HINTS  # experiments/, beside this script
+
+HINTS = TABLE2_HINTS  # Table 2's hint rows per classic env
 
 
 def need_bytes(env: str, configs: int, seeds: int) -> int:
