@@ -53,6 +53,8 @@ class RunConfig:
     checkpoint_every: int = 10  # updates between progress reports and checkpoints
     checkpoint_seconds: float = 0.0  # at least this long between checkpoints (0: after every report)
     expert: str | None = None  # dagger/gail: an exported expert folder (None: the env's packaged one)
+    hint_source: str = "programmatic"  # where training's hint comes from: programmatic, or a generator folder
+    eval_hint_source: str | None = None  # the same at deploy (None: as hint_source)
     ppo: PPOConfig = field(default_factory=PPOConfig)
     dagger: DaggerConfig = field(default_factory=DaggerConfig)
     gail: GailConfig = field(default_factory=GailConfig)
@@ -75,8 +77,23 @@ class RunConfig:
         """[S] PRNG keys of the run's seeds: seed i is key(seed + i)."""
         return jnp.stack([jax.random.key(self.seed + i) for i in range(self.seeds)])
 
-    def make_env(self, observe: tuple[str, ...] | None = None) -> envs.Env:
-        return envs.make(self.env, self.effective_hint, self.agent_spec.observe if observe is None else observe)
+    def hint_source_for(self, deploy: bool) -> str:
+        """The hint source of training, or of deployment (evaluation, videos) with `deploy`."""
+        return (self.eval_hint_source or self.hint_source) if deploy else self.hint_source
+
+    def make_env(self, observe: tuple[str, ...] | None = None, hint: str | None = None, deploy: bool = False) -> envs.Env:
+        """The env the agent acts in (its hint `hint`, default its own, from the hint source of
+        training or of deployment); its params are `task_params`'."""
+        from hintsjax.generator import hinted_env
+
+        observe = self.agent_spec.observe if observe is None else observe
+        return hinted_env(self.env, self.effective_hint if hint is None else hint, observe, self.hint_source_for(deploy))
+
+    def task_params(self, variant: str | None, deploy: bool = False) -> Any:
+        """The params of `make_env(deploy=deploy)`'s env on `variant` (None: the training variant's default)."""
+        from hintsjax.generator import hinted_params
+
+        return hinted_params(self.env, env_params(self.env, variant), self.agent_spec.observe, self.hint_source_for(deploy))
 
     def validate(self) -> "RunConfig":
         try:
@@ -88,6 +105,7 @@ class RunConfig:
             raise UsageError(str(e)) from None
         for v in (self.variant, *self.eval_variants):
             env_params(self.env, v)
+        self._check_hint_sources()
         require_positive(self, ("seeds", "eval_episodes", "checkpoint_every"))
         if self.checkpoint_seconds < 0:
             raise UsageError(f"checkpoint_seconds must be 0 or more, got {self.checkpoint_seconds}")
@@ -96,6 +114,19 @@ class RunConfig:
         if self.agent_spec.algorithm == "dagger" and self.dagger.buffer_size < self.ppo.batch_size:
             raise UsageError(f"dagger.buffer_size ({self.dagger.buffer_size}) must hold one round, ppo.batch_size ({self.ppo.batch_size})")
         return self
+
+
+    def _check_hint_sources(self) -> None:
+        from hintsjax.generator import PROGRAMMATIC, check_matches
+
+        for name in ("hint_source", "eval_hint_source"):
+            source = getattr(self, name)
+            if source in (None, PROGRAMMATIC):
+                continue
+            if not self.agent_spec.hint:
+                raise UsageError(f"{name} applies to agents that see a hint "
+                                 f"({', '.join(a for a, s in AGENTS.items() if s.hint)}), not {self.agent}")
+            check_matches(source, self.env, self.effective_hint)
 
 
 def _fields(cls) -> set[str]:

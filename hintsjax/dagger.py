@@ -86,7 +86,7 @@ def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
 
     ppo, dagger = cfg.ppo, cfg.dagger
     env = envs.AutoReset(cfg.make_env())
-    env_params = envs.make_params(cfg.env, cfg.variant)
+    env_params = cfg.task_params(cfg.variant)
     expert = experts.load(cfg.env, cfg.expert) if expert is None else expert
     experts.check_state_size(expert, cfg, env.state_size)
     network = make_network(cfg, env)

@@ -6,11 +6,13 @@ swingto) evaluate an agent trained on the standard task. An env's `metrics` (the
 progress) are kept from the state each episode ended in. Also a command:
 
     python -m hintsjax.evaluate runs/<run folder> [--variant swingto] [--episodes 50] [--stochastic]
+                                [--hint-source runs/<generator folder>]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -25,6 +27,7 @@ from flax import struct
 from hintsjax import envs
 from hintsjax.config import RunConfig, env_params, load_run_config
 from hintsjax.errors import UsageError, fail
+from hintsjax.generator import PROGRAMMATIC
 from hintsjax.ppo import Hyper, make_network, pick_hint
 
 EVAL_TAG = 0xE7A1  # folded into a seed's key so evaluation draws differ from training's
@@ -47,7 +50,7 @@ def make_task_evaluator(
     variant of the env (its params are an argument, so one compiled program serves every variant).
     With `hint` (a group's env hint, hintsjax.group) the agent sees the hint that `pick` (a member's
     Hyper) picks out of it: one program then evaluates every member of a group."""
-    env = envs.make(cfg.env, cfg.effective_hint if hint is None else hint, cfg.agent_spec.observe)
+    env = cfg.make_env(hint=hint, deploy=True)
     network = make_network(cfg, env)
     metrics_of = jax.vmap(env.metrics, in_axes=(0, None))
 
@@ -89,7 +92,7 @@ def make_evaluator(
 ) -> Callable[[Any, jax.Array], EvalResult]:
     """`evaluate(params, key) -> EvalResult[E]` for one seed's params on `variant`; vmap it over seeds."""
     evaluate = make_task_evaluator(cfg, num_episodes, stochastic)
-    task_params = envs.make_params(cfg.env, variant)
+    task_params = cfg.task_params(variant, deploy=True)
     return lambda params, key: evaluate(params, key, task_params)
 
 
@@ -136,7 +139,7 @@ def compile_evaluator(cfg: RunConfig, params: Any, variant: str | None, episodes
     picked = () if pick is None else (pick,)
     evaluate = jax.jit(jax.vmap(make_task_evaluator(cfg, episodes, stochastic, hint),
                                 in_axes=(0, 0, None) + (None,) * len(picked)))
-    compiled = evaluate.lower(params, eval_keys(cfg), envs.make_params(cfg.env, variant), *picked).compile()
+    compiled = evaluate.lower(params, eval_keys(cfg), cfg.task_params(variant, deploy=True), *picked).compile()
     return compiled, time.perf_counter() - t
 
 
@@ -147,7 +150,7 @@ def evaluate_variants(cfg: RunConfig, params: Any, variants: tuple[str | None, .
     per variant, seconds spent compiling)."""
     evaluate, compile_seconds = compiled or compile_evaluator(cfg, params, variants[0], episodes, stochastic)
     keys = eval_keys(cfg)
-    summaries = [variant_summary(cfg, v, stochastic, evaluate(params, keys, envs.make_params(cfg.env, v)))
+    summaries = [variant_summary(cfg, v, stochastic, evaluate(params, keys, cfg.task_params(v, deploy=True)))
                  for v in variants]
     return summaries, compile_seconds
 
@@ -176,7 +179,7 @@ def evaluate_group(group: Any, state: Any) -> tuple[list[list[dict]], float]:
     evaluate, compile_seconds = compile_evaluator(cfg, member(0), cfg.variant, cfg.eval_episodes, cfg.stochastic_eval,
                                                   group.hint, group.hyper(0))
     summaries = [[variant_summary(c, v, c.stochastic_eval,
-                                  evaluate(member(k), keys, envs.make_params(c.env, v), group.hyper(k)))
+                                  evaluate(member(k), keys, c.task_params(v, deploy=True), group.hyper(k)))
                   for v in (c.variant, *c.eval_variants)] for k, c in enumerate(group.cfgs)]
     return summaries, compile_seconds
 
@@ -194,9 +197,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--variant", default=None, help="env variant to evaluate on (default: the training one)")
     parser.add_argument("--episodes", type=int, default=None, help="episodes per seed (default: the run's)")
     parser.add_argument("--stochastic", action="store_true", help="sample actions instead of the mean")
+    parser.add_argument("--hint-source", default=None,
+                        help="the agent's hints at deploy: programmatic, or a generator folder (hintsjax.generator); "
+                             "default: the run's eval_hint_source")
     args = parser.parse_args(argv)
     try:
         cfg = load_run_config(args.run)
+        if args.hint_source is not None:
+            cfg = dataclasses.replace(cfg, eval_hint_source=args.hint_source).validate()
         variant = args.variant or cfg.variant
         env_params(cfg.env, variant)
         episodes = cfg.eval_episodes if args.episodes is None else args.episodes
@@ -207,9 +215,12 @@ def main(argv: list[str] | None = None) -> int:
         return fail(e)
     result = evaluate_params(cfg, state.params, variant, episodes, args.stochastic)
     mode = "stochastic" if args.stochastic else "deterministic"
-    out = args.run / f"eval-{result['variant']}-{mode}-{episodes}.json"
-    out.write_text(json.dumps({"label": cfg.label, "env": cfg.env, **result}, indent=1))
-    print(f"{cfg.label} on {cfg.env}/{result['variant']} ({mode}, {cfg.seeds} seeds x {episodes} episodes): "
+    source = cfg.hint_source_for(deploy=True)
+    tag = "" if source == PROGRAMMATIC else f"-hints-{Path(source).name}"
+    out = args.run / f"eval-{result['variant']}-{mode}-{episodes}{tag}.json"
+    out.write_text(json.dumps({"label": cfg.label, "env": cfg.env, "hint_source": source, **result}, indent=1))
+    print(f"{cfg.label} on {cfg.env}/{result['variant']} ({mode}, {cfg.seeds} seeds x {episodes} episodes"
+          f"{'' if not tag else ', hints from ' + source}): "
           f"{result['mean']:.2f} +- {result['std']:.2f}{metrics_text(result)}  -> {out}")
     return 0
 

@@ -23,6 +23,7 @@ import jax.numpy as jnp
 from hintsjax import envs, ppo
 from hintsjax.config import RunConfig
 from hintsjax.errors import UsageError
+from hintsjax.generator import PROGRAMMATIC
 from hintsjax.ppo import Hyper, RunnerState
 from hintsjax.trainer import Trainer
 
@@ -41,8 +42,9 @@ def signature(cfg: RunConfig) -> dict[str, Any]:
 
 
 def groupable(cfg: RunConfig) -> bool:
-    """Whether `cfg` may share a group: PPO's agents; the imitation agents train alone."""
-    return cfg.agent_spec.algorithm == "ppo"
+    """Whether `cfg` may share a group: PPO's agents with programmatic hints; the imitation agents,
+    and agents whose hints come from a learned generator (hintsjax.generator), train alone."""
+    return cfg.agent_spec.algorithm == "ppo" and {cfg.hint_source_for(False), cfg.hint_source_for(True)} == {PROGRAMMATIC}
 
 
 def check_group(cfgs: Sequence[RunConfig]) -> None:
@@ -121,7 +123,7 @@ def make_group_trainer(group: Group) -> Trainer:
     vmapped over the members. Metrics are [K] per update."""
     cfg = group.cfgs[0]
     base = ppo.make_trainer(cfg, group.hint)
-    env_params = envs.make_params(cfg.env, cfg.variant)
+    env_params = cfg.task_params(cfg.variant)
     hypers = [group.hyper(k) for k in range(len(group.cfgs))]
 
     def init(key: jax.Array) -> RunnerState:

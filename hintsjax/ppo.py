@@ -272,8 +272,8 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
     state's `Hyper`, so the pieces serve any configuration of the same shapes; `hint` is the
     env's hint (default: cfg's; a group's env computes every member's, see hintsjax.group)."""
     ppo = cfg.ppo
-    env = envs.AutoReset(envs.make(cfg.env, cfg.effective_hint if hint is None else hint, cfg.agent_spec.observe))
-    env_params = envs.make_params(cfg.env, cfg.variant)
+    env = envs.AutoReset(cfg.make_env(hint=hint))
+    env_params = cfg.task_params(cfg.variant)
     network = make_network(cfg, env)
     T, N = ppo.rollout_length, ppo.num_envs
 

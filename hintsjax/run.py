@@ -32,7 +32,7 @@ from hintsjax.config import RunConfig, load_run_config, run_config, save_run_con
 from hintsjax.evaluate import compile_evaluator, evaluate_group, evaluate_variants, metrics_text
 from hintsjax.algorithms import make_trainer
 from hintsjax.errors import UsageError, fail
-from hintsjax.runlog import CURVE_PNG, METRICS_CSV, RunLog, plot_curves, read_curves
+from hintsjax.runlog import CURVE_PNG, METRICS_CSV, RunLog, fresh_folder, plot_curves, read_curves
 from hintsjax.trainer import Trainer
 
 EVAL_JSON = "eval.json"
@@ -55,12 +55,7 @@ def seed_keys(cfg: RunConfig) -> tuple[jax.Array, int]:
 
 def new_run_dir(out_dir: str, name: str | None, cfg: RunConfig) -> Path:
     """A fresh folder; never an existing one."""
-    base = Path(out_dir) / (name or f"{cfg.env}-{cfg.label}-{time.strftime('%Y%m%d-%H%M%S')}")
-    run_dir, i = base, 1
-    while run_dir.exists():
-        run_dir, i = base.with_name(f"{base.name}-{i}"), i + 1
-    run_dir.mkdir(parents=True)
-    return run_dir
+    return fresh_folder(Path(out_dir) / (name or f"{cfg.env}-{cfg.label}-{time.strftime('%Y%m%d-%H%M%S')}"))
 
 
 # Training seconds (compiles excluded) up to the newest checkpoint, summed over resumed calls; and

@@ -13,6 +13,15 @@ CURVE_PNG = "learning_curve.png"
 CURVE_POINTS = 250  # points per seed of a plotted (and an archived) learning curve
 
 
+def fresh_folder(base: Path) -> Path:
+    """A new folder at `base`, or at `base-1`, `base-2`, ... if taken; never an existing one."""
+    folder, i = Path(base), 1
+    while folder.exists():
+        folder, i = Path(base).with_name(f"{Path(base).name}-{i}"), i + 1
+    folder.mkdir(parents=True)
+    return folder
+
+
 class RunLog:
     """Appends per-update, per-seed metric rows to metrics.csv and means to TensorBoard."""
 

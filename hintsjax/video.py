@@ -78,8 +78,8 @@ def rollout(cfg: RunConfig, params: Any, variant: str | None, steps: int, key: j
 @functools.lru_cache(maxsize=8)
 def make_rollout(cfg: RunConfig, variant: str, steps: int) -> Callable[[Any, jax.Array], Rollout]:
     """The jitted `run(params, key) -> Rollout` behind `rollout`, kept: seeds share one compile."""
-    env = cfg.make_env()
-    task_params = envs.make_params(cfg.env, variant)
+    env = cfg.make_env(deploy=True)
+    task_params = cfg.task_params(variant, deploy=True)
     network = make_network(cfg, env)
 
     @jax.jit
@@ -237,7 +237,7 @@ def main(argv: list[str] | None = None) -> int:
         env_params(cfg.env, variant)
         if not 0 <= args.seed < cfg.seeds:
             raise UsageError(f"--seed must be in [0, {cfg.seeds}) for this run of {cfg.seeds} seeds, got {args.seed}")
-        env = cfg.make_env()
+        env = cfg.make_env(deploy=True)
         steps = min(env.max_steps, MAX_STEPS) if args.steps is None else args.steps
         for name, value in (("--steps", steps), ("--scale", args.scale), ("--fps", args.fps)):
             if value <= 0:
