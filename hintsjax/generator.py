@@ -390,10 +390,11 @@ def make_train(cfg: GeneratorConfig) -> Callable[[jax.Array], tuple[GeneratorPar
         return stack_frames(data, t, n, k), (data.hint[t, n] - mean) / std
 
     def errors(net, data: Rollouts, envs_: int, mean, std) -> tuple[jax.Array, jax.Array]:
-        """Per hint dimension: mean squared error (normalised) and R^2 over the first whole
-        minibatches of `data`'s samples."""
-        count = (envs_ * cfg.steps) // B * B
-        idx = jnp.arange(count).reshape(-1, B)
+        """Per hint dimension: mean squared error (normalised) and R^2 over `data`'s samples (those
+        of its whole batches of up to B)."""
+        size = min(B, envs_ * cfg.steps)
+        count = (envs_ * cfg.steps) // size * size
+        idx = jnp.arange(count).reshape(-1, size)
 
         def batch(i):
             x, y = targets(data, i // envs_, i % envs_, mean, std)

@@ -1,0 +1,181 @@
+"""Hints without ground truth at deploy (issue 24): agents whose hints come from a learned generator.
+
+    python experiments/learned_hints.py --cases pendulum:composite,acrobot:composite --seeds 10
+    python experiments/learned_hints.py --frames-sweep 1,2,3,4 --cases pendulum:composite
+    python experiments/learned_hints.py --report          # -> experiments/results/learned_hints.md
+
+For each env:hint case, under --runs: a generator (hintsjax.generator, --gen-seeds seeds, data
+from random actions in half the envs and the packaged expert in the other half), then HINTS-FC
+trained with programmatic hints and evaluated with them and with the generator's (no
+retraining), then HINTS-FC trained and evaluated with the generator's hints. Every agent run has
+--seeds seeds x 50 episodes and the env's default budget. Finished steps are skipped and a run
+cut off mid-way resumes from its checkpoint, so the command can be repeated until it is done.
+`--frames-sweep` trains only generators, one per number of pictures, for the choice of that
+default. `--report` reads the folders (and PPO-RGB's archived 20-seed rows) and writes the table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from report import markdown_table  # noqa: E402
+
+RESULTS = Path(__file__).resolve().parent / "results"
+CASES = "pendulum:composite,pendulum:angular_velocity,acrobot:composite,idp:composite"
+GENERATOR = dict(policy="expert", expert_fraction=0.5, num_envs=64, steps=500, held_out_envs=16, epochs=10)
+PPO_RGB = RESULTS / "runs" / "classic20"  # PPO-RGB's archived rows: <env>/ppo_rgb/eval.json
+
+
+def generator_folder(runs: Path, env: str, hint: str, frames: int) -> Path:
+    return runs / f"generator-{env}-{hint}-k{frames}"
+
+
+def train_generator(runs: Path, env: str, hint: str, frames: int, seeds: int) -> Path:
+    from hintsjax import generator
+
+    folder = generator_folder(runs, env, hint, frames)
+    if not (folder / generator.GENERATOR_JSON).is_file():
+        if folder.exists():  # an interrupted one: train it again
+            import shutil
+
+            shutil.rmtree(folder)
+        argv = [f"{k}={v}" for k, v in {**GENERATOR, "env": env, "hint": hint, "frames": frames, "seeds": seeds,
+                                         "out_dir": runs, "name": folder.name}.items()]
+        if generator.main(argv):
+            raise SystemExit(f"generator {folder.name} failed")
+    return folder
+
+
+def train_agent(runs: Path, name: str, values: dict) -> Path:
+    from hintsjax import run
+
+    folder = runs / name
+    if (folder / "eval.json").is_file():
+        return folder
+    common = {"out_dir": str(runs), "name": name, "checkpoint_seconds": 60}
+    status = run.main_from_values({"resume": str(folder)} if (folder / "config.yaml").is_file() else {**values, **common})
+    if status:
+        raise SystemExit(f"run {name} failed ({status})")
+    return folder
+
+
+def deploy_with(folder: Path, source: Path) -> Path:
+    from hintsjax import evaluate
+
+    out = folder / f"eval-deploy-learned-{source.name}.json"
+    if not out.is_file():
+        if evaluate.main([str(folder), "--hint-source", str(source)]):
+            raise SystemExit(f"evaluating {folder.name} with {source.name} failed")
+        written = sorted(folder.glob(f"eval-*-hints-{source.name}.json"))[-1]
+        written.rename(out)
+    return out
+
+
+def run_case(runs: Path, env: str, hint: str, frames: int, seeds: int, gen_seeds: int) -> None:
+    source = train_generator(runs, env, hint, frames, gen_seeds)
+    base = {"env": env, "agent": "hints", "scheme": "fc", "hint": hint, "seeds": seeds}
+    programmatic = train_agent(runs, f"{env}-{hint}-programmatic", base)
+    deploy_with(programmatic, source)
+    train_agent(runs, f"{env}-{hint}-learned-k{frames}", {**base, "hint_source": str(source)})
+
+
+# -- the report ----------------------------------------------------------------------------------------
+
+
+def seed_means(path: Path) -> np.ndarray:
+    data = json.loads(path.read_text())
+    return np.asarray(data["evaluations"][0]["seed_means"] if "evaluations" in data else data["seed_means"])
+
+
+def report(runs: Path, cases: list[tuple[str, str]], frames: int, out: Path) -> None:
+    from hintsjax import stats
+
+    lines = ["# Hints without ground truth at deploy: agents that see a learned generator's hints", "",
+             "Written by `python experiments/learned_hints.py --report` from the runs of "
+             "`python experiments/learned_hints.py --cases ... --seeds ...` (commands and hardware below). "
+             "Returns: the mean over each seed's 50 deterministic episodes, then mean ± std over seeds, "
+             "IQM with its 95% bootstrap interval (hintsjax/stats.py), and P(row > PPO-RGB), the probability "
+             "that a seed of the row beats a seed of PPO-RGB, with its 95% interval (decided where it excludes 0.5).", ""]
+    rows, verdicts, costs = [], [], []
+    for env, hint in cases:
+        gen = generator_folder(runs, env, hint, frames)
+        programmatic, learned = runs / f"{env}-{hint}-programmatic", runs / f"{env}-{hint}-learned-k{frames}"
+        if not (learned / "eval.json").is_file():
+            continue
+        meta = json.loads((gen / "generator.json").read_text())
+        r2 = ", ".join(f"{d} {m:.3f} (min {lo:.3f})" for d, m, lo in
+                       zip(meta["dimensions"], meta["heldout_r2_mean"], meta["heldout_r2_min"]))
+        rgb = seed_means(PPO_RGB / env / "ppo_rgb" / "eval.json")
+        entries = [("trained and deployed with programmatic hints", programmatic / "eval.json"),
+                   ("trained with programmatic, deployed with learned hints", programmatic / f"eval-deploy-learned-{gen.name}.json"),
+                   ("trained and deployed with learned hints", learned / "eval.json")]
+        for what, path in entries:
+            x = seed_means(path)
+            poi = stats.poi_ci(x, rgb)
+            rows.append([env, hint, what, f"{x.mean():.1f} ± {x.std():.1f}", stats.iqm_cell(x), str(len(x)),
+                         f"{poi.point:.2f} [{poi.low:.2f}, {poi.high:.2f}]"])
+            verdicts.append(f"- {env} {hint}, {what}: " + stats.ordering_text("row", "PPO-RGB", poi))
+        rows.append([env, "-", "PPO-RGB (archived 20-seed row)", f"{rgb.mean():.1f} ± {rgb.std():.1f}", stats.iqm_cell(rgb),
+                     str(len(rgb)), "-"])
+        rates = [json.loads((f / "eval.json").read_text())["train_env_steps_per_s"] for f in (programmatic, learned)]
+        costs.append([env, hint, r2, f"{meta['env_steps']:,}", f"{meta['seconds']['compile']:.0f} + {meta['seconds']['train']:.0f}",
+                      f"{rates[0]:,.0f}", f"{rates[1]:,.0f}", f"{1 - rates[1] / rates[0]:.0%}"])
+    lines += ["## Returns", "", *markdown_table(["env", "hint", "agent", "mean ± std over seeds", "IQM [95% CI]", "seeds",
+                                                "P(> PPO-RGB) [95% CI]"], rows), ""]
+    lines += ["## Against PPO-RGB", "", *verdicts, ""]
+    lines += ["## The generators and what they cost", "",
+              f"Each generator: {frames} pictures, trained on rollouts of 64 envs x 500 steps (half driven by the "
+              "packaged expert, half by N(0, 1) actions), held out: 16 more envs x 500 steps. R^2 is the held-out "
+              "mean over the generator's seeds (and its worst seed); agents use seed 0. Training rate: the agent "
+              "run's env steps per second (compiles excluded), programmatic against learned hints; the last column "
+              "is the slowdown the generator's inference causes.", "",
+              *markdown_table(["env", "hint", "held-out R^2 per dimension", "data env steps", "generator compile + train (s)",
+                              "agent steps/s, programmatic", "agent steps/s, learned", "slowdown"], costs), ""]
+    device = json.loads((runs / "device.json").read_text()) if (runs / "device.json").is_file() else {}
+    lines += [f"Hardware: {device.get('device', 'see the runs')}; commands: {device.get('commands', '-')}.", ""]
+    out.write_text("\n".join(lines))
+    print(f"wrote {out}")
+
+
+def frames_sweep(runs: Path, cases: list[tuple[str, str]], choices: list[int], seeds: int) -> None:
+    results = []
+    for env, hint in cases:
+        for k in choices:
+            meta = json.loads((train_generator(runs, env, hint, k, seeds) / "generator.json").read_text())
+            results.append({"env": env, "hint": hint, "frames": k, "dimensions": meta["dimensions"],
+                            "heldout_r2_mean": meta["heldout_r2_mean"], "heldout_r2_min": meta["heldout_r2_min"],
+                            "seconds": meta["seconds"], "device": meta["device"]})
+            print(json.dumps(results[-1]), flush=True)
+    (runs / "frames_sweep.json").write_text(json.dumps(results, indent=1))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cases", default=CASES, help=f"env:hint pairs (default {CASES})")
+    parser.add_argument("--seeds", type=int, default=10, help="seeds per agent run")
+    parser.add_argument("--gen-seeds", type=int, default=5, help="seeds per generator")
+    parser.add_argument("--frames", type=int, default=3, help="pictures the generator reads")
+    parser.add_argument("--frames-sweep", default=None, help="comma-separated numbers of pictures: train generators only")
+    parser.add_argument("--runs", type=Path, default=Path("runs/learned_hints"))
+    parser.add_argument("--report", action="store_true")
+    parser.add_argument("--out", type=Path, default=RESULTS / "learned_hints.md")
+    args = parser.parse_args()
+    cases = [tuple(c.split(":")) for c in args.cases.split(",")]
+    args.runs.mkdir(parents=True, exist_ok=True)
+    if args.report:
+        report(args.runs, cases, args.frames, args.out)
+    elif args.frames_sweep:
+        frames_sweep(args.runs, cases, [int(k) for k in args.frames_sweep.split(",")], args.gen_seeds)
+    else:
+        for env, hint in cases:
+            run_case(args.runs, env, hint, args.frames, args.seeds, args.gen_seeds)
+
+
+if __name__ == "__main__":
+    main()
