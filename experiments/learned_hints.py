@@ -102,7 +102,7 @@ def report(runs: Path, cases: list[tuple[str, str]], frames: int, out: Path) -> 
              "Returns: the mean over each seed's 50 deterministic episodes, then mean ± std over seeds, "
              "IQM with its 95% bootstrap interval (hintsjax/stats.py), and P(row > PPO-RGB), the probability "
              "that a seed of the row beats a seed of PPO-RGB, with its 95% interval (decided where it excludes 0.5).", ""]
-    rows, verdicts, costs = [], [], []
+    rows, verdicts, against, costs = [], [], [], []
     for env, hint in cases:
         gen = generator_folder(runs, env, hint, frames)
         programmatic, learned = runs / f"{env}-{hint}-programmatic", runs / f"{env}-{hint}-learned-k{frames}"
@@ -115,9 +115,13 @@ def report(runs: Path, cases: list[tuple[str, str]], frames: int, out: Path) -> 
         entries = [("trained and deployed with programmatic hints", programmatic / "eval.json"),
                    ("trained with programmatic, deployed with learned hints", programmatic / f"eval-deploy-learned-{gen.name}.json"),
                    ("trained and deployed with learned hints", learned / "eval.json")]
+        reference = seed_means(entries[0][1])
         for what, path in entries:
             x = seed_means(path)
             poi = stats.poi_ci(x, rgb)
+            if path != entries[0][1]:
+                against.append(f"- {env} {hint}, {what}: " + stats.ordering_text("learned", "programmatic",
+                                                                                 stats.poi_ci(x, reference)))
             rows.append([env, hint, what, f"{x.mean():.1f} ± {x.std():.1f}", stats.iqm_cell(x), str(len(x)),
                          f"{poi.point:.2f} [{poi.low:.2f}, {poi.high:.2f}]"])
             verdicts.append(f"- {env} {hint}, {what}: " + stats.ordering_text("row", "PPO-RGB", poi))
@@ -129,6 +133,9 @@ def report(runs: Path, cases: list[tuple[str, str]], frames: int, out: Path) -> 
     lines += ["## Returns", "", *markdown_table(["env", "hint", "agent", "mean ± std over seeds", "IQM [95% CI]", "seeds",
                                                 "P(> PPO-RGB) [95% CI]"], rows), ""]
     lines += ["## Against PPO-RGB", "", *verdicts, ""]
+    lines += ["## Learned against programmatic hints", "",
+              "The same comparison between each learned-hint row and the row trained and deployed with "
+              "programmatic hints (for the deploy row: the very same agents, seed for seed).", "", *against, ""]
     lines += ["## The generators and what they cost", "",
               f"Each generator: {frames} pictures, trained on rollouts of 64 envs x 500 steps (half driven by the "
               "packaged expert, half by N(0, 1) actions), held out: 16 more envs x 500 steps. R^2 is the held-out "
@@ -137,8 +144,17 @@ def report(runs: Path, cases: list[tuple[str, str]], frames: int, out: Path) -> 
               "is the slowdown the generator's inference causes.", "",
               *markdown_table(["env", "hint", "held-out R^2 per dimension", "data env steps", "generator compile + train (s)",
                               "agent steps/s, programmatic", "agent steps/s, learned", "slowdown"], costs), ""]
-    device = json.loads((runs / "device.json").read_text()) if (runs / "device.json").is_file() else {}
-    lines += [f"Hardware: {device.get('device', 'see the runs')}; commands: {device.get('commands', '-')}.", ""]
+    if (runs / "frames_sweep.json").is_file():
+        sweep = json.loads((runs / "frames_sweep.json").read_text())
+        lines += ["## How many pictures", "",
+                  "Held-out R^2 per hint dimension, mean over 3 generator seeds (worst seed), by the number of "
+                  "pictures the generator reads (`--frames-sweep 1,2,3,4 --gen-seeds 3`); everything else as above.", "",
+                  *markdown_table(["env", "hint", "pictures", "held-out R^2", "compile + train (s)"], [
+                      [r["env"], r["hint"], str(r["frames"]),
+                       ", ".join(f"{d} {m:.3f} ({lo:.3f})" for d, m, lo in zip(r["dimensions"], r["heldout_r2_mean"], r["heldout_r2_min"])),
+                       f"{r['seconds']['compile']:.0f} + {r['seconds']['train']:.0f}"] for r in sweep]), ""]
+    about = json.loads((runs / "about.json").read_text()) if (runs / "about.json").is_file() else {}
+    lines += ["## Where these numbers come from", "", *(f"- {k}: {v}" for k, v in about.items()), ""]
     out.write_text("\n".join(lines))
     print(f"wrote {out}")
 
@@ -160,7 +176,7 @@ def main() -> None:
     parser.add_argument("--cases", default=CASES, help=f"env:hint pairs (default {CASES})")
     parser.add_argument("--seeds", type=int, default=10, help="seeds per agent run")
     parser.add_argument("--gen-seeds", type=int, default=5, help="seeds per generator")
-    parser.add_argument("--frames", type=int, default=3, help="pictures the generator reads")
+    parser.add_argument("--frames", type=int, default=2, help="pictures the generator reads")
     parser.add_argument("--frames-sweep", default=None, help="comma-separated numbers of pictures: train generators only")
     parser.add_argument("--runs", type=Path, default=Path("runs/learned_hints"))
     parser.add_argument("--report", action="store_true")
