@@ -6,8 +6,6 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, TypeVar
 
-import yaml
-
 from hintsjax.errors import UsageError
 
 T = TypeVar("T")
@@ -15,7 +13,7 @@ T = TypeVar("T")
 
 def parse_key_values(cls: type[T], argv: list[str]) -> T:
     """`cls(**values)` from `key=value` arguments (str fields take the text as it is; int and float
-    fields a number; `null` or nothing gives None where the field allows it); UsageError naming
+    fields a number; `null`, or nothing for a number, gives None where the field allows it); UsageError naming
     the valid keys or the expected type."""
     kinds = {f.name: str(f.type) for f in dataclasses.fields(cls)}
     values: dict[str, Any] = {}
@@ -24,14 +22,13 @@ def parse_key_values(cls: type[T], argv: list[str]) -> T:
         if not eq or key not in kinds:
             raise UsageError(f"unexpected argument {arg!r}: give key=value with a key of {', '.join(kinds)}")
         kind = kinds[key]
-        if kind.endswith("None") and raw in ("", "null"):
+        if kind.endswith("None") and (raw == "null" or (raw == "" and not kind.startswith("str"))):
             values[key] = None
         elif kind.startswith("str"):
             values[key] = raw
         else:
-            value = yaml.safe_load(raw) if raw else None
-            number = (int,) if kind.startswith("int") else (int, float)
-            if not isinstance(value, number) or isinstance(value, bool):
-                raise UsageError(f"{key} must be {kind}, got {raw!r}")
-            values[key] = float(value) if kind.startswith("float") else value
+            try:
+                values[key] = (int if kind.startswith("int") else float)(raw)
+            except ValueError:
+                raise UsageError(f"{key} must be {kind}, got {raw!r}") from None
     return cls(**values)

@@ -3,7 +3,8 @@
 At reset a cue c in {-1, +1} is drawn uniformly; the picture is a constant grey image and the
 state observation is [0.0], so neither reveals c. The hint `cue` is [c]. The episode is one
 step long (truncated at t = 1) with reward -(a - c)^2, a clipped to [-2, 2]. (A second hint,
-`cue_pair` = [c, -c], gives tests/test_group.py hints of several widths.) The best an agent
+`cue_pair` = [c, -c], gives tests/test_group.py hints of several widths; a third, `distractor`, is
+noise: a number drawn uniformly in [-1, 1] at reset, independent of c, for tests/test_rank.py.) The best an agent
 blind to the hint can do is the constant action a = 0, whose expected return is -1; an agent
 that reads the hint can reach 0.
 
@@ -35,6 +36,7 @@ class CueParams:
 class CueState:
     cue: jax.Array  # float32, -1 or +1
     t: jax.Array
+    distractor: jax.Array = struct.field(default_factory=lambda: jnp.zeros((), jnp.float32))
 
 
 class CueEnv(Env):
@@ -48,7 +50,8 @@ class CueEnv(Env):
 
     def initial_state(self, key: jax.Array, params: CueParams) -> CueState:
         cue = jnp.where(jax.random.bernoulli(key), 1.0, -1.0).astype(jnp.float32)
-        return CueState(cue=cue, t=jnp.zeros((), jnp.int32))
+        distractor = jax.random.uniform(jax.random.fold_in(key, 1), (), jnp.float32, -1.0, 1.0)  # the cue's draw unchanged
+        return CueState(cue=cue, t=jnp.zeros((), jnp.int32), distractor=distractor)
 
     def transition(self, key, state: CueState, action, params: CueParams) -> Step:
         a = jnp.clip(jnp.reshape(action, ()), -params.action_limit, params.action_limit)
@@ -71,6 +74,12 @@ def cue(state: CueState, params: CueParams) -> jax.Array:
 def cue_pair(state: CueState, params: CueParams) -> jax.Array:
     """[c, -c]: the cue twice (a second hint of another width, for the group tests)."""
     return jnp.stack([state.cue, -state.cue])
+
+
+@register_hint(NAME, "distractor", dim=1, unit="1")
+def distractor(state: CueState, params: CueParams) -> jax.Array:
+    """Noise: a number drawn at reset, independent of the cue."""
+    return state.distractor[None]
 
 
 envs.REGISTRY[NAME] = envs.EnvEntry(CueEnv, {"default": CueParams()})

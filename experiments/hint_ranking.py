@@ -1,0 +1,182 @@
+"""How far a cheap hint-utility score agrees with the full tables (issue 25).
+
+    python experiments/hint_ranking.py --envs pendulum,acrobot,idp --seeds 5    # scores (GPU); resumable
+    python experiments/hint_ranking.py --report     # -> experiments/results/hint_ranking.md
+
+Scores every Table 2 hint of each env with `python -m hintsjax.rank` (both scores) into
+--runs/<env>, then compares each score's ranking with the ranking by the full-budget evaluation:
+the IQM of the archived 20-seed rows (experiments/results/runs/classic20) where they exist, else
+the 5-seed table's means (classic_table2.md, no per-seed data: no interval). Spearman's rho with a
+95% bootstrap interval (the table's seeds resampled per row, the score's seeds resampled jointly
+over the candidates), and each score's cost against the table's hint rows: in env steps, and in
+seconds (compile included) against the rows' recorded wall-clock.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from classic_control import TABLE2_HINTS  # noqa: E402
+from report import markdown_table  # noqa: E402
+
+RESULTS = Path(__file__).resolve().parent / "results"
+ARCHIVE = RESULTS / "runs" / "classic20"
+# Seconds the Table 2 hint rows took at 20 seeds on one H100 (classic_seeds20.md's group wall-clock:
+# pendulum's one group of 6; acrobot's group of 6 plus the state row alone; the idp's group of 7
+# trained 195 updates in 459 s after a 64 s compile, 2026-11-25, before its evaluation was cut).
+TABLE_SECONDS = {"pendulum": 616, "acrobot": 677 + 141, "idp": 459 + 64}
+TABLE_SEEDS = 20
+RESAMPLES = 2000
+
+
+def score_folder(runs: Path, env: str) -> Path:
+    return runs / env
+
+
+def run_scores(runs: Path, env: str, seeds: int, fraction: float) -> None:
+    from hintsjax import rank
+
+    folder = score_folder(runs, env)
+    if (folder / "scores.json").is_file():
+        return
+    argv = [f"env={env}", f"hints={','.join(TABLE2_HINTS[env])}", f"seeds={seeds}", f"probe_fraction={fraction}",
+            f"out_dir={runs}", f"name={env}"]
+    if rank.main(argv):
+        raise SystemExit(f"ranking {env} failed")
+
+
+def table_rows(env: str) -> dict[str, np.ndarray]:
+    """Per hint the full-budget per-seed mean returns ([20]) from the archive, or [1] (the 5-seed
+    mean) from classic_table2.md."""
+    rows = {}
+    for hint in TABLE2_HINTS[env]:
+        path = ARCHIVE / env / f"hints-fc-{hint}" / "eval.json"
+        if path.is_file():
+            rows[hint] = np.asarray(json.loads(path.read_text())["evaluations"][0]["seed_means"])
+    if len(rows) == len(TABLE2_HINTS[env]):
+        return rows
+    text = (RESULTS / "classic_table2.md").read_text().split(f"## {env}\n", 1)[1].split("\n## ", 1)[0]
+    for hint in TABLE2_HINTS[env]:
+        match = re.search(rf"^\| hints-fc-{hint} \| (-?[\d.]+) ±", text, re.M)
+        rows[hint] = np.asarray([float(match.group(1))])
+    return rows
+
+
+def spearman(x: np.ndarray, y: np.ndarray) -> float:
+    from scipy.stats import spearmanr
+
+    return float(spearmanr(x, y).statistic)
+
+
+def rho_interval(score: np.ndarray, rows: list[np.ndarray], rng: np.random.Generator) -> tuple[float, float, float]:
+    """rho between the score's means over seeds ([S, K]) and the rows' IQMs, with a 95% bootstrap interval."""
+    from hintsjax.stats import iqm
+
+    point = spearman(score.mean(axis=0), [iqm(r) for r in rows])
+    if all(len(r) == 1 for r in rows):
+        return point, np.nan, np.nan
+    draws = []
+    for _ in range(RESAMPLES):
+        s = score[rng.integers(0, len(score), len(score))].mean(axis=0)
+        t = [iqm(r[rng.integers(0, len(r), len(r))]) for r in rows]
+        if np.ptp(s) > 0 and np.ptp(t) > 0:
+            draws.append(spearman(s, t))
+    if not draws:
+        return point, np.nan, np.nan
+    low, high = np.percentile(draws, [2.5, 97.5])
+    return point, float(low), float(high)
+
+
+def report(runs: Path, env_list: list[str], out: Path) -> None:
+    from hintsjax import stats
+
+    rng = np.random.default_rng(0)
+    lines = ["# Which hint is worth giving: cheap scores against the full tables", "",
+             "Written by `python experiments/hint_ranking.py --report` from `python experiments/hint_ranking.py "
+             "--envs ... --seeds 5` (hintsjax.rank on every Table 2 hint; commands and hardware below). "
+             "Full ranking: the IQM of each HINTS-FC row's per-seed evaluation returns at the full budget "
+             "(20 seeds, experiments/results/runs/classic20; the idp's 5-seed means from classic_table2.md, "
+             "without an interval, as its 20-seed rows are not trained yet). rho: Spearman's rank correlation "
+             "between a score's mean over its seeds and that ranking, with a 95% bootstrap interval. Cost: the "
+             "score's env steps and seconds (compile included, one H100) against the table's hint rows at 20 seeds.", ""]
+    summary, per_env = [], []
+    rhos: dict[str, list[float]] = {}
+    for env in env_list:
+        path = score_folder(runs, env) / "scores.json"
+        if not path.is_file():
+            continue
+        result = json.loads(path.read_text())
+        full = table_rows(env)
+        hints = result["candidates"]
+        rows = [full[h] for h in hints]
+        per_env += [f"## {env}", ""]
+        header = ["hint", f"full: IQM [95% CI] ({len(rows[0])} seed{'s' if len(rows[0]) > 1 else ''})"]
+        cells = [[h, stats.iqm_cell(r) if len(r) > 1 else f"{r[0]:.1f}"] for h, r in zip(hints, rows)]
+        for name, values in result["scores"].items():
+            values = np.asarray(values)
+            header.append(f"{name}: mean ± std ({len(values)} seeds)")
+            for cell, mean, std in zip(cells, values.mean(axis=0), values.std(axis=0)):
+                cell.append(f"{mean:.3g} ± {std:.2g}")
+            point, low, high = rho_interval(values, rows, rng)
+            rhos.setdefault(name, []).append(point)
+            steps = _score_env_steps(name, result, score_folder(runs, env), len(hints))
+            seconds = result["seconds"][name]
+            full_steps = _table_env_steps(env, len(hints))
+            summary.append([env, name, f"{point:.2f}" + ("" if np.isnan(low) else f" [{low:.2f}, {high:.2f}]"),
+                            f"{steps:,} ({steps / full_steps:.1%})", f"{seconds:.0f} ({seconds / TABLE_SECONDS[env]:.1%})"])
+        per_env += [*markdown_table(header, cells), ""]
+    lines += ["## Agreement and cost", "",
+              *markdown_table(["env", "score", "rho [95% CI]", "env steps (of the table's)", "seconds (of the table's)"], summary), ""]
+    lines += ["Mean rho over the envs: " + ", ".join(f"{n} {np.mean(v):.2f}" for n, v in rhos.items())
+              + " (target: 0.7 at 10% of the cost).", ""]
+    lines += per_env
+    about = json.loads((runs / "about.json").read_text()) if (runs / "about.json").is_file() else {}
+    lines += ["## Where these numbers come from", "", *(f"- {k}: {v}" for k, v in about.items()), ""]
+    out.write_text("\n".join(lines))
+    print(f"wrote {out}")
+
+
+def _table_env_steps(env: str, hints: int) -> int:
+    from hintsjax.config import run_config
+
+    return TABLE_SEEDS * hints * run_config({"env": env, "agent": "hints"}).ppo.total_env_steps
+
+
+def _score_env_steps(name: str, result: dict, folder: Path, hints: int) -> int:
+    """The env steps a score used: every candidate's short runs, or the information score's rollouts."""
+    import yaml
+
+    seeds = len(result["scores"][name])
+    if name == "probe":
+        return seeds * hints * result["probe_env_steps_per_run"]
+    cfg = yaml.safe_load((folder / "config.yaml").read_text())
+    return seeds * (cfg["info_envs"] + cfg["info_held_out_envs"]) * cfg["info_steps"]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--envs", default="pendulum,acrobot,idp")
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--probe-fraction", type=float, default=0.1)
+    parser.add_argument("--runs", type=Path, default=Path("runs/hint_ranking"))
+    parser.add_argument("--report", action="store_true")
+    parser.add_argument("--out", type=Path, default=RESULTS / "hint_ranking.md")
+    args = parser.parse_args()
+    env_list = args.envs.split(",")
+    if args.report:
+        report(args.runs, env_list, args.out)
+        return
+    args.runs.mkdir(parents=True, exist_ok=True)
+    for env in env_list:
+        run_scores(args.runs, env, args.seeds, args.probe_fraction)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,354 @@
+"""Which hint is worth giving: cheap utility scores of candidate hints, before paying for training.
+
+    python -m hintsjax.rank env=pendulum                                # every registered hint
+    python -m hintsjax.rank env=acrobot hints=joint,composite,angular_velocity_1+goal_distance
+
+Two scores, each one compiled call over every candidate and seed (the paper's Section 6 asks for
+such a metric; experiments/results/hint_ranking.md measures how far each agrees with the full
+tables):
+
+- `information`: how much the hint adds to what one picture shows about the return to come.
+  Rollouts (N(0, 1) actions, and the env's packaged expert in half the envs where it has one)
+  give pictures, every candidate's hint, the action taken and the discounted return that followed
+  (`info_gamma`). A probe (the agent's encoder on the picture, the hint and the action, into an
+  MLP) regresses that return; the score is its held-out R^2 with the hint minus its R^2 with the
+  hint zeroed (the same probe, data and seed): the information about what pays that the picture
+  lacks and the hint carries.
+- `probe`: every candidate trained as HINTS-<scheme> for `probe_fraction` of the env's budget,
+  all of them and their seeds one group (hintsjax.group); the score is the area under the
+  learning curve (the mean training return over the updates).
+
+The run folder holds config.yaml, scores.json (per score, candidate and seed), ranking.csv and
+ranking.png.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import yaml
+from flax import struct
+
+from hintsjax import envs
+from hintsjax.arguments import parse_key_values
+from hintsjax.conditioning import SCHEMES
+from hintsjax.envs.errors import ChoiceError, choose
+from hintsjax.errors import UsageError, fail, require_positive, require_range
+from hintsjax.networks import MLP, Encoder, scale_pixels
+from hintsjax.runlog import fresh_folder
+
+SCORES = {"information": "the return's R^2 gained by the hint over one picture",
+          "probe": "area under a short training run's learning curve"}
+
+
+@dataclass(frozen=True)
+class RankConfig:
+    """What `python -m hintsjax.rank` scores: `hints` (comma-separated; each a registered hint, a
+    composite or names joined by '+'; None: every registered hint of `env`) by `scores`."""
+
+    env: str = "pendulum"
+    hints: str | None = None
+    scheme: str = "fc"
+    scores: str = "information,probe"
+    seeds: int = 5
+    seed: int = 0
+    probe_fraction: float = 0.1  # of the env's HINTS budget (ENV_DEFAULTS), rounded to whole updates
+    info_envs: int = 64
+    info_steps: int = 250
+    info_held_out_envs: int = 16
+    info_gamma: float = 0.9
+    info_epochs: int = 5
+    info_minibatch_size: int = 256
+    info_lr: float = 3e-4
+    policy: str = "auto"  # the information rollouts' actions: auto (the packaged expert in half the envs where there is one), random
+    out_dir: str = "runs"
+    name: str | None = None  # folder name (default: rank-<env>-<timestamp>)
+
+    @property
+    def candidates(self) -> list[str]:
+        if self.hints is None:
+            return [h for h in envs.hint_names(self.env) if h != envs.NO_HINT]
+        return [h.strip() for h in self.hints.split(",")]
+
+    @property
+    def score_names(self) -> list[str]:
+        return [s.strip() for s in self.scores.split(",")]
+
+    def validate(self) -> "RankConfig":
+        try:
+            choose("env", self.env, envs.REGISTRY)
+            choose("scheme", self.scheme, SCHEMES)
+            for name in self.score_names:
+                choose("score", name, SCORES)
+            choose("policy", self.policy, {"auto": "", "random": ""})
+            if not self.candidates or "" in self.candidates:
+                raise UsageError(f"hints is empty: give a comma-separated list of {self.env}'s hints "
+                                 f"({', '.join(envs.hint_names(self.env))})")
+            for hint in self.candidates:
+                if envs.make_hint(self.env, hint).dim == 0:
+                    raise UsageError(f"hint '{hint}' is empty: give hints of {self.env} ({', '.join(envs.hint_names(self.env))})")
+        except ChoiceError as e:
+            raise UsageError(str(e)) from None
+        if len(set(self.candidates)) < len(self.candidates):
+            raise UsageError(f"hints lists a hint twice: {self.hints}")
+        require_positive(self, ("seeds", "info_envs", "info_steps", "info_held_out_envs", "info_epochs",
+                                "info_minibatch_size", "info_lr"))
+        require_range(self, {"probe_fraction": (0.0, 1.0), "info_gamma": (0.0, 1.0)})
+        if self.probe_fraction == 0:
+            raise UsageError("probe_fraction must be above 0")
+        if "probe" in self.score_names:
+            probe = probe_configs(self)[0]
+            steps, limit = probe.ppo.num_updates * probe.ppo.rollout_length, envs.REGISTRY[self.env].cls.max_steps
+            if steps < limit:
+                raise UsageError(f"probe_fraction {self.probe_fraction} gives {probe.ppo.num_updates} updates of "
+                                 f"{probe.ppo.rollout_length} steps per env, fewer than one {self.env} episode "
+                                 f"({limit} steps): raise it to {self.probe_fraction * limit / steps:.2g} or more")
+        if self.info_minibatch_size > self.info_held_out_envs * self.info_steps:
+            raise UsageError(f"info_minibatch_size ({self.info_minibatch_size}) exceeds the held-out samples "
+                             f"(info_held_out_envs x info_steps = {self.info_held_out_envs * self.info_steps})")
+        return self
+
+
+# -- the information score --------------------------------------------------------------------------
+
+
+def hint_layout(env: str, candidates: list[str]) -> tuple[str, list[list[int]]]:
+    """(an env hint holding every candidate's parts once, side by side; per candidate its positions
+    in it), as a group's env computes its members' hints (hintsjax.group)."""
+    parts: list[envs.hints.HintSpec] = []
+    for hint in candidates:
+        parts += [p for p in envs.make_hint(env, hint).parts if p not in parts]
+    offsets, at = {}, 0
+    for p in parts:
+        offsets[p.name], at = list(range(at, at + p.dim)), at + p.dim
+    takes = [[i for p in envs.make_hint(env, hint).parts for i in offsets[p.name]] for hint in candidates]
+    return "+".join(p.name for p in parts), takes
+
+
+class ReturnProbe(nn.Module):
+    """(picture, hint, action) -> the return to come: the agent's encoder on the picture, the hint
+    and the action joined to it, one hidden layer."""
+
+    @nn.compact
+    def __call__(self, pixels: jax.Array, hint: jax.Array, action: jax.Array) -> jax.Array:
+        z = jnp.concatenate([Encoder()(scale_pixels(pixels)), hint, action], axis=-1)
+        return MLP((256, 1))(z)[..., 0]
+
+
+@struct.dataclass
+class Samples:
+    pixels: jax.Array  # uint8[M, S, S, 3]
+    hint: jax.Array  # [M, U]: every candidate's parts
+    action: jax.Array  # [M, A]
+    ret: jax.Array  # [M]: discounted return that followed
+
+
+def discounted_returns(reward: jax.Array, done: jax.Array, gamma: float) -> jax.Array:
+    """[T, N] rewards and episode ends -> the discounted return from each step to its episode's
+    end (or to the end of the data)."""
+    def back(acc, x):
+        r, d = x
+        acc = r + gamma * (1.0 - d) * acc
+        return acc, acc
+
+    return jax.lax.scan(back, jnp.zeros_like(reward[0]), (reward, done.astype(jnp.float32)), reverse=True)[1]
+
+
+def make_information(cfg: RankConfig, policy: Any = None) -> Callable[[jax.Array], jax.Array]:
+    """`information(key) -> [K]`: each candidate's held-out R^2 of the return with its hint minus
+    that with the hint zeroed. `policy` (an object with `mean(state)` and `log_std`, the packaged
+    expert by default where cfg.policy is auto and the env has one) acts in half the envs."""
+    candidates = cfg.candidates
+    union, takes = hint_layout(cfg.env, candidates)
+    width = max(len(t) for t in takes)
+    take = jnp.asarray([t + [0] * (width - len(t)) for t in takes + [[]]], jnp.int32)  # the last: no hint
+    keep = jnp.asarray([[i < len(t) for i in range(width)] for t in takes + [[]]])
+    if policy is None and cfg.policy == "auto":
+        from hintsjax import expert
+
+        policy = expert.load(cfg.env) if cfg.env in expert.packaged() else None
+    observe = ("pixels", "hint", "state") if policy is not None else ("pixels", "hint")
+    env = envs.AutoReset(envs.make(cfg.env, union, observe))
+    params = envs.make_params(cfg.env)
+    probe, optimizer, B = ReturnProbe(), optax.adam(cfg.info_lr), cfg.info_minibatch_size
+
+    def collect(key: jax.Array, n: int) -> Samples:
+        k_reset, k_run = jax.random.split(key)
+        ts = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_reset, n), params)
+        driven = jnp.arange(n) < n // 2
+
+        def step(carry, key):
+            state, obs = carry
+            k_act, k_env = jax.random.split(key)
+            action = jax.random.normal(k_act, (n, env.action_size))
+            if policy is not None:
+                action = jnp.where(driven[:, None], jax.vmap(policy.mean)(obs["state"]) + jnp.exp(policy.log_std) * action, action)
+            ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(jax.random.split(k_env, n), state, action, params)
+            return (ts.state, ts.obs), (obs["pixels"], obs["hint"], action, ts.reward, ts.terminated | ts.truncated)
+
+        _, (pixels, hint, action, reward, done) = jax.lax.scan(step, (ts.state, ts.obs), jax.random.split(k_run, cfg.info_steps))
+        ret = discounted_returns(reward, done, cfg.info_gamma)
+        flat = lambda x: x.reshape((-1,) + x.shape[2:])  # noqa: E731
+        return Samples(flat(pixels), flat(hint), flat(action), flat(ret))
+
+    def r2(net, data: Samples, pick, mean, std) -> jax.Array:
+        count = data.ret.shape[0] // B * B
+        idx = jnp.arange(count).reshape(-1, B)
+        pred = jax.lax.map(lambda i: probe.apply(net, data.pixels[i], pick(data.hint[i]), data.action[i]), idx).reshape(-1)
+        y = (data.ret[:count] - mean) / std
+        return 1.0 - jnp.sum((pred - y) ** 2) / jnp.maximum(jnp.sum((y - y.mean()) ** 2), 1e-12)
+
+    def fit(key: jax.Array, data: Samples, held: Samples, take_k, keep_k) -> jax.Array:
+        pick = lambda h: jnp.where(keep_k, h[..., take_k], 0.0)  # noqa: E731
+        mean, std = data.ret.mean(), jnp.maximum(data.ret.std(), 1e-6)
+        m = data.ret.shape[0]
+        k_init, k_epochs = jax.random.split(key)
+        net = probe.init(k_init, data.pixels[:1], pick(data.hint[:1]), data.action[:1])
+
+        def loss_fn(net, i):
+            y = (data.ret[i] - mean) / std
+            return jnp.mean((probe.apply(net, data.pixels[i], pick(data.hint[i]), data.action[i]) - y) ** 2)
+
+        def minibatch(carry, i):
+            net, opt_state = carry
+            grads = jax.grad(loss_fn)(net, i)
+            updates, opt_state = optimizer.update(grads, opt_state, net)
+            return (optax.apply_updates(net, updates), opt_state), None
+
+        def epoch(carry, key):
+            order = jax.random.permutation(key, m)[: m // B * B].reshape(-1, B)
+            return jax.lax.scan(minibatch, carry, order)[0], None
+
+        (net, _), _ = jax.lax.scan(epoch, (net, optimizer.init(net)), jax.random.split(k_epochs, cfg.info_epochs))
+        return r2(net, held, pick, mean, std)
+
+    def information(key: jax.Array) -> jax.Array:
+        k_data, k_held, k_fit = jax.random.split(key, 3)
+        data, held = collect(k_data, cfg.info_envs), collect(k_held, cfg.info_held_out_envs)
+        scores = jax.vmap(fit, in_axes=(None, None, None, 0, 0))(k_fit, data, held, take, keep)  # same seed, data and init for all
+        return scores[:-1] - scores[-1]
+
+    return information
+
+
+# -- the short training probe -----------------------------------------------------------------------
+
+
+def probe_configs(cfg: RankConfig) -> list:
+    """The HINTS runs of the probe: every candidate at probe_fraction of the env's budget."""
+    from hintsjax.config import run_config
+
+    base = run_config({"env": cfg.env, "agent": "hints", "scheme": cfg.scheme, "hint": cfg.candidates[0]})
+    updates = max(1, round(cfg.probe_fraction * base.ppo.num_updates))
+    ppo = {"total_env_steps": updates * base.ppo.batch_size}
+    return [run_config({"env": cfg.env, "agent": "hints", "scheme": cfg.scheme, "hint": h, "seeds": cfg.seeds,
+                        "seed": cfg.seed, "ppo": ppo}) for h in cfg.candidates]
+
+
+def probe_scores(cfg: RankConfig) -> np.ndarray:
+    """[S, K]: each seed's and candidate's mean training return over the short run's updates."""
+    from hintsjax.group import make_group, make_group_trainer
+
+    cfgs = probe_configs(cfg)
+    trainer = make_group_trainer(make_group(cfgs))
+    _, metrics = jax.jit(jax.vmap(trainer.train))(cfgs[0].seed_keys())
+    return np.nanmean(np.asarray(metrics["episode_return"]), axis=1)  # [S, U, K] -> [S, K]
+
+
+# -- the command ---------------------------------------------------------------------------------------
+
+
+def rank_hints(cfg: RankConfig) -> dict[str, Any]:
+    """Every score of every candidate and seed, and the seconds each took (compile included)."""
+    keys = jnp.stack([jax.random.key(cfg.seed + i) for i in range(cfg.seeds)])
+    out: dict[str, Any] = {"candidates": cfg.candidates, "scores": {}, "seconds": {}}
+    for name in cfg.score_names:
+        start = time.perf_counter()
+        if name == "information":
+            values = np.asarray(jax.jit(jax.vmap(make_information(cfg)))(keys))
+        else:
+            values = probe_scores(cfg)
+        out["scores"][name] = values.tolist()  # [S, K]
+        out["seconds"][name] = round(time.perf_counter() - start, 2)
+    if "probe" in cfg.score_names:
+        out["probe_env_steps_per_run"] = probe_configs(cfg)[0].ppo.total_env_steps
+    return out
+
+
+def ranking(values: np.ndarray) -> list[int]:
+    """Rank (1 = best) of each candidate by its mean over seeds ([S, K] -> [K])."""
+    order = np.argsort(-np.asarray(values).mean(axis=0), kind="stable")
+    ranks = np.empty(len(order), int)
+    ranks[order] = np.arange(1, len(order) + 1)
+    return ranks.tolist()
+
+
+def write_folder(folder: Path, cfg: RankConfig, result: dict[str, Any]) -> list[list[str]]:
+    """scores.json, ranking.csv and ranking.png; the table's rows."""
+    (folder / "scores.json").write_text(json.dumps({**result, "device": jax.devices()[0].device_kind}, indent=1))
+    rows = []
+    for name, values in result["scores"].items():
+        values = np.asarray(values)
+        for hint, rank, mean, std in zip(cfg.candidates, ranking(values), values.mean(axis=0), values.std(axis=0)):
+            rows.append([name, hint, str(rank), f"{mean:.4g}", f"{std:.3g}"])
+    with (folder / "ranking.csv").open("w", newline="") as f:
+        csv.writer(f).writerows([["score", "hint", "rank", "mean", "std_over_seeds"], *rows])
+    plot(folder / "ranking.png", cfg, result)
+    return rows
+
+
+def plot(path: Path, cfg: RankConfig, result: dict[str, Any]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(result["scores"])
+    fig, axes = plt.subplots(1, len(names), figsize=(5 * len(names), 0.5 * len(cfg.candidates) + 1.5), squeeze=False)
+    for ax, name in zip(axes[0], names):
+        values = np.asarray(result["scores"][name])
+        y = np.arange(len(cfg.candidates))
+        ax.barh(y, values.mean(axis=0), xerr=values.std(axis=0), color="tab:blue")
+        ax.set_yticks(y, cfg.candidates)
+        ax.invert_yaxis()
+        ax.set_title(f"{name} ({cfg.seeds} seeds)")
+        ax.set_xlabel(SCORES[name])
+    fig.suptitle(f"{cfg.env}: hint utility")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    try:
+        cfg = parse_key_values(RankConfig, sys.argv[1:] if argv is None else argv).validate()
+    except UsageError as e:
+        return fail(e)
+    print(f"ranking {len(cfg.candidates)} hints of {cfg.env} by {cfg.scores}, {cfg.seeds} seeds", flush=True)
+    folder = fresh_folder(Path(cfg.out_dir) / (cfg.name or f"rank-{cfg.env}-{time.strftime('%Y%m%d-%H%M%S')}"))
+    (folder / "config.yaml").write_text(yaml.safe_dump(dataclasses.asdict(cfg), sort_keys=False))
+    result = rank_hints(cfg)
+    rows = write_folder(folder, cfg, result)
+    width = max(len(h) for h in cfg.candidates)
+    for name in result["scores"]:
+        print(f"{name} ({result['seconds'][name]:.0f} s):")
+        for score, hint, rank, mean, std in sorted((r for r in rows if r[0] == name), key=lambda r: int(r[2])):
+            print(f"  {rank:>2}. {hint:<{width}}  {mean} +- {std}")
+    print(f"-> {folder}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

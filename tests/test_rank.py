@@ -1,0 +1,70 @@
+"""Hint ranking (hintsjax.rank): on the cue task, where one hint is the right action and another
+is noise, every score ranks the informative hint first; its pieces by hand; its bad input."""
+
+from __future__ import annotations
+
+import json
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import cue_env  # noqa: F401  (registers the test env "cue": hints cue (the right action) and distractor (noise))
+from hintsjax import rank
+
+TINY = ["env=cue", "hints=distractor,cue", "seeds=2", "info_envs=64", "info_steps=8", "info_held_out_envs=32",
+        "info_epochs=3", "info_minibatch_size=64", "info_lr=1e-3", "probe_fraction=0.05"]
+
+
+def test_every_score_ranks_the_informative_hint_first(tmp_path, capsys):
+    assert rank.main([*TINY, f"out_dir={tmp_path}", "name=r"]) == 0
+    folder = tmp_path / "r"
+    result = json.loads((folder / "scores.json").read_text())
+    assert result["candidates"] == ["distractor", "cue"] and set(result["scores"]) == {"information", "probe"}
+    for name, values in result["scores"].items():
+        values = np.asarray(values)  # [seeds, candidates]
+        assert values.shape == (2, 2)
+        assert np.all(values[:, 1] > values[:, 0]), name  # every seed: cue above the noise
+    info = np.asarray(result["scores"]["information"])
+    assert np.all(info[:, 1] > 0.2) and np.all(np.abs(info[:, 0]) < 0.1)  # noise adds nothing to the return's R^2
+    rows = (folder / "ranking.csv").read_text().splitlines()
+    assert rows[0] == "score,hint,rank,mean,std_over_seeds" and "information,cue,1," in rows[2]
+    assert (folder / "ranking.png").stat().st_size > 0
+    assert "1. cue" in capsys.readouterr().out
+
+
+def test_the_layout_holds_each_part_once():
+    union, takes = rank.hint_layout("cue", ["cue_pair", "cue", "cue+distractor"])
+    assert union == "cue_pair+cue+distractor" and takes == [[0, 1], [2], [2, 3]]
+
+
+def test_discounted_returns_by_hand():
+    reward = jnp.array([[1.0], [2.0], [3.0], [4.0]])
+    done = jnp.array([[False], [True], [False], [False]])  # an episode ends after step 1
+    ret = rank.discounted_returns(reward, done, 0.5)[:, 0]
+    np.testing.assert_allclose(ret, [1 + 0.5 * 2, 2, 3 + 0.5 * 4, 4])
+
+
+def test_ranking_by_mean():
+    assert rank.ranking(np.array([[0.1, 0.5, 0.3], [0.1, 0.7, 0.1]])) == [3, 1, 2]
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["env=nowhere"], "unknown env 'nowhere'"),
+    (["env=pendulum", "hints=joint"], "unknown hint 'joint'"),
+    (["env=pendulum", "hints="], "hints is empty"),
+    (["env=pendulum", "hints=composite,,torque"], "hints is empty"),
+    (["env=pendulum", "hints=torque,torque"], "lists a hint twice"),
+    (["env=pendulum", "scores=vibes"], "unknown score 'vibes'"),
+    (["env=pendulum", "scheme=xx"], "unknown scheme 'xx'"),
+    (["probe_fraction=0"], "probe_fraction must be above 0"),
+    (["probe_fraction=1.5"], "probe_fraction must be a finite number in [0.0, 1.0]"),
+    (["seeds=0"], "seeds must be positive"),
+    (["env=pendulum", "probe_fraction=0.01"], "fewer than one pendulum episode (200 steps)"),
+    (["hint=composite"], "give key=value with a key of env, hints"),
+])
+def test_bad_input_is_one_line(argv, message, tmp_path, capsys):
+    assert rank.main([*argv, f"out_dir={tmp_path / 'out'}"]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert not (tmp_path / "out").exists()
