@@ -108,13 +108,6 @@ class RankConfig:
         require_range(self, {"probe_fraction": (0.0, 1.0), "info_gamma": (0.0, 1.0)})
         if self.probe_fraction == 0:
             raise UsageError("probe_fraction must be above 0")
-        if "probe" in self.score_names:
-            probe = probe_configs(self)[0]
-            steps, limit = probe.ppo.num_updates * probe.ppo.rollout_length, envs.REGISTRY[self.env].cls.max_steps
-            if steps < limit:
-                raise UsageError(f"probe_fraction {self.probe_fraction} gives {probe.ppo.num_updates} updates of "
-                                 f"{probe.ppo.rollout_length} steps per env, fewer than one {self.env} episode "
-                                 f"({limit} steps): raise it to {self.probe_fraction * limit / steps:.2g} or more")
         if self.info_minibatch_size > self.info_held_out_envs * self.info_steps:
             raise UsageError(f"info_minibatch_size ({self.info_minibatch_size}) exceeds the held-out samples "
                              f"(info_held_out_envs x info_steps = {self.info_held_out_envs * self.info_steps})")
@@ -264,7 +257,11 @@ def probe_scores(cfg: RankConfig) -> np.ndarray:
     cfgs = probe_configs(cfg)
     trainer = make_group_trainer(make_group(cfgs))
     _, metrics = jax.jit(jax.vmap(trainer.train))(cfgs[0].seed_keys())
-    return np.nanmean(np.asarray(metrics["episode_return"]), axis=1)  # [S, U, K] -> [S, K]
+    returns = np.asarray(metrics["episode_return"])  # [S, U, K]; NaN where no episode ended in an update
+    if np.isnan(returns).all(axis=1).any():
+        raise UsageError(f"no {cfg.env} episode ended within the probe's {cfgs[0].ppo.num_updates} updates: "
+                         f"raise probe_fraction (now {cfg.probe_fraction})")
+    return np.nanmean(returns, axis=1)
 
 
 # -- the command ---------------------------------------------------------------------------------------

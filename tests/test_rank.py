@@ -60,7 +60,6 @@ def test_ranking_by_mean():
     (["probe_fraction=0"], "probe_fraction must be above 0"),
     (["probe_fraction=1.5"], "probe_fraction must be a finite number in [0.0, 1.0]"),
     (["seeds=0"], "seeds must be positive"),
-    (["env=pendulum", "probe_fraction=0.01"], "fewer than one pendulum episode (200 steps)"),
     (["hint=composite"], "give key=value with a key of env, hints"),
 ])
 def test_bad_input_is_one_line(argv, message, tmp_path, capsys):
