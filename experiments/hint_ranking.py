@@ -36,18 +36,21 @@ TABLE_SEEDS = 20
 RESAMPLES = 2000
 
 
-def score_folder(runs: Path, env: str) -> Path:
-    return runs / env
+DEFAULT_FRACTION = 0.1
 
 
-def run_scores(runs: Path, env: str, seeds: int, fraction: float) -> None:
+def score_folder(runs: Path, env: str, fraction: float = DEFAULT_FRACTION) -> Path:
+    return runs / (env if fraction == DEFAULT_FRACTION else f"{env}-probe{fraction:g}")
+
+
+def run_scores(runs: Path, env: str, seeds: int, fraction: float, scores: str) -> None:
     from hintsjax import rank
 
-    folder = score_folder(runs, env)
+    folder = score_folder(runs, env, fraction)
     if (folder / "scores.json").is_file():
         return
     argv = [f"env={env}", f"hints={','.join(TABLE2_HINTS[env])}", f"seeds={seeds}", f"probe_fraction={fraction}",
-            f"out_dir={runs}", f"name={env}"]
+            f"scores={scores}", f"out_dir={runs}", f"name={folder.name}"]
     if rank.main(argv):
         raise SystemExit(f"ranking {env} failed")
 
@@ -104,7 +107,8 @@ def report(runs: Path, env_list: list[str], out: Path) -> None:
              "Full ranking: the IQM of each HINTS-FC row's per-seed evaluation returns at the full budget "
              "(20 seeds, experiments/results/runs/classic20; the idp's 5-seed means from classic_table2.md, "
              "without an interval, as its 20-seed rows are not trained yet). rho: Spearman's rank correlation "
-             "between a score's mean over its seeds and that ranking, with a 95% bootstrap interval. Cost: the "
+             "between a score's mean over its seeds and that ranking, with a 95% bootstrap interval; `probe f`: the "
+             "short training probe at the fraction f of the budget. Cost: the "
              "score's env steps and seconds (compile included, one H100) against the table's hint rows at 20 seeds.", ""]
     summary, per_env = [], []
     rhos: dict[str, list[float]] = {}
@@ -113,6 +117,15 @@ def report(runs: Path, env_list: list[str], out: Path) -> None:
         if not path.is_file():
             continue
         result = json.loads(path.read_text())
+        for folder in sorted(runs.glob(f"{env}-probe*")):  # the probe at other fractions of the budget
+            extra = json.loads((folder / "scores.json").read_text())
+            label = f"probe {folder.name.split('-probe')[1]}"
+            result["scores"][label] = extra["scores"]["probe"]
+            result["seconds"][label] = extra["seconds"]["probe"]
+            result.setdefault("steps", {})[label] = extra["probe_env_steps_per_run"]
+        result["scores"]["probe 0.1"] = result["scores"].pop("probe")
+        result["seconds"]["probe 0.1"] = result["seconds"].pop("probe")
+        result.setdefault("steps", {})["probe 0.1"] = result["probe_env_steps_per_run"]
         full = table_rows(env)
         hints = result["candidates"]
         rows = [full[h] for h in hints]
@@ -155,8 +168,8 @@ def _score_env_steps(name: str, result: dict, folder: Path, hints: int) -> int:
     import yaml
 
     seeds = len(result["scores"][name])
-    if name == "probe":
-        return seeds * hints * result["probe_env_steps_per_run"]
+    if name.startswith("probe"):
+        return seeds * hints * result["steps"][name]
     cfg = yaml.safe_load((folder / "config.yaml").read_text())
     return seeds * (cfg["info_envs"] + cfg["info_held_out_envs"]) * cfg["info_steps"]
 
@@ -165,7 +178,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--envs", default="pendulum,acrobot,idp")
     parser.add_argument("--seeds", type=int, default=5)
-    parser.add_argument("--probe-fraction", type=float, default=0.1)
+    parser.add_argument("--probe-fraction", type=float, default=DEFAULT_FRACTION)
+    parser.add_argument("--scores", default="information,probe")
     parser.add_argument("--runs", type=Path, default=Path("runs/hint_ranking"))
     parser.add_argument("--report", action="store_true")
     parser.add_argument("--out", type=Path, default=RESULTS / "hint_ranking.md")
@@ -176,7 +190,7 @@ def main() -> None:
         return
     args.runs.mkdir(parents=True, exist_ok=True)
     for env in env_list:
-        run_scores(args.runs, env, args.seeds, args.probe_fraction)
+        run_scores(args.runs, env, args.seeds, args.probe_fraction, args.scores)
 
 
 if __name__ == "__main__":

@@ -36,7 +36,7 @@ class CueParams:
 class CueState:
     cue: jax.Array  # float32, -1 or +1
     t: jax.Array
-    distractor: jax.Array = struct.field(default_factory=lambda: jnp.zeros((), jnp.float32))
+    distractor: jax.Array  # float32 in [-1, 1], independent of the cue
 
 
 class CueEnv(Env):

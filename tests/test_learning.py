@@ -39,7 +39,8 @@ def learn(agent: str, scheme: str = "fc", seed: int = 0):
 def policy_mean(trainer, params, cues):
     """The policy's mean action for episodes with the given cues (through the env's observation)."""
     env_params = trainer.env.default_params()
-    states = cue_env.CueState(cue=jnp.asarray(cues, jnp.float32), t=jnp.zeros(len(cues), jnp.int32))
+    states = cue_env.CueState(cue=jnp.asarray(cues, jnp.float32), t=jnp.zeros(len(cues), jnp.int32),
+                              distractor=jnp.zeros(len(cues), jnp.float32))
     obs = jax.vmap(trainer.env.observation, in_axes=(0, None))(states, env_params)
     mean, _, _ = trainer.network.apply(params, obs)
     return np.asarray(mean[:, 0])
@@ -50,7 +51,7 @@ def test_cue_env_hides_the_cue_outside_the_hint():
 
     env = envs.make("cue", "cue")
     params = envs.make_params("cue")
-    states = [cue_env.CueState(cue=jnp.float32(c), t=jnp.int32(0)) for c in (-1.0, 1.0)]
+    states = [cue_env.CueState(cue=jnp.float32(c), t=jnp.int32(0), distractor=jnp.float32(0)) for c in (-1.0, 1.0)]
     obs = [env.observation(s, params) for s in states]
     np.testing.assert_array_equal(obs[0]["pixels"], obs[1]["pixels"])
     np.testing.assert_array_equal(obs[0]["state"], obs[1]["state"])
