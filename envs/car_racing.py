@@ -34,8 +34,11 @@ wheels' spin with Gymnasium's power law; brakes slow both axles' spin (>= 0.9 lo
 rises by at most 0.1 per step and steering turns at 3 rad/s to at most 0.4 rad, as in Gymnasium
 (steer +1 turns right). Full gas spins the rear wheels, whose force then goes mostly lengthwise:
 the rear loses side grip and the car oversteers. SUBSTEPS semi-implicit Euler steps per 1/50 s
-frame, finite at rest. A quadratic drag sets the top speed: 0 to 42.6 u/s in 1 s, 92 in 3 s, 108
-at most (Gymnasium: 46, 98, then Box2D's cap of 100). 1 u is a track unit (the car is 5 u long).
+frame, finite at rest. No drag: the top speed is Box2D's cap of 2 u per 1/50 s step, 100 u/s, as
+in Gymnasium: 0 to 44.9 u/s in 1 s, 86.6 in 2 s, 100 after 2.6 s (Gymnasium: 46, 86, 98, 100). A
+quadratic drag that set a top speed of 108 until 2026-11-25 ate up to 60% of the rear tyres'
+grip at speed, and a scripted driver left the road 2.5x as often as on Gymnasium's car
+(experiments/results/car_driver.md). 1 u is a track unit (the car is 5 u long).
 
 Reward and episode, as Gymnasium: +1000/N for each tile first visited, -0.1 per frame; leaving
 the +-PLAYFIELD square pays -100 and ends the episode; the lap ends it when more than 95% of the
@@ -85,7 +88,7 @@ ENGINE_POWER = 1e8 * 0.02**2  # per rear wheel
 FRICTION_LIMIT = 1e6 * 0.02**2  # per wheel, on road
 TYRE_STIFFNESS = 205000 * 0.02**2  # force per u/s of slip
 BRAKE_RATE = 15 * WHEEL_R * FPS  # u/s^2 of rim speed at full brake
-DRAG = 0.06  # ours: force per (u/s)^2
+MAX_SPEED = 100.0  # u/s: Box2D's cap on a body's translation, b2_maxTranslation = 2 u per 1/50 s step
 
 # -- ours --------------------------------------------------------------------------------------
 MAX_TILES = 400
@@ -336,9 +339,11 @@ def _substep(car: Car, target: jax.Array, gas: jax.Array, brake: jax.Array, limi
     f_long, f_lat = f_long * scale, f_lat * scale
     spin = spin - dt * f_long * WHEEL_R**2 / WHEEL_INERTIA
     # two wheels per axle; the front pair's force turned by the steering angle
-    fx = 2 * (f_long[0] * c - f_lat[0] * s + f_long[1]) - DRAG * u * jnp.abs(u)
+    fx = 2 * (f_long[0] * c - f_lat[0] * s + f_long[1])
     fy_front, fy_rear = 2 * (f_long[0] * s + f_lat[0] * c), 2 * f_lat[1]
     u, v = u + dt * (fx / MASS + v * r), v + dt * ((fy_front + fy_rear) / MASS - u * r)
+    cap = jnp.minimum(1.0, MAX_SPEED / jnp.maximum(jnp.sqrt(u**2 + v**2), 1e-6))  # Box2D's speed cap
+    u, v = u * cap, v * cap
     r = r + dt * (FRONT * fy_front - REAR * fy_rear) / INERTIA
     angle = car.angle + dt * r
     fwd, left = jnp.stack([-jnp.sin(angle), jnp.cos(angle)]), jnp.stack([-jnp.cos(angle), -jnp.sin(angle)])
