@@ -120,6 +120,21 @@ class Hint:
 NO_HINT = "none"
 
 
+def side_by_side(env: str, specs: list[str]) -> tuple[str, list[tuple[int, ...]]]:
+    """One hint holding every part of the hints `specs` once, side by side in order of first
+    appearance (NO_HINT if none has a part), and per spec the positions of its parts in it: how
+    an env computes several hints at once (a group's members, a ranking's candidates)."""
+    hints = [make_hint(env, spec) for spec in specs]
+    parts: list[HintSpec] = []
+    for hint in hints:
+        parts += [p for p in hint.parts if p not in parts]
+    offsets, at = {}, 0
+    for p in parts:
+        offsets[p.name], at = range(at, at + p.dim), at + p.dim
+    takes = [tuple(i for p in hint.parts for i in offsets[p.name]) for hint in hints]
+    return "+".join(p.name for p in parts) or NO_HINT, takes
+
+
 def make_hint(env: str, spec: str) -> Hint:
     """Resolve `spec` (a registered name, a composite, or names joined by '+') for `env`."""
     if spec == NO_HINT:

@@ -115,7 +115,6 @@ class RunConfig:
             raise UsageError(f"dagger.buffer_size ({self.dagger.buffer_size}) must hold one round, ppo.batch_size ({self.ppo.batch_size})")
         return self
 
-
     def _check_hint_sources(self) -> None:
         from hintsjax.generator import PROGRAMMATIC, check_matches
 

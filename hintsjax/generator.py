@@ -41,7 +41,7 @@ import orbax.checkpoint as ocp
 import yaml
 from flax import struct
 
-from hintsjax import envs
+from hintsjax import envs, rollouts
 from hintsjax.arguments import parse_key_values
 from hintsjax.checkpoint import on_this_device, require_same_arrays
 from hintsjax.envs.core import Env, Step
@@ -330,32 +330,20 @@ def stack_frames(data: Rollouts, t: jax.Array, n: jax.Array, k: int) -> jax.Arra
 
 def make_collect(cfg: GeneratorConfig) -> Callable[[jax.Array, int], Rollouts]:
     """`collect(key, num_envs) -> Rollouts[steps, num_envs]` of rollouts of cfg's env."""
-    observe = ("pixels", "hint", "state") if cfg.policy == "expert" else ("pixels", "hint")
-    env = envs.AutoReset(envs.make(cfg.env, cfg.hint, observe))
-    params = envs.make_params(cfg.env, cfg.variant)
     policy = None
     if cfg.policy == "expert":
         from hintsjax import expert
 
         policy = expert.load(cfg.env)
+    env = envs.AutoReset(envs.make(cfg.env, cfg.hint, rollouts.observed(policy)))
+    params = envs.make_params(cfg.env, cfg.variant)
+
+    def record(state, obs, action, ts) -> Rollouts:
+        return Rollouts(obs["pixels"], state.episode_length, obs["hint"])
 
     def collect(key: jax.Array, num_envs: int) -> Rollouts:
-        k_reset, k_run = jax.random.split(key)
-        ts = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_reset, num_envs), params)
-        driven = jnp.arange(num_envs) < round(cfg.expert_fraction * num_envs)  # the expert's envs
-
-        def step(carry, key):
-            state, obs = carry
-            k_act, k_env = jax.random.split(key)
-            action = jax.random.normal(k_act, (num_envs, env.action_size))
-            if policy is not None:
-                expert_action = jax.vmap(policy.mean)(obs["state"]) + jnp.exp(policy.log_std) * action
-                action = jnp.where(driven[:, None], expert_action, action)
-            ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(jax.random.split(k_env, num_envs), state, action, params)
-            return (ts.state, ts.obs), Rollouts(obs["pixels"], state.episode_length, obs["hint"])
-
-        _, data = jax.lax.scan(step, (ts.state, ts.obs), jax.random.split(k_run, cfg.steps))
-        return data
+        return rollouts.rollout(env, params, key, num_envs, cfg.steps, record, policy,
+                                driven=round(cfg.expert_fraction * num_envs))
 
     return collect
 

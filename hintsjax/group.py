@@ -107,15 +107,8 @@ def make_group(cfgs: Sequence[RunConfig]) -> Group:
     """The group of validated configurations; UsageError naming what differs if they cannot share one."""
     cfgs = tuple(cfgs)
     check_group(cfgs)
-    hints = [envs.make_hint(cfg.env, cfg.effective_hint) for cfg in cfgs]
-    parts: list[envs.hints.HintSpec] = []
-    for hint in hints:
-        parts += [p for p in hint.parts if p not in parts]
-    offsets, at = {}, 0
-    for p in parts:
-        offsets[p.name], at = range(at, at + p.dim), at + p.dim
-    takes = tuple(tuple(i for p in hint.parts for i in offsets[p.name]) for hint in hints)
-    return Group(cfgs, "+".join(p.name for p in parts) or envs.NO_HINT, takes)
+    hint, takes = envs.hints.side_by_side(cfgs[0].env, [cfg.effective_hint for cfg in cfgs])
+    return Group(cfgs, hint, tuple(takes))
 
 
 def make_group_trainer(group: Group) -> Trainer:

@@ -41,7 +41,7 @@ import optax
 import yaml
 from flax import struct
 
-from hintsjax import envs
+from hintsjax import envs, rollouts
 from hintsjax.arguments import parse_key_values
 from hintsjax.conditioning import SCHEMES
 from hintsjax.envs.errors import ChoiceError, choose
@@ -51,6 +51,8 @@ from hintsjax.runlog import fresh_folder
 
 SCORES = {"information": "the return's R^2 gained by the hint over one picture",
           "probe": "area under a short training run's learning curve"}
+POLICIES = {"auto": "the packaged expert in half the envs where the env has one, N(0, 1) actions in the rest",
+            "random": "N(0, 1) actions"}
 
 
 @dataclass(frozen=True)
@@ -92,7 +94,7 @@ class RankConfig:
             choose("scheme", self.scheme, SCHEMES)
             for name in self.score_names:
                 choose("score", name, SCORES)
-            choose("policy", self.policy, {"auto": "", "random": ""})
+            choose("policy", self.policy, POLICIES)
             if not self.candidates or "" in self.candidates:
                 raise UsageError(f"hints is empty: give a comma-separated list of {self.env}'s hints "
                                  f"({', '.join(envs.hint_names(self.env))})")
@@ -115,19 +117,6 @@ class RankConfig:
 
 
 # -- the information score --------------------------------------------------------------------------
-
-
-def hint_layout(env: str, candidates: list[str]) -> tuple[str, list[list[int]]]:
-    """(an env hint holding every candidate's parts once, side by side; per candidate its positions
-    in it), as a group's env computes its members' hints (hintsjax.group)."""
-    parts: list[envs.hints.HintSpec] = []
-    for hint in candidates:
-        parts += [p for p in envs.make_hint(env, hint).parts if p not in parts]
-    offsets, at = {}, 0
-    for p in parts:
-        offsets[p.name], at = list(range(at, at + p.dim)), at + p.dim
-    takes = [[i for p in envs.make_hint(env, hint).parts for i in offsets[p.name]] for hint in candidates]
-    return "+".join(p.name for p in parts), takes
 
 
 class ReturnProbe(nn.Module):
@@ -164,34 +153,24 @@ def make_information(cfg: RankConfig, policy: Any = None) -> Callable[[jax.Array
     that with the hint zeroed. `policy` (an object with `mean(state)` and `log_std`, the packaged
     expert by default where cfg.policy is auto and the env has one) acts in half the envs."""
     candidates = cfg.candidates
-    union, takes = hint_layout(cfg.env, candidates)
+    union, takes = envs.hints.side_by_side(cfg.env, candidates)
     width = max(len(t) for t in takes)
-    take = jnp.asarray([t + [0] * (width - len(t)) for t in takes + [[]]], jnp.int32)  # the last: no hint
-    keep = jnp.asarray([[i < len(t) for i in range(width)] for t in takes + [[]]])
+    take = jnp.asarray([list(t) + [0] * (width - len(t)) for t in takes + [()]], jnp.int32)  # the last: no hint
+    keep = jnp.asarray([[i < len(t) for i in range(width)] for t in takes + [()]])
     if policy is None and cfg.policy == "auto":
         from hintsjax import expert
 
         policy = expert.load(cfg.env) if cfg.env in expert.packaged() else None
-    observe = ("pixels", "hint", "state") if policy is not None else ("pixels", "hint")
-    env = envs.AutoReset(envs.make(cfg.env, union, observe))
+    env = envs.AutoReset(envs.make(cfg.env, union, rollouts.observed(policy)))
     params = envs.make_params(cfg.env)
     probe, optimizer, B = ReturnProbe(), optax.adam(cfg.info_lr), cfg.info_minibatch_size
 
+    def record(state, obs, action, ts):
+        return obs["pixels"], obs["hint"], action, ts.reward, ts.terminated | ts.truncated
+
     def collect(key: jax.Array, n: int) -> Samples:
-        k_reset, k_run = jax.random.split(key)
-        ts = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_reset, n), params)
-        driven = jnp.arange(n) < n // 2
-
-        def step(carry, key):
-            state, obs = carry
-            k_act, k_env = jax.random.split(key)
-            action = jax.random.normal(k_act, (n, env.action_size))
-            if policy is not None:
-                action = jnp.where(driven[:, None], jax.vmap(policy.mean)(obs["state"]) + jnp.exp(policy.log_std) * action, action)
-            ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(jax.random.split(k_env, n), state, action, params)
-            return (ts.state, ts.obs), (obs["pixels"], obs["hint"], action, ts.reward, ts.terminated | ts.truncated)
-
-        _, (pixels, hint, action, reward, done) = jax.lax.scan(step, (ts.state, ts.obs), jax.random.split(k_run, cfg.info_steps))
+        pixels, hint, action, reward, done = rollouts.rollout(env, params, key, n, cfg.info_steps, record, policy,
+                                                              driven=n // 2)
         ret = discounted_returns(reward, done, cfg.info_gamma)
         flat = lambda x: x.reshape((-1,) + x.shape[2:])  # noqa: E731
         return Samples(flat(pixels), flat(hint), flat(action), flat(ret))

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import cue_env  # noqa: F401  (registers the test env "cue": hints cue (the right action) and distractor (noise))
-from hintsjax import rank
+from hintsjax import envs, rank
 
 TINY = ["env=cue", "hints=distractor,cue", "seeds=2", "info_envs=64", "info_steps=8", "info_held_out_envs=32",
         "info_epochs=3", "info_minibatch_size=64", "info_lr=1e-3", "probe_fraction=0.05"]
@@ -34,8 +34,8 @@ def test_every_score_ranks_the_informative_hint_first(tmp_path, capsys):
 
 
 def test_the_layout_holds_each_part_once():
-    union, takes = rank.hint_layout("cue", ["cue_pair", "cue", "cue+distractor"])
-    assert union == "cue_pair+cue+distractor" and takes == [[0, 1], [2], [2, 3]]
+    union, takes = envs.hints.side_by_side("cue", ["cue_pair", "cue", "cue+distractor"])
+    assert union == "cue_pair+cue+distractor" and takes == [(0, 1), (2,), (2, 3)]
 
 
 def test_discounted_returns_by_hand():
