@@ -135,6 +135,36 @@ def plan_jobs(run_ids: list[str], seeds: int, smoke: bool, group_size: int = 0) 
     return [[run_ids[i] for i in members[k:k + size]] for members in plan(cfgs) for k in range(0, len(members), size)]
 
 
+def begun_groups(runs: Path, run_ids: list[str], seeds: int) -> list[list[str]]:
+    """Groups an earlier sweep began (a checkpoint in their folder) that still hold unfinished runs
+    of `run_ids`, e.g. one cut while it wrote its members' results. Each is resumed whole, so its
+    training is kept: planned afresh, its unfinished runs would form a new group (another digest,
+    no checkpoint) and train from the start. Its other members must be in `run_ids` or finished
+    (they are evaluated and written again, with the same numbers)."""
+    from hintsjax import checkpoint
+
+    finished = lambda r: (runs / r / "eval.json").exists()  # noqa: E731
+    jobs: list[list[str]] = []
+    for path in sorted(runs.glob(f"*/{GROUPS}/*/group.json")):
+        record = json.loads(path.read_text())
+        members = record["runs"]
+        if (record.get("seeds") != seeds or all(r not in run_ids or finished(r) for r in members)
+                or any(r not in run_ids and not finished(r) for r in members)
+                or any(r in job for job in jobs for r in members) or checkpoint.latest_update(path.parent) is None):
+            continue
+        jobs.append(members)
+    return jobs
+
+
+def todo_jobs(runs: Path, run_ids: list[str], seeds: int, smoke: bool, group_size: int = 0) -> list[list[str]]:
+    """The jobs that train the unfinished runs of `run_ids`: the groups begun earlier
+    (`begun_groups`), resumed as they were, then the other unfinished runs grouped by `plan_jobs`."""
+    begun = begun_groups(runs, run_ids, seeds)
+    taken = {r for job in begun for r in job}
+    rest = [r for r in run_ids if r not in taken and not (runs / r / "eval.json").exists()]
+    return begun + plan_jobs(rest, seeds, smoke, group_size)
+
+
 def prerequisite(run_id: str) -> str | None:
     """The run that must finish before this one starts: an env's expert, for its dagger and gail."""
     from hintsjax.agents import AGENTS
@@ -163,13 +193,13 @@ def stopped(*_: Any) -> None:
 def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int | str, smoke: bool,
           launch_until: float = float("inf"), experts: Path | None = None, gpus: tuple[str, ...] = (),
           group_size: int = 0) -> None:
-    """Train every unfinished run, grouped (`plan_jobs`), `workers` groups at a time, starting
-    none after `launch_until` seconds (so that a time-limited call ends with finished runs, not
-    killed ones); append the sweep's wall-clock to runs/sweeps.jsonl. With `gpus` (CUDA device
+    """Train every unfinished run, grouped (`todo_jobs`: a group begun earlier resumes whole),
+    `workers` groups at a time, starting none after `launch_until` seconds (so that a
+    time-limited call ends with finished runs, not killed ones); append the sweep's wall-clock to runs/sweeps.jsonl. With `gpus` (CUDA device
     ids), each worker gets the least busy of them to itself (CUDA_VISIBLE_DEVICES); without, all
     workers share the visible devices. `group_size` caps the runs of a group (`plan_jobs`)."""
     unfinished = [r for r in run_ids if not (runs / r / "eval.json").exists()]
-    todo = sorted(plan_jobs(unfinished, seeds, smoke, group_size), key=lambda job: sum(map(budget, job)), reverse=True)
+    todo = sorted(todo_jobs(runs, run_ids, seeds, smoke, group_size), key=lambda job: sum(map(budget, job)), reverse=True)
     print(f"table {table}: {len(run_ids) - len(unfinished)} of {len(run_ids)} runs done already; "
           f"training {len(unfinished)} in {len(todo)} group(s), {workers} at a time, {seeds} seeds each", flush=True)
     launched = 0

@@ -381,6 +381,17 @@ def test_a_group_trains_into_each_runs_folder_and_splits_when_too_big(tmp_path, 
     folder = sweep.group_folder(tmp_path, ids)
     assert json.loads((folder / "group.json").read_text())["runs"] == ids and (folder / "checkpoints").is_dir()
 
+    # A group cut while it wrote its members' results resumes whole from its final checkpoint (its
+    # unfinished member alone would be a new group, trained from the start): the same numbers.
+    first = json.loads((tmp_path / ids[1] / "eval.json").read_text())
+    (tmp_path / ids[1] / "eval.json").unlink()
+    assert sweep.todo_jobs(tmp_path, ids, 2, True) == [ids]
+    assert sweep.todo_jobs(tmp_path, ids[1:], 2, True) == [ids]  # --only the unfinished run
+    assert sweep.todo_jobs(tmp_path, ids, 3, True) == [[ids[1]]]  # another seed count: not that group
+    sweep.train_one(tmp_path, ids, seeds=2, smoke=True, experts=None)
+    again = json.loads((tmp_path / ids[1] / "eval.json").read_text())
+    assert again["evaluations"] == first["evaluations"] and again["train_env_steps_per_s"] == 0  # no update retrained
+
     def too_big(compiled, what):
         raise run.GroupTooBig(f"{what} needs 99 GiB")
 
