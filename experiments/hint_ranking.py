@@ -105,8 +105,7 @@ def report(runs: Path, env_list: list[str], out: Path) -> None:
              "Written by `python experiments/hint_ranking.py --report` from `python experiments/hint_ranking.py "
              "--envs ... --seeds 5` (hintsjax.rank on every Table 2 hint; commands and hardware below). "
              "Full ranking: the IQM of each HINTS-FC row's per-seed evaluation returns at the full budget "
-             "(20 seeds, experiments/results/runs/classic20; the idp's 5-seed means from classic_table2.md, "
-             "without an interval, as its 20-seed rows are not trained yet). rho: Spearman's rank correlation "
+             "(20 seeds, experiments/results/runs/classic20). rho: Spearman's rank correlation "
              "between a score's mean over its seeds and that ranking, with a 95% bootstrap interval; `probe f`: the "
              "short training probe at the fraction f of the budget. Cost: the "
              "score's env steps and seconds (compile included, one H100) against the table's hint rows at 20 seeds.", ""]
