@@ -21,7 +21,7 @@ with contextlib.redirect_stdout(io.StringIO()):  # mjx prints a notice when its 
     from mujoco import mjx  # noqa: F401
 
 from hintsjax.envs import acrobot, ant, car_racing, halfcheetah, humanoid, idp, pendulum  # noqa: E402
-from hintsjax.envs.core import OBS_KEYS, AutoReset, Env, Step, Timestep
+from hintsjax.envs.core import OBS_KEYS, AutoReset, Env, SquashedActions, Step, Timestep
 from hintsjax.envs.errors import ChoiceError, choose
 from hintsjax.envs.hints import NO_HINT, Hint, hint_names, make_hint, register_composite, register_hint
 
@@ -69,7 +69,7 @@ def make_params(name: str, variant: str | None = None) -> Any:
 
 
 __all__ = [
-    "OBS_KEYS", "AutoReset", "ChoiceError", "Env", "EnvEntry", "Hint", "NO_HINT", "REGISTRY", "Step",
+    "OBS_KEYS", "AutoReset", "ChoiceError", "Env", "EnvEntry", "Hint", "NO_HINT", "REGISTRY", "SquashedActions", "Step",
     "Timestep", "choose", "env_names", "hint_names", "make", "make_hint", "make_params",
     "register_composite", "register_hint", "variant_names",
 ]

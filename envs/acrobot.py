@@ -107,6 +107,9 @@ class Acrobot(MjxEnv):
         s = jax.random.uniform(key, (4,), jnp.float32, -params.init_range, params.init_range)
         return AcrobotState(qpos=s[:2], qvel=s[2:], t=jnp.zeros((), jnp.int32))
 
+    def action_range(self, params: AcrobotParams) -> tuple[jax.Array, jax.Array]:
+        return -params.max_torque * jnp.ones(1), params.max_torque * jnp.ones(1)
+
     def transition(self, key, state: AcrobotState, action, params: AcrobotParams) -> Step:
         torque = jnp.clip(jnp.reshape(action, (1,)), -params.max_torque, params.max_torque)
         data = mjx.make_data(self.model).replace(qpos=state.qpos, qvel=state.qvel, ctrl=torque)

@@ -351,9 +351,13 @@ def _substep(car: Car, target: jax.Array, gas: jax.Array, brake: jax.Array, limi
                        steer=steer, wheel_speed=spin)
 
 
+# [steer, gas, brake]: steering left to right, gas and brake from none to full (Gymnasium's Box).
+ACTION_RANGE = (np.array([-1.0, 0.0, 0.0], np.float32), np.array([1.0, 1.0, 1.0], np.float32))
+
+
 def drive(car: Car, action: jax.Array, grip: jax.Array) -> Car:
     """One 1/50 s frame under action [steer, gas, brake] (clipped) with grip float32[2] (front, rear)."""
-    steer, gas, brake = jnp.clip(action, jnp.array([-1.0, 0.0, 0.0]), 1.0)
+    steer, gas, brake = jnp.clip(action, *ACTION_RANGE)
     car = car.replace(gas=car.gas + jnp.minimum(gas - car.gas, 0.1))
     target, limit = jnp.clip(-steer, -0.4, 0.4), grip * FRICTION_LIMIT
     return jax.lax.fori_loop(0, SUBSTEPS, lambda _, car: _substep(car, target, car.gas, brake, limit), car)
@@ -507,6 +511,9 @@ class CarRacing(Env):
         # Gymnasium's start: the first centre point, facing along the track
         car = Car.at(track.xy[0], track.beta[0])
         return CarRacingState(track, car, jnp.zeros(MAX_TILES, bool), jnp.zeros((), jnp.int32))
+
+    def action_range(self, params: CarRacingParams) -> tuple[jax.Array, jax.Array]:
+        return jnp.asarray(ACTION_RANGE[0]), jnp.asarray(ACTION_RANGE[1])
 
     def transition(self, key, state: CarRacingState, action, params: CarRacingParams) -> Step:
         track = state.track

@@ -90,6 +90,11 @@ class Env:
         """float32[n] state observation, as the Gymnasium reference env returns it."""
         raise NotImplementedError
 
+    def action_range(self, params: Any) -> tuple[jax.Array, jax.Array]:
+        """float32[A] low and high of the actions `transition` applies: it clips any other action
+        into them (what `SquashedActions` maps onto)."""
+        raise NotImplementedError
+
     # -- optional ----------------------------------------------------------------------------
     def metrics(self, state: Any, params: Any) -> dict[str, jax.Array]:
         """Named float scalars of a state, reported by evaluation for the state each episode
@@ -195,6 +200,30 @@ class AutoReset:
             final_obs=ts.obs,
             info=_episode_info(episode_return, episode_length),
         )
+
+
+class SquashedActions:
+    """Wraps an Env so that its actions are unbounded: u in R^A becomes
+    low + (high - low) * (tanh(u) + 1) / 2 in the env's `action_range`, so no action is clipped.
+
+    The agent's tanh-squashed Gaussian (`ppo.action_head=tanh`): the policy samples u from its
+    Gaussian and PPO's ratio of two policies' densities at u equals their ratio at the squashed
+    action (the squash's Jacobian cancels), so the learner is PPO's as it is; a deterministic
+    policy acts tanh(mean), mapped.
+    """
+
+    def __init__(self, env: Env):
+        self.env = env
+
+    def __getattr__(self, name):
+        return getattr(self.env, name)
+
+    def squash(self, u: jax.Array, params: Any) -> jax.Array:
+        low, high = self.env.action_range(params)
+        return low + (high - low) * (jnp.tanh(u) + 1.0) / 2.0
+
+    def step(self, key: jax.Array, state: Any, action: jax.Array, params: Any) -> Timestep:
+        return self.env.step(key, state, self.squash(action, params), params)
 
 
 def _episode_info(episode_return: jax.Array, episode_length: jax.Array) -> dict[str, jax.Array]:

@@ -131,6 +131,9 @@ class InvertedDoublePendulum(MjxEnv):
         qvel = noise * jax.random.normal(k_vel, (3,), jnp.float32)
         return self.state_at(qpos, qvel)
 
+    def action_range(self, params: IDPParams) -> tuple[jax.Array, jax.Array]:
+        return -jnp.ones(1), jnp.ones(1)  # the slider's ctrlrange
+
     def transition(self, key, state: IDPState, action, params: IDPParams) -> Step:
         ctrl = jnp.clip(jnp.reshape(action, (1,)), -1.0, 1.0)
         data = mjx.make_data(self.model).replace(qpos=state.qpos, qvel=state.qvel, ctrl=ctrl)

@@ -156,6 +156,9 @@ class LocomotionEnv(MjxEnv):
     def initial_state(self, key: jax.Array, params: LocomotionParams) -> LocomotionState:
         return self.state_at(*self.draw_start(key, params))
 
+    def action_range(self, params: LocomotionParams) -> tuple[jax.Array, jax.Array]:
+        return self.ctrl_range[:, 0], self.ctrl_range[:, 1]  # the actuators' ctrlrange
+
     def transition(self, key, state: LocomotionState, action, params: LocomotionParams) -> Step:
         ctrl = jnp.clip(jnp.reshape(action, (self.action_size,)), self.ctrl_range[:, 0], self.ctrl_range[:, 1])
         data = mjx.make_data(self.model).replace(qpos=state.qpos, qvel=state.qvel, ctrl=ctrl)

@@ -116,6 +116,9 @@ class Pendulum(MjxEnv):
         data = data.replace(qpos=state.theta[None], qvel=state.dtheta[None], ctrl=torque[None])
         return self.physics.forward(data)
 
+    def action_range(self, params: PendulumParams) -> tuple[jax.Array, jax.Array]:
+        return -params.max_torque * jnp.ones(1), params.max_torque * jnp.ones(1)
+
     def transition(self, key, state: PendulumState, action, params: PendulumParams) -> Step:
         torque = jnp.clip(jnp.reshape(action, ()), -params.max_torque, params.max_torque)
         cost = (

@@ -50,6 +50,7 @@ class AgentSpec:
         return "-".join(parts)
 
 
+EXPERT_AGENT = "expert_ppo"  # the agent whose trained policy is exported as an env's expert (hintsjax.expert)
 AGENTS: dict[str, AgentSpec] = {
     "ppo_rgb": AgentSpec(pixels=True),
     "ppo_state": AgentSpec(state=True),
@@ -59,7 +60,7 @@ AGENTS: dict[str, AgentSpec] = {
     "hints": AgentSpec(pixels=True, hint=True),
     # The converged references (tier 3). expert_ppo is PPO on the state at the env's expert
     # budget (env_defaults.ENV_DEFAULTS[env]["agents"]); dagger and gail learn from its exported policy.
-    "expert_ppo": AgentSpec(state=True),
+    EXPERT_AGENT: AgentSpec(state=True),
     "dagger": AgentSpec(state=True, algorithm="dagger"),
     "gail": AgentSpec(state=True, algorithm="gail"),
 }

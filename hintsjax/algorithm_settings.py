@@ -10,6 +10,14 @@ from dataclasses import dataclass
 from hintsjax.errors import UsageError, require_positive, require_range
 
 
+# The policy's action distribution (`ppo.action_head`; the car's learning measurements, issue 26):
+#   gaussian: N(mean, std), mean linear in the features, std learnt and state-independent; the env
+#             clips the action into its range (so on the car half the gas and brake draws are 0);
+#   tanh:     the same Gaussian, its draw squashed into the env's action range (envs.SquashedActions);
+#   sigmoid:  the authors' head: mean = 2 sigmoid(x) - 1 in [-1, 1], std floored at 0.01; clipped as gaussian.
+ACTION_HEADS = ("gaussian", "tanh", "sigmoid")
+
+
 @dataclass(frozen=True)
 class PPOConfig:
     """PPO settings (SPEC section 5). The budget is counted in environment steps."""
@@ -40,6 +48,7 @@ class PPOConfig:
     target_kl: float | None = None
     # State agents: normalise the state by its running mean and std (hintsjax.normalization).
     normalize_state: bool = False
+    action_head: str = "gaussian"  # one of ACTION_HEADS
 
     @property
     def rollout_length(self) -> int:
@@ -69,6 +78,8 @@ class PPOConfig:
                          "ppo.")
         require_range(self, {"gamma": (0.0, 1.0), "gae_lambda": (0.0, 1.0), "vf_coef": (0.0, math.inf),
                              "ent_coef": (0.0, math.inf)}, "ppo.")
+        if self.action_head not in ACTION_HEADS:
+            raise UsageError(f"unknown ppo.action_head {self.action_head!r}; valid: {', '.join(ACTION_HEADS)}")
         if self.target_kl is not None and not self.target_kl > 0:
             raise UsageError(f"ppo.target_kl ({self.target_kl}) must be positive, or null for no KL early stop")
 

@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import yaml
 
 from hintsjax import envs
-from hintsjax.agents import AGENTS, AgentSpec
+from hintsjax.agents import AGENTS, EXPERT_AGENT, AgentSpec
 from hintsjax.algorithm_settings import DaggerConfig, GailConfig, PPOConfig
 from hintsjax.conditioning import SCHEMES
 from hintsjax.env_defaults import ENV_DEFAULTS
@@ -87,7 +87,8 @@ class RunConfig:
         from hintsjax.generator import hinted_env
 
         observe = self.agent_spec.observe if observe is None else observe
-        return hinted_env(self.env, self.effective_hint if hint is None else hint, observe, self.hint_source_for(deploy))
+        env = hinted_env(self.env, self.effective_hint if hint is None else hint, observe, self.hint_source_for(deploy))
+        return envs.SquashedActions(env) if self.ppo.action_head == "tanh" else env
 
     def task_params(self, variant: str | None, deploy: bool = False) -> Any:
         """The params of `make_env(deploy=deploy)`'s env on `variant` (None: the training variant's default)."""
@@ -111,6 +112,9 @@ class RunConfig:
             raise UsageError(f"checkpoint_seconds must be 0 or more, got {self.checkpoint_seconds}")
         for section in SECTIONS:
             getattr(self, section).validate()
+        if self.ppo.action_head != "gaussian" and (self.agent_spec.imitates or self.agent == EXPERT_AGENT):
+            raise UsageError(f"ppo.action_head={self.ppo.action_head} is for PPO's learners; {self.agent} keeps the "
+                             "gaussian head (an expert's policy drives dagger and gail as a Gaussian's mean)")
         if self.agent_spec.algorithm == "dagger" and self.dagger.buffer_size < self.ppo.batch_size:
             raise UsageError(f"dagger.buffer_size ({self.dagger.buffer_size}) must hold one round, ppo.batch_size ({self.ppo.batch_size})")
         return self

@@ -162,6 +162,9 @@ class GeneratedHintEnv(Env):
         frame = self.inner._render(state, params.task)
         return FramedState(state, jnp.repeat(frame[None], self.hint.generator.frames, axis=0), state.t)
 
+    def action_range(self, params: GeneratedParams) -> tuple[jax.Array, jax.Array]:
+        return self.inner.action_range(params.task)
+
     def transition(self, key: jax.Array, state: FramedState, action: jax.Array, params: GeneratedParams) -> Step:
         out = self.inner.transition(key, state.env_state, action, params.task)
         inner = out.state.replace(t=state.env_state.t + 1)  # as Env.step advances the wrapped env's count

@@ -30,7 +30,7 @@ from hintsjax.trainer import Trainer
 # The PPO settings that fix the shapes of a run's arrays or the structure of its program: the
 # members of a group agree on these; every other PPO number is a Hyper leaf and may differ.
 SHAPES = ("total_env_steps", "num_envs", "batch_size", "epochs", "minibatch_size", "hint_width", "hidden",
-          "starts_per_rollout", "normalize_state")
+          "starts_per_rollout", "normalize_state", "action_head")
 
 
 def signature(cfg: RunConfig) -> dict[str, Any]:

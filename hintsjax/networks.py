@@ -90,12 +90,18 @@ class MLP(nn.Module):
         return nn.Dense(self.features[-1], kernel_init=he_init(self.out_scale**2 / 2))(x)
 
 
+SIGMOID_MIN_STD = 0.01  # the sigmoid head's floor on the policy's std
+
+
 class ActorCritic(nn.Module):
     """obs dict (batched) -> (action mean [B, A], log std [A], value [B]).
 
     The features z' come from the agent's inputs: pixels through the encoder (conditioned on
     the hint by the scheme), the state vector, or the embedded hint alone. Actor and critic are
-    three-layer MLPs on z'; the policy is a Gaussian with a learnt, state-independent std.
+    three-layer MLPs on z'; the policy is a Gaussian with a learnt, state-independent std. With
+    `action_head` "sigmoid" (the authors' head) its mean is 2 sigmoid(x) - 1 and its std at least
+    SIGMOID_MIN_STD; "gaussian" and "tanh" leave both as they are (tanh squashes in the env:
+    envs.SquashedActions).
     Top-level parameter names ("encoder", "conditioning", "actor", "log_std", "critic") are the
     optimiser's learning-rate groups. With `normalize_state` the state passes through the running
     normaliser first (hintsjax.normalization; its statistics are the "obs_stats" collection).
@@ -107,6 +113,7 @@ class ActorCritic(nn.Module):
     hint_width: int = 64
     hidden: tuple[int, ...] = (256, 256)
     normalize_state: bool = False
+    action_head: str = "gaussian"
 
     def features(self, obs: dict[str, jax.Array]) -> jax.Array:
         agent = self.agent
@@ -124,6 +131,8 @@ class ActorCritic(nn.Module):
         z = self.features(obs)
         mean = MLP((*self.hidden, self.action_size), out_scale=0.01, name="actor")(z)
         log_std = self.param("log_std", nn.initializers.zeros, (self.action_size,))
+        if self.action_head == "sigmoid":
+            mean, log_std = 2.0 * nn.sigmoid(mean) - 1.0, jnp.maximum(log_std, jnp.log(SIGMOID_MIN_STD))
         value = MLP((*self.hidden, 1), out_scale=1.0, name="critic")(z)[..., 0]
         return mean, log_std, value
 

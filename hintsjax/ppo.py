@@ -197,7 +197,7 @@ def clipped_surrogate_loss(
 
 def make_network(cfg: RunConfig, env: envs.Env) -> ActorCritic:
     return ActorCritic(cfg.agent_spec, cfg.scheme, env.action_size, cfg.ppo.hint_width, cfg.ppo.hidden,
-                       cfg.ppo.normalize_state)
+                       cfg.ppo.normalize_state, cfg.ppo.action_head)
 
 
 def make_optimizer(hyper: Hyper, params: Any) -> optax.GradientTransformation:
