@@ -399,3 +399,38 @@ def test_a_group_trains_into_each_runs_folder_and_splits_when_too_big(tmp_path, 
     sweep.train_one(tmp_path / "split", ids, seeds=2, smoke=True, experts=None)
     for run_id in ids:
         assert "group" not in json.loads((tmp_path / "split" / run_id / "eval.json").read_text())
+
+
+def test_car_learning_report_sets_each_variant_beside_the_defaults(tmp_path, monkeypatch):
+    """experiments/car_learning.py's report, on hand-written runs: per variant the IQM of each
+    evaluation (the run's deterministic eval.json, hintsjax.evaluate's stochastic files), the
+    policy's std from the last logged entropy (std 0.5 on 3 actions), and P(variant > gaussian)
+    (every tanh seed above every gaussian seed: 1.00, decided)."""
+    import math
+
+    import car_learning
+    from hintsjax import config
+
+    monkeypatch.setattr(report, "ARCHIVE", tmp_path / "archive")
+    runs = tmp_path / "car_learning"
+    entropy = 3 * (math.log(0.5) + 0.5 * (1 + math.log(2 * math.pi)))
+    for name, base in (("gaussian", 100.0), ("tanh", 400.0)):
+        means = [base, base + 10, base + 20, base + 30]
+        write_run(runs, "car_racing", name, [evaluation(base, 5.0, means, seeds=4, episodes_per_seed=50)] * 2,
+                  returns=[[base] * 20] * 4)
+        config.save_run_config(runs / "car_racing" / name, config.run_config({"env": "car_racing", "agent": "ppo_rgb"}))
+        rows = list(csv.DictReader((runs / "car_racing" / name / "metrics.csv").open()))
+        with (runs / "car_racing" / name / "metrics.csv").open("w", newline="") as f:
+            writer = csv.DictWriter(f, [*rows[0], "entropy"])
+            writer.writeheader()
+            writer.writerows({**row, "entropy": entropy} for row in rows)
+        for track in car_learning.TRACKS:
+            (runs / "car_racing" / name / f"eval-{track}-stochastic-50.json").write_text(
+                json.dumps(evaluation(base - 50, 5.0, [m - 50 for m in means])))
+    car_learning.report(runs, tmp_path / "car_learning.md")
+    text = (tmp_path / "car_learning.md").read_text()
+    tanh_row = next(line for line in text.splitlines() if line.startswith("| tanh |"))
+    assert tanh_row.count("415.0 [") == 2 and tanh_row.count("365.0 [") == 2 and tanh_row.endswith("| 0.50 |")
+    assert "(4 seeds x 50 evaluation episodes)" in text
+    assert "- hairpin, stochastic: P(tanh > gaussian) = 1.00 [1.00, 1.00]: decided" in text
+    assert (tmp_path / "archive" / "car_learning" / "car_racing" / "tanh" / "eval-hairpin-stochastic-50.json").exists()
