@@ -11,7 +11,8 @@ retraining), then HINTS-FC trained and evaluated with the generator's hints. Eve
 --seeds seeds x 50 episodes and the env's default budget. Finished steps are skipped and a run
 cut off mid-way resumes from its checkpoint, so the command can be repeated until it is done.
 `--frames-sweep` trains only generators, one per number of pictures, for the choice of that
-default. `--report` reads the folders (and PPO-RGB's archived 20-seed rows) and writes the table.
+default. `--report` reads the folders (and PPO-RGB's archived 20-seed rows; an env without one,
+e.g. halfcheetah, gets a PPO-RGB run of --seeds seeds beside its case) and writes the table.
 """
 
 from __future__ import annotations
@@ -30,6 +31,14 @@ RESULTS = Path(__file__).resolve().parent / "results"
 CASES = "pendulum:composite,pendulum:angular_velocity,acrobot:composite,idp:composite"
 GENERATOR = dict(policy="expert", expert_fraction=0.5, num_envs=64, steps=500, held_out_envs=16, epochs=10)
 PPO_RGB = RESULTS / "runs" / "classic20"  # PPO-RGB's archived rows: <env>/ppo_rgb/eval.json
+
+
+def rgb_folder(runs: Path, env: str) -> Path:
+    """PPO-RGB's run for `env`: the archived 20-seed row where there is one (classic control),
+    else the one this script trains beside the case (e.g. halfcheetah's, whose table row predates
+    the archive)."""
+    archived = PPO_RGB / env / "ppo_rgb"
+    return archived if (archived / "eval.json").is_file() else runs / f"{env}-ppo_rgb"
 
 
 def generator_folder(runs: Path, env: str, hint: str, frames: int) -> Path:
@@ -82,6 +91,8 @@ def run_case(runs: Path, env: str, hint: str, frames: int, seeds: int, gen_seeds
     base = {"env": env, "agent": "hints", "scheme": "fc", "hint": hint, "seeds": seeds}
     programmatic = train_agent(runs, f"{env}-{hint}-programmatic", base)
     deploy_with(programmatic, source)
+    if rgb_folder(runs, env).parent == runs:  # before the learned row: the report reads both once that is done
+        train_agent(runs, rgb_folder(runs, env).name, {"env": env, "agent": "ppo_rgb", "seeds": seeds})
     train_agent(runs, f"{env}-{hint}-learned-k{frames}", {**base, "hint_source": str(source)})
 
 
@@ -111,7 +122,8 @@ def report(runs: Path, cases: list[tuple[str, str]], frames: int, out: Path) -> 
         meta = json.loads((gen / "generator.json").read_text())
         r2 = ", ".join(f"{d} {m:.3f} (min {lo:.3f})" for d, m, lo in
                        zip(meta["dimensions"], meta["heldout_r2_mean"], meta["heldout_r2_min"]))
-        rgb = seed_means(PPO_RGB / env / "ppo_rgb" / "eval.json")
+        rgb_run = rgb_folder(runs, env)
+        rgb = seed_means(rgb_run / "eval.json")
         entries = [("trained and deployed with programmatic hints", programmatic / "eval.json"),
                    ("trained with programmatic, deployed with learned hints", programmatic / f"eval-deploy-learned-{gen.name}.json"),
                    ("trained and deployed with learned hints", learned / "eval.json")]
@@ -125,7 +137,8 @@ def report(runs: Path, cases: list[tuple[str, str]], frames: int, out: Path) -> 
             rows.append([env, hint, what, f"{x.mean():.1f} ± {x.std():.1f}", stats.iqm_cell(x), str(len(x)),
                          f"{poi.point:.2f} [{poi.low:.2f}, {poi.high:.2f}]"])
             verdicts.append(f"- {env} {hint}, {what}: " + stats.ordering_text("row", "PPO-RGB", poi))
-        rows.append([env, "-", "PPO-RGB (archived 20-seed row)", f"{rgb.mean():.1f} ± {rgb.std():.1f}", stats.iqm_cell(rgb),
+        rgb_what = "PPO-RGB (archived 20-seed row)" if rgb_run.parent != runs else "PPO-RGB (trained here)"
+        rows.append([env, "-", rgb_what, f"{rgb.mean():.1f} ± {rgb.std():.1f}", stats.iqm_cell(rgb),
                      str(len(rgb)), "-"])
         rates = [json.loads((f / "eval.json").read_text())["train_env_steps_per_s"] for f in (programmatic, learned)]
         costs.append([env, hint, r2, f"{meta['env_steps']:,}", f"{meta['seconds']['compile']:.0f} + {meta['seconds']['train']:.0f}",

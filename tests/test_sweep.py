@@ -434,3 +434,13 @@ def test_car_learning_report_sets_each_variant_beside_the_defaults(tmp_path, mon
     assert "(4 seeds x 50 evaluation episodes)" in text
     assert "- hairpin, stochastic: P(tanh > gaussian) = 1.00 [1.00, 1.00]: decided" in text
     assert (tmp_path / "archive" / "car_learning" / "car_racing" / "tanh" / "eval-hairpin-stochastic-50.json").exists()
+
+
+def test_learned_hints_compares_with_the_archived_ppo_rgb_or_trains_its_own(tmp_path):
+    """experiments/learned_hints.py: the pendulum's PPO-RGB is its archived 20-seed row; the
+    halfcheetah's table row predates the archive, so the case trains one beside it."""
+    import learned_hints
+
+    assert learned_hints.rgb_folder(tmp_path, "pendulum") == learned_hints.PPO_RGB / "pendulum" / "ppo_rgb"
+    assert (learned_hints.rgb_folder(tmp_path, "pendulum") / "eval.json").is_file()
+    assert learned_hints.rgb_folder(tmp_path, "halfcheetah") == tmp_path / "halfcheetah-ppo_rgb"
