@@ -14,6 +14,7 @@ from hintsjax.errors import UsageError, require_positive, require_range
 #   gaussian: N(mean, std), mean linear in the features, std learnt and state-independent; the env
 #             clips the action into its range (so on the car half the gas and brake draws are 0);
 #   tanh:     the same Gaussian, its draw squashed into the env's action range (envs.SquashedActions);
+#             the entropy bonus stays the Gaussian's, before the squash (no closed form after it);
 #   sigmoid:  the authors' head: mean = 2 sigmoid(x) - 1 in [-1, 1], std floored at 0.01; clipped as gaussian.
 ACTION_HEADS = ("gaussian", "tanh", "sigmoid")
 
