@@ -32,11 +32,13 @@ from typing import Any, Callable
 
 from report import archive_runs, load
 
+from hintsjax.agents import EXPERT_AGENT
+
 # A sweep's runs save at most once a minute: fast runs finish 50 updates in seconds, and a big
 # run's checkpoint (every env's MJX state) can reach a GB; an interruption loses at most a minute.
 CHECKPOINT_SECONDS = 60
 CHILD_ENVIRON = dict(os.environ)  # the workers' environment: a sweep's parent process keeps off the GPU
-EXPERT_RUN = "expert_ppo"  # the run whose best seed becomes its env's expert for dagger and gail
+EXPERT_RUN = EXPERT_AGENT  # the run whose best seed becomes its env's expert for dagger and gail
 GROUPS = "_groups"  # under runs/<sweep>/<env>: the groups' checkpoints and logs
 
 
