@@ -1,6 +1,6 @@
 """The policy's action heads (`ppo.action_head`): each env's action range, the tanh head's
 squashing into it (envs.SquashedActions), the authors' sigmoid head, and a tanh agent learning an
-action at the edge of its range."""
+action at the edge of its range. Bad heads are in tests/test_cli.py's BAD_SETTINGS."""
 
 from __future__ import annotations
 
@@ -16,7 +16,6 @@ from hintsjax.algorithms import make_trainer
 from hintsjax.config import run_config
 from hintsjax.env_defaults import ENV_DEFAULTS
 from hintsjax.envs.core import Env, Step
-from hintsjax.errors import UsageError
 from hintsjax.networks import SIGMOID_MIN_STD, ActorCritic
 
 
@@ -113,10 +112,3 @@ def test_a_tanh_agent_learns_the_action_at_the_edge_of_its_range():
     returns = np.asarray(metrics["episode_return"])
     assert np.nanmax(returns) <= 1.0 and np.nanmean(returns[-5:]) > np.nanmean(returns[:5])
 
-
-def test_action_head_bad_values_are_one_line_errors():
-    with pytest.raises(UsageError, match="valid: gaussian, tanh, sigmoid"):
-        run_config(dict(env="pendulum", ppo=dict(action_head="beta")))
-    for agent in ("expert_ppo", "dagger"):
-        with pytest.raises(UsageError, match="keeps the gaussian head"):
-            run_config(dict(env="pendulum", agent=agent, ppo=dict(action_head="tanh")))

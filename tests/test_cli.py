@@ -102,6 +102,7 @@ BAD_SETTINGS = {
     "ppo.target_kl=-1": "ppo.target_kl (-1) must be positive, or null for no KL early stop",
     "ppo.action_head=beta": "unknown ppo.action_head 'beta'; valid: gaussian, tanh, sigmoid",
     "agent=expert_ppo ppo.action_head=tanh": "ppo.action_head=tanh is for PPO's learners; expert_ppo keeps the gaussian head",
+    "agent=dagger ppo.action_head=sigmoid": "ppo.action_head=sigmoid is for PPO's learners; dagger keeps the gaussian head",
     "eval_episodes=0": "eval_episodes must be positive, got 0",
     "checkpoint_every=0": "checkpoint_every must be positive, got 0",
     "checkpoint_seconds=-1": "checkpoint_seconds must be 0 or more, got -1",
