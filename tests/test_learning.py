@@ -77,8 +77,13 @@ def test_hints_agent_learns_the_cue(scheme):
     final = returns[-LAST:].mean()
     assert final > -0.3, f"{scheme}: final return {final:.3f}, returns {np.round(returns, 2)}"
     assert final > returns[0] + 1.0
-    # The deterministic policy follows the cue.
-    np.testing.assert_allclose(policy_mean(trainer, state.params, [-1.0, 1.0]), [-1.0, 1.0], atol=0.3)
+    # The deterministic policy follows the cue: the sign of each cue, and far apart (a policy blind to
+    # it gives both cues one mean). Not "within 0.3 of the cue": near the optimum the normalised
+    # advantages are noise at unit scale, and the last update's steps at actor_lr 1e-2 (after the
+    # last measured return) move the mean by up to 2 in 1 of 16 runs; which runs depends on XLA's
+    # CPU thread count (fc seed 0 ends at -1.78 for cue -1 on 1 core, within 0.3 of -1 on 2).
+    low, high = policy_mean(trainer, state.params, [-1.0, 1.0])
+    assert low < 0.0 < high and high - low > 1.0, (low, high)
 
 
 def test_rgb_agent_cannot_beat_the_best_constant_action():
