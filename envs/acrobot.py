@@ -111,7 +111,7 @@ class Acrobot(MjxEnv):
         return -params.max_torque * jnp.ones(1), params.max_torque * jnp.ones(1)
 
     def transition(self, key, state: AcrobotState, action, params: AcrobotParams) -> Step:
-        torque = jnp.clip(jnp.reshape(action, (1,)), -params.max_torque, params.max_torque)
+        torque = jnp.clip(jnp.reshape(action, (1,)), *self.action_range(params))
         data = mjx.make_data(self.model).replace(qpos=state.qpos, qvel=state.qvel, ctrl=torque)
         data = self.physics.step(data)
         qpos = wrap_angle(data.qpos)

@@ -135,7 +135,7 @@ class InvertedDoublePendulum(MjxEnv):
         return -jnp.ones(1), jnp.ones(1)  # the slider's ctrlrange
 
     def transition(self, key, state: IDPState, action, params: IDPParams) -> Step:
-        ctrl = jnp.clip(jnp.reshape(action, (1,)), -1.0, 1.0)
+        ctrl = jnp.clip(jnp.reshape(action, (1,)), *self.action_range(params))
         data = mjx.make_data(self.model).replace(qpos=state.qpos, qvel=state.qvel, ctrl=ctrl)
         data = jax.lax.fori_loop(0, params.frame_skip, lambda _, d: self.physics.step(d), data)
         next_state = self._state(data, state.t)

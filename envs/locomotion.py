@@ -160,7 +160,7 @@ class LocomotionEnv(MjxEnv):
         return self.ctrl_range[:, 0], self.ctrl_range[:, 1]  # the actuators' ctrlrange
 
     def transition(self, key, state: LocomotionState, action, params: LocomotionParams) -> Step:
-        ctrl = jnp.clip(jnp.reshape(action, (self.action_size,)), self.ctrl_range[:, 0], self.ctrl_range[:, 1])
+        ctrl = jnp.clip(jnp.reshape(action, (self.action_size,)), *self.action_range(params))
         data = mjx.make_data(self.model).replace(qpos=state.qpos, qvel=state.qvel, ctrl=ctrl)
         data = jax.lax.fori_loop(0, params.frame_skip, lambda _, d: self.physics.step(d), data)
         data = self.physics.rne_postconstraint(data)

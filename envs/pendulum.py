@@ -120,7 +120,7 @@ class Pendulum(MjxEnv):
         return -params.max_torque * jnp.ones(1), params.max_torque * jnp.ones(1)
 
     def transition(self, key, state: PendulumState, action, params: PendulumParams) -> Step:
-        torque = jnp.clip(jnp.reshape(action, ()), -params.max_torque, params.max_torque)
+        torque = jnp.clip(jnp.reshape(action, (1,)), *self.action_range(params))[0]
         cost = (
             wrap_angle(state.theta - state.goal) ** 2
             + 0.1 * state.dtheta**2
