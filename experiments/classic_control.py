@@ -182,7 +182,7 @@ def scheme_findings(runs: Path, env: str) -> str:
         best, paper_best = max(ours, key=ours.get), max(paper, key=paper.get)
         agree += best == paper_best
         parts.append(f"{h}: {best} (paper {paper_best})")
-    return ("Best scheme per hint column, ours (paper): " + "; ".join(parts)
+    return ("Best scheme per hint column by mean return, as the paper ranks, ours (paper): " + "; ".join(parts)
             + f". The best scheme agrees with the paper's in {agree} of {len(parts)} columns.")
 
 
