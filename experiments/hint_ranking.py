@@ -1,12 +1,14 @@
 """How far a cheap hint-utility score agrees with the full tables (issue 25).
 
-    python experiments/hint_ranking.py --envs pendulum,acrobot,idp --seeds 5    # scores (GPU); resumable
+    python experiments/hint_ranking.py --envs pendulum,acrobot,idp,halfcheetah --seeds 5    # scores (GPU); resumable
     python experiments/hint_ranking.py --report     # -> experiments/results/hint_ranking.md
 
-Scores every Table 2 hint of each env with `python -m hintsjax.rank` (both scores) into
+Scores every hint of an env's table (Table 2 for the classic envs, Table 3 for halfcheetah, the
+one locomotion env with 4 hint rows) with `python -m hintsjax.rank` (both scores) into
 --runs/<env>, then compares each score's ranking with the ranking by the full-budget evaluation:
 the IQM of the archived 20-seed rows (experiments/results/runs/classic20) where they exist, else
-the 5-seed table's means (classic_table2.md, no per-seed data: no interval). Spearman's rho with a
+the 5-seed table's means (classic_table2.md, locomotion_table3.md; no per-seed data: no interval
+on the table's side). Spearman's rho with a
 95% bootstrap interval (the table's seeds resampled per row, the score's seeds resampled jointly
 over the candidates), and each score's cost against the table's hint rows: in env steps, and in
 seconds (compile included) against the rows' recorded wall-clock.
@@ -24,15 +26,21 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from classic_control import TABLE2_HINTS  # noqa: E402
+from locomotion import HINTS as LOCOMOTION_HINTS  # noqa: E402
 from report import markdown_table  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ARCHIVE = RESULTS / "runs" / "classic20"
-# Seconds the Table 2 hint rows took at 20 seeds on one H100 (classic_seeds20.md's group wall-clock:
-# pendulum's one group of 6; acrobot's group of 6 plus the state row alone; the idp's group of 7
-# trained 195 updates in 459 s after a 64 s compile, 2026-11-25, before its evaluation was cut).
-TABLE_SECONDS = {"pendulum": 616, "acrobot": 677 + 141, "idp": 459 + 64}
-TABLE_SEEDS = 20
+TABLE_HINTS = {**TABLE2_HINTS, "halfcheetah": LOCOMOTION_HINTS["halfcheetah"]}
+TABLE_FILES = {"pendulum": "classic_table2.md", "acrobot": "classic_table2.md", "idp": "classic_table2.md",
+               "halfcheetah": "locomotion_table3.md"}  # the 5-seed means, where no 20-seed archive is whole
+# Seconds the table's hint rows took on one GPU. Classic (20 seeds, one H100, classic_seeds20.md's
+# group wall-clock): pendulum's one group of 6; acrobot's group of 6 plus the state row alone; the
+# idp's group of 7 trained 195 updates in 459 s after a 64 s compile, 2026-11-25, before its
+# evaluation was cut. Halfcheetah (5 seeds, locomotion_table3.md): its 4 hint rows' wall-clock
+# (1144 + 1156 + 1156 + 1149 s), each its own process, trained several at a time on one H200.
+TABLE_SECONDS = {"pendulum": 616, "acrobot": 677 + 141, "idp": 459 + 64, "halfcheetah": 1144 + 1156 + 1156 + 1149}
+TABLE_SEEDS = {"pendulum": 20, "acrobot": 20, "idp": 20, "halfcheetah": 5}
 RESAMPLES = 2000
 
 
@@ -49,7 +57,7 @@ def run_scores(runs: Path, env: str, seeds: int, fraction: float, scores: str) -
     folder = score_folder(runs, env, fraction)
     if (folder / "scores.json").is_file():
         return
-    argv = [f"env={env}", f"hints={','.join(TABLE2_HINTS[env])}", f"seeds={seeds}", f"probe_fraction={fraction}",
+    argv = [f"env={env}", f"hints={','.join(TABLE_HINTS[env])}", f"seeds={seeds}", f"probe_fraction={fraction}",
             f"scores={scores}", f"out_dir={runs}", f"name={folder.name}"]
     if rank.main(argv):
         raise SystemExit(f"ranking {env} failed")
@@ -57,17 +65,18 @@ def run_scores(runs: Path, env: str, seeds: int, fraction: float, scores: str) -
 
 def table_rows(env: str) -> dict[str, np.ndarray]:
     """Per hint the full-budget per-seed mean returns ([20]) from the archive, or [1] (the 5-seed
-    mean) from classic_table2.md."""
+    mean) from the env's table file."""
     rows = {}
-    for hint in TABLE2_HINTS[env]:
+    for hint in TABLE_HINTS[env]:
         path = ARCHIVE / env / f"hints-fc-{hint}" / "eval.json"
         if path.is_file():
             rows[hint] = np.asarray(json.loads(path.read_text())["evaluations"][0]["seed_means"])
-    if len(rows) == len(TABLE2_HINTS[env]):
+    if len(rows) == len(TABLE_HINTS[env]):
         return rows
-    text = (RESULTS / "classic_table2.md").read_text().split(f"## {env}\n", 1)[1].split("\n## ", 1)[0]
-    for hint in TABLE2_HINTS[env]:
-        match = re.search(rf"^\| hints-fc-{hint} \| (-?[\d.]+) ±", text, re.M)
+    text = re.split(rf"^## {env}\b.*\n", (RESULTS / TABLE_FILES[env]).read_text(), maxsplit=1, flags=re.M)[1]
+    text = text.split("\n## ", 1)[0]
+    for hint in TABLE_HINTS[env]:
+        match = re.search(rf"^\| hints-fc-{hint}(?: †)? \| (-?[\d.]+) ±", text, re.M)
         rows[hint] = np.asarray([float(match.group(1))])
     return rows
 
@@ -79,12 +88,12 @@ def spearman(x: np.ndarray, y: np.ndarray) -> float:
 
 
 def rho_interval(score: np.ndarray, rows: list[np.ndarray], rng: np.random.Generator) -> tuple[float, float, float]:
-    """rho between the score's means over seeds ([S, K]) and the rows' IQMs, with a 95% bootstrap interval."""
+    """rho between the score's means over seeds ([S, K]) and the rows' IQMs, with a 95% bootstrap
+    interval (the score's seeds and the rows' seeds resampled; rows of one number, a table's means,
+    stay as they are: the interval then says how far the score's own seeds move rho)."""
     from hintsjax.stats import iqm
 
     point = spearman(score.mean(axis=0), [iqm(r) for r in rows])
-    if all(len(r) == 1 for r in rows):
-        return point, np.nan, np.nan
     draws = []
     for _ in range(RESAMPLES):
         s = score[rng.integers(0, len(score), len(score))].mean(axis=0)
@@ -103,12 +112,14 @@ def report(runs: Path, env_list: list[str], out: Path) -> None:
     rng = np.random.default_rng(0)
     lines = ["# Which hint is worth giving: cheap scores against the full tables", "",
              "Written by `python experiments/hint_ranking.py --report` from `python experiments/hint_ranking.py "
-             "--envs ... --seeds 5` (hintsjax.rank on every Table 2 hint; commands and hardware below). "
+             "--envs ... --seeds 5` (hintsjax.rank on every hint of the env's table; commands and hardware below). "
              "Full ranking: the IQM of each HINTS-FC row's per-seed evaluation returns at the full budget "
-             "(20 seeds, experiments/results/runs/classic20). rho: Spearman's rank correlation "
+             "(20 seeds, experiments/results/runs/classic20; halfcheetah: the 5-seed means of locomotion_table3.md, "
+             "whose interval resamples the score's seeds only). rho: Spearman's rank correlation "
              "between a score's mean over its seeds and that ranking, with a 95% bootstrap interval; `probe f`: the "
              "short training probe at the fraction f of the budget. Cost: the "
-             "score's env steps and seconds (compile included, one H100) against the table's hint rows at 20 seeds.", ""]
+             "score's env steps and seconds (compile included, one H100) against the table's hint rows (TABLE_SECONDS "
+             "in experiments/hint_ranking.py says where each table's seconds come from).", ""]
     summary, per_env = [], []
     rhos: dict[str, list[float]] = {}
     for env in env_list:
@@ -144,6 +155,9 @@ def report(runs: Path, env_list: list[str], out: Path) -> None:
             summary.append([env, name, f"{point:.2f}" + ("" if np.isnan(low) else f" [{low:.2f}, {high:.2f}]"),
                             f"{steps:,} ({steps / full_steps:.1%})", f"{seconds:.0f} ({seconds / TABLE_SECONDS[env]:.1%})"])
         per_env += [*markdown_table(header, cells), ""]
+        if result.get("probe_measure") == "step_reward":
+            per_env += ["The probe's score here is the mean reward per step over the short run's updates: no "
+                        f"{env} episode ended within it (hintsjax.rank's `learning_curve_area`).", ""]
     lines += ["## Agreement and cost", "",
               *markdown_table(["env", "score", "rho [95% CI]", "env steps (of the table's)", "seconds (of the table's)"], summary), ""]
     lines += ["Where a rho lies outside its interval, tied scores (e.g. the pendulum's three hints that carry the "
@@ -159,7 +173,7 @@ def report(runs: Path, env_list: list[str], out: Path) -> None:
 def _table_env_steps(env: str, hints: int) -> int:
     from hintsjax.config import run_config
 
-    return TABLE_SEEDS * hints * run_config({"env": env, "agent": "hints"}).ppo.total_env_steps
+    return TABLE_SEEDS[env] * hints * run_config({"env": env, "agent": "hints"}).ppo.total_env_steps
 
 
 def _score_env_steps(name: str, result: dict, folder: Path, hints: int) -> int:

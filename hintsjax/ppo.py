@@ -367,6 +367,7 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
         metrics = {
             **jax.tree.map(jnp.mean, parts),
             **episode_metrics(traj.terminated | traj.truncated, traj.episode_return),
+            "step_reward": jnp.mean(traj.reward),  # the env's reward per step, unscaled: defined where no episode ends
             "env_steps": (state.update + 1) * ppo.batch_size,
         }
         return state.replace(params=params, opt_state=opt_state, update=state.update + 1), metrics

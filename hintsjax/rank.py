@@ -16,7 +16,9 @@ tables):
   lacks and the hint carries.
 - `probe`: every candidate trained as HINTS-<scheme> for `probe_fraction` of the env's budget,
   all of them and their seeds one group (hintsjax.group); the score is the area under the
-  learning curve (the mean training return over the updates).
+  learning curve (the mean training return over the updates; where a run saw no episode end, as
+  halfcheetah's 1000-step episodes at 10 % of its budget, every run's mean reward per step:
+  scores.json's `probe_measure` says which).
 
 The run folder holds config.yaml, scores.json (per score, candidate and seed), ranking.csv and
 ranking.png.
@@ -229,18 +231,26 @@ def probe_configs(cfg: RankConfig) -> list:
                         "seed": cfg.seed, "ppo": ppo}) for h in cfg.candidates]
 
 
-def probe_scores(cfg: RankConfig) -> np.ndarray:
-    """[S, K]: each seed's and candidate's mean training return over the short run's updates."""
+def probe_scores(cfg: RankConfig) -> tuple[np.ndarray, str]:
+    """([S, K] each seed's and candidate's area under its short run's learning curve, its measure)."""
     from hintsjax.group import make_group, make_group_trainer
 
     cfgs = probe_configs(cfg)
     trainer = make_group_trainer(make_group(cfgs))
     _, metrics = jax.jit(jax.vmap(trainer.train))(cfgs[0].seed_keys())
-    returns = np.asarray(metrics["episode_return"])  # [S, U, K]; NaN where no episode ended in an update
-    if np.isnan(returns).all(axis=1).any():
-        raise UsageError(f"no {cfg.env} episode ended within the probe's {cfgs[0].ppo.num_updates} updates: "
-                         f"raise probe_fraction (now {cfg.probe_fraction})")
-    return np.nanmean(returns, axis=1)
+    return learning_curve_area({k: np.asarray(v) for k, v in metrics.items()})
+
+
+def learning_curve_area(metrics: dict[str, np.ndarray]) -> tuple[np.ndarray, str]:
+    """From a group's metrics ([S, U, K] per name), each run's area under its learning curve: the
+    mean training return over the updates ("episode_return"), or, where some run saw no episode
+    end (episodes longer than the probe: halfcheetah's 1000 steps against 784 steps per env at 10 %
+    of its budget), every run's mean reward per step ("step_reward": a fixed-length episode's return over its
+    length); ([S, K], the measure's name)."""
+    returns = metrics["episode_return"]  # NaN where no episode ended in an update
+    if not np.isnan(returns).all(axis=1).any():
+        return np.nanmean(returns, axis=1), "episode_return"
+    return metrics["step_reward"].mean(axis=1), "step_reward"
 
 
 # -- the command ---------------------------------------------------------------------------------------
@@ -255,7 +265,7 @@ def rank_hints(cfg: RankConfig) -> dict[str, Any]:
         if name == "information":
             values = np.asarray(jax.jit(jax.vmap(make_information(cfg)))(keys))
         else:
-            values = probe_scores(cfg)
+            values, out["probe_measure"] = probe_scores(cfg)
         out["scores"][name] = values.tolist()  # [S, K]
         out["seconds"][name] = round(time.perf_counter() - start, 2)
     if "probe" in cfg.score_names:

@@ -74,6 +74,7 @@ def test_hints_agent_learns_the_cue(scheme):
     returns = metrics["episode_return"]
     assert returns.shape == (trainer.cfg.ppo.num_updates,) == (12,)
     assert np.all(metrics["episodes"] == LEARN_PPO["batch_size"])  # every step ends an episode
+    np.testing.assert_allclose(metrics["step_reward"], returns, rtol=1e-5)  # so its reward is its return
     final = returns[-LAST:].mean()
     assert final > -0.3, f"{scheme}: final return {final:.3f}, returns {np.round(returns, 2)}"
     assert final > returns[0] + 1.0

@@ -21,6 +21,7 @@ def test_every_score_ranks_the_informative_hint_first(tmp_path, capsys):
     folder = tmp_path / "r"
     result = json.loads((folder / "scores.json").read_text())
     assert result["candidates"] == ["distractor", "cue"] and set(result["scores"]) == {"information", "probe"}
+    assert result["probe_measure"] == "episode_return"  # every step of the cue task ends an episode
     for name, values in result["scores"].items():
         values = np.asarray(values)  # [seeds, candidates]
         assert values.shape == (2, 2)
@@ -43,6 +44,19 @@ def test_discounted_returns_by_hand():
     done = jnp.array([[False], [True], [False], [False]])  # an episode ends after step 1
     ret = rank.discounted_returns(reward, done, 0.5)[:, 0]
     np.testing.assert_allclose(ret, [1 + 0.5 * 2, 2, 3 + 0.5 * 4, 4])
+
+
+def test_learning_curve_area_by_hand():
+    nan = np.nan
+    returns = np.array([[[1.0, nan], [3.0, 2.0]], [[nan, 4.0], [5.0, 6.0]]])  # [S=2, U=2, K=2]
+    step = np.array([[[0.1, 0.2], [0.3, 0.4]], [[0.5, 0.6], [0.7, 0.8]]])
+    area, measure = rank.learning_curve_area({"episode_return": returns, "step_reward": step})
+    assert measure == "episode_return"
+    np.testing.assert_allclose(area, [[2.0, 2.0], [5.0, 5.0]])  # the updates where episodes ended
+    returns[1, :, 0] = nan  # seed 1's first candidate saw no episode end: every run by its reward per step
+    area, measure = rank.learning_curve_area({"episode_return": returns, "step_reward": step})
+    assert measure == "step_reward"
+    np.testing.assert_allclose(area, [[0.2, 0.3], [0.6, 0.7]])
 
 
 def test_ranking_by_mean():
