@@ -194,7 +194,9 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = argparse.ArgumentParser(prog="python -m hintsjax.evaluate", description=__doc__.splitlines()[0])
     parser.add_argument("run", type=Path, help="a run folder written by python -m hintsjax.run")
-    parser.add_argument("--variant", default=None, help="env variant to evaluate on (default: the training one)")
+    parser.add_argument("--variant", default=None,
+                        help="env variant(s) to evaluate on, comma-separated, all by one compiled program "
+                             "(default: the training one)")
     parser.add_argument("--episodes", type=int, default=None, help="episodes per seed (default: the run's)")
     parser.add_argument("--stochastic", action="store_true", help="sample actions instead of the mean")
     parser.add_argument("--hint-source", default=None,
@@ -205,23 +207,25 @@ def main(argv: list[str] | None = None) -> int:
         cfg = load_run_config(args.run)
         if args.hint_source is not None:
             cfg = dataclasses.replace(cfg, eval_hint_source=args.hint_source).validate()
-        variant = args.variant or cfg.variant
-        env_params(cfg.env, variant)
+        variants = tuple(v.strip() for v in args.variant.split(",")) if args.variant else (cfg.variant,)
+        for variant in variants:
+            env_params(cfg.env, variant)
         episodes = cfg.eval_episodes if args.episodes is None else args.episodes
         if episodes <= 0:
             raise UsageError(f"--episodes must be positive, got {episodes}")
         state, _ = checkpoint.restore_latest(args.run, cfg)
     except UsageError as e:
         return fail(e)
-    result = evaluate_params(cfg, state.params, variant, episodes, args.stochastic)
+    results, _ = evaluate_variants(cfg, state.params, variants, episodes, args.stochastic)
     mode = "stochastic" if args.stochastic else "deterministic"
     source = cfg.hint_source_for(deploy=True)
     tag = "" if source == PROGRAMMATIC else f"-hints-{Path(source).name}"
-    out = args.run / f"eval-{result['variant']}-{mode}-{episodes}{tag}.json"
-    out.write_text(json.dumps({"label": cfg.label, "env": cfg.env, "hint_source": source, **result}, indent=1))
-    print(f"{cfg.label} on {cfg.env}/{result['variant']} ({mode}, {cfg.seeds} seeds x {episodes} episodes"
-          f"{'' if not tag else ', hints from ' + source}): "
-          f"{result['mean']:.2f} +- {result['std']:.2f}{metrics_text(result)}  -> {out}")
+    for result in results:
+        out = args.run / f"eval-{result['variant']}-{mode}-{episodes}{tag}.json"
+        out.write_text(json.dumps({"label": cfg.label, "env": cfg.env, "hint_source": source, **result}, indent=1))
+        print(f"{cfg.label} on {cfg.env}/{result['variant']} ({mode}, {cfg.seeds} seeds x {episodes} episodes"
+              f"{'' if not tag else ', hints from ' + source}): "
+              f"{result['mean']:.2f} +- {result['std']:.2f}{metrics_text(result)}  -> {out}")
     return 0
 
 

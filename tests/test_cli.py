@@ -292,6 +292,17 @@ def test_evaluate_command_on_a_deploy_variant(finished_run, capsys):
     assert "swingto" in capsys.readouterr().out
 
 
+def test_evaluate_command_on_two_variants_in_one_program(finished_run, capsys):
+    """--variant a,b writes each variant's file, equal to evaluating it alone."""
+    assert evaluate_main([str(finished_run), "--variant", "swingup,swingto", "--episodes", "4", "--stochastic"]) == 0
+    both = {v: json.loads((finished_run / f"eval-{v}-stochastic-4.json").read_text()) for v in ("swingup", "swingto")}
+    assert evaluate_main([str(finished_run), "--variant", "swingto", "--episodes", "4", "--stochastic"]) == 0
+    alone = json.loads((finished_run / "eval-swingto-stochastic-4.json").read_text())
+    assert both["swingto"]["returns"] == alone["returns"] and both["swingup"]["returns"] != alone["returns"]
+    assert evaluate_main([str(finished_run), "--variant", "swingup,nope"]) == 2
+    assert "valid choices: swingto, swingup" in capsys.readouterr().err
+
+
 def test_evaluate_bad_inputs(finished_run, tmp_path, capsys):
     assert evaluate_main([str(tmp_path / "missing")]) == 2
     assert evaluate_main([str(finished_run), "--variant", "nope"]) == 2
