@@ -5,7 +5,8 @@
 
 Each variant is PPO-RGB on the car at its table's budget (ENV_DEFAULTS: 1000 episodes of 1000
 steps) with a few settings changed (`VARIANTS`), trained by `python -m hintsjax.run` into
-<runs>/car_racing/<variant> (a folder with checkpoints and no eval.json resumes), then evaluated
+<runs>/car_racing/<variant> (a folder with checkpoints and no eval.json resumes; the variants that
+differ only in numbers, the reward scale, train as one group: one program), then evaluated
 as the run does (deterministic: the policy's mean; standard tracks and the hairpin deploy) and with
 sampled actions, the authors' protocol (`python -m hintsjax.evaluate <folder> --stochastic`, both
 tracks). The report gives per variant and evaluation the IQM [95% CI] of the per-seed mean
@@ -49,20 +50,42 @@ def stochastic_file(folder: Path, track: str) -> Path | None:
     return found[-1] if found else None
 
 
-def train(runs: Path, names: list[str], seeds: int, smoke: bool) -> None:
-    """Train and evaluate each variant not finished yet (both evaluations); resumable."""
-    from hintsjax import evaluate, run
+def variant_values(runs: Path, name: str, seeds: int, smoke: bool) -> dict:
+    """`python -m hintsjax.run`'s settings of a variant's run."""
+    values = {"env": ENV, "agent": AGENT, "seeds": seeds, **VARIANTS[name], "out_dir": str(runs / ENV), "name": name}
+    if smoke:
+        values = {**values, **SMOKE, "ppo": {**SMOKE["ppo"], **VARIANTS[name].get("ppo", {})}}
+    return values
 
+
+def train(runs: Path, names: list[str], seeds: int, smoke: bool) -> None:
+    """Train and evaluate each variant not finished yet (both evaluations); resumable. Variants
+    that differ only in numbers (the reward scale: hintsjax.group's Hyper) train as one group, in
+    one program (<runs>/car_racing/_groups/<names>); the policy heads each need their own."""
+    from hintsjax import checkpoint, evaluate, run
+    from hintsjax.config import run_config, save_run_config
+    from hintsjax.group import plan
+
+    cfgs = [run_config({k: v for k, v in variant_values(runs, n, seeds, smoke).items() if k not in ("out_dir", "name")})
+            for n in names]
+    for members in plan(cfgs):  # a group with one member finished (cut while writing results) resumes whole
+        group = [names[i] for i in members]
+        if all((runs / ENV / n / "eval.json").exists() for n in group):
+            continue
+        if len(group) == 1:
+            folder = runs / ENV / group[0]
+            values = {"resume": str(folder)} if (folder / "config.yaml").exists() else variant_values(runs, group[0], seeds, smoke)
+            if run.main_from_values(values):
+                raise SystemExit(f"{group[0]}: training failed (see above)")
+            continue
+        folder = runs / ENV / "_groups" / "+".join(group)
+        for i in members:
+            (runs / ENV / names[i]).mkdir(parents=True, exist_ok=True)
+            save_run_config(runs / ENV / names[i], cfgs[i])
+        run.train_group([cfgs[i] for i in members], folder, [runs / ENV / n for n in group],
+                        resume=checkpoint.latest_update(folder) is not None)
     for name in names:
         folder = runs / ENV / name
-        if not (folder / "eval.json").exists():
-            begun = (folder / "config.yaml").exists()
-            values = {"resume": str(folder)} if begun else {
-                "env": ENV, "agent": AGENT, "seeds": seeds, **VARIANTS[name], "out_dir": str(runs / ENV), "name": name}
-            if smoke and not begun:
-                values = {**values, **SMOKE, "ppo": {**SMOKE["ppo"], **VARIANTS[name].get("ppo", {})}}
-            if run.main_from_values(values):
-                raise SystemExit(f"{name}: training failed (see above)")
         missing = [track for track in TRACKS if stochastic_file(folder, track) is None]  # one program for both
         if missing and evaluate.main([str(folder), "--stochastic", "--variant", ",".join(missing)]):
             raise SystemExit(f"{name}: the stochastic evaluation on {', '.join(missing)} failed")
