@@ -46,6 +46,17 @@ class RunLog:
             writer.writeheader()
             writer.writerows(r for r in rows if int(r["update"]) <= update)
 
+    def _widen(self, names: list[str]) -> None:
+        """Add columns for metrics that a resumed run's file predates (a metric added to the code
+        since it began): its earlier rows get NaN there."""
+        with self.path.open() as f:
+            rows = list(csv.DictReader(f))
+        self.columns = [*self.columns, *names]
+        with self.path.open("w", newline="") as f:
+            writer = csv.DictWriter(f, self.columns, restval="nan")
+            writer.writeheader()
+            writer.writerows(rows)
+
     def write(self, metrics: dict[str, np.ndarray], first_update: int) -> None:
         """metrics: name -> [S, n] for n updates starting after `first_update` updates."""
         names = sorted(metrics)
@@ -53,6 +64,8 @@ class RunLog:
         new = not self.path.exists()
         if self.columns is None:
             self.columns = ["update", "seed", *names]
+        elif missing := [k for k in names if k not in self.columns]:
+            self._widen(missing)
         with self.path.open("a", newline="") as f:
             writer = csv.DictWriter(f, self.columns)
             if new:

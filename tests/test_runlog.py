@@ -1,10 +1,29 @@
-"""Learning-curve statistics: the bootstrap confidence band of the mean over seeds."""
+"""Learning-curve statistics: the bootstrap confidence band of the mean over seeds; the metrics
+file of a resumed run."""
 
 from __future__ import annotations
 
+import csv
+
 import numpy as np
 
-from hintsjax.runlog import bin_means, mean_confidence_band
+from hintsjax.runlog import METRICS_CSV, RunLog, bin_means, mean_confidence_band
+
+
+def test_a_resumed_run_gains_the_columns_of_metrics_added_since_it_began(tmp_path):
+    """A run begun before a metric existed resumes: the metric gets a column, NaN in earlier rows,
+    and rows after the checkpoint resumed from are dropped."""
+    log = RunLog(tmp_path)
+    log.write({"env_steps": np.array([[8.0, 16.0, 24.0]]), "episode_return": np.array([[1.0, 2.0, 3.0]])}, 0)
+    log.close()
+    log = RunLog(tmp_path, resume_update=2)  # the checkpoint was at update 2: update 3 is dropped
+    log.write({"env_steps": np.array([[24.0]]), "episode_return": np.array([[5.0]]), "step_reward": np.array([[0.5]])}, 2)
+    log.close()
+    with (tmp_path / METRICS_CSV).open() as f:
+        rows = list(csv.DictReader(f))
+    assert list(rows[0]) == ["update", "seed", "env_steps", "episode_return", "step_reward"]
+    assert [(r["update"], r["episode_return"], r["step_reward"]) for r in rows] == [
+        ("1", "1.0", "nan"), ("2", "2.0", "nan"), ("3", "5.0", "0.5")]
 
 
 def test_band_brackets_the_mean_and_shrinks_with_agreement():
