@@ -50,9 +50,9 @@ def stochastic_file(folder: Path, track: str) -> Path | None:
     return found[-1] if found else None
 
 
-def variant_values(runs: Path, name: str, seeds: int, smoke: bool) -> dict:
-    """`python -m hintsjax.run`'s settings of a variant's run."""
-    values = {"env": ENV, "agent": AGENT, "seeds": seeds, **VARIANTS[name], "out_dir": str(runs / ENV), "name": name}
+def variant_settings(name: str, seeds: int, smoke: bool) -> dict:
+    """A variant's run settings (RunConfig's values)."""
+    values = {"env": ENV, "agent": AGENT, "seeds": seeds, **VARIANTS[name]}
     if smoke:
         values = {**values, **SMOKE, "ppo": {**SMOKE["ppo"], **VARIANTS[name].get("ppo", {})}}
     return values
@@ -66,15 +66,15 @@ def train(runs: Path, names: list[str], seeds: int, smoke: bool) -> None:
     from hintsjax.config import run_config, save_run_config
     from hintsjax.group import plan
 
-    cfgs = [run_config({k: v for k, v in variant_values(runs, n, seeds, smoke).items() if k not in ("out_dir", "name")})
-            for n in names]
+    cfgs = [run_config(variant_settings(n, seeds, smoke)) for n in names]
     for members in plan(cfgs):  # a group with one member finished (cut while writing results) resumes whole
         group = [names[i] for i in members]
         if all((runs / ENV / n / "eval.json").exists() for n in group):
             continue
         if len(group) == 1:
             folder = runs / ENV / group[0]
-            values = {"resume": str(folder)} if (folder / "config.yaml").exists() else variant_values(runs, group[0], seeds, smoke)
+            values = ({"resume": str(folder)} if (folder / "config.yaml").exists() else
+                      {**variant_settings(group[0], seeds, smoke), "out_dir": str(runs / ENV), "name": group[0]})
             if run.main_from_values(values):
                 raise SystemExit(f"{group[0]}: training failed (see above)")
             continue

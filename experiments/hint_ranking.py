@@ -32,8 +32,8 @@ from report import markdown_table  # noqa: E402
 RESULTS = Path(__file__).resolve().parent / "results"
 ARCHIVE = RESULTS / "runs" / "classic20"
 TABLE_HINTS = {**TABLE2_HINTS, "halfcheetah": LOCOMOTION_HINTS["halfcheetah"]}
-TABLE_FILES = {"pendulum": "classic_table2.md", "acrobot": "classic_table2.md", "idp": "classic_table2.md",
-               "halfcheetah": "locomotion_table3.md"}  # the 5-seed means, where no 20-seed archive is whole
+TABLE_FILES = {**{env: "classic_table2.md" for env in TABLE2_HINTS},  # the 5-seed means, where no 20-seed archive is whole
+               "halfcheetah": "locomotion_table3.md"}
 # Seconds the table's hint rows took on one GPU. Classic (20 seeds, one H100, classic_seeds20.md's
 # group wall-clock): pendulum's one group of 6; acrobot's group of 6 plus the state row alone; the
 # idp's group of 7 trained 195 updates in 459 s after a 64 s compile, 2026-11-25, before its
