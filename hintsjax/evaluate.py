@@ -24,11 +24,12 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from hintsjax import envs
+from hintsjax import envs, program_cache
 from hintsjax.config import RunConfig, env_params, load_run_config
 from hintsjax.errors import UsageError, fail
 from hintsjax.generator import PROGRAMMATIC
 from hintsjax.ppo import Hyper, make_network, pick_hint
+from hintsjax.trainer import program_identity
 
 EVAL_TAG = 0xE7A1  # folded into a seed's key so evaluation draws differ from training's
 
@@ -137,9 +138,10 @@ def compile_evaluator(cfg: RunConfig, params: Any, variant: str | None, episodes
     task_params, pick)` for any member; (that executable, seconds spent compiling)."""
     t = time.perf_counter()
     picked = () if pick is None else (pick,)
-    evaluate = jax.jit(jax.vmap(make_task_evaluator(cfg, episodes, stochastic, hint),
-                                in_axes=(0, 0, None) + (None,) * len(picked)))
-    compiled = evaluate.lower(params, eval_keys(cfg), cfg.task_params(variant, deploy=True), *picked).compile()
+    evaluate = jax.vmap(make_task_evaluator(cfg, episodes, stochastic, hint), in_axes=(0, 0, None) + (None,) * len(picked))
+    identity = program_identity(cfg, episodes, stochastic, hint)
+    compiled = program_cache.lower(evaluate, params, eval_keys(cfg), cfg.task_params(variant, deploy=True), *picked,
+                                   name="evaluate", context=identity).compile()
     return compiled, time.perf_counter() - t
 
 

@@ -25,7 +25,7 @@ from hintsjax.config import RunConfig
 from hintsjax.errors import UsageError
 from hintsjax.generator import PROGRAMMATIC
 from hintsjax.ppo import Hyper, RunnerState
-from hintsjax.trainer import Trainer
+from hintsjax.trainer import Trainer, program_identity
 
 # The PPO settings that fix the shapes of a run's arrays or the structure of its program: the
 # members of a group agree on these; every other PPO number is a Hyper leaf and may differ.
@@ -129,7 +129,8 @@ def make_group_trainer(group: Group) -> Trainer:
             states.append(RunnerState(params, opt_state, ts.state, ts.obs, k_run, jnp.zeros((), jnp.int32), hyper))
         return jax.tree.map(lambda *x: jnp.stack(x), *states)
 
-    return Trainer(cfg, base.env, base.network, init, jax.vmap(base.update))
+    cacheable = all(program_identity(member) is not None for member in group.cfgs)
+    return Trainer(cfg, base.env, base.network, init, jax.vmap(base.update), repr(group) if cacheable else None)
 
 
 def cell_state(group: Group, state: RunnerState, k: int) -> RunnerState:

@@ -21,7 +21,7 @@ from flax import struct
 from hintsjax import envs, normalization
 from hintsjax.config import RunConfig
 from hintsjax.networks import ActorCritic, lr_labels
-from hintsjax.trainer import Trainer, episode_metrics
+from hintsjax.trainer import Trainer, episode_metrics, program_identity
 
 
 @struct.dataclass
@@ -386,4 +386,4 @@ def make_trainer(cfg: RunConfig, hint: str | None = None) -> Trainer:
         state, metrics = parts.learn(state, traj, last_value, state.hyper.reward_scale * traj.reward, k_epochs)
         return state.replace(key=key), metrics
 
-    return Trainer(cfg, parts.env, parts.network, parts.init, update)
+    return Trainer(cfg, parts.env, parts.network, parts.init, update, program_identity(cfg, hint))

@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from hintsjax import checkpoint, compilation_cache, expert
+from hintsjax import checkpoint, compilation_cache, expert, program_cache
 from hintsjax.config import RunConfig, load_run_config, run_config, save_run_config
 from hintsjax.evaluate import compile_evaluator, evaluate_group, evaluate_variants, metrics_text
 from hintsjax.algorithms import make_trainer
@@ -79,7 +79,8 @@ class Compiled:
     run_chunk: Callable[[Any, np.int32], tuple[Any, dict[str, jax.Array]]]
     chunk: int
     seconds: float  # spent tracing and compiling both
-    trace_seconds: float  # of which tracing and lowering to XLA (Python; the persistent cache cannot save it)
+    trace_seconds: float  # of which tracing and lowering to XLA (Python), or loading both as traced before
+    loaded: bool = False  # both programs were read from the traced-program cache, not traced
 
 
 def compile_training(trainer: Trainer, keys: jax.Array, chunk: int) -> Compiled:
@@ -87,13 +88,18 @@ def compile_training(trainer: Trainer, keys: jax.Array, chunk: int) -> Compiled:
     array of the state and the metrics split over devices by its seed axis, if the keys are)."""
     t = time.perf_counter()
     seeds = seed_sharding(keys.shape[0]) if len(keys.devices()) > 1 else None
-    placed = (lambda f, args: jax.jit(f, in_shardings=args, out_shardings=seeds)) if seeds else (lambda f, _: jax.jit(f))
-    init = placed(jax.vmap(trainer.init), seeds).lower(keys)
-    run_chunk = placed(jax.vmap(partial(trainer.run_chunk, length=chunk), in_axes=(0, None)), (seeds, None)).lower(
-        init.out_info, np.int32(chunk))  # the state's shapes as init's lowering found them: no second trace
+    init_fn, chunk_fn = jax.vmap(trainer.init), jax.vmap(partial(trainer.run_chunk, length=chunk), in_axes=(0, None))
+    if seeds is None:  # traced, or loaded as traced by an earlier process (hintsjax/program_cache.py)
+        init = program_cache.lower(init_fn, keys, name="init", context=trainer.identity)
+        run_chunk = program_cache.lower(chunk_fn, init.out_info, np.int32(chunk), name=f"chunk{chunk}",
+                                        context=trainer.identity)  # the state's shapes as init's lowering found them
+    else:
+        init = jax.jit(init_fn, in_shardings=seeds, out_shardings=seeds).lower(keys)
+        run_chunk = jax.jit(chunk_fn, in_shardings=(seeds, None), out_shardings=seeds).lower(init.out_info, np.int32(chunk))
     traced = time.perf_counter() - t
+    loaded = all(getattr(program, "loaded", False) for program in (init, run_chunk))
     init, run_chunk = init.compile(), run_chunk.compile()
-    return Compiled(init, run_chunk, chunk, time.perf_counter() - t, traced)
+    return Compiled(init, run_chunk, chunk, time.perf_counter() - t, traced, loaded)
 
 
 class GroupTooBig(RuntimeError):
@@ -258,7 +264,7 @@ def finish(cfg: RunConfig, run_dir: Path, training: Training, evaluations: list[
     results = {"label": cfg.label, "env": cfg.env, "train_seconds_this_call": training.seconds,
                "train_seconds": training.before + training.seconds,
                "compile_seconds": {"train": compiled.seconds, "eval": eval_compile},
-               "trace_seconds": {"train": compiled.trace_seconds},
+               "trace_seconds": {"train": compiled.trace_seconds}, "traced_programs_loaded": compiled.loaded,
                "train_env_steps_per_s": (training.done - training.first) * cfg.ppo.batch_size * cfg.seeds
                / max(training.seconds, 1e-9),
                "env_steps": cfg.ppo.num_updates * cfg.ppo.batch_size, **(extra or {}), "evaluations": evaluations}

@@ -30,6 +30,9 @@ class Trainer:
     network: Any  # the policy's ActorCritic
     init: Callable[[jax.Array], Any]
     update: Callable[[Any], tuple[Any, dict[str, jax.Array]]]
+    # What the programs depend on besides code and their arguments' shapes (`program_identity`),
+    # the key of the traced-program cache (hintsjax/program_cache.py); None: never cached
+    identity: str | None = None
 
     def run(self, state: Any, num_updates: int) -> tuple[Any, dict[str, jax.Array]]:
         """Advance `num_updates` updates; metrics are [num_updates]-stacked."""
@@ -53,6 +56,18 @@ class Trainer:
     def train(self, key: jax.Array) -> tuple[Any, dict[str, jax.Array]]:
         """The whole run from a seed key: the function that is vmapped over seeds."""
         return self.run(self.init(key), self.cfg.ppo.num_updates)
+
+
+def program_identity(cfg: RunConfig, *more: Any) -> str | None:
+    """The description of a run's programs that the traced-program cache keys them by: its
+    configuration (and `more`, e.g. a group's members), or None where the programs close over
+    files that no configuration value digests (an imitation agent's expert, a learned hint
+    generator), which are then traced every time."""
+    from hintsjax.generator import PROGRAMMATIC
+
+    if cfg.agent_spec.imitates or {cfg.hint_source_for(False), cfg.hint_source_for(True)} != {PROGRAMMATIC}:
+        return None
+    return repr((cfg, *more))
 
 
 def episode_metrics(done: jax.Array, episode_return: jax.Array) -> dict[str, jax.Array]:

@@ -1,0 +1,13 @@
+"""Settings for the whole test suite.
+
+The traced-program cache (hintsjax/program_cache.py) is off: several tests replace a function at
+run time (a poisoned trainer, a patched env metric), which no key of that cache can see, and a
+test must never run a program traced for another test. tests/test_program_cache.py turns it on
+in folders of its own. Subprocesses that the tests start inherit the setting.
+"""
+
+import os
+
+from hintsjax import program_cache
+
+os.environ[program_cache.ENV_VAR] = "off"
