@@ -47,9 +47,11 @@ def _chunk(trainer):
 
 
 def _run(lowered_init, lowered_chunk, keys):
-    """init, then one chunk of 2 of its 3 updates, from the two lowered programs."""
+    """init, then one chunk of 2 of its 3 updates, from the two lowered programs; the state is
+    placed as the chunk expects, as a resumed run's restored state is (run.start)."""
     state = lowered_init.compile()(keys)
-    return lowered_chunk.compile()(state, np.int32(2))
+    chunk = lowered_chunk.compile()
+    return chunk(jax.device_put(state, chunk.input_shardings[0][0]), np.int32(2))
 
 
 def test_a_loaded_program_computes_what_plain_jit_computes(trainer, cache):
