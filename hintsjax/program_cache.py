@@ -14,7 +14,7 @@ arguments, the source of every module loaded from outside the installed librarie
 itself, and a script or test that registered an env or hint of its own), the versions of the
 libraries that trace it, the backend and device, `XLA_FLAGS` and the jax settings that change
 numerics. What no key can see is not cached: a program whose inputs are sharded over several
-devices, and (`run.py`, `evaluate.py`) agents whose programs close over files (an imitation
+devices, and (`trainer.program_identity`) agents whose programs close over files (an imitation
 agent's expert, a learned hint generator); so is every program when a registered env or hint
 has no source file (defined in a notebook). A code change that a source file does not show, such
 as a function replaced at run time, is invisible too: turn the cache off for such work with
@@ -56,8 +56,10 @@ def folder() -> Path | None:
 
 
 def _library_roots() -> tuple[str, ...]:
+    """The installed libraries' folders, as sysconfig names them and with links resolved."""
     paths = sysconfig.get_paths()
-    return tuple(str(Path(paths[k]).resolve()) for k in ("stdlib", "platstdlib", "purelib", "platlib") if k in paths)
+    named = [paths[k] for k in ("stdlib", "platstdlib", "purelib", "platlib") if k in paths]
+    return tuple({*named, *(str(Path(p).resolve()) for p in named)})
 
 
 def _source_file(obj: Any) -> Path | None:
@@ -88,7 +90,9 @@ def sources_digest() -> str | None:
     roots = _library_roots()
     for module in list(sys.modules.values()):
         path = getattr(module, "__file__", None)
-        if path and path.endswith(".py") and not str(Path(path).resolve()).startswith(roots):
+        # most modules are the libraries', recognised by their path as it stands; only the rest
+        # are resolved (links) before the same test
+        if path and path.endswith(".py") and not path.startswith(roots) and not str(Path(path).resolve()).startswith(roots):
             files.add(Path(path).resolve())
     digest = hashlib.sha256()
     for path in sorted(files):
