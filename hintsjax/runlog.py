@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+from collections.abc import Iterable
 import warnings
 from pathlib import Path
 
@@ -34,28 +35,31 @@ class RunLog:
             self._truncate(resume_update)
         self.tb = SummaryWriter(str(Path(run_dir) / "tb"))
 
-    def _truncate(self, update: int) -> None:
-        """Drop rows written after the checkpoint being resumed from."""
+    def _rows(self) -> list[dict[str, str]]:
         with self.path.open() as f:
-            rows = list(csv.DictReader(f))
-        if not rows:
-            return
-        self.columns = list(rows[0])
-        with self.path.open("w", newline="") as f:
-            writer = csv.DictWriter(f, self.columns)
-            writer.writeheader()
-            writer.writerows(r for r in rows if int(r["update"]) <= update)
+            return list(csv.DictReader(f))
 
-    def _widen(self, names: list[str]) -> None:
-        """Add columns for metrics that a resumed run's file predates (a metric added to the code
-        since it began): its earlier rows get NaN there."""
-        with self.path.open() as f:
-            rows = list(csv.DictReader(f))
-        self.columns = [*self.columns, *names]
+    def _rewrite(self, rows: Iterable[dict[str, str]]) -> None:
+        """The file anew with `self.columns` and `rows` (NaN in a column a row lacks)."""
         with self.path.open("w", newline="") as f:
             writer = csv.DictWriter(f, self.columns, restval="nan")
             writer.writeheader()
             writer.writerows(rows)
+
+    def _truncate(self, update: int) -> None:
+        """Drop rows written after the checkpoint being resumed from."""
+        rows = self._rows()
+        if not rows:
+            return
+        self.columns = list(rows[0])
+        self._rewrite(r for r in rows if int(r["update"]) <= update)
+
+    def _widen(self, names: list[str]) -> None:
+        """Add columns for metrics that a resumed run's file predates (a metric added to the code
+        since it began): its earlier rows get NaN there."""
+        rows = self._rows()
+        self.columns = [*self.columns, *names]
+        self._rewrite(rows)
 
     def write(self, metrics: dict[str, np.ndarray], first_update: int) -> None:
         """metrics: name -> [S, n] for n updates starting after `first_update` updates."""
