@@ -137,6 +137,18 @@ def poi_ci(x, y, level: float = LEVEL, resamples: int = RESAMPLES, seed: int = 0
     return _percentile_interval(probability_of_improvement(a, b), _poi_rows(xs, ys), level)
 
 
+def difference_ci(x, y, level: float = LEVEL, resamples: int = RESAMPLES, seed: int = 0) -> Interval:
+    """[n], [m] -> Interval: percentile bootstrap CI of mean(X) - mean(Y), x and y resampled
+    independently (a difference in the units of the scores, e.g. the car's hairpin progress)."""
+    a = _scores(x, "x", ndims=(1,))
+    b = _scores(y, "y", ndims=(1,))
+    _check_bootstrap_args(level, resamples)
+    rng = np.random.default_rng(seed)
+    xs = _resample(a, rng, int(resamples))
+    ys = _resample(b, rng, int(resamples))
+    return _percentile_interval(a.mean() - b.mean(), xs.mean(axis=-1) - ys.mean(axis=-1), level)
+
+
 def direction(interval: Interval) -> int:
     """Interval of P(X > Y) -> +1 if it lies wholly above 0.5 (X better), -1 if wholly below, else 0."""
     # strict: an interval that touches 0.5 does not exclude it

@@ -219,6 +219,25 @@ def test_poi_interval_resamples_each_agent_on_its_own_and_agrees_with_scipy():
     assert ci.high == pytest.approx(high, abs=0.1 * ci.width)
 
 
+def test_difference_interval_agrees_with_scipy_and_is_exact_for_constant_samples():
+    """mean(X) - mean(Y) with each agent's seeds resampled on its own: scipy's two-sample
+    percentile bootstrap gives about the same interval; constants give a zero-width one."""
+    rng = np.random.default_rng(13)
+    x, y = rng.normal(0.3, 0.2, 10), rng.normal(0.1, 0.1, 12)
+    ci = stats.difference_ci(x, y, resamples=4000)
+    assert ci.point == pytest.approx(x.mean() - y.mean())
+    assert ci.low < ci.point < ci.high
+    res = sps.bootstrap((x, y), lambda a, b, axis: a.mean(axis) - b.mean(axis), n_resamples=4000,
+                        method="percentile", vectorized=True, rng=np.random.default_rng(5))
+    low, high = res.confidence_interval
+    assert ci.low == pytest.approx(low, abs=0.1 * ci.width)
+    assert ci.high == pytest.approx(high, abs=0.1 * ci.width)
+    assert stats.difference_ci([0.78] * 5, [0.46] * 5) == Interval(pytest.approx(0.32), pytest.approx(0.32),
+                                                                     pytest.approx(0.32))
+    with pytest.raises(ValueError, match="1-D"):
+        stats.difference_ci(np.ones((2, 2)), [1.0])
+
+
 def test_an_agent_against_itself_is_undecided_with_a_real_interval():
     x = np.random.default_rng(12).normal(size=10)
     ci = stats.poi_ci(x, x)
