@@ -5,8 +5,10 @@ actions are the policy's mean unless `stochastic`, and deploy variants (e.g. pen
 swingto) evaluate an agent trained on the standard task. An env's `metrics` (the car's
 progress) are kept from the state each episode ended in. Also a command:
 
-    python -m hintsjax.evaluate runs/<run folder> [--variant swingto] [--episodes 50] [--stochastic]
-                                [--hint-source runs/<generator folder>]
+    python -m hintsjax.evaluate runs/<run folder> [--variant swingto] [--episodes 50]
+                                [--stochastic | --deterministic] [--hint-source runs/<generator folder>]
+
+(by default sampled or not as the run's `stochastic_eval`: the car samples, the others take the mean)
 """
 
 from __future__ import annotations
@@ -200,7 +202,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="env variant(s) to evaluate on, comma-separated, all by one compiled program "
                              "(default: the training one)")
     parser.add_argument("--episodes", type=int, default=None, help="episodes per seed (default: the run's)")
-    parser.add_argument("--stochastic", action="store_true", help="sample actions instead of the mean")
+    mode = parser.add_mutually_exclusive_group()
+    mode.add_argument("--stochastic", action="store_true", help="sample actions (default: as the run's stochastic_eval)")
+    mode.add_argument("--deterministic", action="store_true", help="the mean action (default: as the run's stochastic_eval)")
     parser.add_argument("--hint-source", default=None,
                         help="the agent's hints at deploy: programmatic, or a generator folder (hintsjax.generator); "
                              "default: the run's eval_hint_source")
@@ -218,8 +222,9 @@ def main(argv: list[str] | None = None) -> int:
         state, _ = checkpoint.restore_latest(args.run, cfg)
     except UsageError as e:
         return fail(e)
-    results, _ = evaluate_variants(cfg, state.params, variants, episodes, args.stochastic)
-    mode = "stochastic" if args.stochastic else "deterministic"
+    stochastic = args.stochastic or (cfg.stochastic_eval and not args.deterministic)
+    results, _ = evaluate_variants(cfg, state.params, variants, episodes, stochastic)
+    mode = "stochastic" if stochastic else "deterministic"
     source = cfg.hint_source_for(deploy=True)
     tag = "" if source == PROGRAMMATIC else f"-hints-{Path(source).name}"
     for result in results:

@@ -303,6 +303,32 @@ def test_evaluate_command_on_two_variants_in_one_program(finished_run, capsys):
     assert "valid choices: swingto, swingup" in capsys.readouterr().err
 
 
+def test_evaluate_command_samples_as_the_run_does_unless_told(finished_run, tmp_path):
+    """Without --stochastic or --deterministic, hintsjax.evaluate follows the run's stochastic_eval
+    (the car's default samples); either flag overrides it, and the two together are refused."""
+    import shutil
+
+    import yaml
+
+    sampled_run = tmp_path / "sampled"
+    shutil.copytree(finished_run, sampled_run)
+    values = yaml.safe_load((sampled_run / "config.yaml").read_text())
+    assert values["stochastic_eval"] is False
+    (sampled_run / "config.yaml").write_text(yaml.safe_dump({**values, "stochastic_eval": True}, sort_keys=False))
+    args = ["--variant", "swingto", "--episodes", "4"]
+    assert evaluate_main([str(sampled_run), *args]) == 0
+    default = json.loads((sampled_run / "eval-swingto-stochastic-4.json").read_text())
+    assert evaluate_main([str(finished_run), *args, "--stochastic"]) == 0
+    assert default["returns"] == json.loads((finished_run / "eval-swingto-stochastic-4.json").read_text())["returns"]
+    assert evaluate_main([str(sampled_run), *args, "--deterministic"]) == 0
+    assert evaluate_main([str(finished_run), *args]) == 0
+    deterministic = [json.loads((run / "eval-swingto-deterministic-4.json").read_text())["returns"]
+                     for run in (sampled_run, finished_run)]
+    assert deterministic[0] == deterministic[1] != default["returns"]
+    with pytest.raises(SystemExit):
+        evaluate_main([str(sampled_run), "--stochastic", "--deterministic"])
+
+
 def test_evaluate_bad_inputs(finished_run, tmp_path, capsys):
     assert evaluate_main([str(tmp_path / "missing")]) == 2
     assert evaluate_main([str(finished_run), "--variant", "nope"]) == 2
