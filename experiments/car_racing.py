@@ -17,8 +17,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from report import (apart_text, cell, curve_lines, footer, load, markdown_table, metric_cell, metric_of,
-                    references_note, training_cell, wall_clock, write_report)
+import numpy as np
+from report import (cell, curve_lines, footer, load, markdown_table, metric_cell, references_note, training_cell, wall_clock, write_report)
 from sweep import hints_run, table_main
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -52,23 +52,42 @@ def table_runs(env: str) -> list[str]:
     return [*REFERENCES, *BASELINES, *(hints_run("mc", h) for h in HINTS[env])]
 
 
-def hairpin_progress(result: dict | None) -> tuple[float, float] | None:
-    """Mean hairpin progress and the std of its per-seed means, or None when not recorded."""
-    stats = metric_of(result, "progress", VARIANTS.index("hairpin"))
-    return None if stats is None else (stats[0], stats[2])
+def hairpin_progress(result: dict | None) -> list[float] | None:
+    """The per-seed mean hairpin progress, or None when not recorded."""
+    e = None if result is None else result["evaluations"][VARIANTS.index("hairpin")]
+    return None if e is None or "progress_seed_means" not in e else e["progress_seed_means"]
 
 
 def findings(runs: Path, env: str) -> str:
     """The paper's claim for these rows (O3), as numbers: composite hints lift the car's hairpin
-    progress above vision only (46% -> 78% in the paper)."""
+    progress above vision only (46% -> 78% in the paper); decided when the 95% bootstrap interval
+    of the difference in mean progress over seeds excludes 0."""
+    from hintsjax import stats
+
     rgb = hairpin_progress(load(runs, env, "ppo_rgb"))
     composite = hairpin_progress(load(runs, env, hints_run("mc", "composite")))
     if rgb is None or composite is None:
         return ""
-    return (f"Hairpin progress: HINTS-MC composite {100 * composite[0]:.0f}% (seed std {100 * composite[1]:.0f}), "
-            f"PPO-RGB {100 * rgb[0]:.0f}% (seed std {100 * rgb[1]:.0f}); paper 78% against 46%. "
-            f"Composite beats vision only on hairpins: {'yes' if composite[0] > rgb[0] else 'no'}"
-            f" ({apart_text(composite, rgb)} the seeds' spread).")
+    d = stats.difference_ci(composite, rgb)
+    verdict = "decided" if d.low > 0 or d.high < 0 else "undecided"
+    return (f"Hairpin progress (O3): HINTS-MC composite {100 * np.mean(composite):.0f}% ({len(composite)} seeds), "
+            f"PPO-RGB {100 * np.mean(rgb):.0f}% ({len(rgb)} seeds); paper 78% against 46%. Composite minus vision "
+            f"only: {100 * d.point:+.0f} points [{100 * d.low:+.0f}, {100 * d.high:+.0f}] (95% bootstrap interval "
+            f"over seeds): {verdict}.")
+
+
+def protocol(runs: Path, env: str) -> str:
+    """How the table's rows were evaluated ('5 training seeds x 50 evaluation episodes (sampled
+    actions)'), or each row's where they differ."""
+    found = {}
+    for label in table_runs(env):
+        if (result := load(runs, env, label)) is not None:
+            e = result["evaluations"][0]
+            found[label] = (f"{len(e['seed_means'])} training seeds x {e.get('episodes_per_seed', '?')} evaluation episodes "
+                            f"({'sampled actions' if e.get('stochastic') else 'the policy mean'})")
+    if len(set(found.values())) <= 1:
+        return next(iter(found.values()), "training seeds x evaluation episodes")
+    return "the row's training seeds x evaluation episodes (" + "; ".join(f"{k}: {v}" for k, v in found.items()) + ")"
 
 
 def report(runs: Path, force: bool = False) -> None:
@@ -76,8 +95,8 @@ def report(runs: Path, force: bool = False) -> None:
 
     lines = [
         "# Car Racing: the paper's Table 3 (CR Standard and CR Hairpin rows), reproduced", "",
-        "Each cell: mean ± std over 5 training seeds x 50 evaluation episodes (deterministic policy);",
-        "in brackets the std of the 5 per-seed means. Return: the episode return; P: progress, visited",
+        f"Each cell: mean ± std over {protocol(runs, ENVS[0])};",
+        "in brackets the std of the per-seed means. Return: the episode return; P: progress, visited",
         "tiles / all tiles of the state an episode ended in. Agents train on standard tracks and are",
         "deployed on hairpin ones (first corner at most 45 degrees). The paper's cells are mean ± std",
         "over n=50; its P values are section 5's (O3); it gives no expert, DAgger, GAIL or PPO-x car numbers.",
@@ -102,7 +121,7 @@ def report(runs: Path, force: bool = False) -> None:
         lines += ["", findings(runs, env), "", references_note(runs, env, REFERENCES), ""]
         learners = [label for label in table_runs(env) if label not in REFERENCES]  # at the table's budget
         lines += curve_lines(runs, env, learners, RESULTS / f"car_curves_{env}.png",
-                             f"{env} (standard tracks): Table 3 agents, 5 seeds")
+                             f"{env} (standard tracks): Table 3 agents")
     lines.append(footer(runs, TABLE, run_ids(ENVS)))
     write_report(RESULTS / "car_table3.md", lines, force)
 

@@ -140,6 +140,31 @@ def test_car_references_come_first_and_the_note_describes_gail():
     assert "gail learns from 16 of that expert's episodes, by PPO for 2 M steps on the discriminator's reward -log(1 - D)" in note
 
 
+def test_car_findings_decide_o3_by_the_interval_of_the_difference_in_hairpin_progress(tmp_path):
+    """O3 (composite hints lift hairpin progress above vision only) is decided when the bootstrap
+    interval of the difference in mean progress over seeds excludes 0, undecided when it does not."""
+    import car_racing
+
+    def runs(rgb, composite):
+        folder = tmp_path / f"runs{len(list(tmp_path.iterdir()))}"
+        for label, progress in (("ppo_rgb", rgb), ("hints-mc-composite", composite)):
+            hairpin = evaluation(1.0, 0.0, [1.0] * len(progress), progress_mean=sum(progress) / len(progress),
+                                 progress_std=0.1, progress_seed_means=progress, stochastic=True,
+                                 episodes_per_seed=50)
+            write_run(folder, "car_racing", label, [evaluation(1.0, 0.0, [1.0] * len(progress), stochastic=True,
+                                                               episodes_per_seed=50), hairpin])
+        return folder
+
+    apart = runs([0.40, 0.45, 0.50, 0.42, 0.48], [0.75, 0.80, 0.78, 0.82, 0.76])
+    text = car_racing.findings(apart, "car_racing")
+    assert text.startswith("Hairpin progress (O3): HINTS-MC composite 78% (5 seeds), PPO-RGB 45% (5 seeds); paper 78% "
+                           "against 46%. Composite minus vision only: +33 points [+")
+    assert text.endswith(": decided.")
+    mixed = runs([0.10, 0.60, 0.20, 0.50, 0.30], [0.15, 0.55, 0.25, 0.45, 0.40])
+    assert car_racing.findings(mixed, "car_racing").endswith(": undecided.")
+    assert car_racing.protocol(apart, "car_racing") == "5 training seeds x 50 evaluation episodes (sampled actions)"
+
+
 def test_locomotion_report_states_the_settings_each_row_was_trained_with(tmp_path):
     import locomotion
     from hintsjax import config
@@ -433,7 +458,9 @@ def test_car_learning_report_sets_each_variant_beside_the_defaults(tmp_path, mon
     assert tanh_row.count("415.0 [") == 2 and tanh_row.count("365.0 [") == 2 and tanh_row.endswith("| 0.50 |")
     assert "(4 seeds x 50 evaluation episodes)" in text
     assert "- hairpin, stochastic: P(tanh > gaussian) = 1.00 [1.00, 1.00]: decided" in text
-    assert (tmp_path / "archive" / "car_learning" / "car_racing" / "tanh" / "eval-hairpin-stochastic-50.json").exists()
+    archived = tmp_path / "archive" / "car_learning" / "car_racing" / "tanh"
+    assert (archived / "eval-hairpin-stochastic-50.json").exists()
+    assert car_learning.final_std(archived) == "0.50"  # kept in its summary: the archived metrics.csv has no entropy
 
 
 def test_learned_hints_compares_with_the_archived_ppo_rgb_or_trains_its_own(tmp_path):
