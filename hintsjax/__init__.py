@@ -19,6 +19,17 @@ if not (_here / "envs").is_dir() and (_here.parent / "envs" / "__init__.py").is_
 if "xla_gpu_deterministic_ops" not in _os.environ.get("XLA_FLAGS", ""):
     _os.environ["XLA_FLAGS"] = (_os.environ.get("XLA_FLAGS", "") + " --xla_gpu_deterministic_ops=true").strip()
 
+# No deadlock on a CPU. XLA's CPU runtime runs independent parts of a program at once on its
+# thread pool (as many threads as cores), and jaxlib's batched LAPACK kernels (the Cholesky and
+# triangular solves of MJX's constraint solver and mass matrix) split their batch over that same
+# pool and wait for the pieces: when every pool thread is such a kernel, nothing is left to run
+# the pieces and the program stops for good (the ant's training program on 2 cores, and
+# tests/test_cpu_deadlock.py's two independent batched Cholesky solves). XLA's schedule that
+# orders a program for concurrency is what puts them side by side; without it they run one after
+# the other. Set the flag in XLA_FLAGS yourself to choose otherwise.
+if "xla_cpu_enable_concurrency_optimized_scheduler" not in _os.environ.get("XLA_FLAGS", ""):
+    _os.environ["XLA_FLAGS"] = (_os.environ["XLA_FLAGS"] + " --xla_cpu_enable_concurrency_optimized_scheduler=false").strip()
+
 
 def deterministic_gpu_ops() -> bool:
     """Whether XLA_FLAGS asks for deterministic GPU ops (the last setting of the flag wins)."""
