@@ -1,6 +1,7 @@
-"""A short GIF of a trained agent: one deterministic episode, with its hint drawn beside the picture.
+"""A short GIF of a trained agent: one episode, with its hint drawn beside the picture.
 
-One seed's params act with the policy mean for up to --steps steps in a single jitted scan
+One seed's params act as the run is evaluated (the policy mean, or sampled actions where the
+run's `stochastic_eval` is on: the car's default) for up to --steps steps in a single jitted scan
 (frames stop where the episode ends). Each frame is the env's picture, upscaled by --scale
 (nearest neighbour), beside the agent's hint as labelled bars (none for an agent without a
 hint), the step and the return so far. Also a command:
@@ -63,14 +64,17 @@ def step_keys(key: jax.Array) -> tuple[jax.Array, jax.Array]:
     return k_reset, k_run
 
 
-def policy_action(network: Any, params: Any, obs: dict[str, jax.Array]) -> jax.Array:
-    """The policy mean for one unbatched observation."""
-    mean, _, _ = network.apply(params, jax.tree.map(lambda x: x[None], obs))
-    return mean[0]
+def policy_action(network: Any, params: Any, obs: dict[str, jax.Array], key: jax.Array | None = None) -> jax.Array:
+    """The policy mean for one unbatched observation, or with `key` an action sampled around it."""
+    mean, log_std, _ = network.apply(params, jax.tree.map(lambda x: x[None], obs))
+    if key is None:
+        return mean[0]
+    return mean[0] + jnp.exp(log_std) * jax.random.normal(key, mean.shape[1:])
 
 
 def rollout(cfg: RunConfig, params: Any, variant: str | None, steps: int, key: jax.Array) -> Rollout:
-    """One deterministic episode of one seed's `params` on `variant`, `steps` steps long at most."""
+    """One episode of one seed's `params` on `variant`, `steps` steps long at most, acting as the
+    run is evaluated (sampled actions where `cfg.stochastic_eval`)."""
     variant = envs.variant_names(cfg.env)[0] if variant is None else variant
     return make_rollout(cfg, variant, steps)(params, key)
 
@@ -89,8 +93,9 @@ def make_rollout(cfg: RunConfig, variant: str, steps: int) -> Callable[[Any, jax
 
         def step(carry, t):
             state, obs, alive = carry
-            action = policy_action(network, params, obs)
-            ts = env.step(jax.random.fold_in(k_run, t), state, action, task_params)
+            k_env = jax.random.fold_in(k_run, t)
+            action = policy_action(network, params, obs, jax.random.fold_in(k_env, 1) if cfg.stochastic_eval else None)
+            ts = env.step(k_env, state, action, task_params)
             done = ts.terminated | ts.truncated
             record = Rollout(
                 frames=env.render(ts.state, task_params),

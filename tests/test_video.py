@@ -92,6 +92,20 @@ def test_rollout_matches_a_step_by_step_loop(tiny_run):
     assert len({f.tobytes() for f in frames}) > 1  # the rod moves: a policy acted
 
 
+def test_a_run_evaluated_with_sampled_actions_is_filmed_with_them(tiny_run):
+    """A run with stochastic_eval (the car's default) acts with sampled actions in its video, the
+    same ones for the same key; without it, with the policy mean."""
+    import dataclasses
+
+    cfg, params = tiny_run.cfg, tiny_run.seed(1)
+    key = eval_keys(cfg)[1]
+    sampled_cfg = dataclasses.replace(cfg, stochastic_eval=True)
+    mean_episode = rollout(cfg, params, None, STEPS, key).cut()
+    sampled = [rollout(sampled_cfg, params, None, STEPS, key).cut() for _ in range(2)]
+    np.testing.assert_array_equal(sampled[0].rewards, sampled[1].rewards)
+    assert not np.allclose(sampled[0].rewards, mean_episode.rewards)
+
+
 def test_composed_frame_is_the_upscaled_picture_beside_the_panel():
     env = envs.make("pendulum", hint="composite")
     assert hint_labels(env.hint) == ["angular_velocity[0] (rad/s)", "goal_distance[0] (m)"]
