@@ -1,6 +1,7 @@
 """Hints without ground truth at deploy (issue 24): agents whose hints come from a learned generator.
 
     python experiments/learned_hints.py --cases pendulum:composite,acrobot:composite --seeds 10
+    python experiments/learned_hints.py --cases halfcheetah:velocity --seeds 5 --parts generator,programmatic
     python experiments/learned_hints.py --frames-sweep 1,2,3,4 --cases pendulum:composite
     python experiments/learned_hints.py --report          # -> experiments/results/learned_hints.md
 
@@ -86,14 +87,20 @@ def deploy_with(folder: Path, source: Path) -> Path:
     return out
 
 
-def run_case(runs: Path, env: str, hint: str, frames: int, seeds: int, gen_seeds: int) -> None:
-    source = train_generator(runs, env, hint, frames, gen_seeds)
+# A case's pieces, in order; `--parts` runs some of them (e.g. one per device lease: a 5-seed halfcheetah
+# run takes about 20 minutes on an H100). Each piece needs the generator's folder, which the first makes.
+PARTS = ("generator", "programmatic", "ppo_rgb", "learned")
+
+
+def run_case(runs: Path, env: str, hint: str, frames: int, seeds: int, gen_seeds: int, parts: tuple[str, ...] = PARTS) -> None:
+    source = train_generator(runs, env, hint, frames, gen_seeds)  # every other piece reads it
     base = {"env": env, "agent": "hints", "scheme": "fc", "hint": hint, "seeds": seeds}
-    programmatic = train_agent(runs, f"{env}-{hint}-programmatic", base)
-    deploy_with(programmatic, source)
-    if rgb_folder(runs, env).parent == runs:  # before the learned row: the report reads both once that is done
+    if "programmatic" in parts:
+        deploy_with(train_agent(runs, f"{env}-{hint}-programmatic", base), source)
+    if "ppo_rgb" in parts and rgb_folder(runs, env).parent == runs:  # none archived: trained beside the case
         train_agent(runs, rgb_folder(runs, env).name, {"env": env, "agent": "ppo_rgb", "seeds": seeds})
-    train_agent(runs, f"{env}-{hint}-learned-k{frames}", {**base, "hint_source": str(source)})
+    if "learned" in parts:  # last: the report shows a case once this row is done
+        train_agent(runs, f"{env}-{hint}-learned-k{frames}", {**base, "hint_source": str(source)})
 
 
 # -- the report ----------------------------------------------------------------------------------------
@@ -192,10 +199,16 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=2, help="pictures the generator reads")
     parser.add_argument("--frames-sweep", default=None, help="comma-separated numbers of pictures: train generators only")
     parser.add_argument("--runs", type=Path, default=Path("runs/learned_hints"))
+    parser.add_argument("--parts", default=",".join(PARTS),
+                        help=f"comma-separated pieces of each case to run (default: all, {', '.join(PARTS)}; the "
+                             "generator is trained first whenever it is missing)")
     parser.add_argument("--report", action="store_true")
     parser.add_argument("--out", type=Path, default=RESULTS / "learned_hints.md")
     args = parser.parse_args()
     cases = [tuple(c.split(":")) for c in args.cases.split(",")]
+    parts = tuple(x for x in args.parts.split(",") if x)
+    if not parts or any(x not in PARTS for x in parts):
+        parser.exit(2, f"error: unknown --parts {args.parts!r}; valid choices: {', '.join(PARTS)}\n")
     args.runs.mkdir(parents=True, exist_ok=True)
     if args.report:
         report(args.runs, cases, args.frames, args.out)
@@ -203,7 +216,7 @@ def main() -> None:
         frames_sweep(args.runs, cases, [int(k) for k in args.frames_sweep.split(",")], args.gen_seeds)
     else:
         for env, hint in cases:
-            run_case(args.runs, env, hint, args.frames, args.seeds, args.gen_seeds)
+            run_case(args.runs, env, hint, args.frames, args.seeds, args.gen_seeds, parts)
 
 
 if __name__ == "__main__":

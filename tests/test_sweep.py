@@ -463,6 +463,26 @@ def test_car_learning_report_sets_each_variant_beside_the_defaults(tmp_path, mon
     assert car_learning.final_std(archived) == "0.50"  # kept in its summary: the archived metrics.csv has no entropy
 
 
+def test_learned_hints_runs_only_the_parts_asked_for(tmp_path, monkeypatch):
+    """--parts: each piece of a case alone (one per device lease), the generator first whenever
+    it is missing; every piece in order by default."""
+    import learned_hints
+
+    calls = []
+    monkeypatch.setattr(learned_hints, "train_generator", lambda runs, env, hint, k, s: calls.append("generator") or runs / "g")
+    monkeypatch.setattr(learned_hints, "train_agent", lambda runs, name, values: calls.append(name) or runs / name)
+    monkeypatch.setattr(learned_hints, "deploy_with", lambda folder, source: calls.append(f"deploy {folder.name}"))
+    learned_hints.run_case(tmp_path, "halfcheetah", "velocity", 2, 5, 5, ("ppo_rgb",))
+    assert calls == ["generator", "halfcheetah-ppo_rgb"]
+    calls.clear()
+    learned_hints.run_case(tmp_path, "halfcheetah", "velocity", 2, 5, 5)
+    assert calls == ["generator", "halfcheetah-velocity-programmatic", "deploy halfcheetah-velocity-programmatic",
+                     "halfcheetah-ppo_rgb", "halfcheetah-velocity-learned-k2"]
+    calls.clear()
+    learned_hints.run_case(tmp_path, "pendulum", "composite", 2, 5, 5, ("ppo_rgb", "learned"))
+    assert calls == ["generator", "pendulum-composite-learned-k2"]  # the pendulum's PPO-RGB is archived
+
+
 def test_learned_hints_compares_with_the_archived_ppo_rgb_or_trains_its_own(tmp_path):
     """experiments/learned_hints.py: the pendulum's PPO-RGB is its archived 20-seed row; the
     halfcheetah's table row predates the archive, so the case trains one beside it."""
