@@ -125,27 +125,27 @@ def probability_of_improvement(x, y) -> float:
     return float(_poi_rows(a[None], b[None])[0])
 
 
-def poi_ci(x, y, level: float = LEVEL, resamples: int = RESAMPLES, seed: int = 0) -> Interval:
-    """[n], [m] -> Interval: percentile bootstrap CI of P(X > Y), x and y resampled independently."""
+def _two_agent_resamples(x, y, level: float, resamples: int, seed: int):
+    """[n], [m] -> (x, y, [resamples, n], [resamples, m]) as checked float arrays and their bootstrap
+    resamples. The two agents' seeds are independent runs, so each is resampled on its own
+    (stratified by agent), x's draws first from one generator seeded with `seed`."""
     a = _scores(x, "x", ndims=(1,))
     b = _scores(y, "y", ndims=(1,))
     _check_bootstrap_args(level, resamples)
     rng = np.random.default_rng(seed)
-    # the two agents' seeds are independent runs, so each is resampled on its own (stratified by agent)
-    xs = _resample(a, rng, int(resamples))
-    ys = _resample(b, rng, int(resamples))
+    return a, b, _resample(a, rng, int(resamples)), _resample(b, rng, int(resamples))
+
+
+def poi_ci(x, y, level: float = LEVEL, resamples: int = RESAMPLES, seed: int = 0) -> Interval:
+    """[n], [m] -> Interval: percentile bootstrap CI of P(X > Y), x and y resampled independently."""
+    a, b, xs, ys = _two_agent_resamples(x, y, level, resamples, seed)
     return _percentile_interval(probability_of_improvement(a, b), _poi_rows(xs, ys), level)
 
 
 def difference_ci(x, y, level: float = LEVEL, resamples: int = RESAMPLES, seed: int = 0) -> Interval:
     """[n], [m] -> Interval: percentile bootstrap CI of mean(X) - mean(Y), x and y resampled
     independently (a difference in the units of the scores, e.g. the car's hairpin progress)."""
-    a = _scores(x, "x", ndims=(1,))
-    b = _scores(y, "y", ndims=(1,))
-    _check_bootstrap_args(level, resamples)
-    rng = np.random.default_rng(seed)
-    xs = _resample(a, rng, int(resamples))
-    ys = _resample(b, rng, int(resamples))
+    a, b, xs, ys = _two_agent_resamples(x, y, level, resamples, seed)
     return _percentile_interval(a.mean() - b.mean(), xs.mean(axis=-1) - ys.mean(axis=-1), level)
 
 
