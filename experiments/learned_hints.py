@@ -29,8 +29,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from report import markdown_table  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
-CASES = "pendulum:composite,pendulum:angular_velocity,acrobot:composite,idp:composite"
+CASES = "pendulum:composite,pendulum:angular_velocity,acrobot:composite,idp:composite,halfcheetah:velocity"
 GENERATOR = dict(policy="expert", expert_fraction=0.5, num_envs=64, steps=500, held_out_envs=16, epochs=10)
+SHARED_KEY = "shared_gpu_runs"  # about.json: run folders that shared the GPU with other training (timings not costs)
+SHARED_CELL = "(shared GPU)"
 PPO_RGB = RESULTS / "runs" / "classic20"  # PPO-RGB's archived rows: <env>/ppo_rgb/eval.json
 
 
@@ -120,6 +122,8 @@ def report(runs: Path, cases: list[tuple[str, str]], frames: int, out: Path) -> 
              "Returns: the mean over each seed's 50 deterministic episodes, then mean ± std over seeds, "
              "IQM with its 95% bootstrap interval (hintsjax/stats.py), and P(row > PPO-RGB), the probability "
              "that a seed of the row beats a seed of PPO-RGB, with its 95% interval (decided where it excludes 0.5).", ""]
+    about = json.loads((runs / "about.json").read_text()) if (runs / "about.json").is_file() else {}
+    shared = set(about.pop(SHARED_KEY, []))  # folders whose seconds are not a cost: the GPU ran other training too
     rows, verdicts, against, costs = [], [], [], []
     for env, hint in cases:
         gen = generator_folder(runs, env, hint, frames)
@@ -147,9 +151,13 @@ def report(runs: Path, cases: list[tuple[str, str]], frames: int, out: Path) -> 
         rgb_what = "PPO-RGB (archived 20-seed row)" if rgb_run.parent != runs else "PPO-RGB (trained here)"
         rows.append([env, "-", rgb_what, f"{rgb.mean():.1f} ± {rgb.std():.1f}", stats.iqm_cell(rgb),
                      str(len(rgb)), "-"])
-        rates = [json.loads((f / "eval.json").read_text())["train_env_steps_per_s"] for f in (programmatic, learned)]
-        costs.append([env, hint, r2, f"{meta['env_steps']:,}", f"{meta['seconds']['compile']:.0f} + {meta['seconds']['train']:.0f}",
-                      f"{rates[0]:,.0f}", f"{rates[1]:,.0f}", f"{1 - rates[1] / rates[0]:.0%}"])
+        rates = [None if f.name in shared else json.loads((f / "eval.json").read_text())["train_env_steps_per_s"]
+                 for f in (programmatic, learned)]
+        gen_cost = (SHARED_CELL if gen.name in shared else
+                    f"{meta['seconds']['compile']:.0f} + {meta['seconds']['train']:.0f}")
+        costs.append([env, hint, r2, f"{meta['env_steps']:,}", gen_cost,
+                      *(SHARED_CELL if r is None else f"{r:,.0f}" for r in rates),
+                      "-" if None in rates else f"{1 - rates[1] / rates[0]:.0%}"])
     lines += ["## Returns", "", *markdown_table(["env", "hint", "agent", "mean ± std over seeds", "IQM [95% CI]", "seeds",
                                                 "P(> PPO-RGB) [95% CI]"], rows), ""]
     lines += ["## Against PPO-RGB", "", *verdicts, ""]
@@ -173,7 +181,9 @@ def report(runs: Path, cases: list[tuple[str, str]], frames: int, out: Path) -> 
                       [r["env"], r["hint"], str(r["frames"]),
                        ", ".join(f"{d} {m:.3f} ({lo:.3f})" for d, m, lo in zip(r["dimensions"], r["heldout_r2_mean"], r["heldout_r2_min"])),
                        f"{r['seconds']['compile']:.0f} + {r['seconds']['train']:.0f}"] for r in sweep]), ""]
-    about = json.loads((runs / "about.json").read_text()) if (runs / "about.json").is_file() else {}
+    if shared:
+        about["shared GPU"] = (f"{', '.join(sorted(shared))} trained beside other training programs on the same GPU, "
+                               f"so their seconds are not a cost ({SHARED_CELL} above)")
     lines += ["## Where these numbers come from", "", *(f"- {k}: {v}" for k, v in about.items()), ""]
     out.write_text("\n".join(lines))
     print(f"wrote {out}")
