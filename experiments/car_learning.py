@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import (SUMMARY_JSON, archive_run, iqm_cell, load, markdown_table, metric_cell, ordering,  # noqa: E402
+from report import (SUMMARY_JSON, about_lines, archive_run, iqm_cell, load, markdown_table, metric_cell, ordering,  # noqa: E402
                     run_folder, training_cell, training_seed_means)
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -171,6 +171,7 @@ def report(runs: Path, out: Path) -> None:
              *markdown_table(header, rows), "",
              f"Each variant against `{reference}` (probability of improvement over seeds, 95% bootstrap interval; "
              "decided where it excludes 0.5):", "", *comparisons, ""]
+    lines += about_lines(runs)
     out.write_text("\n".join(lines))
     print(f"wrote {out}")
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from report import (cell, curve_lines, footer, load, markdown_table, metric_cell, references_note, training_cell, wall_clock, write_report)
+from report import (about_lines, cell, curve_lines, footer, load, markdown_table, metric_cell, references_note, training_cell, wall_clock, write_report)
 from sweep import hints_run, table_main
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -87,7 +87,9 @@ def protocol(runs: Path, env: str) -> str:
                             f"({'sampled actions' if e.get('stochastic') else 'the policy mean'})")
     if len(set(found.values())) <= 1:
         return next(iter(found.values()), "training seeds x evaluation episodes")
-    return "the row's training seeds x evaluation episodes (" + "; ".join(f"{k}: {v}" for k, v in found.items()) + ")"
+    rows_of = {v: [k for k in found if found[k] == v] for v in dict.fromkeys(found.values())}
+    return "the row's training seeds x evaluation episodes (" + "; ".join(
+        f"{', '.join(labels)}: {v}" for v, labels in rows_of.items()) + ")"
 
 
 def report(runs: Path, force: bool = False) -> None:
@@ -122,6 +124,7 @@ def report(runs: Path, force: bool = False) -> None:
         learners = [label for label in table_runs(env) if label not in REFERENCES]  # at the table's budget
         lines += curve_lines(runs, env, learners, RESULTS / f"car_curves_{env}.png",
                              f"{env} (standard tracks): Table 3 agents")
+    lines += about_lines(runs)
     lines.append(footer(runs, TABLE, run_ids(ENVS)))
     write_report(RESULTS / "car_table3.md", lines, force)
 

@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 
 ARCHIVE = Path(__file__).resolve().parent / "results" / "runs"
+ABOUT_JSON = "about.json"  # in an archive folder, beside its runs: how they were made
 SUMMARY_JSON = "summary.json"
 KL_ABOVE = 0.5  # kl_cell's threshold: an update whose approx. KL exceeds it blew up
 
@@ -307,6 +308,15 @@ def curve_lines(runs: Path, env: str, labels: list[str], out: Path, title: str, 
         return [*old, f"![{env} learning curves of the runs since the archive]({out.name})", ""]
     plot_curves(curves, out, title)
     return [f"![{env} learning curves]({out.name})", ""]
+
+
+def about_lines(runs: Path) -> list[str]:
+    """The report's section on how its rows were made (commands, hardware, dates, what shared a GPU),
+    from ARCHIVE/<runs' name>/about.json, written by whoever ran them; [] when there is none."""
+    path = ARCHIVE / runs.name / ABOUT_JSON
+    if not path.is_file():
+        return []
+    return ["## Where these numbers come from", "", *(f"- {k}: {v}" for k, v in json.loads(path.read_text()).items()), ""]
 
 
 def footer(runs: Path, table: str, run_ids: list[str]) -> str:

@@ -163,6 +163,12 @@ def test_car_findings_decide_o3_by_the_interval_of_the_difference_in_hairpin_pro
     mixed = runs([0.10, 0.60, 0.20, 0.50, 0.30], [0.15, 0.55, 0.25, 0.45, 0.40])
     assert car_racing.findings(mixed, "car_racing").endswith(": undecided.")
     assert car_racing.protocol(apart, "car_racing") == "5 training seeds x 50 evaluation episodes (sampled actions)"
+    # rows evaluated alike are named together: 10 seeds for the hint row, 5 for the others
+    uneven = runs([0.40, 0.45, 0.50, 0.42, 0.48], [0.75, 0.80, 0.78, 0.82, 0.76, 0.7, 0.7, 0.7, 0.7, 0.7])
+    write_run(uneven, "car_racing", "dagger", [evaluation(1.0, 0.0, [1.0] * 5, stochastic=True, episodes_per_seed=50)])
+    assert car_racing.protocol(uneven, "car_racing") == (
+        "the row's training seeds x evaluation episodes (dagger, ppo_rgb: 5 training seeds x 50 evaluation episodes "
+        "(sampled actions); hints-mc-composite: 10 training seeds x 50 evaluation episodes (sampled actions))")
 
 
 def test_locomotion_report_states_the_settings_each_row_was_trained_with(tmp_path):
