@@ -98,6 +98,23 @@ def test_sigmoid_head_bounds_the_mean_and_floors_the_std():
     np.testing.assert_allclose(log_std, [np.log(SIGMOID_MIN_STD), 0.5], rtol=1e-6)
 
 
+def test_sigmoid_head_log_probability_is_the_hand_computed_one():
+    """The actor's last layer outputs its bias b = (0, ln 3) (every kernel zero), so the head's mean is
+    2 sigmoid(b) - 1 = (0, 0.5); log std (ln 0.5, -10) is floored to (ln 0.5, ln 0.01). Action (0.5,
+    0.52) is then 1 and 2 stds from the mean: log p = (-1/2 + ln 2) + (-2 + ln 100) - ln 2 pi."""
+    from hintsjax.ppo import gaussian_log_prob
+
+    net = ActorCritic(AGENTS["ppo_state"], "fc", 2, hidden=(8,), action_head="sigmoid")
+    params = net.init(jax.random.key(0), {"state": jnp.zeros((1, 3))})["params"]
+    actor = jax.tree.map(jnp.zeros_like, params["actor"])
+    actor["Dense_1"]["bias"] = jnp.array([0.0, np.log(3.0)])
+    params = {**params, "actor": actor, "log_std": jnp.array([np.log(0.5), -10.0])}
+    mean, log_std, _ = net.apply({"params": params}, {"state": jnp.array([[0.3, -1.2, 2.0]])})
+    got = float(gaussian_log_prob(jnp.array([[0.5, 0.52]]), mean, log_std)[0])
+    want = (-0.5 + np.log(2.0)) + (-2.0 + np.log(100.0)) - np.log(2 * np.pi)
+    np.testing.assert_allclose(got, want, rtol=1e-4)
+
+
 def test_a_tanh_agent_learns_the_action_at_the_edge_of_its_range():
     """Reward = the action: the squashed policy's deterministic action, tanh(mean), nears the
     range's edge 1, and every action the env received lay in the range (returns <= 1; the gaussian
