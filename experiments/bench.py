@@ -177,6 +177,7 @@ def bench_train(name: str, seeds: int, updates: int, overrides: dict, agent: str
         "env": name, "agent": agent, "seeds": seeds, "updates": updates,
         "ppo": {k: getattr(cfg.ppo, k) for k in ("num_envs", "batch_size", "epochs", "minibatch_size")},
         "env_steps_per_s": results["train_env_steps_per_s"],
+        "chunks_env_steps_per_s": results["chunks_env_steps_per_s"],
         "grad_samples_per_s": results["train_env_steps_per_s"] * cfg.ppo.epochs,
         "compile_s": results["compile_seconds"],
         "scan_env_steps_per_s": env_steps / seconds,

@@ -77,6 +77,7 @@ def main() -> None:
                 row = {"env": cell, "label": result["label"], "cell_wall_s": wall, "compile_s": compile_s,
                        "compile_s_parts": result["compile_seconds"], "updates": updates,
                        "train_env_steps_per_s": result["train_env_steps_per_s"],
+                       "chunks_env_steps_per_s": result.get("chunks_env_steps_per_s"),
                        "device": jax.devices()[0].device_kind, "jax": jax.__version__,
                        "deterministic": jax.default_backend() == "cpu" or hintsjax.deterministic_gpu_ops(),
                        "warm_cache": warm}
@@ -92,6 +93,8 @@ def main() -> None:
             if row["env"] == cell:
                 row["bench_env_steps_per_s"] = bench["scan_env_steps_per_s"]
                 row["cli_fraction_of_bench"] = row["train_env_steps_per_s"] / bench["scan_env_steps_per_s"]
+                if row["chunks_env_steps_per_s"] is not None:  # training's start to the last chunk: the bench's span
+                    row["chunks_fraction_of_bench"] = row["chunks_env_steps_per_s"] / bench["scan_env_steps_per_s"]
                 row["update_parts_s"] = bench["update_parts_s"]
         print(json.dumps({"bench": bench}), flush=True)
     if args.out:

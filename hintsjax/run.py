@@ -173,6 +173,19 @@ class Training:
     first: int  # updates this call started from (a resumed run's checkpoint)
     before: float  # training seconds of earlier calls (resumed)
     seconds: float = 0.0  # training seconds of this call
+    # (seconds since training began, updates done) each time a chunk's metrics reached the host
+    arrivals: tuple[tuple[float, int], ...] = ()
+
+
+def chunks_rate(training: Training, env_steps_per_update: int) -> float | None:
+    """Env steps per second from training's start to the last chunk's metrics on the host: the span
+    the bench's back-to-back chunks are timed over, so the two compare; the last checkpoint's
+    write, after it, is left out. None when no chunk ran. (A rate between chunk ends would read
+    high whenever the host fetched the first chunk late, once later chunks had run.)"""
+    if not training.arrivals:
+        return None
+    seconds, updates = training.arrivals[-1]
+    return (updates - training.first) * env_steps_per_update / max(seconds, 1e-9)
 
 
 def start(trainer: Trainer, cfg: RunConfig, run_dir: Path, resume: bool, label: str, check_memory: bool = False) -> Training:
@@ -223,8 +236,11 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
                                                          "compile_seconds": compiled.seconds,
                                                          "trace_seconds": compiled.trace_seconds}))
 
+    arrivals = []
+
     def report(metrics: dict[str, jax.Array], after: int, n: int) -> None:
         metrics = {k: np.asarray(v)[:, :n] for k, v in metrics.items()}  # waits for that chunk only
+        arrivals.append((time.perf_counter() - t0, after + n))
         write(metrics, after)
         found = first_nonfinite(metrics, after)
         if found is not None:
@@ -254,7 +270,8 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
                 save(state, total, finite)
     finally:
         bar.close()
-    return dataclasses.replace(training, state=state, done=done, seconds=time.perf_counter() - t0)
+    return dataclasses.replace(training, state=state, done=done, seconds=time.perf_counter() - t0,
+                               arrivals=tuple(arrivals))
 
 
 def finish(cfg: RunConfig, run_dir: Path, training: Training, evaluations: list[dict], eval_compile: float,
@@ -267,6 +284,7 @@ def finish(cfg: RunConfig, run_dir: Path, training: Training, evaluations: list[
                "trace_seconds": {"train": compiled.trace_seconds}, "traced_programs_loaded": compiled.loaded,
                "train_env_steps_per_s": (training.done - training.first) * cfg.ppo.batch_size * cfg.seeds
                / max(training.seconds, 1e-9),
+               "chunks_env_steps_per_s": chunks_rate(training, cfg.ppo.batch_size * cfg.seeds),
                "env_steps": cfg.ppo.num_updates * cfg.ppo.batch_size, **(extra or {}), "evaluations": evaluations}
     (run_dir / EVAL_JSON).write_text(json.dumps(results, indent=1))
     if (run_dir / METRICS_CSV).exists():

@@ -125,7 +125,19 @@ def test_a_run_resumed_at_its_last_update_only_evaluates(tmp_path):
     assert run.main_from_values({"resume": str(folder)}) == 0
     again = json.loads((folder / run.EVAL_JSON).read_text())
     assert again["evaluations"] == first["evaluations"] and (folder / "metrics.csv").read_text() == rows
+    assert first["chunks_env_steps_per_s"] > 0 and again["chunks_env_steps_per_s"] is None  # 3 chunks; none
     assert checkpoint.latest_update(folder) == 5
+
+
+def test_chunks_rate_runs_from_training_start_to_the_last_chunks_metrics():
+    """6 updates of 100 env steps, the last chunk's metrics on the host at 3.0 s (its checkpoint
+    written after, at 9.0 s): 200 steps/s; a resumed call from update 2 trained 4 of them; no
+    chunk, no rate."""
+    training = run.Training(compiled=None, state=None, done=6, first=0, before=0.0, seconds=9.0,
+                            arrivals=((1.0, 2), (2.5, 4), (3.0, 6)))
+    assert run.chunks_rate(training, 100) == pytest.approx(200.0)
+    assert run.chunks_rate(dataclasses.replace(training, first=2), 100) == pytest.approx(400 / 3)
+    assert run.chunks_rate(dataclasses.replace(training, arrivals=()), 100) is None
 
 
 def nonfinite_values(tmp_path, **ppo) -> dict:
