@@ -28,8 +28,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import (SUMMARY_JSON, about_lines, archive_run, iqm_cell, load, markdown_table, metric_cell, ordering,  # noqa: E402
-                    run_folder, training_cell, training_seed_means)
+from report import (ARCHIVE, SUMMARY_JSON, about_lines, archive_run, iqm_cell, load, markdown_table, metric_cell, ordering,  # noqa: E402
+                    read_about, run_folder, training_cell, training_seed_means)
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENV, AGENT = "car_racing", "ppo_rgb"
@@ -171,7 +171,7 @@ def report(runs: Path, out: Path) -> None:
              *markdown_table(header, rows), "",
              f"Each variant against `{reference}` (probability of improvement over seeds, 95% bootstrap interval; "
              "decided where it excludes 0.5):", "", *comparisons, ""]
-    lines += about_lines(runs)
+    lines += about_lines(read_about(ARCHIVE / runs.name))
     out.write_text("\n".join(lines))
     print(f"wrote {out}")
 

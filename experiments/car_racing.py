@@ -18,7 +18,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from report import (about_lines, cell, curve_lines, footer, load, markdown_table, metric_cell, references_note, training_cell, wall_clock, write_report)
+from report import (ARCHIVE, about_lines, cell, curve_lines, footer, load, markdown_table, metric_cell, read_about, references_note, training_cell, wall_clock, write_report)
 from sweep import hints_run, table_main
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -79,17 +79,17 @@ def findings(runs: Path, env: str) -> str:
 def protocol(runs: Path, env: str) -> str:
     """How the table's rows were evaluated ('5 training seeds x 50 evaluation episodes (sampled
     actions)'), or each row's where they differ."""
-    found = {}
+    found: dict[str, list[str]] = {}  # the text of a protocol -> the rows evaluated so
     for label in table_runs(env):
         if (result := load(runs, env, label)) is not None:
             e = result["evaluations"][0]
-            found[label] = (f"{len(e['seed_means'])} training seeds x {e.get('episodes_per_seed', '?')} evaluation episodes "
-                            f"({'sampled actions' if e.get('stochastic') else 'the policy mean'})")
-    if len(set(found.values())) <= 1:
-        return next(iter(found.values()), "training seeds x evaluation episodes")
-    rows_of = {v: [k for k in found if found[k] == v] for v in dict.fromkeys(found.values())}
+            text = (f"{len(e['seed_means'])} training seeds x {e.get('episodes_per_seed', '?')} evaluation episodes "
+                    f"({'sampled actions' if e.get('stochastic') else 'the policy mean'})")
+            found.setdefault(text, []).append(label)
+    if len(found) <= 1:
+        return next(iter(found), "training seeds x evaluation episodes")
     return "the row's training seeds x evaluation episodes (" + "; ".join(
-        f"{', '.join(labels)}: {v}" for v, labels in rows_of.items()) + ")"
+        f"{', '.join(labels)}: {text}" for text, labels in found.items()) + ")"
 
 
 def report(runs: Path, force: bool = False) -> None:
@@ -124,7 +124,7 @@ def report(runs: Path, force: bool = False) -> None:
         learners = [label for label in table_runs(env) if label not in REFERENCES]  # at the table's budget
         lines += curve_lines(runs, env, learners, RESULTS / f"car_curves_{env}.png",
                              f"{env} (standard tracks): Table 3 agents")
-    lines += about_lines(runs)
+    lines += about_lines(read_about(ARCHIVE / runs.name))
     lines.append(footer(runs, TABLE, run_ids(ENVS)))
     write_report(RESULTS / "car_table3.md", lines, force)
 

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import markdown_table  # noqa: E402
+from report import about_lines, markdown_table, read_about  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 CASES = "pendulum:composite,pendulum:angular_velocity,acrobot:composite,idp:composite,halfcheetah:velocity"
@@ -122,7 +122,7 @@ def report(runs: Path, cases: list[tuple[str, str]], frames: int, out: Path) -> 
              "Returns: the mean over each seed's 50 deterministic episodes, then mean ± std over seeds, "
              "IQM with its 95% bootstrap interval (hintsjax/stats.py), and P(row > PPO-RGB), the probability "
              "that a seed of the row beats a seed of PPO-RGB, with its 95% interval (decided where it excludes 0.5).", ""]
-    about = json.loads((runs / "about.json").read_text()) if (runs / "about.json").is_file() else {}
+    about = read_about(runs)
     shared = set(about.pop(SHARED_KEY, []))  # folders whose seconds are not a cost: the GPU ran other training too
     rows, verdicts, against, costs = [], [], [], []
     for env, hint in cases:
@@ -184,7 +184,7 @@ def report(runs: Path, cases: list[tuple[str, str]], frames: int, out: Path) -> 
     if shared:
         about["shared GPU"] = (f"{', '.join(sorted(shared))} trained beside other training programs on the same GPU, "
                                f"so their seconds are not a cost ({SHARED_CELL} above)")
-    lines += ["## Where these numbers come from", "", *(f"- {k}: {v}" for k, v in about.items()), ""]
+    lines += about_lines(about)
     out.write_text("\n".join(lines))
     print(f"wrote {out}")
 

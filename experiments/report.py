@@ -310,13 +310,16 @@ def curve_lines(runs: Path, env: str, labels: list[str], out: Path, title: str, 
     return [f"![{env} learning curves]({out.name})", ""]
 
 
-def about_lines(runs: Path) -> list[str]:
-    """The report's section on how its rows were made (commands, hardware, dates, what shared a GPU),
-    from ARCHIVE/<runs' name>/about.json, written by whoever ran them; [] when there is none."""
-    path = ARCHIVE / runs.name / ABOUT_JSON
-    if not path.is_file():
-        return []
-    return ["## Where these numbers come from", "", *(f"- {k}: {v}" for k, v in json.loads(path.read_text()).items()), ""]
+def read_about(folder: Path) -> dict:
+    """How a folder's runs were made (commands, hardware, dates, what shared a GPU): its
+    about.json, written by whoever ran them; {} when there is none."""
+    path = folder / ABOUT_JSON
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
+def about_lines(about: dict) -> list[str]:
+    """A report's closing section from `read_about`'s entries; [] when there are none."""
+    return ["## Where these numbers come from", "", *(f"- {k}: {v}" for k, v in about.items()), ""] if about else []
 
 
 def footer(runs: Path, table: str, run_ids: list[str]) -> str:

@@ -30,7 +30,7 @@ from hintsjax import envs, program_cache
 from hintsjax.config import RunConfig, env_params, load_run_config
 from hintsjax.errors import UsageError, fail
 from hintsjax.generator import PROGRAMMATIC
-from hintsjax.ppo import Hyper, make_network, pick_hint
+from hintsjax.ppo import Hyper, gaussian_sample, make_network, pick_hint
 from hintsjax.trainer import program_identity
 
 EVAL_TAG = 0xE7A1  # folded into a seed's key so evaluation draws differ from training's
@@ -66,7 +66,7 @@ def make_task_evaluator(
             t, state, obs, ret, length, metrics, alive = carry
             k_act, k_env = jax.random.split(jax.random.fold_in(k_run, t))
             mean, log_std, _ = network.apply(params, see(obs))
-            action = mean + stochastic * jnp.exp(log_std) * jax.random.normal(k_act, mean.shape)
+            action = gaussian_sample(k_act, mean, log_std) if stochastic else mean
             ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
                 jax.random.split(k_env, num_episodes), state, action, task_params
             )

@@ -123,6 +123,11 @@ def gaussian_log_prob(action: jax.Array, mean: jax.Array, log_std: jax.Array) ->
     return jnp.sum(-0.5 * z**2 - log_std - 0.5 * jnp.log(2 * jnp.pi), axis=-1)
 
 
+def gaussian_sample(key: jax.Array, mean: jax.Array, log_std: jax.Array) -> jax.Array:
+    """An action drawn from the diagonal Gaussian policy: mean + std * N(0, 1), [..., A]."""
+    return mean + jnp.exp(log_std) * jax.random.normal(key, mean.shape)
+
+
 def gaussian_entropy(log_std: jax.Array) -> jax.Array:
     """Entropy of a diagonal Gaussian: [A] -> []."""
     return jnp.sum(log_std + 0.5 * (1.0 + jnp.log(2 * jnp.pi)), axis=-1)
@@ -292,7 +297,7 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
             k_noise, k_act, k_env, k_final = jax.random.split(key, 4)
             seen = observe(obs, k_noise, state.hyper)
             mean, log_std, value = network.apply(state.params, seen)
-            action = mean + jnp.exp(log_std) * jax.random.normal(k_act, mean.shape)
+            action = gaussian_sample(k_act, mean, log_std)
             ts = jax.vmap(env.step, in_axes=(0, 0, 0, None, 0))(jax.random.split(k_env, N), env_state, action, env_params, starts)
             final_value = network.apply(state.params, observe(ts.final_obs, k_final, state.hyper))[2]
             transition = Transition(

@@ -26,7 +26,7 @@ from hintsjax import envs
 from hintsjax.config import RunConfig, env_params, load_run_config
 from hintsjax.errors import UsageError, fail
 from hintsjax.evaluate import eval_keys
-from hintsjax.ppo import make_network
+from hintsjax.ppo import gaussian_sample, make_network
 
 MAX_STEPS = 300  # the default --steps: the env's episode, capped here
 PANEL_WIDTH = 240  # pixels of the text-and-bars panel right of the picture
@@ -69,7 +69,7 @@ def policy_action(network: Any, params: Any, obs: dict[str, jax.Array], key: jax
     mean, log_std, _ = network.apply(params, jax.tree.map(lambda x: x[None], obs))
     if key is None:
         return mean[0]
-    return mean[0] + jnp.exp(log_std) * jax.random.normal(key, mean.shape[1:])
+    return gaussian_sample(key, mean[0], log_std)
 
 
 def rollout(cfg: RunConfig, params: Any, variant: str | None, steps: int, key: jax.Array) -> Rollout:
