@@ -89,8 +89,10 @@ def deploy_with(folder: Path, source: Path) -> Path:
     return out
 
 
-# A case's pieces, in order; `--parts` runs some of them (e.g. one per device lease: a 5-seed halfcheetah
-# run takes about 20 minutes on an H100). Each piece needs the generator's folder, which the first makes.
+# A case's pieces, in order; `--parts` runs some of them (e.g. where one device call cannot hold them all:
+# a 5-seed halfcheetah run trained in 106 to 119 s alone on an H200; Table 3's cheetah runs, 7 sharing one
+# H100, took about 1150 s each).
+# Each piece needs the generator's folder, which the first makes.
 PARTS = ("generator", "programmatic", "ppo_rgb", "learned")
 
 
