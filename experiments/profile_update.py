@@ -40,6 +40,9 @@ VARIANTS = {
     "at0": ("--xla_gpu_deterministic_ops=false --xla_gpu_autotune_level=0", {}),
     "excl_at0_unroll_learn": ("--xla_gpu_deterministic_ops=false --xla_gpu_exclude_nondeterministic_ops=true "
                               "--xla_gpu_autotune_level=0", {4: 4}),
+    # XLA's sort-and-prefix-scan rewrite of scatters that deterministic ops would otherwise turn
+    # into while loops of one update per iteration (MJX's scatter-adds)
+    "scatter_det": ("--xla_gpu_enable_scatter_determinism_expander=true", {}),
     "unroll_rollout": ("", {64: 8}),
     "unroll_learn": ("", {4: 4}),
     "unroll_both": ("", {64: 8, 4: 4}),

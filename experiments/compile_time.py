@@ -1,0 +1,102 @@
+"""Where the compile of one cell's training programs goes, cold and warm, under XLA flag variants.
+
+    python experiments/compile_time.py [--env ant] [--variants base,llvm_par] [--warm] [--out FILE]
+
+Each variant runs in its own process (XLA_FLAGS are read at start-up) with its own empty
+compilation cache; with `--warm` a second process then compiles again from the cache the first
+filled, as a second run of `python -m hintsjax.run` would. A process compiles the cell's init and
+chunk programs through `run.compile_training` (what the command runs, the traced-program cache
+included), splits the seconds by JAX's monitoring events (tracing, lowering to MLIR, XLA's
+backend compile, reading the persistent cache), then runs one chunk of `--updates` updates and
+digests the params: equal digests mean a flag left the program's numbers alone.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections import defaultdict
+from pathlib import Path
+
+# name -> XLA flags appended to the defaults (deterministic ops stay on in every variant)
+VARIANTS = {
+    "base": "",
+    # XLA splits the program's LLVM module and compiles the parts on several threads
+    "llvm_par": "--xla_gpu_enable_llvm_module_compilation_parallelism=true",
+    "threads16": "--xla_gpu_force_compilation_parallelism=16",
+    "autotune0": "--xla_gpu_autotune_level=0",
+}
+
+
+def one(args: argparse.Namespace) -> dict:
+    import jax
+    import numpy as np
+
+    from hintsjax import compilation_cache, run
+    from hintsjax.algorithms import make_trainer
+    from hintsjax.config import run_config
+    from hintsjax.env_defaults import ENV_DEFAULTS
+
+    seconds: dict[str, float] = defaultdict(float)
+    jax.monitoring.register_event_duration_secs_listener(lambda event, s, **_: seconds.__setitem__(event, seconds[event] + s))
+    compilation_cache.enable(args.cache)
+    cfg = run_config({"env": args.env, "agent": "hints", "scheme": "fc", "hint": ENV_DEFAULTS[args.env]["hint"],
+                      "checkpoint_every": args.updates})
+    keys = cfg.seed_keys()
+    t = time.perf_counter()
+    compiled = run.compile_training(make_trainer(cfg), keys, args.updates)
+    total = time.perf_counter() - t
+    state = compiled.init(keys)
+    state, _ = jax.block_until_ready(compiled.run_chunk(state, np.int32(args.updates)))
+    digest = hashlib.sha256(b"".join(np.asarray(x).tobytes() for x in jax.tree.leaves(state.params))).hexdigest()[:16]
+    short = {k.rsplit("/", 1)[-1]: round(v, 2) for k, v in seconds.items()}
+    return {"variant": args.variant, "warm": args.warm, "xla_flags": os.environ.get("XLA_FLAGS", ""),
+            "device": jax.devices()[0].device_kind, "jax": jax.__version__, "compile_s": round(total, 2),
+            "trace_s": round(compiled.trace_seconds, 2), "loaded_traced": compiled.loaded, "events_s": short,
+            "digest": digest}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--env", default="ant")
+    parser.add_argument("--updates", type=int, default=2)
+    parser.add_argument("--variants", default="base,llvm_par")
+    parser.add_argument("--warm", action="store_true", help="compile each variant a second time from its cache")
+    parser.add_argument("--variant", default=None, help=argparse.SUPPRESS)  # set in the child process
+    parser.add_argument("--cache", default=None, help=argparse.SUPPRESS)
+    parser.add_argument("--out", default=None, help="write the rows as JSON here")
+    args = parser.parse_args()
+    if args.variant is not None:
+        print("RESULT " + json.dumps(one(args)), flush=True)
+        return
+    names = [v for v in args.variants.split(",") if v]
+    unknown = [v for v in names if v not in VARIANTS]
+    if unknown:
+        parser.exit(2, f"error: unknown variant(s) {unknown}; valid: {', '.join(VARIANTS)}\n")
+    rows = []
+    for name in names:
+        env = {**os.environ, "XLA_FLAGS": (os.environ.get("XLA_FLAGS", "") + " " + VARIANTS[name]).strip()}
+        with tempfile.TemporaryDirectory() as cache:
+            for warm in ([False, True] if args.warm else [False]):
+                cmd = [sys.executable, __file__, "--variant", name, "--env", args.env, "--updates", str(args.updates),
+                       "--cache", cache] + (["--warm"] if warm else [])
+                out = subprocess.run(cmd, env=env, capture_output=True, text=True)
+                lines = [line for line in out.stdout.splitlines() if line.startswith("RESULT ")]
+                if not lines:
+                    print(f"{name}: failed\n{out.stderr[-3000:]}", flush=True)
+                    break
+                row = json.loads(lines[-1][len("RESULT "):])
+                rows.append(row)
+                print(json.dumps(row), flush=True)
+    if args.out:
+        Path(args.out).write_text(json.dumps(rows, indent=1))
+
+
+if __name__ == "__main__":
+    main()
