@@ -51,7 +51,7 @@ class RunConfig:
     eval_variants: tuple[str, ...] = ()  # deploy variants evaluated after training
     stochastic_eval: bool = False
     checkpoint_every: int = 10  # updates between progress reports and checkpoints
-    checkpoint_seconds: float = 0.0  # at least this long between checkpoints (0: after every report)
+    checkpoint_seconds: float = 30.0  # at least this long between checkpoints (0: after every report)
     expert: str | None = None  # dagger/gail: an exported expert folder (None: the env's packaged one)
     hint_source: str = "programmatic"  # where training's hint comes from: programmatic, or a generator folder
     eval_hint_source: str | None = None  # the same at deploy (None: as hint_source)

@@ -19,7 +19,7 @@ from hintsjax.errors import UsageError
 from hintsjax.evaluate import main as evaluate_main
 
 TINY = [
-    "agent=ppo_state", "seeds=2", "eval_episodes=3", "checkpoint_every=2",
+    "agent=ppo_state", "seeds=2", "eval_episodes=3", "checkpoint_every=2", "checkpoint_seconds=0",
     "ppo.total_env_steps=256", "ppo.num_envs=4", "ppo.batch_size=64", "ppo.minibatch_size=32", "ppo.epochs=1",
 ]
 

@@ -28,7 +28,7 @@ SEEDS = 2
 
 def cue_cfg(hint: str, scheme: str = "fc", **ppo_values) -> object:
     return run_config({"env": "cue", "agent": "hints", "scheme": scheme, "hint": hint, "seeds": SEEDS,
-                       "eval_episodes": 2, "checkpoint_every": 2, "ppo": {**TINY_PPO, **ppo_values}})
+                       "eval_episodes": 2, "checkpoint_every": 2, "checkpoint_seconds": 0, "ppo": {**TINY_PPO, **ppo_values}})
 
 
 def trained(trainer, cfg) -> object:

@@ -100,7 +100,7 @@ def test_a_failed_background_write_stops_the_run_with_one_line_and_keeps_the_las
         return real_save(self, step, *args, **kwargs)
 
     monkeypatch.setattr(ocp.CheckpointManager, "save", fail_after_first)
-    values = {"env": "linear", "agent": "ppo_state", "seeds": 2, "eval_episodes": 2, "checkpoint_every": 1,
+    values = {"env": "linear", "agent": "ppo_state", "seeds": 2, "eval_episodes": 2, "checkpoint_every": 1, "checkpoint_seconds": 0,
               "ppo": TINY_PPO, "out_dir": str(tmp_path), "name": "r"}
     assert run.main_from_values(values) == 1
     err = capsys.readouterr().err
@@ -115,7 +115,7 @@ def test_a_failed_background_write_stops_the_run_with_one_line_and_keeps_the_las
 
 def test_a_run_resumed_at_its_last_update_only_evaluates(tmp_path):
     """A run killed during its evaluation resumes at its end: nothing is trained or saved again."""
-    values = {"env": "linear", "agent": "ppo_state", "seeds": 2, "eval_episodes": 2, "checkpoint_every": 2,
+    values = {"env": "linear", "agent": "ppo_state", "seeds": 2, "eval_episodes": 2, "checkpoint_every": 2, "checkpoint_seconds": 0,
               "ppo": TINY_PPO, "out_dir": str(tmp_path), "name": "r"}
     assert run.main_from_values(values) == 0
     folder = tmp_path / "r"
@@ -142,7 +142,7 @@ def test_chunks_rate_runs_from_training_start_to_the_last_chunks_metrics():
 
 def nonfinite_values(tmp_path, **ppo) -> dict:
     """A 5-update run on the linear test env, checkpointed every 2 updates."""
-    return {"env": "linear", "agent": "ppo_state", "seeds": 2, "eval_episodes": 2, "checkpoint_every": 2,
+    return {"env": "linear", "agent": "ppo_state", "seeds": 2, "eval_episodes": 2, "checkpoint_every": 2, "checkpoint_seconds": 0,
             "out_dir": str(tmp_path), "name": "nan", "ppo": {**TINY_PPO, **ppo}}
 
 
