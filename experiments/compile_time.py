@@ -1,6 +1,6 @@
 """Where the compile of one cell's training programs goes, cold and warm, under XLA flag variants.
 
-    python experiments/compile_time.py [--env ant] [--variants base,llvm_par] [--warm] [--out FILE]
+    python experiments/compile_time.py [--env ant] [--variants base,threads16] [--warm] [--out FILE]
 
 Each variant runs in its own process (XLA_FLAGS are read at start-up) with its own empty
 compilation cache; with `--warm` a second process then compiles again from the cache the first
@@ -17,18 +17,18 @@ import argparse
 import hashlib
 import json
 import os
-import subprocess
-import sys
 import tempfile
 import time
 from collections import defaultdict
 from pathlib import Path
 
+import flag_variants
+
 # name -> XLA flags appended to the defaults (deterministic ops stay on in every variant)
 VARIANTS = {
     "base": "",
-    # XLA splits the program's LLVM module and compiles the parts on several threads
-    "llvm_par": "--xla_gpu_enable_llvm_module_compilation_parallelism=true",
+    # XLA compiles the program's parts on 16 threads (jax 0.11.2's XLA no longer knows
+    # --xla_gpu_enable_llvm_module_compilation_parallelism: a process given it stops at start-up)
     "threads16": "--xla_gpu_force_compilation_parallelism=16",
     "autotune0": "--xla_gpu_autotune_level=0",
 }
@@ -66,32 +66,23 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--env", default="ant")
     parser.add_argument("--updates", type=int, default=2)
-    parser.add_argument("--variants", default="base,llvm_par")
+    parser.add_argument("--variants", default="base,threads16")
     parser.add_argument("--warm", action="store_true", help="compile each variant a second time from its cache")
     parser.add_argument("--variant", default=None, help=argparse.SUPPRESS)  # set in the child process
     parser.add_argument("--cache", default=None, help=argparse.SUPPRESS)
     parser.add_argument("--out", default=None, help="write the rows as JSON here")
     args = parser.parse_args()
     if args.variant is not None:
-        print("RESULT " + json.dumps(one(args)), flush=True)
+        flag_variants.report(one(args))
         return
-    names = [v for v in args.variants.split(",") if v]
-    unknown = [v for v in names if v not in VARIANTS]
-    if unknown:
-        parser.exit(2, f"error: unknown variant(s) {unknown}; valid: {', '.join(VARIANTS)}\n")
     rows = []
-    for name in names:
-        env = {**os.environ, "XLA_FLAGS": (os.environ.get("XLA_FLAGS", "") + " " + VARIANTS[name]).strip()}
+    for name in flag_variants.chosen(parser, args.variants, VARIANTS):
         with tempfile.TemporaryDirectory() as cache:
             for warm in ([False, True] if args.warm else [False]):
-                cmd = [sys.executable, __file__, "--variant", name, "--env", args.env, "--updates", str(args.updates),
-                       "--cache", cache] + (["--warm"] if warm else [])
-                out = subprocess.run(cmd, env=env, capture_output=True, text=True)
-                lines = [line for line in out.stdout.splitlines() if line.startswith("RESULT ")]
-                if not lines:
-                    print(f"{name}: failed\n{out.stderr[-3000:]}", flush=True)
+                row = flag_variants.run(__file__, VARIANTS[name], ["--variant", name, "--env", args.env, "--updates",
+                                                                   str(args.updates), "--cache", cache] + (["--warm"] if warm else []))
+                if row is None:
                     break
-                row = json.loads(lines[-1][len("RESULT "):])
                 rows.append(row)
                 print(json.dumps(row), flush=True)
     if args.out:

@@ -17,12 +17,12 @@ import gzip
 import hashlib
 import json
 import os
-import subprocess
-import sys
 import tempfile
 import time
 from collections import defaultdict
 from pathlib import Path
+
+import flag_variants
 
 # name -> (extra XLA flags, {scan length: unroll}); a variant runs in its own process with its
 # flags appended, and its scans of those lengths unrolled (the pendulum's rollout and GAE scan 64
@@ -133,23 +133,14 @@ def main() -> None:
     parser.add_argument("--out", default=None, help="write every variant's result as JSON into this folder")
     args = parser.parse_args()
     if args.variant is not None:
-        print("RESULT " + json.dumps(one(args)), flush=True)
+        flag_variants.report(one(args))
         return
-    names = [v for v in args.variants.split(",") if v]
-    unknown = [v for v in names if v not in VARIANTS]
-    if unknown:
-        parser.exit(2, f"error: unknown variant(s) {unknown}; valid: {', '.join(VARIANTS)}\n")
     results = []
-    for name in names:
-        env = {**os.environ, "XLA_FLAGS": (os.environ.get("XLA_FLAGS", "") + " " + VARIANTS[name][0]).strip()}
-        cmd = [sys.executable, __file__, "--variant", name, "--env", args.env, "--seeds", str(args.seeds),
-               "--updates", str(args.updates), "--top", str(args.top)]
-        out = subprocess.run(cmd, env=env, capture_output=True, text=True)
-        lines = [line for line in out.stdout.splitlines() if line.startswith("RESULT ")]
-        if not lines:
-            print(f"{name}: failed\n{out.stderr[-3000:]}", flush=True)
+    for name in flag_variants.chosen(parser, args.variants, VARIANTS):
+        r = flag_variants.run(__file__, VARIANTS[name][0], ["--variant", name, "--env", args.env, "--seeds", str(args.seeds),
+                                                            "--updates", str(args.updates), "--top", str(args.top)])
+        if r is None:
             continue
-        r = json.loads(lines[-1][len("RESULT "):])
         results.append(r)
         k = r["kernels"]
         print(f"\n== {name} ({r['xla_flags']}): {r['update_ms']:.1f} ms/update = {r['env_steps_per_s']:,.0f} env steps/s, "
