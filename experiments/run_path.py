@@ -1,6 +1,6 @@
 """What the command a user types delivers: `python -m hintsjax.run` timed end to end, beside the bench.
 
-    python experiments/run_path.py [--cells pendulum,ant] [--ant-updates 200] [--out experiments/results/run_path.json]
+    python experiments/run_path.py [--cells pendulum,ant,ant_fast] [--ant-updates 200] [--out experiments/results/run_path.json]
 
 For each cell (pendulum: hints/fc/composite; ant: hints/fc/speed, the env defaults otherwise),
 the command runs twice in a fresh process, first with an empty compilation cache (cold), then
@@ -27,7 +27,10 @@ import time
 from pathlib import Path
 
 CELLS = {"pendulum": ["env=pendulum", "agent=hints", "hint=composite", "scheme=fc"],
-         "ant": ["env=ant", "agent=hints", "hint=speed", "scheme=fc"]}
+         "ant": ["env=ant", "agent=hints", "hint=speed", "scheme=fc"],
+         # the ant with cheaper physics (Euler, 2 Newton iterations, 9 contacts: docs/environments.md)
+         "ant_fast": ["env=ant_fast", "agent=hints", "hint=speed", "scheme=fc"]}
+PARTIAL = ("ant", "ant_fast")  # cells trained for --ant-updates updates, their full wall extrapolated
 
 
 def timed_command(args: list[str], cache: Path, out_dir: Path) -> tuple[float, dict]:
@@ -43,7 +46,7 @@ def timed_command(args: list[str], cache: Path, out_dir: Path) -> tuple[float, d
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cells", default="pendulum,ant", help=f"comma-separated subset of {', '.join(CELLS)}")
-    parser.add_argument("--ant-updates", type=int, default=200, help="updates of the ant cell (its full budget is 4882)")
+    parser.add_argument("--ant-updates", type=int, default=200, help="updates of the ant cells (their full budget is 4882)")
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
     cells = [c for c in args.cells.split(",") if c]
@@ -66,7 +69,7 @@ def main() -> None:
         values = dict(a.split("=") for a in CELLS[cell])
         cfg = run_config(values)
         budget = []
-        if cell == "ant":
+        if cell in PARTIAL:
             budget = [f"ppo.total_env_steps={args.ant_updates * cfg.ppo.batch_size}"]
         cache = Path(tempfile.mkdtemp(prefix="xla-cache-"))
         with tempfile.TemporaryDirectory() as out:
