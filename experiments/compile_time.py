@@ -14,7 +14,6 @@ digests the params: equal digests mean a flag left the program's numbers alone.
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import os
 import tempfile
@@ -54,7 +53,7 @@ def one(args: argparse.Namespace) -> dict:
     total = time.perf_counter() - t
     state = compiled.init(keys)
     state, _ = jax.block_until_ready(compiled.run_chunk(state, np.int32(args.updates)))
-    digest = hashlib.sha256(b"".join(np.asarray(x).tobytes() for x in jax.tree.leaves(state.params))).hexdigest()[:16]
+    digest = flag_variants.params_digest(state.params)
     short = {k.rsplit("/", 1)[-1]: round(v, 2) for k, v in seconds.items()}
     return {"variant": args.variant, "warm": args.warm, "xla_flags": os.environ.get("XLA_FLAGS", ""),
             "device": jax.devices()[0].device_kind, "jax": jax.__version__, "compile_s": round(total, 2),

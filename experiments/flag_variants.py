@@ -5,6 +5,7 @@ with `--variant NAME` and prints its result through `report`; the parent reads i
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import subprocess
@@ -21,6 +22,15 @@ def chosen(parser: argparse.ArgumentParser, names: str, valid: dict[str, Any]) -
     if unknown:
         parser.exit(2, f"error: unknown variant(s) {unknown}; valid: {', '.join(valid)}\n")
     return chosen
+
+
+def params_digest(params: Any) -> str:
+    """A digest of every array in `params`: equal digests from two processes (two variants, or one
+    variant twice) mean the same numbers."""
+    import numpy as np
+    from jax import tree
+
+    return hashlib.sha256(b"".join(np.asarray(x).tobytes() for x in tree.leaves(params))).hexdigest()[:16]
 
 
 def report(result: dict) -> None:
