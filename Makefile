@@ -1,4 +1,5 @@
 # make run   : set up (first time), train a first agent on CPU (pendulum, composite hint, FiLM) and show it
+# make setup-gpu : the same set-up on an NVIDIA GPU machine: jax's CUDA plugin and warp-lang (MJX-Warp physics) too
 # make test  : set up (first time) and run the test suite (slow tests: make test-slow)
 # make lint  : set up (first time) and run ruff (pinned in pyproject.toml) over the repository
 # make bench : environment and training throughput (meant for a GPU)
@@ -6,8 +7,9 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
+GPU_STAMP := $(VENV)/.installed-gpu-stamp
 
-.PHONY: setup run test test-slow lint bench clean
+.PHONY: setup setup-gpu run test test-slow lint bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -16,6 +18,12 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 setup: $(STAMP)
+
+$(GPU_STAMP): $(STAMP)
+	$(BIN)/pip install --quiet -e '.[test,gpu]'
+	touch $(GPU_STAMP)
+
+setup-gpu: $(GPU_STAMP)
 
 # A first agent that learns on CPU (python -m hintsjax.quickstart): pendulum, composite hint, FiLM,
 # one seed, 50 updates of 1024 env steps, evaluated beside a random policy, with a GIF of one episode.

@@ -14,16 +14,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-import contextlib
-import io
-
-with contextlib.redirect_stdout(io.StringIO()):  # mjx prints a notice when its optional warp backend is absent
-    from mujoco import mjx  # noqa: F401
-
+from hintsjax.envs import physics as _physics  # first: imports mujoco.mjx without its Warp backend (envs/physics.py)
 from hintsjax.envs import acrobot, ant, car_racing, halfcheetah, humanoid, idp, pendulum  # noqa: E402
 from hintsjax.envs.core import OBS_KEYS, AutoReset, Env, SquashedActions, Step, Timestep
 from hintsjax.envs.errors import ChoiceError, choose
 from hintsjax.envs.hints import NO_HINT, Hint, hint_names, make_hint, register_composite, register_hint
+from hintsjax.envs.mjx_env import MjxEnv
+from hintsjax.envs.physics import AUTO, DEFAULT_CAPACITY, JAX, WARP, PhysicsUnavailable
 
 
 @dataclass(frozen=True)
@@ -52,10 +49,36 @@ def env_names() -> list[str]:
     return sorted(REGISTRY)
 
 
-def make(name: str, hint: str = NO_HINT, observe: tuple[str, ...] = OBS_KEYS) -> Env:
-    """The env `name` observing `observe`, with hint `hint` (see `hints.make_hint`)."""
+def make(name: str, hint: str = NO_HINT, observe: tuple[str, ...] = OBS_KEYS, physics: str = AUTO,
+         warp_capacity: float = DEFAULT_CAPACITY) -> Env:
+    """The env `name` observing `observe`, with hint `hint` (see `hints.make_hint`); an MJX env
+    stepped by `physics` (`resolve_physics`; Warp's buffers `warp_capacity` times the model's
+    most contacts per world)."""
     entry = choose("env", name, REGISTRY)
+    impl = resolve_physics(name, physics)
+    if issubclass(entry.cls, MjxEnv):
+        return entry.cls(make_hint(name, hint), observe, impl, warp_capacity)
     return entry.cls(make_hint(name, hint), observe)
+
+
+def mjx_env_names() -> list[str]:
+    """The envs whose physics is a MuJoCo model (stepped by MJX's JAX solver or MJX-Warp)."""
+    return [name for name in env_names() if issubclass(REGISTRY[name].cls, MjxEnv)]
+
+
+def resolve_physics(name: str, physics: str = AUTO) -> str:
+    """`jax` or `warp`: what `physics` (auto, jax or warp) steps env `name` with on this
+    platform (envs/physics.py `resolve`). ChoiceError for an unknown value; PhysicsUnavailable
+    for warp where it cannot run, or for an env with no MuJoCo model."""
+    import jax
+
+    cls = choose("env", name, REGISTRY).cls
+    if not issubclass(cls, MjxEnv):
+        choose("physics", physics, dict.fromkeys(_physics.CHOICES))
+        if physics == WARP:
+            raise PhysicsUnavailable(f"{name} has no MuJoCo model; physics=warp is for {', '.join(mjx_env_names())}")
+        return JAX
+    return _physics.resolve(physics, jax.default_backend(), cls.warp_by_default)
 
 
 def variant_names(name: str) -> list[str]:
@@ -69,7 +92,8 @@ def make_params(name: str, variant: str | None = None) -> Any:
 
 
 __all__ = [
-    "OBS_KEYS", "AutoReset", "ChoiceError", "Env", "EnvEntry", "Hint", "NO_HINT", "REGISTRY", "SquashedActions", "Step",
-    "Timestep", "choose", "env_names", "hint_names", "make", "make_hint", "make_params",
-    "register_composite", "register_hint", "variant_names",
+    "AUTO", "DEFAULT_CAPACITY", "JAX", "OBS_KEYS", "WARP", "AutoReset", "ChoiceError", "Env", "EnvEntry", "Hint", "MjxEnv",
+    "NO_HINT", "PhysicsUnavailable", "REGISTRY", "SquashedActions", "Step", "Timestep", "choose", "env_names", "hint_names",
+    "make", "make_hint", "make_params", "mjx_env_names", "register_composite", "register_hint", "resolve_physics",
+    "variant_names",
 ]

@@ -16,7 +16,6 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 from flax import struct
-from mujoco import mjx
 
 from hintsjax.envs import raster
 from hintsjax.envs.core import Step
@@ -112,8 +111,7 @@ class Acrobot(MjxEnv):
 
     def transition(self, key, state: AcrobotState, action, params: AcrobotParams) -> Step:
         torque = jnp.clip(jnp.reshape(action, (1,)), *self.action_range(params))
-        data = mjx.make_data(self.model).replace(qpos=state.qpos, qvel=state.qvel, ctrl=torque)
-        data = self.physics.step(data)
+        data = self.physics.run(state.qpos, state.qvel, torque, 1, contact_forces=False)
         qpos = wrap_angle(data.qpos)
         limit = jnp.stack([params.max_speed_1, params.max_speed_2])
         qvel = jnp.clip(data.qvel, -limit, limit)

@@ -15,10 +15,10 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import mujoco
-from mujoco import mjx
 
 from hintsjax.envs.hints import register_hint, share_hints
-from hintsjax.envs.locomotion import LocomotionEnv, LocomotionParams, LocomotionState, cfrc_ext, torso_height_above_target
+from hintsjax.envs.locomotion import LocomotionEnv, LocomotionParams, LocomotionState, torso_height_above_target
+from hintsjax.envs.physics import Readout
 
 NAME = "ant"
 TORSO = 1  # body id of the torso, Gymnasium's `main_body`
@@ -31,9 +31,9 @@ VARIANTS = {
 }
 
 
-def contact_forces(data: mjx.Data) -> jax.Array:
+def contact_forces(data: Readout) -> jax.Array:
     """float32[nbody, 6] cfrc_ext clipped to v5's contact force range [-1, 1]."""
-    return jnp.clip(cfrc_ext(data), -1.0, 1.0)
+    return jnp.clip(data.cfrc_ext, -1.0, 1.0)
 
 
 class Ant(LocomotionEnv):
@@ -44,7 +44,7 @@ class Ant(LocomotionEnv):
     camera = dict(distance=3.5, elevation_deg=-35.0, azimuth_deg=90.0)
     camera_height = 0.4
 
-    def position(self, data: mjx.Data) -> jax.Array:
+    def position(self, data: Readout) -> jax.Array:
         return data.xpos[TORSO, :2]
 
     def outcome(self, data, velocity, ctrl, params):
@@ -56,7 +56,7 @@ class Ant(LocomotionEnv):
         reward = params.forward_reward_weight * velocity[0] + params.healthy_reward * healthy - ctrl_cost - contact_cost
         return reward, ~healthy
 
-    def observe_data(self, data: mjx.Data) -> jax.Array:
+    def observe_data(self, data: Readout) -> jax.Array:
         return jnp.concatenate([data.qpos[2:], data.qvel, contact_forces(data)[1:].ravel()])
 
 

@@ -15,10 +15,10 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-from mujoco import mjx
 
 from hintsjax.envs.hints import register_hint
 from hintsjax.envs.locomotion import LocomotionEnv, LocomotionParams, LocomotionState, forward_velocity
+from hintsjax.envs.physics import Readout
 
 NAME = "halfcheetah"
 
@@ -32,15 +32,16 @@ class HalfCheetah(LocomotionEnv):
     action_size = 6
     camera = dict(distance=3.0, elevation_deg=-15.0, azimuth_deg=90.0)
     camera_height = 0.4
+    contact_forces = False  # v5's cheetah reads no contact force
 
-    def position(self, data: mjx.Data) -> jax.Array:
+    def position(self, data: Readout) -> jax.Array:
         return jnp.stack([data.qpos[0], jnp.zeros_like(data.qpos[0])])
 
     def outcome(self, data, velocity, ctrl, params):
         reward = params.forward_reward_weight * velocity[0] - params.ctrl_cost_weight * jnp.sum(ctrl**2)
         return reward, jnp.zeros((), bool)
 
-    def observe_data(self, data: mjx.Data) -> jax.Array:
+    def observe_data(self, data: Readout) -> jax.Array:
         return jnp.concatenate([data.qpos[1:], data.qvel])
 
 

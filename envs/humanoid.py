@@ -30,11 +30,11 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import mujoco
-from mujoco import mjx
 
 from hintsjax.envs.hints import register_hint
-from hintsjax.envs.locomotion import (SOLVER, LocomotionEnv, LocomotionParams, LocomotionState, cfrc_ext, cinert,
+from hintsjax.envs.locomotion import (SOLVER, LocomotionEnv, LocomotionParams, LocomotionState,
                                       forward_velocity, torso_height_above_target)
+from hintsjax.envs.physics import Readout
 
 NAME = "humanoid"
 CONTACT_COST_MAX = 10.0
@@ -57,21 +57,21 @@ class Humanoid(LocomotionEnv):
     camera_height = 1.0
     uniform_velocity_noise = True
 
-    def position(self, data: mjx.Data) -> jax.Array:
+    def position(self, data: Readout) -> jax.Array:
         return self.mass_centre(data)[:2]
 
     def outcome(self, data, velocity, ctrl, params):
         z = data.qpos[2]
         healthy = (z > params.healthy_z_low) & (z < params.healthy_z_high)
         ctrl_cost = params.ctrl_cost_weight * jnp.sum(ctrl**2)
-        contact_cost = jnp.minimum(params.contact_cost_weight * jnp.sum(cfrc_ext(data) ** 2), CONTACT_COST_MAX)
+        contact_cost = jnp.minimum(params.contact_cost_weight * jnp.sum(data.cfrc_ext ** 2), CONTACT_COST_MAX)
         reward = params.forward_reward_weight * velocity[0] + params.healthy_reward * healthy - ctrl_cost - contact_cost
         return reward, ~healthy
 
-    def observe_data(self, data: mjx.Data) -> jax.Array:
+    def observe_data(self, data: Readout) -> jax.Array:
         return jnp.concatenate([
-            data.qpos[2:], data.qvel, cinert(data)[1:].ravel(), data.cvel[1:].ravel(),
-            data.qfrc_actuator[6:], cfrc_ext(data)[1:].ravel(),
+            data.qpos[2:], data.qvel, data.cinert[1:].ravel(), data.cvel[1:].ravel(),
+            data.qfrc_actuator[6:], data.cfrc_ext[1:].ravel(),
         ])
 
 

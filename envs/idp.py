@@ -22,12 +22,12 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 from flax import struct
-from mujoco import mjx
 
 from hintsjax.envs import raster
 from hintsjax.envs.core import Step
 from hintsjax.envs.hints import register_hint, register_link_velocity_hints
 from hintsjax.envs.mjx_env import MjxEnv
+from hintsjax.envs.physics import Readout
 
 NAME = "idp"
 
@@ -110,19 +110,18 @@ class InvertedDoublePendulum(MjxEnv):
     max_steps = 1000
     action_size = 1
 
-
     def default_params(self) -> IDPParams:
         return VARIANTS["standard"]
 
-    def _state(self, data: mjx.Data, t: jax.Array) -> IDPState:
+    def _state(self, data: Readout, t: jax.Array) -> IDPState:
         tip = data.site_xpos[self.site_ids["tip"]][jnp.array([0, 2])]
         return IDPState(data.qpos, data.qvel, tip, data.qfrc_constraint[0], t)
 
     def state_at(self, qpos, qvel, t=0) -> IDPState:
         """The state at (qpos, qvel) with MuJoCo's kinematics and constraint force computed."""
         f32 = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731
-        data = mjx.make_data(self.model).replace(qpos=f32(qpos), qvel=f32(qvel))
-        return self._state(self.physics.forward(data), jnp.asarray(t, jnp.int32))
+        data = self.physics.run(f32(qpos), f32(qvel), jnp.zeros(1, jnp.float32), 0, contact_forces=False)
+        return self._state(data, jnp.asarray(t, jnp.int32))
 
     def initial_state(self, key: jax.Array, params: IDPParams) -> IDPState:
         k_pos, k_vel = jax.random.split(key)
@@ -136,8 +135,7 @@ class InvertedDoublePendulum(MjxEnv):
 
     def transition(self, key, state: IDPState, action, params: IDPParams) -> Step:
         ctrl = jnp.clip(jnp.reshape(action, (1,)), *self.action_range(params))
-        data = mjx.make_data(self.model).replace(qpos=state.qpos, qvel=state.qvel, ctrl=ctrl)
-        data = jax.lax.fori_loop(0, params.frame_skip, lambda _, d: self.physics.step(d), data)
+        data = self.physics.run(state.qpos, state.qvel, ctrl, params.frame_skip, contact_forces=False)
         next_state = self._state(data, state.t)
         x, y = next_state.tip[0], next_state.tip[1]
         terminated = y <= params.min_tip_height

@@ -27,11 +27,11 @@ import jax
 import jax.numpy as jnp
 import mujoco
 from flax import struct
-from mujoco import mjx
 
 from hintsjax.envs import render3d
 from hintsjax.envs.core import Step
 from hintsjax.envs.mjx_env import MjxEnv
+from hintsjax.envs.physics import Readout
 
 
 @struct.dataclass
@@ -69,16 +69,6 @@ class LocomotionState:
     t: jax.Array
 
 
-def cfrc_ext(data: mjx.Data) -> jax.Array:
-    """float32[nbody, 6] external (contact) force on each body, after `rne_postconstraint`."""
-    return data._impl.cfrc_ext
-
-
-def cinert(data: mjx.Data) -> jax.Array:
-    """float32[nbody, 10] each body's inertia about the centre of mass (MuJoCo's `cinert`)."""
-    return data._impl.cinert
-
-
 # The one change to Gymnasium's models: Newton capped at 4 iterations and 8 line-search steps
 # instead of MuJoCo's 100 and 50 (MJX runs every iteration for every env under vmap). Fewer
 # iterations leave the Ant's and HalfCheetah's contact solves unconverged (their parity tests).
@@ -95,6 +85,7 @@ class LocomotionEnv(MjxEnv):
     camera: dict[str, float] = dict(distance=4.0, elevation_deg=-20.0, azimuth_deg=90.0)
     camera_height: float = 0.5  # the camera aims at the centre of mass's (x, y) at this height (m)
     uniform_velocity_noise: bool = False  # Humanoid draws qvel uniformly; Ant and HalfCheetah normally
+    contact_forces: bool = True  # the task reads `cfrc_ext` (mj_rnePostConstraint after each step)
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -107,24 +98,24 @@ class LocomotionEnv(MjxEnv):
         return self.variants["standard"]
 
     # -- what each task supplies --------------------------------------------------------------
-    def position(self, data: mjx.Data) -> jax.Array:
+    def position(self, data: Readout) -> jax.Array:
         """float32[2] what the forward reward differentiates (x, y; y may be 0)."""
         raise NotImplementedError
 
-    def outcome(self, data: mjx.Data, velocity: jax.Array, ctrl: jax.Array, params) -> tuple[jax.Array, jax.Array]:
+    def outcome(self, data: Readout, velocity: jax.Array, ctrl: jax.Array, params) -> tuple[jax.Array, jax.Array]:
         """(reward, terminated) of a step that ended in `data` with `velocity` (float32[2])."""
         raise NotImplementedError
 
-    def observe_data(self, data: mjx.Data) -> jax.Array:
+    def observe_data(self, data: Readout) -> jax.Array:
         """float32[n] Gymnasium v5's observation of `data`."""
         raise NotImplementedError
 
     # -- shared ---------------------------------------------------------------------------------
-    def mass_centre(self, data: mjx.Data) -> jax.Array:
+    def mass_centre(self, data: Readout) -> jax.Array:
         """float32[3] the mass-weighted mean of the bodies' centres (Gymnasium's `mass_center`)."""
         return self.body_mass @ data.xipos / jnp.sum(self.body_mass)
 
-    def _state(self, data: mjx.Data, position, velocity, reward, max_velocity, t) -> LocomotionState:
+    def _state(self, data: Readout, position, velocity, reward, max_velocity, t) -> LocomotionState:
         return LocomotionState(
             qpos=data.qpos, qvel=data.qvel, obs=self.observe_data(data),
             geom_xpos=data.geom_xpos, geom_xmat=data.geom_xmat, com=self.mass_centre(data),
@@ -136,8 +127,7 @@ class LocomotionEnv(MjxEnv):
         """The state at (qpos, qvel) after MuJoCo's forward pass, as Gymnasium's `set_state`
         leaves it (with the contact forces filled in), and no step behind it."""
         f32 = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731
-        data = mjx.make_data(self.model).replace(qpos=f32(qpos), qvel=f32(qvel))
-        data = self.physics.rne_postconstraint(self.physics.forward(data))
+        data = self.physics.run(f32(qpos), f32(qvel), jnp.zeros(self.mj_model.nu, jnp.float32), 0, self.contact_forces)
         zero = jnp.zeros((), jnp.float32)
         return self._state(data, self.position(data), jnp.zeros(2, jnp.float32), zero, zero, t)
 
@@ -161,9 +151,7 @@ class LocomotionEnv(MjxEnv):
 
     def transition(self, key, state: LocomotionState, action, params: LocomotionParams) -> Step:
         ctrl = jnp.clip(jnp.reshape(action, (self.action_size,)), *self.action_range(params))
-        data = mjx.make_data(self.model).replace(qpos=state.qpos, qvel=state.qvel, ctrl=ctrl)
-        data = jax.lax.fori_loop(0, params.frame_skip, lambda _, d: self.physics.step(d), data)
-        data = self.physics.rne_postconstraint(data)
+        data = self.physics.run(state.qpos, state.qvel, ctrl, params.frame_skip, self.contact_forces)
         position = self.position(data)
         velocity = (position - state.position) / self.dt
         reward, terminated = self.outcome(data, velocity, ctrl, params)

@@ -2,18 +2,19 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from importlib import resources
-from typing import Any, Callable
+from typing import Any
 
 import jax
 import mujoco
-from mujoco import mjx
 
-from hintsjax.envs.core import Env
+from hintsjax.envs.core import OBS_KEYS, Env
+from hintsjax.envs.hints import Hint
+from hintsjax.envs.physics import AUTO, DEFAULT_CAPACITY, WARP, JaxPhysics, PhysicsKey, WarpPhysics, make_physics, resolve
 
 
-_PER_CLASS: dict[type, tuple[Any, Physics]] = {}  # an env class's MJX model and Physics, made once
+# an env class's physics, made once per implementation (and Warp's capacity)
+_PER_CLASS: dict[tuple[type, PhysicsKey], JaxPhysics | WarpPhysics] = {}
 
 
 def load_asset(name: str) -> str:
@@ -21,41 +22,31 @@ def load_asset(name: str) -> str:
     return resources.files("hintsjax.envs").joinpath("assets", name).read_text()
 
 
-@dataclass(frozen=True)
-class Physics:
-    """MJX's functions on one env class's model, each a `jax.jit` made once per class: every
-    call with the same shapes, in any program of the process (training's init, rollout and reset,
-    evaluation), reuses one trace of MJX's Python instead of tracing it again (the tracing, not
-    XLA's compile, was most of a warm start's compile time)."""
-
-    forward: Callable[[mjx.Data], mjx.Data]
-    step: Callable[[mjx.Data], mjx.Data]
-    rne_postconstraint: Callable[[mjx.Data], mjx.Data]
-
-
-def physics_of(model: Any) -> Physics:
-    """MJX's functions on `model`, jitted."""
-    return Physics(jax.jit(lambda d: mjx.forward(model, d)), jax.jit(lambda d: mjx.step(model, d)),
-                   jax.jit(lambda d: mjx.rne_postconstraint(model, d)))
-
-
 class MjxEnv(Env):
     """An Env built from the MJCF string `mjcf` (or the packaged file `asset`), with the
     `mj_model.opt` fields in `options` overridden: `mj_model` (MuJoCo C, for reference and
-    names), `model` (its MJX copy, what the jitted step uses) and `site_ids` (site name ->
-    index)."""
+    names), `physics` (MJX's JAX solver or MJX-Warp on it: `physics`, envs/physics.py) and
+    `site_ids` (site name -> index)."""
 
     mjcf: str = ""
     asset: str = ""
     options: dict[str, Any] = {}
 
-    def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
+    # Whether physics=auto picks MJX-Warp for this env on an NVIDIA GPU. False for every env until
+    # a task's agents are shown to learn alike on both (docs/environments.md, "Physics"): the one
+    # comparison so far, the ant's hints-fc-speed row, scored 905 +- 194 with Warp against 1239 +- 283
+    # with JAX (another GPU, an earlier day), beyond the seeds' spread. physics=warp asks for it.
+    warp_by_default: bool = False
+
+    def __init__(self, hint: Hint, observe: tuple[str, ...] = OBS_KEYS, physics: str = AUTO,
+                 warp_capacity: float = DEFAULT_CAPACITY):
+        super().__init__(hint, observe)
         self.mj_model = self.make_mj_model()
-        if type(self) not in _PER_CLASS:  # the model depends on the class alone (its MJCF and options)
-            model = mjx.put_model(self.mj_model)
-            _PER_CLASS[type(self)] = model, physics_of(model)
-        self.model, self.physics = _PER_CLASS[type(self)]
+        impl = resolve(physics, jax.default_backend(), self.warp_by_default)
+        key = PhysicsKey(impl, float(warp_capacity) if impl == WARP else 0.0)
+        if (type(self), key) not in _PER_CLASS:  # the model depends on the class alone (its MJCF and options)
+            _PER_CLASS[type(self), key] = make_physics(self.mj_model, key)
+        self.physics = _PER_CLASS[type(self), key]
         self.site_ids = {self.mj_model.site(i).name: i for i in range(self.mj_model.nsite)}
 
     @classmethod

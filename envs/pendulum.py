@@ -17,12 +17,12 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 from flax import struct
-from mujoco import mjx
 
 from hintsjax.envs import raster
 from hintsjax.envs.core import Step
 from hintsjax.envs.hints import register_composite, register_hint
 from hintsjax.envs.mjx_env import MjxEnv
+from hintsjax.envs.physics import Readout
 
 NAME = "pendulum"
 
@@ -111,10 +111,8 @@ class Pendulum(MjxEnv):
             t=jnp.zeros((), jnp.int32),
         )
 
-    def _mjx_data(self, state: PendulumState, torque: jax.Array) -> mjx.Data:
-        data = mjx.make_data(self.model)
-        data = data.replace(qpos=state.theta[None], qvel=state.dtheta[None], ctrl=torque[None])
-        return self.physics.forward(data)
+    def _mjx_data(self, state: PendulumState, torque: jax.Array) -> Readout:
+        return self.physics.run(state.theta[None], state.dtheta[None], torque[None], 0, contact_forces=False)
 
     def action_range(self, params: PendulumParams) -> tuple[jax.Array, jax.Array]:
         return -params.max_torque * jnp.ones(1), params.max_torque * jnp.ones(1)

@@ -82,11 +82,11 @@ def model_options(items: list[str]) -> dict:
 
 
 def bench_env(name: str, num_envs: int, steps: int, pixels: bool = True, reset: str = "step", rollout: int = 8,
-              options: dict | None = None) -> dict:
+              options: dict | None = None, physics: str = envs.AUTO) -> dict:
     observe = ("pixels", "hint") if pixels else ("hint",)
-    env = envs.make(name, ENV_DEFAULTS[name].get("hint", envs.NO_HINT), observe)
+    env = envs.make(name, ENV_DEFAULTS[name].get("hint", envs.NO_HINT), observe, physics=physics)
     if options:  # the same env with other physics options (--model-option)
-        env = type(env).with_options(**options)(env.hint, observe)
+        env = type(env).with_options(**options)(env.hint, observe, env.physics.impl)
     env = env if reset == "none" else envs.AutoReset(env)
     params = envs.make_params(name)
     ts = jax.jit(jax.vmap(env.reset, in_axes=(0, None)))(jax.random.split(jax.random.key(0), num_envs), params)
@@ -115,7 +115,7 @@ def bench_env(name: str, num_envs: int, steps: int, pixels: bool = True, reset: 
     seconds = best_time(roll, ts.state, jax.random.key(1))
     done = steps if reset != "rollout" else steps // rollout * rollout
     return {"env": name, "pixels": pixels, "reset": reset, "num_envs": num_envs, "steps": done,
-            "env_steps_per_s": num_envs * done / seconds}
+            "physics": envs.resolve_physics(name, physics), "env_steps_per_s": num_envs * done / seconds}
 
 
 def bench_ceiling(batch: int) -> dict:
@@ -146,7 +146,7 @@ def bench_ceiling(batch: int) -> dict:
     return {"batch": batch, "update_samples_per_s": batch / seconds}
 
 
-def bench_train(name: str, seeds: int, updates: int, overrides: dict, agent: str = "hints") -> dict:
+def bench_train(name: str, seeds: int, updates: int, overrides: dict, agent: str = "hints", physics: str = envs.AUTO) -> dict:
     """Training rate of the env's default cell (hints/fc with its default hint), two ways:
     `env_steps_per_s` through run.train, the function `python -m hintsjax.run` calls (chunks,
     checkpoints, logs; compile apart), and `scan_env_steps_per_s`, the same compiled chunks called
@@ -157,7 +157,7 @@ def bench_train(name: str, seeds: int, updates: int, overrides: dict, agent: str
     from hintsjax import run
 
     values = {"env": name, "agent": agent, "scheme": "fc", "seeds": seeds, "checkpoint_every": min(10, updates),
-              "ppo": overrides}
+              "physics": physics, "ppo": overrides}
     cfg = run_config(values)
     cfg = run_config({**values, "ppo": {**overrides, "total_env_steps": updates * cfg.ppo.batch_size}})
     with tempfile.TemporaryDirectory() as folder:
@@ -223,6 +223,7 @@ def main() -> None:
     parser.add_argument("--model-option", action="append", default=[], metavar="FIELD=VALUE",
                         help="env rows of MJX envs: override an mj_model.opt field, e.g. integrator=EULER or "
                              "iterations=1 (repeatable); the registered envs keep their own")
+    parser.add_argument("--physics", default=envs.AUTO, help="auto, jax or warp: what steps the MJX envs")
     parser.add_argument("--out", default=None, help="write the results as JSON here")
     args = parser.parse_args()
     names = [n.strip() for n in args.envs.split(",") if n.strip()]
@@ -233,7 +234,12 @@ def main() -> None:
         options = model_options(args.model_option)
     except ValueError as e:
         parser.exit(2, f"error: {e}\n")
-    mjx_envs = [n for n in envs.env_names() if hasattr(envs.REGISTRY[n].cls, "with_options")]
+    mjx_envs = envs.mjx_env_names()
+    try:
+        for name in names:
+            envs.resolve_physics(name, args.physics)
+    except (envs.ChoiceError, envs.PhysicsUnavailable) as e:
+        parser.exit(2, f"error: {e}\n")
     if options and not set(names) <= set(mjx_envs):
         parser.exit(2, f"error: --model-option applies to MJX envs only: {', '.join(mjx_envs)}\n")
     q = args.quick
@@ -256,18 +262,18 @@ def main() -> None:
         for n in ([int(n) for n in args.sizes.split(",")] if not q else (64,)):
             size = envs.make(name).image_size
             for pixels, reset in ((False, "step"), (True, "step"), *(((True, "rollout"), (True, "none")) if args.reset_cost else ())):
-                r = bench_env(name, n, args.steps if not q else 16, pixels, reset, options=options)
+                r = bench_env(name, n, args.steps if not q else 16, pixels, reset, options=options, physics=args.physics)
                 r["model_options"] = args.model_option
                 results["env"].append(r)
                 what = (f"with {size}x{size} picture" if pixels else "physics, reward, hint") + "".join(
                     f"; {o}" for o in args.model_option)
                 print(f"env     {name:>9} {n:>6} envs: {r['env_steps_per_s']:>14,.0f} env steps/s "
-                      f"({what}; {RESETS[reset]})", flush=True)
+                      f"({what}; {RESETS[reset]}; {r['physics']})", flush=True)
         settings = (((5, {}), (5, {"num_envs": 64}), (32, {}), (32, {"num_envs": 64, "minibatch_size": 1024}))
                     if not q else ((2, {"num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}),))
         settings = settings[:1] if args.default_train_only else settings
         for seeds, overrides in settings if not args.no_train else ():
-            r = bench_train(name, seeds, 40 if not q else 2, overrides)
+            r = bench_train(name, seeds, 40 if not q else 2, overrides, physics=args.physics)
             r["fraction_of_ceiling"] = r["grad_samples_per_s"] / ceiling
             results["train"].append(r)
             print(f"train   {name:>9} {seeds:>3} seeds {r['ppo']}: {r['env_steps_per_s']:,.0f} env steps/s "

@@ -21,9 +21,10 @@ import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
-from mujoco import mjx
 
+from hintsjax import envs
 from hintsjax.envs.humanoid import Humanoid
+from hintsjax.envs.physics import JaxPhysics, capacities
 
 
 def self_pairs(m: mujoco.MjModel) -> list[tuple[int, int]]:
@@ -71,11 +72,11 @@ def floor_only(m: mujoco.MjModel) -> None:
 
 def steps_per_second(change, n: int, steps: int = 5) -> tuple[float, int]:
     """(env steps/s, MJX contact slots) of Humanoid's transition with `change` applied to its model."""
-    env = Humanoid(hint="velocity")
+    env = Humanoid(envs.make_hint("humanoid", "velocity"))
     model = env.make_mj_model()
     if change:
         change(model)
-    env.model = mjx.put_model(model)
+    env.physics = JaxPhysics(model)
     params, keys = env.default_params(), jax.random.split(jax.random.key(0), n)
     state = jax.vmap(lambda k: env.initial_state(k, params))(keys)
     action = jnp.zeros((n, env.action_size))
@@ -84,7 +85,7 @@ def steps_per_second(change, n: int, steps: int = 5) -> tuple[float, int]:
     jax.block_until_ready(run(state))
     t = time.perf_counter()
     jax.block_until_ready(run(state))
-    return n * steps / (time.perf_counter() - t), mjx.make_data(env.model)._impl.contact.geom.shape[0]
+    return n * steps / (time.perf_counter() - t), capacities(model)[0]
 
 
 def main() -> None:

@@ -1,6 +1,7 @@
 """What the command a user types delivers: `python -m hintsjax.run` timed end to end, beside the bench.
 
-    python experiments/run_path.py [--cells pendulum,ant,ant_fast] [--ant-updates 200] [--out experiments/results/run_path.json]
+    python experiments/run_path.py [--cells pendulum,ant,ant_fast] [--ant-updates 200] [--physics jax,warp] [--no-bench]
+                                   [--out experiments/results/run_path.json]
 
 For each cell (pendulum: hints/fc/composite; ant: hints/fc/speed, the env defaults otherwise),
 the command runs twice in a fresh process, first with an empty compilation cache (cold), then
@@ -12,6 +13,9 @@ host: experiments/bench.py's `scan_env_steps_per_s`), and the milliseconds of on
 parts, measured in this process on the same device. A cell whose full budget
 does not fit a device lease (the ant's 5 M steps) is trained for `--ant-updates` updates and its
 full wall is extrapolated at the measured rate: such rows say so (`updates`, `full_cell_wall_s`).
+With `--physics jax,warp` each cell runs once per physics (`physics=...` on the command line),
+cold and warm, with its own empty caches: XLA's and MuJoCo Warp's kernel cache ($WARP_CACHE_PATH),
+so a cold warp row compiles Warp's CUDA kernels too.
 """
 
 from __future__ import annotations
@@ -34,11 +38,11 @@ PARTIAL = ("ant", "ant_fast")  # cells trained for --ant-updates updates, their 
 
 
 def timed_command(args: list[str], cache: Path, out_dir: Path) -> tuple[float, dict]:
-    """Run the command once; (wall seconds, its eval.json)."""
+    """Run the command once (MuJoCo Warp's kernels cached beside XLA's); (wall seconds, its eval.json)."""
     name = f"r{time.time_ns()}"
     t = time.perf_counter()
     subprocess.run([sys.executable, "-m", "hintsjax.run", *args, f"out_dir={out_dir}", f"name={name}",
-                    f"compilation_cache={cache}"], check=True)
+                    f"compilation_cache={cache}"], check=True, env={**os.environ, "WARP_CACHE_PATH": str(cache / "warp")})
     wall = time.perf_counter() - t
     return wall, json.loads((out_dir / name / "eval.json").read_text())
 
@@ -47,6 +51,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cells", default="pendulum,ant", help=f"comma-separated subset of {', '.join(CELLS)}")
     parser.add_argument("--ant-updates", type=int, default=200, help="updates of the ant cells (their full budget is 4882)")
+    parser.add_argument("--physics", default="jax", help="comma-separated: auto, jax, warp (one row pair each)")
+    parser.add_argument("--no-bench", action="store_true", help="the command's rows only (no bench row)")
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
     cells = [c for c in args.cells.split(",") if c]
@@ -65,19 +71,19 @@ def main() -> None:
     from bench import bench_train
 
     rows = []
-    for cell in cells:
+    for cell, physics in [(c, p) for c in cells for p in args.physics.split(",")]:
         values = dict(a.split("=") for a in CELLS[cell])
-        cfg = run_config(values)
-        budget = []
+        cfg = run_config({**values, "physics": physics})
+        budget = [f"physics={physics}"]
         if cell in PARTIAL:
-            budget = [f"ppo.total_env_steps={args.ant_updates * cfg.ppo.batch_size}"]
+            budget += [f"ppo.total_env_steps={args.ant_updates * cfg.ppo.batch_size}"]
         cache = Path(tempfile.mkdtemp(prefix="xla-cache-"))
         with tempfile.TemporaryDirectory() as out:
             for warm in (False, True):
                 wall, result = timed_command(CELLS[cell] + budget, cache, Path(out))
                 updates = result["env_steps"] // cfg.ppo.batch_size
                 compile_s = sum(result["compile_seconds"].values())
-                row = {"env": cell, "label": result["label"], "cell_wall_s": wall, "compile_s": compile_s,
+                row = {"env": cell, "label": result["label"], "physics": result["physics"], "cell_wall_s": wall, "compile_s": compile_s,
                        "compile_s_parts": result["compile_seconds"], "updates": updates,
                        "train_env_steps_per_s": result["train_env_steps_per_s"],
                        "chunks_env_steps_per_s": result.get("chunks_env_steps_per_s"),
@@ -89,11 +95,14 @@ def main() -> None:
                     row["full_cell_wall_s"] = wall + rest / result["train_env_steps_per_s"]
                 rows.append(row)
                 print(json.dumps(row), flush=True)
+        if args.no_bench:
+            shutil.rmtree(cache, ignore_errors=True)
+            continue
         compilation_cache.enable(cache)  # the bench's programs are the command's: compiled above
-        bench = bench_train(cell, cfg.seeds, 40, {})
+        bench = bench_train(cell, cfg.seeds, 40, {}, physics=physics)
         shutil.rmtree(cache, ignore_errors=True)
         for row in rows:
-            if row["env"] == cell:
+            if row["env"] == cell and row["physics"] == cfg.physics:
                 row["bench_env_steps_per_s"] = bench["scan_env_steps_per_s"]
                 row["cli_fraction_of_bench"] = row["train_env_steps_per_s"] / bench["scan_env_steps_per_s"]
                 if row["chunks_env_steps_per_s"] is not None:  # training's start to the last chunk: the bench's span

@@ -55,6 +55,10 @@ class RunConfig:
     expert: str | None = None  # dagger/gail: an exported expert folder (None: the env's packaged one)
     hint_source: str = "programmatic"  # where training's hint comes from: programmatic, or a generator folder
     eval_hint_source: str | None = None  # the same at deploy (None: as hint_source)
+    # What steps an MJX env: auto (resolved when the config is built: Warp on an NVIDIA GPU with
+    # warp-lang, else JAX), jax (bit-reproducible) or warp (envs/physics.py)
+    physics: str = "auto"
+    warp_capacity: float = 2.0  # MJX-Warp's contact and constraint buffers: this many times the model's most per world
     ppo: PPOConfig = field(default_factory=PPOConfig)
     dagger: DaggerConfig = field(default_factory=DaggerConfig)
     gail: GailConfig = field(default_factory=GailConfig)
@@ -87,7 +91,8 @@ class RunConfig:
         from hintsjax.generator import hinted_env
 
         observe = self.agent_spec.observe if observe is None else observe
-        env = hinted_env(self.env, self.effective_hint if hint is None else hint, observe, self.hint_source_for(deploy))
+        env = hinted_env(self.env, self.effective_hint if hint is None else hint, observe, self.hint_source_for(deploy),
+                         physics=self.physics, warp_capacity=self.warp_capacity)
         return envs.SquashedActions(env) if self.ppo.action_head == "tanh" else env
 
     def task_params(self, variant: str | None, deploy: bool = False) -> Any:
@@ -102,8 +107,11 @@ class RunConfig:
             choose("agent", self.agent, AGENTS)
             choose("scheme", self.scheme, SCHEMES)
             envs.make_hint(self.env, self.effective_hint)
-        except ChoiceError as e:
+            envs.resolve_physics(self.env, self.physics)
+        except (ChoiceError, envs.PhysicsUnavailable) as e:
             raise UsageError(str(e)) from None
+        if not 1 <= self.warp_capacity < float("inf"):
+            raise UsageError(f"warp_capacity must be a number of at least 1, got {self.warp_capacity}")
         for v in (self.variant, *self.eval_variants):
             env_params(self.env, v)
         self._check_hint_sources()
@@ -172,6 +180,7 @@ def run_config(values: Mapping[str, Any], resolved: bool = False) -> RunConfig:
     per_agent = defaults.pop("agents", {})
     if resolved:
         merged = {k: dict(v) if k in SECTIONS and isinstance(v, Mapping) else v for k, v in values.items()}
+        merged.setdefault("physics", envs.JAX)  # a run saved before the setting was stepped by MJX's JAX solver
     else:
         merged = _merge(defaults, per_agent.get(values.get("agent") or RunConfig.agent, {}), values)
     unknown = {k for k in merged if k not in SECTIONS} - _fields(RunConfig)
@@ -189,7 +198,8 @@ def run_config(values: Mapping[str, Any], resolved: bool = False) -> RunConfig:
         raise
     except (TypeError, ValueError) as e:
         raise UsageError(f"bad config value: {e}") from None
-    return cfg.validate()
+    cfg = cfg.validate()
+    return dataclasses.replace(cfg, physics=envs.resolve_physics(cfg.env, cfg.physics))  # what the run steps with, kept
 
 
 def _check_types(cfg: RunConfig) -> None:

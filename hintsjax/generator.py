@@ -245,12 +245,13 @@ def load(folder: str | Path, seed: int = 0) -> tuple[Generator, GeneratorParams]
     return generator, jax.tree.map(lambda x: x[seed], params)
 
 
-def hinted_env(env: str, hint: str, observe: tuple[str, ...], source: str) -> Env:
-    """`env` with `hint` from `source`: the programmatic hint, or a generator folder's."""
+def hinted_env(env: str, hint: str, observe: tuple[str, ...], source: str, **physics: Any) -> Env:
+    """`env` with `hint` from `source`: the programmatic hint, or a generator folder's; `physics`
+    (physics, warp_capacity) as `envs.make` takes them."""
     if source == PROGRAMMATIC or "hint" not in observe:
-        return envs.make(env, hint, observe)
+        return envs.make(env, hint, observe, **physics)
     generator, _ = load(source)
-    return GeneratedHintEnv(envs.make(env, hint, ("pixels",)), generator, observe)
+    return GeneratedHintEnv(envs.make(env, hint, ("pixels",), **physics), generator, observe)
 
 
 def hinted_params(env: str, task_params: Any, observe: tuple[str, ...], source: str) -> Any:

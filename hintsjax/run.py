@@ -31,6 +31,7 @@ from hintsjax import checkpoint, compilation_cache, expert, program_cache
 from hintsjax.config import RunConfig, load_run_config, run_config, save_run_config
 from hintsjax.evaluate import compile_evaluator, evaluate_group, evaluate_variants, metrics_text
 from hintsjax.algorithms import make_trainer
+from hintsjax.envs import physics
 from hintsjax.errors import UsageError, fail
 from hintsjax.runlog import CURVE_PNG, METRICS_CSV, RunLog, fresh_folder, plot_curves, read_curves
 from hintsjax.trainer import Trainer
@@ -163,6 +164,15 @@ def stop_nonfinite(run_dir: Path, label: str, found: dict[str, Any]) -> None:
                          f"training stopped without saving it", found)
 
 
+def check_physics(cfg: RunConfig, label: str) -> None:
+    """UsageError naming `warp_capacity` if MJX-Warp ran out of a buffer in this process (its
+    worlds that did were made NaN, so nothing was trained on dropped contacts)."""
+    lost = physics.overflow_seen()
+    if lost is not None:
+        raise UsageError(f"{cfg.env} {label}: MJX-Warp ran out of {lost} at warp_capacity={cfg.warp_capacity}; "
+                         f"train again with a larger warp_capacity (or physics=jax)")
+
+
 @dataclass
 class Training:
     """A training run's progress: its compiled programs, state and timing (what `start` and `advance` share)."""
@@ -191,6 +201,7 @@ def chunks_rate(training: Training, env_steps_per_update: int) -> float | None:
 def start(trainer: Trainer, cfg: RunConfig, run_dir: Path, resume: bool, label: str, check_memory: bool = False) -> Training:
     """Compile `trainer`'s programs for cfg's seeds, then a fresh state or the newest checkpoint of run_dir."""
     keys, num_devices = seed_keys(cfg)
+    physics.clear_overflow()
     total = cfg.ppo.num_updates
     compiled = compile_training(trainer, keys, min(cfg.checkpoint_every, total))
     if check_memory:
@@ -242,6 +253,7 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
         metrics = {k: np.asarray(v)[:, :n] for k, v in metrics.items()}  # waits for that chunk only
         arrivals.append((time.perf_counter() - t0, after + n))
         write(metrics, after)
+        check_physics(cfg, label)  # before the NaN guard: a world that overflowed is NaN
         found = first_nonfinite(metrics, after)
         if found is not None:
             stop_nonfinite(run_dir, label, found)
@@ -285,7 +297,8 @@ def finish(cfg: RunConfig, run_dir: Path, training: Training, evaluations: list[
                "train_env_steps_per_s": (training.done - training.first) * cfg.ppo.batch_size * cfg.seeds
                / max(training.seconds, 1e-9),
                "chunks_env_steps_per_s": chunks_rate(training, cfg.ppo.batch_size * cfg.seeds),
-               "env_steps": cfg.ppo.num_updates * cfg.ppo.batch_size, **(extra or {}), "evaluations": evaluations}
+               "env_steps": cfg.ppo.num_updates * cfg.ppo.batch_size, "physics": cfg.physics, **(extra or {}),
+               "evaluations": evaluations}
     (run_dir / EVAL_JSON).write_text(json.dumps(results, indent=1))
     if (run_dir / METRICS_CSV).exists():
         plot_curves({cfg.label: read_curves(run_dir / METRICS_CSV)}, run_dir / CURVE_PNG, f"{cfg.env}: {cfg.label}")
@@ -312,6 +325,7 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
         compiled = evaluator.result()
     evaluations, eval_compile = evaluate_variants(cfg, training.state.params, variants, cfg.eval_episodes,
                                                   cfg.stochastic_eval, compiled)
+    check_physics(cfg, cfg.label)
     return finish(cfg, run_dir, training, evaluations, eval_compile)
 
 

@@ -62,10 +62,14 @@ def program_identity(cfg: RunConfig, *more: Any) -> str | None:
     """The description of a run's programs that the traced-program cache keys them by: its
     configuration (and `more`, e.g. a group's members), or None where the programs close over
     files that no configuration value digests (an imitation agent's expert, a learned hint
-    generator), which are then traced every time."""
+    generator), which are then traced every time; and None for MJX-Warp physics, whose programs
+    call Warp's kernels through handlers that the tracing process registers."""
+    from hintsjax.envs import WARP
     from hintsjax.generator import PROGRAMMATIC
 
     if cfg.agent_spec.imitates or {cfg.hint_source_for(False), cfg.hint_source_for(True)} != {PROGRAMMATIC}:
+        return None
+    if cfg.physics == WARP:
         return None
     return repr((cfg, *more))
 

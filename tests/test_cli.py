@@ -112,6 +112,10 @@ BAD_SETTINGS = {
     "scheme=FC": "unknown scheme 'FC'; valid choices: ac, fc, lc, mc",
     "env=car_racing hint=torque": "unknown hint 'torque' for env 'car_racing'",
     "gail.disc_lr=nan": "gail.disc_lr must be a positive finite number, got nan",
+    "physics=mujoco": "unknown physics 'mujoco'; valid choices: auto, jax, warp",
+    "env=car_racing physics=warp": "car_racing has no MuJoCo model; physics=warp is for acrobot, ant, ant_fast, halfcheetah",
+    "env=ant warp_capacity=0.5": "warp_capacity must be a number of at least 1, got 0.5",
+    "env=ant warp_capacity=nan": "warp_capacity must be a number of at least 1, got nan",
 }
 
 

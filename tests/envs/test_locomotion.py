@@ -28,8 +28,8 @@ from hintsjax.envs.ant import Ant, AntFast
 from hintsjax.envs.halfcheetah import HalfCheetah
 from hintsjax.envs.humanoid import Humanoid
 from hintsjax.envs.locomotion import LocomotionState
+from gym_parity import KEY, Compiled, parity  # tests/envs/gym_parity.py
 
-KEY = jax.random.key(0)
 ELLIPTIC = dict(solver=mujoco.mjtSolver.mjSOL_NEWTON, iterations=100, ls_iterations=50, cone=mujoco.mjtCone.mjCONE_ELLIPTIC)
 
 
@@ -45,60 +45,9 @@ def test_with_options_changes_a_copy_of_the_model_options():
     assert AntElliptic.make_mj_model().opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
 
 
-def f32(x):
-    """x rounded to float32 and back, so that both sides start from the same state."""
-    return np.asarray(x, np.float32).astype(np.float64)
-
-
-class Compiled:
-    """An env observing its state, with its transition and `state_at` jitted once."""
-
-    def __init__(self, env):
-        self.env, self.params = env, env.default_params()
-        self.transition, self.state_at = jax.jit(env.transition), jax.jit(env.state_at)
-
-
 @pytest.fixture(scope="module")
 def cheetah() -> Compiled:
     return Compiled(HalfCheetah(envs.make_hint("halfcheetah", "none"), ("state",)))
-
-
-def parity(compiled: Compiled, gym_id: str, steps: int, gym_options: dict | None = None, adapt=None,
-           same_termination: bool = True) -> dict[str, float]:
-    """Worst |d obs|, |d reward|, |d qpos|, |d qvel| along gym's trajectories (a fresh gym
-    episode every 20 steps and after each termination), asserting equal termination (or, with
-    `same_termination` False, counting the steps where it differs); counts of terminal and
-    contact steps. gym's model takes `gym_options` and then `adapt(model)`, if given."""
-    params, step, state_at = compiled.params, compiled.transition, compiled.state_at
-    gym_env = gym.make(gym_id).unwrapped
-    for field, value in (gym_options or {}).items():
-        setattr(gym_env.model.opt, field, value)
-    if adapt is not None:
-        adapt(gym_env.model)
-    rng = np.random.default_rng(0)
-    low, high = gym_env.action_space.low, gym_env.action_space.high
-    worst = dict(obs=0.0, reward=0.0, qpos=0.0, qvel=0.0, terminal=0, contact=0, termination_differs=0)
-    fresh = True
-    for i in range(steps):
-        if fresh or i % 20 == 0:
-            gym_env.reset(seed=i)
-        qpos, qvel = f32(gym_env.data.qpos), f32(gym_env.data.qvel)
-        gym_env.set_state(qpos, qvel)
-        action = rng.uniform(low, high).astype(np.float32)
-        out = step(KEY, state_at(qpos, qvel), jnp.asarray(action), params)
-        obs, reward, terminated, _, _ = gym_env.step(action)
-        assert bool(out.terminated) == terminated or not same_termination, f"step {i}"
-        worst["termination_differs"] += bool(out.terminated) != terminated
-        worst["obs"] = max(worst["obs"], float(np.abs(np.asarray(out.state.obs) - obs).max()))
-        worst["reward"] = max(worst["reward"], abs(float(out.reward) - reward))
-        for name in ("qpos", "qvel"):
-            gap = np.abs(np.asarray(getattr(out.state, name)) - getattr(gym_env.data, name)).max()
-            worst[name] = max(worst[name], float(gap))
-        worst["terminal"] += terminated
-        worst["contact"] += gym_env.data.ncon > 0
-        fresh = terminated
-    print(gym_id, worst)
-    return worst
 
 
 def test_halfcheetah_parity(cheetah):
@@ -144,14 +93,12 @@ def test_ant_with_euler_against_ant_v5_as_shipped():
 def test_ant_fast_is_the_ant_with_cheaper_physics():
     """ant_fast: Euler, 2 Newton iterations, floor contacts for the torso and lower legs only
     (9, against the ant's 25), the ant's hints, and next starts drawn once per rollout."""
-    from mujoco import mjx
-
     from hintsjax.config import run_config
+    from hintsjax.envs.physics import capacities
 
     fast, ant = envs.make("ant_fast", "speed"), envs.make("ant", "speed")
     assert fast.mj_model.opt.integrator == mujoco.mjtIntegrator.mjINT_EULER and fast.mj_model.opt.iterations == 2
-    assert mjx.make_data(fast.model)._impl.contact.dist.shape == (9,)
-    assert mjx.make_data(ant.model)._impl.contact.dist.shape == (25,)
+    assert capacities(fast.mj_model)[0] == 9 and capacities(ant.mj_model)[0] == 25
     assert envs.hint_names("ant_fast") == envs.hint_names("ant")
     assert run_config({"env": "ant_fast"}).ppo.starts_per_rollout and not run_config({"env": "ant"}).ppo.starts_per_rollout
 

@@ -1,0 +1,313 @@
+"""The two implementations of MuJoCo MJX's physics that an MJCF env can step: `jax` (MJX's own
+JAX solver: any platform, bit-reproducible with deterministic GPU ops) and `warp` (MJX-Warp,
+MuJoCo Warp's kernels called from the jitted graph: NVIDIA GPUs, several times faster, and not
+bit-deterministic on a GPU), with `auto` choosing between them.
+
+An env asks for one thing, `run(qpos, qvel, ctrl, substeps, contact_forces)`: a fresh
+`mjx.Data` at (qpos, qvel) with `ctrl` applied, stepped `substeps` times (0: MuJoCo's forward
+pass only), and, with `contact_forces`, the external forces `cfrc_ext` filled in as
+`mj_rnePostConstraint` leaves them. What comes back is a `Readout`: the data fields the suite's
+tasks read, with MuJoCo C's staleness (kinematic fields from the last physics stage).
+
+MJX-Warp keeps its contacts in one buffer for all the worlds of a call (`naconmax`), so its
+size must follow the batch. `WarpPhysics.run` is therefore a `custom_vmap` that gathers every
+vmapped axis above it (seeds and envs) into one flat batch of N worlds before MJX sees it, and
+sizes the buffers for exactly those N: `capacity` times the most contacts (and constraint rows)
+the model's collision pairs can make, per world. MuJoCo Warp flags a world whose contacts or
+constraints did not fit (`overflow`); such a world's readout is NaN, so it can never be stepped
+on silently with contacts dropped, and `overflow_seen()` says which capacity overflowed (the run
+loop stops with one line naming the setting to raise).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib.util
+import io
+import math
+import sys
+from dataclasses import dataclass
+from functools import partial
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from flax import struct
+
+from hintsjax.envs.errors import choose
+
+
+def _import_mjx_without_warp() -> Any:
+    """`mujoco.mjx`, with its optional Warp backend left unbound. MJX 3.17 imports warp-lang and
+    MuJoCo Warp as soon as it is imported, if they are installed: 4.5 s more per process on 2
+    cores (hintsjax.envs imported in 7.2 s against 2.8 s), which every command paid although only
+    physics=warp uses them. `enable_warp` binds them in when a WarpPhysics is made."""
+    if "mujoco.mjx" not in sys.modules:
+        saved = sys.modules.get("warp")
+        sys.modules["warp"] = None  # mjx's own `try: import warp` fails at once
+        try:
+            with contextlib.redirect_stdout(io.StringIO()):  # mjx prints a line when warp is absent
+                import mujoco.mjx  # noqa: F401
+        finally:
+            if saved is None:
+                del sys.modules["warp"]
+            else:
+                sys.modules["warp"] = saved
+    return sys.modules["mujoco.mjx"]
+
+
+mjx = _import_mjx_without_warp()
+
+
+def enable_warp() -> None:
+    """Bind warp-lang and MuJoCo Warp into MJX (what its import does when warp-lang is installed,
+    done here when physics=warp first needs it; mujoco-mjx 3.17.0's module layout)."""
+    import mujoco.mjx.warp as mjxw
+
+    if mjxw.WARP_INSTALLED:
+        return
+    import warp
+    from mujoco.mjx._src import io as mjx_io
+    from mujoco.mjx.third_party import mujoco_warp
+    from mujoco.mjx.third_party.mujoco_warp._src import io as mjwp_io
+    from mujoco.mjx.third_party.mujoco_warp._src import types as mjwp_types
+
+    mjxw.warp, mjxw.mujoco_warp, mjxw.mjwp_types, mjxw.mjwp_io = warp, mujoco_warp, mjwp_types, mjwp_io
+    mjxw.types.GraphMode, mjxw.types.Callback = warp.JaxCallableGraphMode, mjwp_types.Callback
+    mjx_io.wp, mjx_io.mjwp, mjx_io.mjwp_types = warp, mujoco_warp, mjwp_types
+    mjxw.WARP_INSTALLED = True
+
+AUTO, JAX, WARP = "auto", "jax", "warp"
+CHOICES = (AUTO, JAX, WARP)
+DEFAULT_CAPACITY = 2.0  # Warp's buffers: this many times the model's most contacts and constraint rows per world
+
+
+class PhysicsUnavailable(ValueError):
+    """physics=warp where MJX-Warp cannot run (no warp-lang, or no NVIDIA GPU and no Warp CPU path)."""
+
+
+def warp_installed() -> bool:
+    """Whether warp-lang (MJX-Warp's one extra dependency) is installed (found, not imported)."""
+    return importlib.util.find_spec("warp") is not None
+
+
+def resolve(choice: str, platform: str, warp_by_default: bool = True) -> str:
+    """`jax` or `warp` for a run on `platform` (jax.default_backend(): cpu, gpu, tpu).
+
+    auto: Warp on an NVIDIA GPU with warp-lang installed (for an env that prefers it), else JAX,
+    so CPU runs, the tests and CPU sweeps stay bit-reproducible. warp: on a GPU or a CPU (Warp's
+    CPU path, for tests: slow), with warp-lang installed; PhysicsUnavailable otherwise."""
+    choose("physics", choice, dict.fromkeys(CHOICES))
+    if choice == AUTO:
+        return WARP if warp_by_default and platform == "gpu" and warp_installed() else JAX
+    if choice == WARP:
+        if not warp_installed():
+            raise PhysicsUnavailable("physics=warp needs warp-lang: pip install -e '.[gpu]' (make setup-gpu); "
+                                     "or physics=jax")
+        if platform not in ("gpu", "cpu"):
+            raise PhysicsUnavailable(f"physics=warp runs on NVIDIA GPUs (and slowly on CPUs), not on {platform}; use physics=jax")
+    return choice
+
+
+@struct.dataclass
+class Readout:
+    """What the tasks read of a stepped `mjx.Data` (MuJoCo's names and shapes); `overflow` is
+    MuJoCo Warp's per-world bitmask of capacities exceeded (always 0 for JAX)."""
+
+    qpos: jax.Array
+    qvel: jax.Array
+    qacc: jax.Array
+    xpos: jax.Array
+    xipos: jax.Array
+    geom_xpos: jax.Array
+    geom_xmat: jax.Array
+    site_xpos: jax.Array
+    cvel: jax.Array
+    cinert: jax.Array
+    qfrc_actuator: jax.Array
+    qfrc_constraint: jax.Array
+    cfrc_ext: jax.Array
+    overflow: jax.Array
+
+
+def readout(data: mjx.Data, overflow: jax.Array) -> Readout:
+    impl = data._impl
+    return Readout(data.qpos, data.qvel, data.qacc, data.xpos, data.xipos, data.geom_xpos, data.geom_xmat,
+                   data.site_xpos, data.cvel, impl.cinert, data.qfrc_actuator, data.qfrc_constraint, impl.cfrc_ext,
+                   jnp.asarray(overflow, jnp.int32))
+
+
+class JaxPhysics:
+    """MJX's JAX solver. Its forward pass, step and `rne_postconstraint` are each a `jax.jit`
+    made once per model: every program of the process that steps the model (training's init,
+    rollout and reset, evaluation) reuses one trace of MJX's Python."""
+
+    impl = JAX
+
+    def __init__(self, mj_model: mujoco.MjModel):
+        self.model = model = mjx.put_model(mj_model)
+        self.forward = jax.jit(lambda d: mjx.forward(model, d))
+        self.step = jax.jit(lambda d: mjx.step(model, d))
+        self.rne_postconstraint = jax.jit(lambda d: mjx.rne_postconstraint(model, d))
+
+    def run(self, qpos, qvel, ctrl, substeps: int, contact_forces: bool) -> Readout:
+        data = mjx.make_data(self.model).replace(qpos=qpos, qvel=qvel, ctrl=ctrl)
+        if substeps == 0:
+            data = self.forward(data)
+        elif substeps == 1:
+            data = self.step(data)
+        else:
+            data = jax.lax.fori_loop(0, substeps, lambda _, d: self.step(d), data)
+        if contact_forces:
+            data = self.rne_postconstraint(data)
+        return readout(data, 0)
+
+
+def capacities(mj_model: mujoco.MjModel) -> tuple[int, int]:
+    """(contacts, constraint rows) per world at most: what MJX's JAX collision driver allocates
+    for the model's collision pairs (a static bound: every pair's most contact points)."""
+    data = mjx.make_data(mjx.put_model(mj_model))
+    return int(data._impl.contact.dist.shape[0]), int(data._impl.efc_J.shape[0])
+
+
+# MuJoCo Warp's overflow bits (mujoco_warp OverflowType) that mean lost contacts or constraints.
+# The solver's iteration limits (bits 9 and 10) are not among them: the suite caps Newton's
+# iterations on purpose (envs/locomotion.py).
+LOST = {1 << 0: "constraint rows (njmax)", 1 << 1: "constraint nonzeros", 1 << 2: "collision pairs (naconmax)",
+        1 << 3: "contacts (naconmax)", 1 << 4: "CCD contacts", 1 << 5: "height-field contacts", 1 << 7: "islands",
+        1 << 8: "EPA horizon"}
+LOST_MASK = sum(LOST)
+_seen = {"bits": 0}
+
+
+def overflow_seen() -> str | None:
+    """What MuJoCo Warp ran out of in this process so far ("contacts (naconmax)", ...), or None."""
+    bits = _seen["bits"]
+    return ", ".join(name for bit, name in LOST.items() if bits & bit) or None
+
+
+def clear_overflow() -> None:
+    """Forget the overflows seen so far (a run starting in a process that ran another)."""
+    _seen["bits"] = 0
+
+
+_LOST_SHIFTS = np.array([bit.bit_length() - 1 for bit in LOST], np.int32)
+
+
+def _record_overflow(seen) -> None:
+    """`seen[i]`: whether a world set LOST's i-th bit."""
+    _seen["bits"] |= sum(bit for bit, flag in zip(LOST, np.asarray(seen)) if flag)
+
+
+def collapse_vmaps(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """`fn` (a function of arrays with any leading batch shape, the same for all) evaluated once
+    at the outermost level: every `jax.vmap` above a call is folded into the arguments' leading
+    axes instead of being applied to `fn`'s body."""
+
+    @jax.custom_batching.custom_vmap
+    def collapsed(*args):
+        return fn(*args)
+
+    @collapsed.def_vmap
+    def rule(axis_size, in_batched, *args):
+        args = [a if batched else jnp.broadcast_to(a, (axis_size, *a.shape)) for a, batched in zip(args, in_batched)]
+        out = collapsed(*args)  # under an outer vmap, that one's rule folds its axis in the same way
+        return out, jax.tree.map(lambda _: True, out)
+
+    return collapsed
+
+
+def _as_traced(x: Any) -> Any:
+    """A template array as a program computes it: a uniform one as a fill (no constant in the
+    program), any other as a constant."""
+    x = np.asarray(x)
+    if x.size and np.all(x == x.flat[0]):
+        return jnp.full(x.shape, x.flat[0], x.dtype)
+    return jnp.asarray(x)
+
+
+class WarpPhysics:
+    """MJX-Warp: MuJoCo Warp's kernels, the whole batch of worlds in one call per substep."""
+
+    impl = WARP
+
+    def __init__(self, mj_model: mujoco.MjModel, capacity: float = DEFAULT_CAPACITY, graph_mode: str | None = None,
+                 report_overflow: bool = True):
+        enable_warp()  # warp-lang: checked by `resolve`
+        import warp
+
+        warp.config.quiet = True  # no line per kernel module loaded
+
+        if not capacity >= 1:
+            raise ValueError(f"warp_capacity must be 1 or more, got {capacity}")
+        self.mj_model, self.capacity, self.report_overflow = mj_model, capacity, report_overflow
+        contacts, rows = capacities(mj_model)
+        self.contacts_per_world = max(1, math.ceil(capacity * contacts))
+        self.rows_per_world = max(1, math.ceil(capacity * rows))
+        mode = None if graph_mode is None else warp.JaxCallableGraphMode[graph_mode.upper()]
+        with contextlib.redirect_stdout(io.StringIO()):
+            model = mjx.put_model(mj_model, impl="warp", graph_mode=mode)
+        # warn_overflow 0: MuJoCo Warp prints no line per world and substep (the overflow bits are
+        # still set, and checked here); the solver's iteration cap would print thousands.
+        options = model.opt._impl.replace(warn_overflow=0)
+        self.model = model.replace(opt=model.opt.replace(_impl=options))
+        # the same model computing the contact forces (mj_rnePostConstraint) after its solve
+        self.model_rne = self.model.replace(opt=model.opt.replace(_impl=options.replace(run_rne_postconstraint=True)))
+        self._templates: dict[int, mjx.Data] = {}
+        self._runs: dict[tuple[int, bool], Callable[..., Readout]] = {}
+
+    def template(self, worlds: int) -> mjx.Data:
+        """A fresh data of one world, its shared buffers sized for `worlds` worlds (host arrays)."""
+        if worlds not in self._templates:
+            with contextlib.redirect_stdout(io.StringIO()), jax.ensure_compile_time_eval():  # host arrays, also mid-trace
+                data = mjx.make_data(self.mj_model, impl="warp", naconmax=worlds * self.contacts_per_world,
+                                     njmax=self.rows_per_world, device=jax.devices("cpu")[0])
+            self._templates[worlds] = data
+        return self._templates[worlds]
+
+    def run(self, qpos, qvel, ctrl, substeps: int, contact_forces: bool) -> Readout:
+        key = (substeps, contact_forces)
+        if key not in self._runs:
+            self._runs[key] = collapse_vmaps(partial(self._run_batch, substeps=substeps, contact_forces=contact_forces))
+        return self._runs[key](qpos, qvel, ctrl)
+
+    def _run_batch(self, qpos, qvel, ctrl, substeps: int, contact_forces: bool) -> Readout:
+        lead = qpos.shape[:-1]
+        worlds = math.prod(lead)
+        flat = lambda x: jnp.reshape(x, (worlds, x.shape[-1]))  # noqa: E731
+        with jax.ensure_compile_time_eval():
+            host = jax.tree.map(np.asarray, self.template(worlds))
+        template = jax.tree.map(_as_traced, host)
+        last = self.model_rne if contact_forces else self.model
+
+        def one(qpos, qvel, ctrl) -> Readout:  # vmapped over the N worlds: MJX-Warp's batching rule
+            data = template.replace(qpos=qpos, qvel=qvel, ctrl=ctrl)
+            if substeps == 0:
+                data = mjx.forward(last, data)
+            else:
+                data = jax.lax.fori_loop(0, substeps - 1, lambda _, d: mjx.step(self.model, d), data)
+                data = mjx.step(last, data)
+            return readout(data, data._impl.overflow)
+
+        out = jax.vmap(one)(flat(qpos), flat(qvel), flat(ctrl))
+        lost = out.overflow & LOST_MASK
+        if self.report_overflow:  # which bits any world set (max, not a bitwise or: reductions every backend has)
+            seen = jnp.max((lost[:, None] >> _LOST_SHIFTS) & 1, axis=0)
+            jax.lax.cond(jnp.max(seen) > 0, lambda b: jax.debug.callback(_record_overflow, b), lambda b: None, seen)
+        poisoned = lambda x: jnp.where(jnp.reshape(lost != 0, (worlds,) + (1,) * (x.ndim - 1)), jnp.nan, x)  # noqa: E731
+        out = out.replace(**{f: poisoned(getattr(out, f)) for f in Readout.__dataclass_fields__ if f != "overflow"})
+        return jax.tree.map(lambda x: jnp.reshape(x, (*lead, *x.shape[1:])), out)
+
+
+@dataclass(frozen=True)
+class PhysicsKey:
+    """What a model's physics object depends on besides the model."""
+
+    impl: str
+    capacity: float
+
+
+def make_physics(mj_model: mujoco.MjModel, key: PhysicsKey) -> JaxPhysics | WarpPhysics:
+    return JaxPhysics(mj_model) if key.impl == JAX else WarpPhysics(mj_model, key.capacity)

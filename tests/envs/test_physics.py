@@ -1,0 +1,179 @@
+"""The `physics` setting (envs/physics.py): how auto, jax and warp resolve and fail, the vmap
+folding that sizes MJX-Warp's buffers, and MJX-Warp against MuJoCo C (Gymnasium) and against
+MJX's JAX solver. Warp runs here through its CPU path (warp-lang is in the test extra), where
+its kernels compile once into Warp's kernel cache (~/.cache/warp: about a minute the first time
+on 2 cores); the same tests run on a GPU (tests/envs/test_physics.py under `device`)."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from gym_parity import KEY, Compiled, parity  # tests/envs/gym_parity.py
+from hintsjax import envs
+from hintsjax.config import run_config
+from hintsjax.envs import physics
+from hintsjax.envs.ant import Ant
+from hintsjax.errors import UsageError
+
+warp_lang = pytest.mark.skipif(not physics.warp_installed(), reason="warp-lang not installed (pip install -e '.[gpu]')")
+
+
+def test_auto_picks_warp_only_on_an_nvidia_gpu_with_warp_lang(monkeypatch):
+    monkeypatch.setattr(physics, "warp_installed", lambda: True)
+    assert physics.resolve("auto", "gpu") == "warp"
+    assert physics.resolve("auto", "cpu") == "jax"  # CPU runs and the tests stay bit-reproducible
+    assert physics.resolve("auto", "gpu", warp_by_default=False) == "jax"  # the pendulum and the acrobot
+    assert physics.resolve("jax", "gpu") == "jax" and physics.resolve("warp", "cpu") == "warp"
+    monkeypatch.setattr(physics, "warp_installed", lambda: False)
+    assert physics.resolve("auto", "gpu") == "jax"
+
+
+def test_auto_keeps_jax_for_every_env_until_learning_on_warp_matches(monkeypatch):
+    """Today no env asks for Warp under auto (envs/mjx_env.py `warp_by_default`): on an NVIDIA GPU
+    with warp-lang, auto still resolves to jax everywhere, and physics=warp is what asks for Warp."""
+    monkeypatch.setattr(physics, "warp_installed", lambda: True)
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    assert {envs.resolve_physics(name) for name in envs.env_names()} == {"jax"}
+    assert {envs.resolve_physics(name, "warp") for name in envs.mjx_env_names()} == {"warp"}
+    assert set(envs.mjx_env_names()) == {"pendulum", "acrobot", "idp", "halfcheetah", "ant", "ant_fast", "humanoid"}
+
+
+def test_physics_warp_without_warp_lang_is_one_line_naming_the_gpu_extra(monkeypatch, tmp_path, capsys):
+    from hintsjax import run
+
+    monkeypatch.setattr(physics, "warp_installed", lambda: False)
+    assert run.main_from_values({"env": "ant", "physics": "warp", "out_dir": str(tmp_path / "runs")}) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "physics=warp needs warp-lang: pip install -e '.[gpu]'" in lines[0], lines
+    assert not (tmp_path / "runs").exists()
+    with pytest.raises(physics.PhysicsUnavailable, match="gpu"):
+        envs.make("ant", physics="warp")
+
+
+def test_the_config_keeps_the_physics_a_run_is_stepped_with():
+    """auto is resolved when the config is built (on a CPU: jax), so config.yaml and eval.json
+    say what stepped the run, and a resumed run keeps it; a config saved before the setting
+    existed was stepped by JAX."""
+    assert run_config({"env": "ant"}).physics == physics.resolve("auto", jax.default_backend())
+    assert run_config({"env": "pendulum"}).physics == "jax"
+    assert run_config({"env": "car_racing", "physics": "jax"}).physics == "jax"
+    saved = {"env": "ant", "hint": "speed"}
+    assert run_config({**saved, "physics": "warp"}, resolved=True).physics == "warp"
+    assert run_config(saved, resolved=True).physics == "jax"
+    with pytest.raises(UsageError, match="valid choices: auto, jax, warp"):
+        run_config({"env": "ant", "physics": "fast"})
+
+
+def test_collapse_vmaps_runs_the_body_once_on_every_vmapped_axis_flattened():
+    seen = []
+
+    def body(x, y):
+        seen.append(x.shape)
+        return {"sum": x.sum(-1, keepdims=True) + y, "twice": 2 * x}
+
+    f = physics.collapse_vmaps(body)
+    x, y = jnp.arange(24.0).reshape(2, 3, 4), jnp.ones((3, 1))
+    batched = jax.jit(jax.vmap(jax.vmap(f), in_axes=(0, None)))  # y unbatched over the outer axis
+    out = batched(x, y)
+    assert seen[-1] == (2, 3, 4)  # both axes folded into the arguments (earlier calls: shapes only)
+    products = [line for line in batched.lower(x, y).as_text().splitlines() if "stablehlo.multiply" in line]
+    assert len(products) == 1 and "tensor<2x3x4xf32>" in products[0]  # the program runs the body once
+    for i in range(2):
+        for j in range(3):
+            np.testing.assert_array_equal(out["sum"][i, j], x[i, j].sum(keepdims=True) + 1)
+    np.testing.assert_array_equal(out["twice"], 2 * x)
+    np.testing.assert_array_equal(f(x[0, 0], y[0])["twice"], 2 * x[0, 0])  # unbatched: the body as it is
+
+
+def test_capacities_are_the_contacts_and_rows_the_collision_pairs_can_make():
+    assert physics.capacities(Ant.make_mj_model()) == (25, 108)
+
+
+# -- MJX-Warp ------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def warp_cheetah() -> Compiled:
+    return Compiled(envs.make("halfcheetah", "none", ("state",), physics="warp"))
+
+
+@pytest.fixture(scope="module")
+def warp_ant() -> Compiled:
+    return Compiled(envs.make("ant", "none", ("state",), physics="warp"))
+
+
+@warp_lang
+def test_warp_halfcheetah_parity(warp_cheetah):
+    """MJX-Warp against HalfCheetah-v5, with the bounds of the JAX path's parity test
+    (test_halfcheetah_parity; JAX measured |d obs| 1.5e-4, |d reward| 1.5e-6). Measured (CPU,
+    warp-lang 1.18.0, 60 steps, 30 with contacts): |d obs| = |d qvel| 1.05e-3, |d reward| 5.2e-6."""
+    worst = parity(warp_cheetah, "HalfCheetah-v5", 60)
+    assert worst["contact"] > 20
+    assert worst["obs"] < 2e-3 and worst["reward"] < 2e-5
+
+
+@warp_lang
+def test_warp_ant_parity_as_shipped(warp_ant):
+    """MJX-Warp against Ant-v5 as Gymnasium ships it (pyramidal cones, Newton capped at 4
+    iterations), with the JAX path's bounds (test_ant_parity_as_shipped; JAX measured |d obs|
+    1.49, |d reward| 0.41). Measured (CPU, 60 steps, 24 with contacts): |d obs| 2.0 (a clipped
+    contact force at +1 on one side, -1 on the other), |d qvel| 1.49, |d reward| 0.41;
+    termination identical."""
+    worst = parity(warp_ant, "Ant-v5", 60)
+    assert worst["contact"] > 20 and worst["terminal"] >= 0
+    assert worst["obs"] < 3.0 and worst["reward"] < 1.0
+
+
+@warp_lang
+def test_warp_equals_jax_and_its_nested_vmap_equals_a_loop():
+    """The inverted double pendulum (its cart's rail limits in the constraint solver, frame skip
+    5): MJX-Warp and MJX's JAX solver agree to float32 rounding over a step of random states and
+    actions; and Warp's nested vmap (seeds x envs, folded into one batch of worlds) gives each
+    world what stepping it alone gives."""
+    warp_idp, jax_idp = (Compiled(envs.make("idp", "none", ("state",), physics=p)) for p in ("warp", "jax"))
+    params = jax_idp.params
+    qpos = np.asarray(jax.random.uniform(KEY, (2, 3, 3), minval=-0.5, maxval=0.5), np.float32)
+    qvel = np.asarray(jax.random.normal(jax.random.key(1), (2, 3, 3)), np.float32)
+    action = np.asarray(jax.random.uniform(jax.random.key(2), (2, 3, 1), minval=-1, maxval=1), np.float32)
+    stepped = lambda c: jax.jit(jax.vmap(jax.vmap(lambda q, v, a: c.env.transition(KEY, c.env.state_at(q, v), a, params))))  # noqa: E731
+    warp, jax_out = stepped(warp_idp)(qpos, qvel, action), stepped(jax_idp)(qpos, qvel, action)
+    for field in ("qpos", "qvel", "tip"):
+        np.testing.assert_allclose(getattr(warp.state, field), getattr(jax_out.state, field), atol=1e-4)
+    np.testing.assert_allclose(warp.reward, jax_out.reward, atol=1e-4)
+    for i, j in ((0, 0), (1, 2)):
+        alone = warp_idp.transition(KEY, warp_idp.state_at(qpos[i, j], qvel[i, j]), action[i, j], params)
+        np.testing.assert_allclose(warp.state.qvel[i, j], alone.state.qvel, atol=1e-5)
+
+
+@warp_lang
+def test_a_warp_overflow_poisons_the_world_and_is_reported():
+    """Contacts that do not fit are never dropped silently: a world whose contacts overflowed
+    reads NaN, and `overflow_seen` names the buffer (the run loop stops with one line naming
+    warp_capacity)."""
+    small = physics.WarpPhysics(Ant.make_mj_model())
+    small.contacts_per_world = 1  # an ant lying on the floor touches it in more places
+    physics.clear_overflow()
+    qpos = Ant.make_mj_model().qpos0.astype(np.float32)
+    qpos[2] = 0.3
+    out = jax.jit(lambda q: small.run(q, jnp.zeros(14), jnp.zeros(8), 1, True))(qpos)
+    assert np.isnan(np.asarray(out.qpos)).all() and int(out.overflow) & physics.LOST_MASK
+    assert "(naconmax)" in physics.overflow_seen()
+    physics.clear_overflow()
+    fine = jax.jit(lambda q: physics.WarpPhysics(Ant.make_mj_model()).run(q, jnp.zeros(14), jnp.zeros(8), 1, True))(qpos)
+    assert np.isfinite(np.asarray(fine.qpos)).all() and physics.overflow_seen() is None
+
+
+@warp_lang
+def test_warp_humanoid_parity():
+    """MJX-Warp's humanoid against Humanoid-v5 with our integrator (Euler) on both sides, with the
+    JAX path's bounds (test_humanoid_parity; JAX measured |d obs| 6.7e-3, |d reward| 1.0e-5).
+    Measured (CPU, 40 steps, 10 with contacts): |d obs| 7.1e-3, |d reward| 7.3e-6."""
+    import mujoco
+
+    humanoid = Compiled(envs.make("humanoid", "none", ("state",), physics="warp"))
+    worst = parity(humanoid, "Humanoid-v5", 40, gym_options=dict(integrator=mujoco.mjtIntegrator.mjINT_EULER))
+    assert worst["contact"] > 5
+    assert worst["obs"] < 0.07 and worst["reward"] < 1e-4
