@@ -106,17 +106,25 @@ class RunConfig:
             choose("env", self.env, envs.REGISTRY)
             choose("agent", self.agent, AGENTS)
             choose("scheme", self.scheme, SCHEMES)
-            envs.make_hint(self.env, self.effective_hint)
+            envs.make_hint(self.env, self.hint)  # named right even where the agent sees no hint
+            hint = envs.make_hint(self.env, self.effective_hint)
             envs.resolve_physics(self.env, self.physics)
         except (ChoiceError, envs.PhysicsUnavailable) as e:
             raise UsageError(str(e)) from None
+        names = [part.name for part in hint.parts]
+        twice = sorted({name for name in names if names.count(name) > 1})
+        if twice:
+            raise UsageError(f"hint '{self.hint}' gives {', '.join(twice)} more than once; name each hint once")
+        if self.agent_spec.hint and not names:
+            raise UsageError(f"agent={self.agent} sees a hint, so hint=none leaves it nothing; valid for {self.env}: "
+                             f"{', '.join(envs.hint_names(self.env))} (or agent=ppo_rgb, which sees none)")
         if not 1 <= self.warp_capacity < float("inf"):
             raise UsageError(f"warp_capacity must be a number of at least 1, got {self.warp_capacity}")
         for v in (self.variant, *self.eval_variants):
             env_params(self.env, v)
         self._check_hint_sources()
         require_positive(self, ("seeds", "eval_episodes", "checkpoint_every"))
-        if self.checkpoint_seconds < 0:
+        if not self.checkpoint_seconds >= 0:  # NaN too
             raise UsageError(f"checkpoint_seconds must be 0 or more, got {self.checkpoint_seconds}")
         for section in SECTIONS:
             getattr(self, section).validate()
@@ -162,6 +170,18 @@ def _merge(*layers: Mapping[str, Any]) -> dict[str, Any]:
     return merged
 
 
+def _as_tuple(key: str, value: Any) -> tuple:
+    """A list-valued setting as a tuple: variant names (one name alone is a list of one), or
+    layer widths (whole positive numbers, at least one); UsageError naming `key` otherwise."""
+    if key == "eval_variants":
+        return (value,) if isinstance(value, str) else tuple(str(v) for v in value)
+    if not isinstance(value, (list, tuple)):
+        raise UsageError(f"{key} must be a list of layer widths such as [256,256], got {value!r}")
+    if not value or not all(isinstance(w, int) and not isinstance(w, bool) for w in value):
+        raise UsageError(f"{key} must be a list of at least one whole number, got {list(value)}")
+    return tuple(value)
+
+
 def run_config(values: Mapping[str, Any], resolved: bool = False) -> RunConfig:
     """Build and validate a RunConfig from plain values (e.g. Hydra's), applying env defaults.
 
@@ -188,9 +208,9 @@ def run_config(values: Mapping[str, Any], resolved: bool = False) -> RunConfig:
     if unknown:
         raise UsageError(f"unknown config keys {sorted(unknown)}")
     try:
-        for section in [merged, *(merged.get(name, {}) for name in SECTIONS)]:
+        for prefix, section in [("", merged), *((f"{name}.", merged.get(name, {})) for name in SECTIONS)]:
             for k in TUPLES & set(section):
-                section[k] = tuple(int(w) if k != "eval_variants" else w for w in section[k])
+                section[k] = _as_tuple(prefix + k, section[k])
         sections = {name: cls(**merged.pop(name, {})) for name, cls in SECTIONS.items()}
         cfg = RunConfig(**merged, **sections)
         _check_types(cfg)

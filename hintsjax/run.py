@@ -363,14 +363,51 @@ def train_group(group_cfgs: list[RunConfig], group_dir: Path, cell_dirs: list[Pa
             for member, cell_dir, member_evaluations in zip(group.cfgs, cell_dirs, evaluations)]
 
 
+def places(values: dict[str, Any]) -> tuple[str | None, str, str | None]:
+    """(resume, out_dir, name) popped from `values` as strings, whatever YAML made of them
+    (`name=2024` is a folder name, not a number); UsageError for a name that is not one folder's
+    name inside out_dir (a path separator, `..`, or nothing)."""
+    resume, out_dir, name = (values.pop(k, default) for k, default in (("resume", None), ("out_dir", "runs"), ("name", None)))
+    resume, out_dir, name = (None if v is None else str(v).lower() if isinstance(v, bool) else str(v)
+                             for v in (resume, out_dir, name))
+    if name is not None and (not name.strip() or name in (".", "..") or any(sep in name for sep in ("/", "\\"))):
+        raise UsageError(f"name must be one folder's name inside out_dir (no '/', '\\' or '..'), got {name!r}")
+    return resume, out_dir or "runs", name
+
+
+def command_line_defaults() -> dict[str, Any]:
+    """conf/config.yaml's values, what Hydra hands over for every key the command line left alone."""
+    import yaml
+
+    conf = yaml.safe_load((Path(__file__).parent / "conf" / "config.yaml").read_text())
+    return {k: v for k, v in conf.items() if k not in ("defaults", "hydra")}
+
+
+def refuse_overrides_on_resume(values: dict[str, Any]) -> None:
+    """UsageError naming the settings given beside `resume` (a resumed run continues as it was
+    configured: its config.yaml decides); values equal to the command line's defaults are none."""
+    defaults = command_line_defaults()
+    given = []
+    for key, value in values.items():
+        if key == "compilation_cache":
+            continue
+        default = defaults.get(key)
+        if isinstance(value, dict):
+            given += [f"{key}.{k}={v}" for k, v in value.items() if v != (default or {}).get(k)]
+        elif value != default:
+            given.append(f"{key}={value}")
+    if given:
+        raise UsageError(f"resume continues a run as its config.yaml says; drop {' '.join(given)} (or start a new run)")
+
+
 def main_from_values(values: dict[str, Any]) -> int:
     """Run from plain config values (what Hydra resolved); returns the exit status."""
     values = dict(values)
     cache = values.pop("compilation_cache", None)
     try:
-        resume = values.pop("resume", None)
-        out_dir, name = values.pop("out_dir", "runs"), values.pop("name", None)
+        resume, out_dir, name = places(values)
         if resume is not None:
+            refuse_overrides_on_resume(values)
             run_dir = Path(resume)
             cfg = load_run_config(run_dir)  # a missing or bad checkpoint is reported by train's restore
         else:

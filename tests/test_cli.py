@@ -116,7 +116,31 @@ BAD_SETTINGS = {
     "env=car_racing physics=warp": "car_racing has no MuJoCo model; physics=warp is for acrobot, ant, ant_fast, halfcheetah",
     "env=ant warp_capacity=0.5": "warp_capacity must be a number of at least 1, got 0.5",
     "env=ant warp_capacity=nan": "warp_capacity must be a number of at least 1, got nan",
+    # issue 49's settings that did not fit together
+    "agent=hints hint=none": "agent=hints sees a hint, so hint=none leaves it nothing; valid for pendulum: ",
+    "agent=ppo_state hint=nope": "unknown hint 'nope' for env 'pendulum'",
+    "hint=composite+composite": "hint 'composite+composite' gives",
+    "ppo.hidden=[]": "ppo.hidden must be a list of at least one whole number, got []",
+    "ppo.hidden=[1.5,2.7]": "ppo.hidden must be a list of at least one whole number, got [1.5, 2.7]",
+    "ppo.hidden=64": "ppo.hidden must be a list of layer widths such as [256,256], got 64",
+    "checkpoint_seconds=nan": "checkpoint_seconds must be 0 or more, got nan",
+    "name=../escape": "name must be one folder's name inside out_dir",
+    "name=..": "name must be one folder's name inside out_dir",
+    "resume=runs/x env=acrobot": "resume continues a run as its config.yaml says; drop env=acrobot",
+    "resume=runs/x ppo.total_env_steps=512": "drop ppo.total_env_steps=512",
 }
+
+
+def test_names_and_folders_are_strings_whatever_yaml_makes_of_them():
+    """`name=2024`, `name=true`, `out_dir=123`, `resume=42` as Hydra parses them (int, bool) are
+    folder names; one variant alone is a list of one."""
+    assert run.places({"name": 2024, "out_dir": 123, "resume": 42}) == ("42", "123", "2024")
+    assert run.places({"name": True}) == (None, "runs", "true")
+    assert run.places({}) == (None, "runs", None)
+    from hintsjax.config import run_config
+
+    assert run_config({"env": "pendulum", "eval_variants": "swingto"}).eval_variants == ("swingto",)
+    assert run_config({"env": "pendulum", "ppo": {"hidden": [64]}}).ppo.hidden == (64,)
 
 
 def parsed(text: str):
