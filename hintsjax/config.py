@@ -106,7 +106,8 @@ class RunConfig:
             choose("env", self.env, envs.REGISTRY)
             choose("agent", self.agent, AGENTS)
             choose("scheme", self.scheme, SCHEMES)
-            envs.make_hint(self.env, self.hint)  # named right even where the agent sees no hint
+            if self.hint not in (RunConfig.hint, ENV_DEFAULTS.get(self.env, {}).get("hint")):
+                envs.make_hint(self.env, self.hint)  # a hint asked for is named right, even where the agent sees none
             hint = envs.make_hint(self.env, self.effective_hint)
             envs.resolve_physics(self.env, self.physics)
         except (ChoiceError, envs.PhysicsUnavailable) as e:
