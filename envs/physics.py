@@ -259,12 +259,12 @@ class WarpPhysics:
         self._runs: dict[tuple[int, bool], Callable[..., Readout]] = {}
 
     def template(self, worlds: int) -> mjx.Data:
-        """A fresh data of one world, its shared buffers sized for `worlds` worlds (host arrays)."""
+        """A fresh data of one world, its shared buffers sized for `worlds` worlds (numpy arrays)."""
         if worlds not in self._templates:
             with contextlib.redirect_stdout(io.StringIO()), jax.ensure_compile_time_eval():  # host arrays, also mid-trace
                 data = mjx.make_data(self.mj_model, impl="warp", naconmax=worlds * self.contacts_per_world,
                                      njmax=self.rows_per_world, device=jax.devices("cpu")[0])
-            self._templates[worlds] = data
+                self._templates[worlds] = jax.tree.map(np.asarray, data)
         return self._templates[worlds]
 
     def run(self, qpos, qvel, ctrl, substeps: int, contact_forces: bool) -> Readout:
@@ -277,9 +277,7 @@ class WarpPhysics:
         lead = qpos.shape[:-1]
         worlds = math.prod(lead)
         flat = lambda x: jnp.reshape(x, (worlds, x.shape[-1]))  # noqa: E731
-        with jax.ensure_compile_time_eval():
-            host = jax.tree.map(np.asarray, self.template(worlds))
-        template = jax.tree.map(_as_traced, host)
+        template = jax.tree.map(_as_traced, self.template(worlds))
         last = self.model_rne if contact_forces else self.model
 
         def one(qpos, qvel, ctrl) -> Readout:  # vmapped over the N worlds: MJX-Warp's batching rule

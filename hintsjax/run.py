@@ -380,7 +380,7 @@ def command_line_defaults() -> dict[str, Any]:
     import yaml
 
     conf = yaml.safe_load((Path(__file__).parent / "conf" / "config.yaml").read_text())
-    return {k: v for k, v in conf.items() if k not in ("defaults", "hydra")}
+    return {k: v for k, v in conf.items() if k not in ("defaults", "hydra")}  # not Hydra's own sections
 
 
 def refuse_overrides_on_resume(values: dict[str, Any]) -> None:
@@ -443,10 +443,7 @@ HYDRA_VALUE_FLAGS = {"--config-name", "-cn", "--config-path", "-cp", "--config-d
 
 def config_keys() -> list[str]:
     """Every key the command line accepts (conf/config.yaml's, nested ones as section.key)."""
-    import yaml
-
-    conf = yaml.safe_load((Path(__file__).parent / "conf" / "config.yaml").read_text())
-    conf = {k: v for k, v in conf.items() if k not in ("defaults", "hydra")}  # Hydra's own sections
+    conf = command_line_defaults()
     return [*conf, *(f"{section}.{k}" for section, values in conf.items() if isinstance(values, dict) for k in values)]
 
 
