@@ -8,7 +8,8 @@ on the table's learner rows (PPO-RGB, PPO-x, PPO-x+N(0,1) and HINTS-FC with ever
 references expert_ppo, dagger and gail are left out: dagger and gail need the expert's run
 first) into a fresh runs folder, and times the whole command, compiles and evaluation included.
 The rows go to experiments/results/table_in_one_call.json with the fields
-`env, rows, seeds, wall_s, env_steps_per_s, ceiling_fraction, device, deterministic` and more:
+`env, rows, seeds, wall_s, env_steps_per_s, ceiling_fraction, device, devices, deterministic` and more
+(devices: the GPUs visible, all of which every worker's run spreads its seeds over):
 env_steps_per_s is every row's training env steps over the command's wall-clock;
 ceiling_fraction is that rate x PPO's epochs (gradient samples/s) over the network's own update
 ceiling, measured in this process (experiments/bench.py's `ceiling`). `--alone` trains each row
@@ -47,17 +48,18 @@ def learner_rows(env: str) -> list[str]:
 def record(row: dict) -> None:
     """Add `row` to the results file, replacing an earlier row of the same kind."""
     rows = json.loads(RESULTS.read_text()) if RESULTS.exists() else []
-    same = ("env", "seeds", "device", "grouped", "platform")
+    same = ("env", "seeds", "device", "devices", "grouped", "platform", "sweep_args")
     rows = [r for r in rows if any(r.get(k) != row.get(k) for k in same)] + [row]
     RESULTS.write_text(json.dumps(rows, indent=1) + "\n")
 
 
-def table(env: str, seeds: int, alone: bool, workers: int, runs: Path) -> dict:
+def table(env: str, seeds: int, alone: bool, workers: int, runs: Path, sweep_args: list[str] = ()) -> dict:
     import hintsjax
 
     labels = learner_rows(env)
     cmd = [sys.executable, str(HERE / "classic_control.py"), "--table", "2", "--envs", env, "--seeds", str(seeds),
-           "--runs", str(runs), "--only", ",".join(labels), "--workers", str(workers), *(["--alone"] if alone else [])]
+           "--runs", str(runs), "--only", ",".join(labels), "--workers", str(workers), *(["--alone"] if alone else []),
+           *sweep_args]
     print(" ".join(cmd), flush=True)
     t = time.perf_counter()
     subprocess.run(cmd, check=True)
@@ -70,9 +72,9 @@ def table(env: str, seeds: int, alone: bool, workers: int, runs: Path) -> dict:
     groups = {tuple(r.get("group", [r["label"]])) for r in results}
     return {"env": env, "rows": labels, "seeds": seeds, "wall_s": round(wall, 1),
             "env_steps_per_s": round(env_steps / wall), "epochs": epochs,
-            "device": jax.devices()[0].device_kind, "deterministic": hintsjax.deterministic_gpu_ops(),
+            "device": jax.devices()[0].device_kind, "devices": len(jax.devices()), "deterministic": hintsjax.deterministic_gpu_ops(),
             "platform": jax.default_backend(), "jax": jax.__version__, "grouped": not alone, "workers": workers,
-            "groups": [list(g) for g in sorted(groups, key=len, reverse=True)],
+            "groups": [list(g) for g in sorted(groups, key=len, reverse=True)], "sweep_args": list(sweep_args),
             "env_steps": env_steps,
             "train_seconds": {r["label"]: round(r["train_seconds"], 1) for r in results},
             "compile_seconds": {r["label"]: r["compile_seconds"] for r in results},
@@ -115,6 +117,9 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=3, help="groups trained at once (classic_control --workers)")
     parser.add_argument("--keep", type=Path, default=None, help="train into this runs folder and keep it")
     parser.add_argument("--cpu-updates", type=int, default=0, help="time this many updates on the CPU instead")
+    parser.add_argument("--gpus", default="", help="classic_control --gpus: one GPU per worker (default: every "
+                                                   "worker spreads its seeds over all visible GPUs)")
+    parser.add_argument("--group-size", type=int, default=0, help="classic_control --group-size (0: no limit)")
     args = parser.parse_args()
     if args.cpu_updates:
         os.environ["JAX_PLATFORMS"] = "cpu"
@@ -132,7 +137,9 @@ def main() -> None:
     for seeds in [int(s) for s in args.seeds.split(",")]:
         with tempfile.TemporaryDirectory() as tmp:
             runs = args.keep / f"seeds{seeds}" if args.keep else Path(tmp)
-            rows.append(table(args.env, seeds, args.alone, args.workers, runs))
+            sweep_args = [*(["--gpus", args.gpus] if args.gpus else []),
+                          *(["--group-size", str(args.group_size)] if args.group_size else [])]
+            rows.append(table(args.env, seeds, args.alone, args.workers, runs, sweep_args))
     ceiling = bench_ceiling(8192)["update_samples_per_s"]
     print(f"ceiling: {ceiling:,.0f} samples/s", flush=True)
     for row in rows:

@@ -28,6 +28,7 @@ from flax import struct
 
 from hintsjax import envs, program_cache
 from hintsjax.config import RunConfig, env_params, load_run_config
+from hintsjax.devices import SeedLayout
 from hintsjax.errors import UsageError, fail
 from hintsjax.generator import PROGRAMMATIC
 from hintsjax.ppo import Hyper, gaussian_sample, make_network, pick_hint
@@ -131,30 +132,42 @@ def metrics_text(summary: dict[str, Any]) -> str:
     return "".join(f"  {n} {summary[n + '_mean']:.2f} +- {summary[n + '_std']:.2f}" for n in names)
 
 
+def one_device(cfg: RunConfig, layout: SeedLayout | None) -> SeedLayout:
+    """`layout`, or cfg's seeds on the default device (params with exactly the run's seeds)."""
+    return layout or SeedLayout.of(cfg.seeds, jax.devices()[:1])
+
+
 def compile_evaluator(cfg: RunConfig, params: Any, variant: str | None, episodes: int, stochastic: bool,
-                      hint: str | None = None, pick: Hyper | None = None) -> tuple[Any, float]:
+                      hint: str | None = None, pick: Hyper | None = None,
+                      layout: SeedLayout | None = None) -> tuple[Any, float]:
     """The evaluation program for seed-batched params shaped like `params` (arrays, or
     jax.ShapeDtypeStructs with their shardings: it can compile before training has finished, e.g.
     in a thread while it runs), `evaluate(params, keys, task_params)` for any variant of the env,
     or with a group's `hint` and a member's `pick` (`evaluate_group`) `evaluate(params, keys,
-    task_params, pick)` for any member; (that executable, seconds spent compiling)."""
+    task_params, pick)` for any member; (that executable, seconds spent compiling). With a
+    `layout` of several devices, params are its padded seeds, and each device evaluates its share."""
     t = time.perf_counter()
+    layout = one_device(cfg, layout)
     picked = () if pick is None else (pick,)
     evaluate = jax.vmap(make_task_evaluator(cfg, episodes, stochastic, hint), in_axes=(0, 0, None) + (None,) * len(picked))
-    identity = program_identity(cfg, episodes, stochastic, hint)
-    compiled = program_cache.lower(evaluate, params, eval_keys(cfg), cfg.task_params(variant, deploy=True), *picked,
-                                   name="evaluate", context=identity).compile()
+    evaluate = layout.spread(evaluate, batched=2, shared=1 + len(picked))
+    identity = program_identity(cfg, episodes, stochastic, hint) if layout.count == 1 else None
+    compiled = program_cache.lower(evaluate, params, layout.pad(eval_keys(cfg)), cfg.task_params(variant, deploy=True),
+                                   *picked, name="evaluate", context=identity).compile()
     return compiled, time.perf_counter() - t
 
 
 def evaluate_variants(cfg: RunConfig, params: Any, variants: tuple[str | None, ...], episodes: int,
-                      stochastic: bool, compiled: tuple[Any, float] | None = None) -> tuple[list[dict], float]:
+                      stochastic: bool, compiled: tuple[Any, float] | None = None,
+                      layout: SeedLayout | None = None) -> tuple[list[dict], float]:
     """Evaluate seed-batched params on each variant, all seeds x episodes in one call per variant
-    of one program compiled once (`compiled`, from `compile_evaluator`, if given); (one summary
-    per variant, seconds spent compiling)."""
-    evaluate, compile_seconds = compiled or compile_evaluator(cfg, params, variants[0], episodes, stochastic)
-    keys = eval_keys(cfg)
-    summaries = [variant_summary(cfg, v, stochastic, evaluate(params, keys, cfg.task_params(v, deploy=True)))
+    of one program compiled once (`compiled`, from `compile_evaluator` with the same `layout`, if
+    given); (one summary per variant, seconds spent compiling)."""
+    layout = one_device(cfg, layout)
+    evaluate, compile_seconds = compiled or compile_evaluator(cfg, params, variants[0], episodes, stochastic,
+                                                              layout=layout)
+    keys = layout.pad(eval_keys(cfg))
+    summaries = [variant_summary(cfg, v, stochastic, layout.fetch(evaluate(params, keys, cfg.task_params(v, deploy=True))))
                  for v in variants]
     return summaries, compile_seconds
 
@@ -164,10 +177,11 @@ def variant_summary(cfg: RunConfig, variant: str | None, stochastic: bool, resul
     return {"variant": variant or envs.variant_names(cfg.env)[0], "stochastic": stochastic, **summarize(result)}
 
 
-def evaluate_group(group: Any, state: Any) -> tuple[list[list[dict]], float]:
+def evaluate_group(group: Any, state: Any, layout: SeedLayout | None = None) -> tuple[list[list[dict]], float]:
     """Evaluate every member of a group (hintsjax.group) from the group's seed-batched state
     ([S, K, ...], hint axes padded) with one compiled program, each on its own variants, episodes
     and sampling as its own run would; (per member its summaries per variant, compile seconds).
+    With a `layout` of several devices, `state` holds its padded seeds.
     The program is the group env's (every member's hint parts) with the member's hint picked
     and its padded weights (exact zeros) in place: what the member alone computes, its sums
     over the hint axis padded with zero terms."""
@@ -176,14 +190,15 @@ def evaluate_group(group: Any, state: Any) -> tuple[list[list[dict]], float]:
         from hintsjax.group import cell_state
 
         results = [evaluate_variants(c, cell_state(group, state, k).params, (c.variant, *c.eval_variants),
-                                     c.eval_episodes, c.stochastic_eval) for k, c in enumerate(group.cfgs)]
+                                     c.eval_episodes, c.stochastic_eval, layout=layout) for k, c in enumerate(group.cfgs)]
         return [r for r, _ in results], sum(t for _, t in results)
-    keys, params = eval_keys(cfg), state.params
+    layout = one_device(cfg, layout)
+    keys, params = layout.pad(eval_keys(cfg)), state.params
     member = lambda k: jax.tree.map(lambda x: x[:, k], params)  # noqa: E731
     evaluate, compile_seconds = compile_evaluator(cfg, member(0), cfg.variant, cfg.eval_episodes, cfg.stochastic_eval,
-                                                  group.hint, group.hyper(0))
-    summaries = [[variant_summary(c, v, c.stochastic_eval,
-                                  evaluate(member(k), keys, c.task_params(v, deploy=True), group.hyper(k)))
+                                                  group.hint, group.hyper(0), layout)
+    summaries = [[variant_summary(c, v, c.stochastic_eval, layout.fetch(
+                                  evaluate(member(k), keys, c.task_params(v, deploy=True), group.hyper(k))))
                   for v in (c.variant, *c.eval_variants)] for k, c in enumerate(group.cfgs)]
     return summaries, compile_seconds
 

@@ -29,6 +29,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from hintsjax import checkpoint, compilation_cache, expert, program_cache
 from hintsjax.config import RunConfig, load_run_config, run_config, save_run_config
+from hintsjax.devices import SeedLayout
 from hintsjax.evaluate import compile_evaluator, evaluate_group, evaluate_variants, metrics_text
 from hintsjax.algorithms import make_trainer
 from hintsjax.envs import physics
@@ -37,21 +38,6 @@ from hintsjax.runlog import CURVE_PNG, METRICS_CSV, RunLog, fresh_folder, plot_c
 from hintsjax.trainer import Trainer
 
 EVAL_JSON = "eval.json"
-
-
-def seed_sharding(seeds: int) -> jax.sharding.Sharding | None:
-    """The seed axis split over this machine's devices when several divide it (None: one device)."""
-    devices = jax.devices()
-    if len(devices) > 1 and seeds % len(devices) == 0:
-        mesh = jax.sharding.Mesh(np.array(devices), ("seeds",))
-        return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("seeds"))
-    return None
-
-
-def seed_keys(cfg: RunConfig) -> tuple[jax.Array, int]:
-    """[S] training keys, sharded over the seed axis when several devices divide it; and how many devices."""
-    keys, sharding = cfg.seed_keys(), seed_sharding(cfg.seeds)
-    return (keys, 1) if sharding is None else (jax.device_put(keys, sharding), len(jax.devices()))
 
 
 def new_run_dir(out_dir: str, name: str | None, cfg: RunConfig) -> Path:
@@ -74,7 +60,7 @@ def seconds_trained(run_dir: Path) -> float:
 class Compiled:
     """A run's training programs, compiled ahead of time for its seed-batched state."""
 
-    init: Callable[[jax.Array], Any]  # [S] keys -> state
+    init: Callable[[jax.Array], Any]  # [padded seeds] keys -> state
     # (state, n) -> (state n updates on, metrics [S, chunk]): the first n <= chunk updates of one
     # program, so every chunk, the shorter last one too, runs the same compiled code
     run_chunk: Callable[[Any, np.int32], tuple[Any, dict[str, jax.Array]]]
@@ -82,25 +68,25 @@ class Compiled:
     seconds: float  # spent tracing and compiling both
     trace_seconds: float  # of which tracing and lowering to XLA (Python), or loading both as traced before
     loaded: bool = False  # both programs were read from the traced-program cache, not traced
+    layout: SeedLayout | None = None  # the seeds over the devices (None: one device, as many seeds as keys)
 
 
-def compile_training(trainer: Trainer, keys: jax.Array, chunk: int) -> Compiled:
-    """Compile `trainer`'s init and its chunk of `chunk` updates for the seed keys' batch (every
-    array of the state and the metrics split over devices by its seed axis, if the keys are)."""
+def compile_training(trainer: Trainer, keys: jax.Array, chunk: int, layout: SeedLayout | None = None) -> Compiled:
+    """Compile `trainer`'s init and its chunk of `chunk` updates for the seed keys' batch; with a
+    `layout` of several devices (keys from its `pad`), each device runs its share of the seeds."""
     t = time.perf_counter()
-    seeds = seed_sharding(keys.shape[0]) if len(keys.devices()) > 1 else None
-    init_fn, chunk_fn = jax.vmap(trainer.init), jax.vmap(partial(trainer.run_chunk, length=chunk), in_axes=(0, None))
-    if seeds is None:  # traced, or loaded as traced by an earlier process (hintsjax/program_cache.py)
-        init = program_cache.lower(init_fn, keys, name="init", context=trainer.identity)
-        run_chunk = program_cache.lower(chunk_fn, init.out_info, np.int32(chunk), name=f"chunk{chunk}",
-                                        context=trainer.identity)  # the state's shapes as init's lowering found them
-    else:
-        init = jax.jit(init_fn, in_shardings=seeds, out_shardings=seeds).lower(keys)
-        run_chunk = jax.jit(chunk_fn, in_shardings=(seeds, None), out_shardings=seeds).lower(init.out_info, np.int32(chunk))
+    layout = layout or SeedLayout.of(keys.shape[0], sorted(keys.devices(), key=lambda d: d.id))
+    init_fn = layout.spread(jax.vmap(trainer.init), batched=1)
+    chunk_fn = layout.spread(jax.vmap(partial(trainer.run_chunk, length=chunk), in_axes=(0, None)), batched=1, shared=1)
+    # traced, or loaded as traced by an earlier process (hintsjax/program_cache.py: one device's programs only)
+    identity = trainer.identity if layout.count == 1 else None
+    init = program_cache.lower(init_fn, keys, name="init", context=identity)
+    run_chunk = program_cache.lower(chunk_fn, init.out_info, np.int32(chunk), name=f"chunk{chunk}",
+                                    context=identity)  # the state's shapes as init's lowering found them
     traced = time.perf_counter() - t
     loaded = all(getattr(program, "loaded", False) for program in (init, run_chunk))
     init, run_chunk = init.compile(), run_chunk.compile()
-    return Compiled(init, run_chunk, chunk, time.perf_counter() - t, traced, loaded)
+    return Compiled(init, run_chunk, chunk, time.perf_counter() - t, traced, loaded, layout)
 
 
 class GroupTooBig(RuntimeError):
@@ -200,20 +186,22 @@ def chunks_rate(training: Training, env_steps_per_update: int) -> float | None:
 
 def start(trainer: Trainer, cfg: RunConfig, run_dir: Path, resume: bool, label: str, check_memory: bool = False) -> Training:
     """Compile `trainer`'s programs for cfg's seeds, then a fresh state or the newest checkpoint of run_dir."""
-    keys, num_devices = seed_keys(cfg)
+    layout = SeedLayout.of(cfg.seeds)
+    keys = layout.pad(cfg.seed_keys())
     physics.clear_overflow()
     total = cfg.ppo.num_updates
-    compiled = compile_training(trainer, keys, min(cfg.checkpoint_every, total))
+    compiled = compile_training(trainer, keys, min(cfg.checkpoint_every, total), layout)
     if check_memory:
         check_fits(compiled.run_chunk, label)
-    if resume:  # restored onto one device: placed as the compiled chunk expects (seeds sharded, if they are)
+    if resume:  # a checkpoint holds the run's own seeds, restored onto one device: padded and placed as at the start
         state, done = checkpoint.restore_latest(run_dir, cfg, trainer)
-        state = jax.device_put(state, compiled.run_chunk.input_shardings[0][0])
+        state = layout.pad(state)
     else:
         state, done = compiled.init(keys), 0
+    spread = f" ({layout.per_device} a device{f', {layout.padded - cfg.seeds} of them padding' if layout.padded > cfg.seeds else ''})"
     print(f"{cfg.env} {label}: {cfg.seeds} seeds x {total} updates of {cfg.ppo.batch_size} env steps "
-          f"on {num_devices} {jax.default_backend()} device(s), compiled in {compiled.seconds:.1f} s -> {run_dir}",
-          flush=True)
+          f"on {layout.count} {jax.default_backend()} device(s){spread if layout.count > 1 else ''}, "
+          f"compiled in {compiled.seconds:.1f} s -> {run_dir}", flush=True)
     return Training(compiled, state, done, done, seconds_trained(run_dir) if resume else 0.0)
 
 
@@ -231,17 +219,18 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
     from tqdm import tqdm
 
     compiled, state, done, total = training.compiled, training.state, training.done, cfg.ppo.num_updates
+    layout = compiled.layout
     bar = tqdm(total=total, initial=done, unit="upd", disable=not progress, desc=f"{cfg.env} {label}")
     t0 = saved = time.perf_counter()
 
     def save(state: Any, update: int, finite: jax.Array) -> None:
         """Checkpoint `state` unless `finite` (its finite_seeds) says some seed's params are not."""
         nonlocal saved
-        finite = np.asarray(finite)
+        finite = layout.fetch(finite)
         if not finite.all():
             stop_nonfinite(run_dir, label, {"update": update, "quantity": "params",
                                             "seeds": np.flatnonzero(~finite).tolist()})
-        checkpoint.save(run_dir, state, update)
+        checkpoint.save(run_dir, layout.crop(state), update)  # the run's own seeds: it resumes on any device count
         saved = time.perf_counter()
         (run_dir / SECONDS_JSON).write_text(json.dumps({"update": update, "seconds": training.before + saved - t0,
                                                          "compile_seconds": compiled.seconds,
@@ -250,7 +239,7 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
     arrivals = []
 
     def report(metrics: dict[str, jax.Array], after: int, n: int) -> None:
-        metrics = {k: np.asarray(v)[:, :n] for k, v in metrics.items()}  # waits for that chunk only
+        metrics = {k: v[:, :n] for k, v in layout.fetch(metrics).items()}  # waits for that chunk only
         arrivals.append((time.perf_counter() - t0, after + n))
         write(metrics, after)
         check_physics(cfg, label)  # before the NaN guard: a world that overflowed is NaN
@@ -297,7 +286,8 @@ def finish(cfg: RunConfig, run_dir: Path, training: Training, evaluations: list[
                "train_env_steps_per_s": (training.done - training.first) * cfg.ppo.batch_size * cfg.seeds
                / max(training.seconds, 1e-9),
                "chunks_env_steps_per_s": chunks_rate(training, cfg.ppo.batch_size * cfg.seeds),
-               "env_steps": cfg.ppo.num_updates * cfg.ppo.batch_size, "physics": cfg.physics, **(extra or {}),
+               "env_steps": cfg.ppo.num_updates * cfg.ppo.batch_size, "physics": cfg.physics,
+               "devices": compiled.layout.count, "device": jax.devices()[0].device_kind, **(extra or {}),
                "evaluations": evaluations}
     (run_dir / EVAL_JSON).write_text(json.dumps(results, indent=1))
     if (run_dir / METRICS_CSV).exists():
@@ -317,14 +307,15 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
     # The evaluation program compiles on the host while the device trains (it needs only the
     # params' shapes), so its compile adds nothing to the wall-clock of a run that trains longer.
     with ThreadPoolExecutor(max_workers=1) as pool:
-        evaluator = pool.submit(compile_evaluator, cfg, shapes, variants[0], cfg.eval_episodes, cfg.stochastic_eval)
+        evaluator = pool.submit(compile_evaluator, cfg, shapes, variants[0], cfg.eval_episodes, cfg.stochastic_eval,
+                                layout=training.compiled.layout)
         try:
             training = advance(training, cfg, run_dir, log.write, progress, cfg.label)
         finally:
             log.close()
         compiled = evaluator.result()
     evaluations, eval_compile = evaluate_variants(cfg, training.state.params, variants, cfg.eval_episodes,
-                                                  cfg.stochastic_eval, compiled)
+                                                  cfg.stochastic_eval, compiled, training.compiled.layout)
     check_physics(cfg, cfg.label)
     return finish(cfg, run_dir, training, evaluations, eval_compile)
 
@@ -355,8 +346,8 @@ def train_group(group_cfgs: list[RunConfig], group_dir: Path, cell_dirs: list[Pa
             log.close()
     for k, cell_dir in enumerate(cell_dirs):
         if checkpoint.latest_update(cell_dir) != training.done:
-            checkpoint.save(cell_dir, cell_state(group, training.state, k), training.done)
-    evaluations, eval_compile = evaluate_group(group, training.state)
+            checkpoint.save(cell_dir, cell_state(group, training.compiled.layout.crop(training.state), k), training.done)
+    evaluations, eval_compile = evaluate_group(group, training.state, training.compiled.layout)
     rate = (training.done - training.first) * cfg.ppo.batch_size * cfg.seeds * len(group.cfgs) / max(training.seconds, 1e-9)
     extra = {"group": [c.label for c in group.cfgs], "group_dir": str(group_dir), "group_env_steps_per_s": rate}
     return [finish(member, cell_dir, training, member_evaluations, eval_compile, extra)

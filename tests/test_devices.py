@@ -1,0 +1,77 @@
+"""A run's seeds over several devices (hintsjax/devices.py), on CPU devices that XLA splits
+the host into: any seed count spreads (the padding is dropped from every result), the numbers
+match one device's to float32 rounding, and a checkpoint written on 4 devices resumes on 1."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import linear_env  # noqa: F401  (registers the test env "linear")
+from hintsjax import checkpoint, run
+from hintsjax.algorithms import make_trainer
+from hintsjax.config import load_run_config
+from hintsjax.devices import SeedLayout
+
+HERE = Path(__file__).parent
+
+
+class FakeDevice:
+    pass
+
+
+def test_a_layout_pads_seeds_to_a_multiple_of_the_devices():
+    four = (FakeDevice(),) * 4
+    assert [(SeedLayout(s, four).padded, SeedLayout(s, four).per_device) for s in (1, 3, 4, 5, 20)] == \
+        [(4, 1), (4, 1), (4, 1), (8, 2), (20, 5)]
+    assert SeedLayout(5, four[:1]).padded == 5 and SeedLayout(5, four[:1]).sharding is None
+
+
+def _layout_run(folder: Path, devices: int) -> dict:
+    env = {**os.environ, "XLA_FLAGS": f"--xla_force_host_platform_device_count={devices}", "JAX_PLATFORMS": "cpu",
+           "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.run([sys.executable, str(HERE / "layout_run.py"), str(folder)], env=env, capture_output=True,
+                          text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    base = tmp_path_factory.mktemp("layouts")
+    return {n: (base / f"d{n}", _layout_run(base / f"d{n}", n)) for n in (1, 4)}
+
+
+def test_three_seeds_on_four_devices_match_one_device(runs):
+    (_, one), (folder, four) = runs[1], runs[4]
+    assert (one["devices"], four["devices"]) == (1, 4)
+    np.testing.assert_allclose(four["alone"], one["alone"], rtol=1e-4)
+    np.testing.assert_allclose(four["group"], one["group"], rtol=1e-4)
+    metrics = (folder / "alone" / "metrics.csv").read_text().splitlines()
+    assert sorted({line.split(",")[1] for line in metrics[1:]}) == ["0", "1", "2"]  # the padding seed is not logged
+    eval_json = json.loads((folder / "alone" / "eval.json").read_text())
+    assert eval_json["devices"] == 4 and eval_json["evaluations"][0]["seeds"] == 3
+
+
+def test_a_checkpoint_written_on_four_devices_resumes_on_one(runs, tmp_path):
+    folder, four = runs[4]
+    run_dir = tmp_path / "alone"
+    shutil.copytree(folder / "alone", run_dir)
+    cfg = load_run_config(run_dir)
+    state, done = checkpoint.restore_latest(run_dir, cfg, make_trainer(cfg))
+    assert done == cfg.ppo.num_updates and state.update.shape == (3,)  # the run's own seeds, no padding
+    last = run_dir / "checkpoints" / str(done)
+    assert len([p for p in (run_dir / "checkpoints").iterdir() if p.name.isdigit()]) >= 2  # an earlier one to go on from
+    shutil.rmtree(last)  # as if stopped before the last update: this process (1 device) trains it
+    (run_dir / "eval.json").unlink()
+    assert run.main_from_values({"resume": str(run_dir)}) == 0
+    resumed = json.loads((run_dir / "eval.json").read_text())
+    assert resumed["devices"] == 1
+    np.testing.assert_allclose(resumed["evaluations"][0]["seed_means"], four["alone"], rtol=1e-4)
