@@ -54,10 +54,11 @@ def test_physics_warp_without_warp_lang_is_one_line_naming_the_gpu_extra(monkeyp
 
 
 def test_the_config_keeps_the_physics_a_run_is_stepped_with():
-    """auto is resolved when the config is built (on a CPU: jax), so config.yaml and eval.json
-    say what stepped the run, and a resumed run keeps it; a config saved before the setting
-    existed was stepped by JAX."""
-    assert run_config({"env": "ant"}).physics == physics.resolve("auto", jax.default_backend())
+    """auto is resolved when the config is built (jax on a CPU, and for every env today on a GPU
+    too: no env prefers Warp yet), so config.yaml and eval.json say what stepped the run, and a
+    resumed run keeps it; a config saved before the setting existed was stepped by JAX."""
+    assert run_config({"env": "ant"}).physics == physics.resolve("auto", jax.default_backend(), Ant.warp_by_default)
+    assert run_config({"env": "ant"}).physics == "jax"
     assert run_config({"env": "pendulum"}).physics == "jax"
     assert run_config({"env": "car_racing", "physics": "jax"}).physics == "jax"
     saved = {"env": "ant", "hint": "speed"}
