@@ -35,3 +35,11 @@ def deterministic_gpu_ops() -> bool:
     """Whether XLA_FLAGS asks for deterministic GPU ops (the last setting of the flag wins)."""
     settings = [f.split("=", 1)[-1] for f in _os.environ.get("XLA_FLAGS", "").split() if f.startswith("--xla_gpu_deterministic_ops")]
     return bool(settings) and settings[-1].lower() in ("true", "1")
+
+
+# One run over several processes or hosts (hintsjax/devices.py): each process must join the
+# others before anything starts JAX's backend, as importing some of the package's modules does.
+if int(_os.environ.get("JAX_NUM_PROCESSES", "1") or 1) > 1 or int(_os.environ.get("SLURM_STEP_NUM_TASKS", "1") or 1) > 1:
+    from hintsjax.devices import join_processes as _join_processes
+
+    _join_processes()

@@ -64,9 +64,10 @@ def require_same_arrays(stored, expected, source: str) -> None:
 
 
 def on_this_device(abstract):
-    """`abstract`'s shapes and types placed on this machine's default device: what to restore
-    into, wherever the arrays were saved (a GPU's checkpoint records devices a CPU lacks)."""
-    here = jax.sharding.SingleDeviceSharding(jax.devices()[0])
+    """`abstract`'s shapes and types placed on this process's first device: what to restore
+    into, wherever the arrays were saved (a GPU's checkpoint records devices a CPU lacks; each
+    process of a run over several reads the whole state, hintsjax/devices.py spreads it)."""
+    here = jax.sharding.SingleDeviceSharding(jax.local_devices()[0])
     return jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=here), abstract)
 
 

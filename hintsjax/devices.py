@@ -16,6 +16,7 @@ differently: a seed's numbers then agree statistically, not bit for bit.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -24,6 +25,66 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 AXIS = "seeds"
+
+# One run over several processes (hosts): JAX's multi-controller runtime, joined from these
+# variables (JAX itself reads the coordinator's), or from a SLURM job step of several tasks.
+PROCESS_VARIABLES = ("JAX_COORDINATOR_ADDRESS", "JAX_NUM_PROCESSES", "JAX_PROCESS_ID")
+
+
+def join_processes() -> int:
+    """Join the run's other processes, if it has any, before JAX touches a device; the process count.
+
+    With JAX_NUM_PROCESSES > 1 (and JAX_COORDINATOR_ADDRESS, JAX_PROCESS_ID), or inside a SLURM
+    job step of several tasks (`srun`), every process calls jax.distributed.initialize; the
+    devices of all of them then form one mesh (`jax.devices()`), and CPU processes talk through
+    gloo. Elsewhere nothing happens."""
+    count = int(os.environ.get("JAX_NUM_PROCESSES", "1") or 1)
+    slurm = int(os.environ.get("SLURM_STEP_NUM_TASKS", "1") or 1)
+    if (count > 1 or slurm > 1) and not jax.distributed.is_initialized():
+        jax.config.update("jax_cpu_collectives_implementation", "gloo")
+        if count > 1:
+            jax.distributed.initialize(os.environ.get("JAX_COORDINATOR_ADDRESS"), count,
+                                       int(os.environ.get("JAX_PROCESS_ID", "0")))
+        else:
+            jax.distributed.initialize()  # JAX's own detection of SLURM's variables
+    return jax.process_count()
+
+
+def is_main() -> bool:
+    """Whether this process writes the run folder (process 0; every process when there is one)."""
+    return jax.process_index() == 0
+
+
+def agree(text: str) -> str:
+    """Process 0's `text`, on every process (e.g. the run folder it chose)."""
+    if jax.process_count() == 1:
+        return text
+    from jax.experimental import multihost_utils
+
+    data = np.zeros(4096, np.uint8)
+    raw = text.encode()[:4096]
+    data[: len(raw)] = np.frombuffer(raw, np.uint8)
+    return bytes(np.asarray(multihost_utils.broadcast_one_to_all(data))).rstrip(b"\0").decode()
+
+
+def agree_that(flag: bool) -> bool:
+    """Process 0's `flag`, on every process (a choice that all of them must make alike, such as
+    writing a checkpoint now: each process writes its share)."""
+    if jax.process_count() == 1:
+        return flag
+    from jax.experimental import multihost_utils
+
+    return bool(multihost_utils.broadcast_one_to_all(np.asarray(flag)))
+
+
+def _place(x: Any, sharding: NamedSharding) -> jax.Array:
+    """`x` (the same value on every process) as a global array split by `sharding`."""
+    if jax.process_count() == 1:
+        return jax.device_put(x, sharding)
+    if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key):
+        return jax.random.wrap_key_data(_place(jax.random.key_data(x), sharding), impl=jax.random.key_impl(x))
+    host = np.asarray(x)
+    return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
 
 
 @dataclass(frozen=True)
@@ -66,7 +127,7 @@ class SeedLayout:
         if self.padded != self.seeds:
             take = np.arange(self.padded) % self.seeds
             tree = jax.tree.map(lambda x: x[take], tree)
-        return tree if self.sharding is None else jax.device_put(tree, self.sharding)
+        return tree if self.sharding is None else jax.tree.map(lambda x: _place(x, self.sharding), tree)
 
     def crop(self, tree: Any) -> Any:
         """[padded, ...] leaves -> their first S seeds (the run's own)."""

@@ -29,6 +29,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from hintsjax import checkpoint, compilation_cache, expert, program_cache
 from hintsjax.config import RunConfig, load_run_config, run_config, save_run_config
+from hintsjax import devices
 from hintsjax.devices import SeedLayout
 from hintsjax.evaluate import compile_evaluator, evaluate_group, evaluate_variants, metrics_text
 from hintsjax.algorithms import make_trainer
@@ -144,7 +145,8 @@ def first_nonfinite(metrics: dict[str, np.ndarray], after: int) -> dict[str, Any
 
 def stop_nonfinite(run_dir: Path, label: str, found: dict[str, Any]) -> None:
     """Record `found` in the run folder and raise NonFiniteError."""
-    (run_dir / NONFINITE_JSON).write_text(json.dumps(found) + "\n")
+    if devices.is_main():
+        (run_dir / NONFINITE_JSON).write_text(json.dumps(found) + "\n")
     where = f"seed(s) {found['seeds']}" + (f", member(s) {found['members']}" if "members" in found else "")
     raise NonFiniteError(f"{label}: {found['quantity']} is not finite after update {found['update']} ({where}); "
                          f"training stopped without saving it", found)
@@ -220,7 +222,7 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
 
     compiled, state, done, total = training.compiled, training.state, training.done, cfg.ppo.num_updates
     layout = compiled.layout
-    bar = tqdm(total=total, initial=done, unit="upd", disable=not progress, desc=f"{cfg.env} {label}")
+    bar = tqdm(total=total, initial=done, unit="upd", disable=not (progress and devices.is_main()), desc=f"{cfg.env} {label}")
     t0 = saved = time.perf_counter()
 
     def save(state: Any, update: int, finite: jax.Array) -> None:
@@ -232,9 +234,10 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
                                             "seeds": np.flatnonzero(~finite).tolist()})
         checkpoint.save(run_dir, layout.crop(state), update)  # the run's own seeds: it resumes on any device count
         saved = time.perf_counter()
-        (run_dir / SECONDS_JSON).write_text(json.dumps({"update": update, "seconds": training.before + saved - t0,
-                                                         "compile_seconds": compiled.seconds,
-                                                         "trace_seconds": compiled.trace_seconds}))
+        if devices.is_main():
+            (run_dir / SECONDS_JSON).write_text(json.dumps({"update": update, "seconds": training.before + saved - t0,
+                                                             "compile_seconds": compiled.seconds,
+                                                             "trace_seconds": compiled.trace_seconds}))
 
     arrivals = []
 
@@ -262,8 +265,8 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
                 following_finite = finite_seeds(following.params)
                 if pending is not None:
                     report(*pending)
-                if (done > training.first and time.perf_counter() - saved >= cfg.checkpoint_seconds
-                        and not checkpoint.saving(run_dir)):
+                if devices.agree_that(done > training.first and time.perf_counter() - saved >= cfg.checkpoint_seconds
+                                      and not checkpoint.saving(run_dir)):  # process 0 decides for all
                     save(state, done, finite)  # the state this chunk started from: computed, copied off as the chunk runs
                 state, finite, pending, done = following, following_finite, (metrics, done, n), done + n
             if pending is not None:  # something was trained (a run resumed at its end only evaluates)
@@ -289,6 +292,8 @@ def finish(cfg: RunConfig, run_dir: Path, training: Training, evaluations: list[
                "env_steps": cfg.ppo.num_updates * cfg.ppo.batch_size, "physics": cfg.physics,
                "devices": compiled.layout.count, "device": jax.devices()[0].device_kind, **(extra or {}),
                "evaluations": evaluations}
+    if not devices.is_main():  # process 0 writes the run folder
+        return results
     (run_dir / EVAL_JSON).write_text(json.dumps(results, indent=1))
     if (run_dir / METRICS_CSV).exists():
         plot_curves({cfg.label: read_curves(run_dir / METRICS_CSV)}, run_dir / CURVE_PNG, f"{cfg.env}: {cfg.label}")
@@ -298,10 +303,24 @@ def finish(cfg: RunConfig, run_dir: Path, training: Training, evaluations: list[
     return results
 
 
+class Unlogged:
+    """What a process other than the main one logs: nothing (process 0 writes metrics.csv and tb/)."""
+
+    def write(self, metrics: dict[str, np.ndarray], after: int) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def run_log(run_dir: Path, resume_update: int) -> RunLog | Unlogged:
+    return RunLog(run_dir, resume_update=resume_update) if devices.is_main() else Unlogged()
+
+
 def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = True) -> dict[str, Any]:
     """Train all seeds (in chunks, with checkpoints: see `advance`), evaluate, plot; returns eval results."""
     training = start(make_trainer(cfg), cfg, run_dir, resume, cfg.label)
-    log = RunLog(run_dir, resume_update=training.done)
+    log = run_log(run_dir, training.done)
     variants = (cfg.variant, *cfg.eval_variants)
     shapes = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=x.sharding), training.state.params)
     # The evaluation program compiles on the host while the device trains (it needs only the
@@ -333,7 +352,7 @@ def train_group(group_cfgs: list[RunConfig], group_dir: Path, cell_dirs: list[Pa
     cfg = group.cfgs[0]
     label = f"group of {len(group.cfgs)} ({', '.join(c.label for c in group.cfgs)})"
     training = start(make_group_trainer(group), cfg, group_dir, resume, label, check_memory=len(group.cfgs) > 1)
-    logs = [RunLog(d, resume_update=training.done) for d in cell_dirs]
+    logs = [run_log(d, training.done) for d in cell_dirs]
 
     def write(metrics: dict[str, np.ndarray], after: int) -> None:  # [S, n, K]: one log per member
         for k, log in enumerate(logs):
@@ -394,6 +413,7 @@ def refuse_overrides_on_resume(values: dict[str, Any]) -> None:
 def main_from_values(values: dict[str, Any]) -> int:
     """Run from plain config values (what Hydra resolved); returns the exit status."""
     values = dict(values)
+    devices.join_processes()  # a run spread over several processes: before anything touches a device
     cache = values.pop("compilation_cache", None)
     try:
         resume, out_dir, name = places(values)
@@ -410,8 +430,10 @@ def main_from_values(values: dict[str, Any]) -> int:
         return fail(e)
     compilation_cache.enable(compilation_cache.folder(cache))
     if run_dir is None:
-        run_dir = new_run_dir(out_dir, name, cfg)
-        save_run_config(run_dir, cfg)
+        if devices.is_main():
+            run_dir = new_run_dir(out_dir, name, cfg)
+            save_run_config(run_dir, cfg)
+        run_dir = Path(devices.agree(str(run_dir)))  # the folder process 0 made, on every process
     try:
         train(cfg, run_dir, resume=resume is not None)
     except UsageError as e:
@@ -421,7 +443,8 @@ def main_from_values(values: dict[str, Any]) -> int:
         return 1
     except NonFiniteError as e:  # its checkpoints were all written before it went non-finite
         good = checkpoint.latest_update(run_dir)  # read once the background writes are done
-        (run_dir / NONFINITE_JSON).write_text(json.dumps({**e.found, "last_good_checkpoint": good}) + "\n")
+        if devices.is_main():
+            (run_dir / NONFINITE_JSON).write_text(json.dumps({**e.found, "last_good_checkpoint": good}) + "\n")
         print(f"error: {e}; last good checkpoint: {f'update {good}' if good else 'none'} ({run_dir})", file=sys.stderr)
         return 1
     return 0

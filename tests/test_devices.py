@@ -1,12 +1,15 @@
 """A run's seeds over several devices (hintsjax/devices.py), on CPU devices that XLA splits
 the host into: any seed count spreads (the padding is dropped from every result), the numbers
-match one device's to float32 rounding, and a checkpoint written on 4 devices resumes on 1."""
+match one device's to float32 rounding, and a checkpoint written on 4 devices resumes on 1.
+One run over two processes (JAX's multi-controller runtime, CPU collectives through gloo)
+equals one process with the same 4 devices, bit for bit, and resumes as it would."""
 
 from __future__ import annotations
 
 import json
 import os
 import shutil
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -75,3 +78,41 @@ def test_a_checkpoint_written_on_four_devices_resumes_on_one(runs, tmp_path):
     resumed = json.loads((run_dir / "eval.json").read_text())
     assert resumed["devices"] == 1
     np.testing.assert_allclose(resumed["evaluations"][0]["seed_means"], four["alone"], rtol=1e-4)
+
+
+def _processes(folder: Path, count: int, devices_each: int, *args: str) -> None:
+    """tests/process_run.py in `count` processes joined into one run, each with `devices_each` CPU devices."""
+    with socket.socket() as s:
+        s.bind(("localhost", 0))
+        port = s.getsockname()[1]
+    base = {**os.environ, "XLA_FLAGS": f"--xla_force_host_platform_device_count={devices_each}", "JAX_PLATFORMS": "cpu",
+            "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])}
+    if count > 1:
+        base.update(JAX_NUM_PROCESSES=str(count), JAX_COORDINATOR_ADDRESS=f"localhost:{port}")
+    logs = [folder.parent / f"{folder.name}-process{i}{''.join(args)}.log" for i in range(count)]
+    procs = []
+    for i, log in enumerate(logs):
+        with log.open("w") as out:  # a file, not a pipe: a process blocked on a full pipe would stall the others
+            procs.append(subprocess.Popen([sys.executable, str(HERE / "process_run.py"), str(folder), *args],
+                                          env={**base, "JAX_PROCESS_ID": str(i)}, stdout=out, stderr=subprocess.STDOUT))
+    for proc in procs:
+        proc.wait(timeout=600)
+    assert all(p.returncode == 0 for p in procs), "\n".join(log.read_text()[-2000:] for log in logs)
+
+
+def test_one_run_over_two_processes_equals_one_process_and_resumes(tmp_path):
+    _processes(tmp_path / "one", 1, 4)
+    _processes(tmp_path / "two", 2, 2)
+    one, two = tmp_path / "one" / "run", tmp_path / "two" / "run"
+    assert sorted(p.name for p in (tmp_path / "two").iterdir()) == ["run"]  # process 0 made the one folder
+    evals = [json.loads((d / "eval.json").read_text()) for d in (one, two)]
+    assert [e["devices"] for e in evals] == [4, 4]
+    assert evals[1]["evaluations"][0]["seed_means"] == evals[0]["evaluations"][0]["seed_means"]
+    assert (two / "metrics.csv").read_text() == (one / "metrics.csv").read_text()
+    updates = sorted(int(p.name) for p in (two / "checkpoints").iterdir() if p.name.isdigit())
+    assert len(updates) == 2  # the last and one before it, written by both processes
+    shutil.rmtree(two / "checkpoints" / str(updates[-1]))
+    (two / "eval.json").unlink()
+    _processes(tmp_path / "two", 2, 2, "--resume")
+    resumed = json.loads((two / "eval.json").read_text())
+    assert resumed["evaluations"][0]["seed_means"] == evals[0]["evaluations"][0]["seed_means"]
