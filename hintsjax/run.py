@@ -461,6 +461,22 @@ def config_keys() -> list[str]:
     return [*conf, *(f"{section}.{k}" for section, values in conf.items() if isinstance(values, dict) for k in values)]
 
 
+# Hydra's launchers that run a sweep's jobs elsewhere: the package that provides them (the cluster extra).
+LAUNCHERS = {"submitit_slurm": "hydra_plugins.hydra_submitit_launcher", "submitit_local": "hydra_plugins.hydra_submitit_launcher",
+             "basic": "hydra._internal.core_plugins.basic_launcher"}
+
+
+def check_launcher(name: str) -> None:
+    """UsageError in one line for a launcher Hydra does not have here (not one of LAUNCHERS, or its
+    plugin not installed)."""
+    import importlib.util
+
+    if name not in LAUNCHERS:
+        raise UsageError(f"unknown hydra/launcher {name!r}; valid choices: {', '.join(LAUNCHERS)}")
+    if importlib.util.find_spec(LAUNCHERS[name].rsplit(".", 1)[0]) is None or importlib.util.find_spec(LAUNCHERS[name]) is None:
+        raise UsageError(f"hydra/launcher={name} needs hydra-submitit-launcher: pip install -e '.[cluster]'")
+
+
 def check_overrides(argv: list[str]) -> None:
     """UsageError for an argument that is not `key=value` with a known key, naming the closest
     valid key (Hydra would print seven lines and exit 1)."""
@@ -473,8 +489,11 @@ def check_overrides(argv: list[str]) -> None:
             continue
         if "=" not in arg:
             raise UsageError(f"unexpected argument {arg!r}: give key=value pairs (e.g. env=pendulum)")
-        key = arg.split("=", 1)[0].lstrip("+~")
-        if key == "hydra" or key.startswith("hydra."):
+        key, value = arg.split("=", 1)
+        key = key.lstrip("+~")
+        if key == "hydra/launcher":
+            check_launcher(value)
+        if key == "hydra" or key.startswith(("hydra.", "hydra/")):
             continue
         if key not in keys:
             close = difflib.get_close_matches(key, keys, n=1)

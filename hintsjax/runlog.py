@@ -15,12 +15,15 @@ CURVE_POINTS = 250  # points per seed of a plotted (and an archived) learning cu
 
 
 def fresh_folder(base: Path) -> Path:
-    """A new folder at `base`, or at `base-1`, `base-2`, ... if taken; never an existing one."""
+    """A new folder at `base`, or at `base-1`, `base-2`, ... if taken; never an existing one, also
+    when processes started at once (a sweep's jobs) ask for the same name."""
     folder, i = Path(base), 1
-    while folder.exists():
-        folder, i = Path(base).with_name(f"{Path(base).name}-{i}"), i + 1
-    folder.mkdir(parents=True)
-    return folder
+    while True:
+        try:
+            folder.mkdir(parents=True)  # atomic: of two processes making it, one gets FileExistsError
+            return folder
+        except FileExistsError:
+            folder, i = Path(base).with_name(f"{Path(base).name}-{i}"), i + 1
 
 
 class RunLog:

@@ -60,6 +60,7 @@ BAD_RUN_ARGS = {
     "ppo.actor_lr=nan": "ppo.actor_lr must be a positive finite number, got nan",
     "ppo.actor_lr=abc": "actor_lr must be float, got 'abc'",
     "ppo.gamma=1.5": "ppo.gamma must be a finite number in [0.0, 1.0], got 1.5",
+    "-m hydra/launcher=nope scheme=lc,fc": "unknown hydra/launcher 'nope'; valid choices: submitit_slurm, submitit_local, basic",
 }
 
 
@@ -436,6 +437,24 @@ def test_seeds_sharded_over_two_devices_give_the_single_device_result(finished_r
     single = json.loads((finished_run / "eval.json").read_text())["evaluations"]
     for a, b in zip(sharded, single):
         np.testing.assert_allclose(a["returns"], b["returns"], rtol=1e-4)
+
+
+def test_a_launcher_whose_plugin_is_missing_is_one_line(monkeypatch):
+    monkeypatch.setitem(run.LAUNCHERS, "submitit_slurm", "hydra_plugins.no_such_launcher")
+    with pytest.raises(UsageError, match=r"hydra/launcher=submitit_slurm needs hydra-submitit-launcher: pip install -e '\.\[cluster\]'"):
+        run.check_overrides(["-m", "hydra/launcher=submitit_slurm", "scheme=lc,fc"])
+
+
+def test_a_sweep_runs_through_hydras_submitit_launcher(tmp_path):
+    """`-m hydra/launcher=submitit_local`: submitit starts each job of the sweep as a process of
+    its own (as submitit_slurm submits it to SLURM), and each writes its own run folder, though
+    both ask for the same name at once."""
+    out = cli("-m", "hydra/launcher=submitit_local", "env=pendulum", *TINY, "seed=0,1", "out_dir=runs", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr[-3000:]
+    folders = [p for p in (tmp_path / "runs").iterdir() if p.is_dir() and not p.name.startswith(".")]
+    assert len(folders) == 2 and (tmp_path / "runs" / "multirun.yaml").exists()
+    seeds = sorted(yaml.safe_load((f / "config.yaml").read_text())["seed"] for f in folders)
+    assert seeds == [0, 1] and all(json.loads((f / "eval.json").read_text())["evaluations"] for f in folders)
 
 
 @pytest.mark.slow
