@@ -186,9 +186,20 @@ def chunks_rate(training: Training, env_steps_per_update: int) -> float | None:
     return (updates - training.first) * env_steps_per_update / max(seconds, 1e-9)
 
 
+def seed_layout(cfg: RunConfig) -> SeedLayout:
+    """cfg's seeds over every device (of every process) JAX sees; a run with physics=warp on this
+    process's first device only (jit's partitioner cannot split MJX-Warp's custom call: every
+    device would step every world)."""
+    if cfg.physics != physics.WARP:
+        return SeedLayout.of(cfg.seeds)
+    if jax.process_count() > 1:
+        raise UsageError("physics=warp runs in one process (on one GPU); drop JAX_NUM_PROCESSES or use physics=jax")
+    return SeedLayout.of(cfg.seeds, jax.local_devices()[:1])
+
+
 def start(trainer: Trainer, cfg: RunConfig, run_dir: Path, resume: bool, label: str, check_memory: bool = False) -> Training:
     """Compile `trainer`'s programs for cfg's seeds, then a fresh state or the newest checkpoint of run_dir."""
-    layout = SeedLayout.of(cfg.seeds)
+    layout = seed_layout(cfg)
     keys = layout.pad(cfg.seed_keys())
     physics.clear_overflow()
     total = cfg.ppo.num_updates
@@ -426,6 +437,8 @@ def main_from_values(values: dict[str, Any]) -> int:
             run_dir = None
         if cfg.agent_spec.imitates:
             expert.describe(cfg.env, cfg.expert)  # a missing or foreign expert fails before any folder is made
+        if cfg.physics == physics.WARP:
+            seed_layout(cfg)  # physics=warp in several processes fails before any folder is made
     except UsageError as e:
         return fail(e)
     compilation_cache.enable(compilation_cache.folder(cache))

@@ -116,3 +116,19 @@ def test_one_run_over_two_processes_equals_one_process_and_resumes(tmp_path):
     _processes(tmp_path / "two", 2, 2, "--resume")
     resumed = json.loads((two / "eval.json").read_text())
     assert resumed["evaluations"][0]["seed_means"] == evals[0]["evaluations"][0]["seed_means"]
+
+
+def test_physics_warp_stays_on_one_device_and_in_one_process(monkeypatch):
+    """jit's partitioner cannot split MJX-Warp's custom call (every device would step every
+    world), so a Warp run keeps to this process's first device, and several processes are refused."""
+    import jax
+
+    from hintsjax.config import run_config
+    from hintsjax.errors import UsageError
+
+    cfg = run_config({"env": "ant", "physics": "warp"})
+    assert run.seed_layout(cfg).devices == tuple(jax.local_devices()[:1])
+    assert run.seed_layout(run_config({"env": "ant", "physics": "jax"})).devices == tuple(jax.devices())
+    monkeypatch.setattr(jax, "process_count", lambda: 2)
+    with pytest.raises(UsageError, match="physics=warp runs in one process"):
+        run.seed_layout(cfg)
