@@ -131,11 +131,22 @@ def _first_line(e: Exception) -> str:
     return str(e).strip().splitlines()[0][:200] if str(e).strip() else type(e).__name__
 
 
+def drop_empty_step_folders(run_dir: Path) -> None:
+    """Remove empty numbered folders from checkpoints/ (made by hand, or by a copy cut short):
+    orbax would take one for the newest checkpoint, fail to resume from it and never save below
+    it. Being empty, nothing is lost."""
+    for folder in (Path(run_dir) / CHECKPOINTS).iterdir():
+        if folder.is_dir() and folder.name.isdigit() and not any(folder.iterdir()):
+            folder.rmdir()
+
+
 def latest_update(run_dir: Path) -> int | None:
-    """The update of the newest complete checkpoint in `run_dir` (None without any)."""
+    """The update of the newest complete checkpoint in `run_dir` (None without any; an empty
+    numbered folder is none: `drop_empty_step_folders`)."""
     path = Path(run_dir) / CHECKPOINTS
     if not path.is_dir():
         return None
+    drop_empty_step_folders(run_dir)
     with _quiet(), _manager(run_dir, create=False) as manager:
         return manager.latest_step()
 

@@ -257,7 +257,7 @@ def load_run_config(run_dir: Path) -> RunConfig:
         raise UsageError(f"no run folder at {run_dir}")
     try:
         values = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as e:
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as e:  # missing, unreadable, not UTF-8, not YAML
         raise UsageError(f"cannot read {path}: {type(e).__name__}") from None
     if not isinstance(values, dict):
         raise UsageError(f"{path} is not a run config")

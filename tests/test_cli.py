@@ -426,6 +426,25 @@ def test_corrupt_checkpoint_is_refused_through_the_command_line(finished_run, tm
     assert (copy / "metrics.csv").read_text() == metrics_before
 
 
+def test_a_stray_empty_checkpoint_folder_does_not_block_resuming(finished_run, tmp_path):
+    """An empty checkpoints/99 (made by hand) is no checkpoint: the run resumes from its newest
+    real one (4, its last update: it only evaluates), and the empty folder is gone."""
+    copy = tmp_path / "stray"
+    shutil.copytree(finished_run, copy)
+    (copy / "checkpoints" / "99").mkdir()
+    assert checkpoint.latest_update(copy) == 4 and not (copy / "checkpoints" / "99").exists()
+    (copy / "checkpoints" / "99").mkdir()
+    assert run.main_from_values({"resume": str(copy)}) == 0
+
+
+def test_a_config_that_is_not_utf8_is_one_line(finished_run, tmp_path):
+    copy = tmp_path / "latin1"
+    shutil.copytree(finished_run, copy)
+    (copy / "config.yaml").write_bytes((copy / "config.yaml").read_bytes() + b"# \xe9t\xe9\n")
+    with pytest.raises(UsageError, match="cannot read .*config.yaml: UnicodeDecodeError"):
+        run.load_run_config(copy)
+
+
 def test_seeds_sharded_over_two_devices_give_the_single_device_result(finished_run, tmp_path):
     env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
     args = [*TINY, "out_dir=runs", "name=sharded"]
