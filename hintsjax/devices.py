@@ -7,7 +7,7 @@ result (`crop`): metrics, checkpoints (always S seeds, so a run resumes on any d
 and evaluations. With several processes (`jax.distributed`), the devices are the global ones
 and `fetch` gathers an array to every process's host.
 
-What a layout changes (docs/design.md, "Reproducibility"): a seed's keys, and so its draws, are
+What a layout changes (docs/design.md, "Several devices and processes"): a seed's keys, and so its draws, are
 the same on any layout, and the same command on the same kind and number of devices gives the
 same numbers bit for bit. Another device count compiles another program (another share per
 device, or one device's program against an SPMD one), whose floating-point sums may round
@@ -25,10 +25,6 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 AXIS = "seeds"
-
-# One run over several processes (hosts): JAX's multi-controller runtime, joined from these
-# variables (JAX itself reads the coordinator's), or from a SLURM job step of several tasks.
-PROCESS_VARIABLES = ("JAX_COORDINATOR_ADDRESS", "JAX_NUM_PROCESSES", "JAX_PROCESS_ID")
 
 
 def join_processes() -> int:
