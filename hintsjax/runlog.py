@@ -50,12 +50,21 @@ class RunLog:
             writer.writerows(rows)
 
     def _truncate(self, update: int) -> None:
-        """Drop rows written after the checkpoint being resumed from."""
-        rows = self._rows()
+        """Drop rows written after the checkpoint being resumed from; UsageError, the file left as
+        it is, if it is not a metrics.csv this package wrote (no `update` column, or a row whose
+        update is not a whole number)."""
+        from hintsjax.errors import UsageError
+
+        try:
+            rows = self._rows()
+            kept = [r for r in rows if int(r["update"]) <= update]
+        except (KeyError, TypeError, ValueError, UnicodeDecodeError, csv.Error) as e:
+            raise UsageError(f"{self.path} is not a metrics file of this run ({type(e).__name__}); "
+                             "move it away to resume (the run's checkpoints are intact)") from None
         if not rows:
             return
         self.columns = list(rows[0])
-        self._rewrite(r for r in rows if int(r["update"]) <= update)
+        self._rewrite(kept)
 
     def _widen(self, names: list[str]) -> None:
         """Add columns for metrics that a resumed run's file predates (a metric added to the code

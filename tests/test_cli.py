@@ -437,6 +437,18 @@ def test_a_stray_empty_checkpoint_folder_does_not_block_resuming(finished_run, t
     assert run.main_from_values({"resume": str(copy)}) == 0
 
 
+@pytest.mark.parametrize("garbage", [b"not,a,metrics\nfile,at,all\n", b"update,seed\nfour,0\n", b"\xff\xfe\x00"])
+def test_a_garbage_metrics_file_is_one_line_and_kept(garbage, finished_run, tmp_path):
+    copy = tmp_path / "garbage"
+    shutil.copytree(finished_run, copy)
+    shutil.rmtree(copy / "checkpoints" / "4")  # resume from 2: the rows after it would be dropped
+    (copy / "eval.json").unlink()
+    (copy / "metrics.csv").write_bytes(garbage)
+    with pytest.raises(UsageError, match="metrics.csv is not a metrics file of this run"):
+        run.train(run.load_run_config(copy), copy, resume=True, progress=False)
+    assert (copy / "metrics.csv").read_bytes() == garbage
+
+
 def test_a_config_that_is_not_utf8_is_one_line(finished_run, tmp_path):
     copy = tmp_path / "latin1"
     shutil.copytree(finished_run, copy)
