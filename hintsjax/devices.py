@@ -29,6 +29,7 @@ AXIS = "seeds"
 
 def join_processes() -> int:
     """Join the run's other processes, if it has any, before JAX touches a device; the process count.
+    hintsjax/__init__.py calls it on import, so every command joins before its modules load.
 
     With JAX_NUM_PROCESSES > 1 (and JAX_COORDINATOR_ADDRESS, JAX_PROCESS_ID), or inside a SLURM
     job step of several tasks (`srun`), every process calls jax.distributed.initialize; the

@@ -133,8 +133,8 @@ def metrics_text(summary: dict[str, Any]) -> str:
 
 
 def one_device(cfg: RunConfig, layout: SeedLayout | None) -> SeedLayout:
-    """`layout`, or cfg's seeds on the default device (params with exactly the run's seeds)."""
-    return layout or SeedLayout.of(cfg.seeds, jax.devices()[:1])
+    """`layout`, or cfg's seeds on this process's first device (params with exactly the run's seeds)."""
+    return layout or SeedLayout.of(cfg.seeds, jax.local_devices()[:1])
 
 
 def compile_evaluator(cfg: RunConfig, params: Any, variant: str | None, episodes: int, stochastic: bool,

@@ -27,9 +27,8 @@ import jax.numpy as jnp
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from hintsjax import checkpoint, compilation_cache, expert, program_cache
+from hintsjax import checkpoint, compilation_cache, devices, expert, program_cache
 from hintsjax.config import RunConfig, load_run_config, run_config, save_run_config
-from hintsjax import devices
 from hintsjax.devices import SeedLayout
 from hintsjax.evaluate import compile_evaluator, evaluate_group, evaluate_variants, metrics_text
 from hintsjax.algorithms import make_trainer
@@ -68,8 +67,8 @@ class Compiled:
     chunk: int
     seconds: float  # spent tracing and compiling both
     trace_seconds: float  # of which tracing and lowering to XLA (Python), or loading both as traced before
-    loaded: bool = False  # both programs were read from the traced-program cache, not traced
-    layout: SeedLayout | None = None  # the seeds over the devices (None: one device, as many seeds as keys)
+    loaded: bool  # both programs were read from the traced-program cache, not traced
+    layout: SeedLayout  # the seeds over the devices (their count padded to a multiple of the devices)
 
 
 def compile_training(trainer: Trainer, keys: jax.Array, chunk: int, layout: SeedLayout | None = None) -> Compiled:
@@ -424,7 +423,6 @@ def refuse_overrides_on_resume(values: dict[str, Any]) -> None:
 def main_from_values(values: dict[str, Any]) -> int:
     """Run from plain config values (what Hydra resolved); returns the exit status."""
     values = dict(values)
-    devices.join_processes()  # a run spread over several processes: before anything touches a device
     cache = values.pop("compilation_cache", None)
     try:
         resume, out_dir, name = places(values)
