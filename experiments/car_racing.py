@@ -69,7 +69,7 @@ def findings(runs: Path, env: str) -> str:
     if rgb is None or composite is None:
         return ""
     d = stats.difference_ci(composite, rgb)
-    verdict = "decided" if d.low > 0 or d.high < 0 else "undecided"
+    verdict = "decided" if stats.difference_decided(d) else "undecided"
     return (f"Hairpin progress (O3): HINTS-MC composite {100 * np.mean(composite):.0f}% ({len(composite)} seeds), "
             f"PPO-RGB {100 * np.mean(rgb):.0f}% ({len(rgb)} seeds); paper 78% against 46%. Composite minus vision "
             f"only: {100 * d.point:+.0f} points [{100 * d.low:+.0f}, {100 * d.high:+.0f}] (95% bootstrap interval "

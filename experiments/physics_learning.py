@@ -49,7 +49,7 @@ def main() -> None:
                      f"{rj['train_env_steps_per_s'] / 1e3:.1f} K / {rw['train_env_steps_per_s'] / 1e3:.1f} K | "
                      f"{rj['compile_seconds']['train']:.0f} / {rw['compile_seconds']['train']:.0f} |")
         verdicts.append(f"- {env}: " + (f"decided: warp scores {'below' if diff.high < 0 else 'above'} jax "
-                                         f"(the difference's interval excludes 0)" if stats.decided(diff)
+                                         f"(the difference's interval excludes 0)" if stats.difference_decided(diff)
                                          else "undecided: the difference's interval holds 0"))
     lines += ["", "Verdicts (difference of means, 95 % bootstrap CI over seeds):", *verdicts, "",
               "Commands:", *[f"- {name}: `{cmd}`" for name, cmd in about["commands"].items()], "",

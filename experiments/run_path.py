@@ -1,17 +1,17 @@
 """What the command a user types delivers: `python -m hintsjax.run` timed end to end, beside the bench.
 
-    python experiments/run_path.py [--cells pendulum,ant,ant_fast] [--ant-updates 200] [--physics jax,warp] [--no-bench]
+    python experiments/run_path.py [--cells pendulum,ant,ant_fast,humanoid] [--updates 200] [--physics jax,warp] [--no-bench]
                                    [--out experiments/results/run_path.json]
 
-For each cell (pendulum: hints/fc/composite; ant: hints/fc/speed, the env defaults otherwise),
-the command runs twice in a fresh process, first with an empty compilation cache (cold), then
+For each cell (pendulum: hints/fc/composite; ant: hints/fc/speed; humanoid: hints/fc/velocity;
+the env defaults otherwise), the command runs twice in a fresh process, first with an empty compilation cache (cold), then
 with the cache the first run filled (warm). Each row: `cell_wall_s` (the whole command, start-up,
 compiles, training, evaluation and plotting), `compile_s` (training and evaluation programs),
 `train_env_steps_per_s` (the command's training rate, compile excluded), and
 `bench_env_steps_per_s` (the same compiled chunks called back to back with nothing else on the
 host: experiments/bench.py's `scan_env_steps_per_s`), and the milliseconds of one update's
 parts, measured in this process on the same device. A cell whose full budget
-does not fit a device lease (the ant's 5 M steps) is trained for `--ant-updates` updates and its
+does not fit a device lease (the ant's 5 M steps) is trained for `--updates` updates and its
 full wall is extrapolated at the measured rate: such rows say so (`updates`, `full_cell_wall_s`).
 With `--physics jax,warp` each cell runs once per physics (`physics=...` on the command line),
 cold and warm, with its own empty caches: XLA's and MuJoCo Warp's kernel cache ($WARP_CACHE_PATH),
@@ -33,8 +33,9 @@ from pathlib import Path
 CELLS = {"pendulum": ["env=pendulum", "agent=hints", "hint=composite", "scheme=fc"],
          "ant": ["env=ant", "agent=hints", "hint=speed", "scheme=fc"],
          # the ant with cheaper physics (Euler, 2 Newton iterations, 9 contacts: docs/environments.md)
-         "ant_fast": ["env=ant_fast", "agent=hints", "hint=speed", "scheme=fc"]}
-PARTIAL = ("ant", "ant_fast")  # cells trained for --ant-updates updates, their full wall extrapolated
+         "ant_fast": ["env=ant_fast", "agent=hints", "hint=speed", "scheme=fc"],
+         "humanoid": ["env=humanoid", "agent=hints", "hint=velocity", "scheme=fc"]}
+PARTIAL = ("ant", "ant_fast", "humanoid")  # cells trained for --updates updates, their full wall extrapolated
 
 
 def timed_command(args: list[str], cache: Path, out_dir: Path) -> tuple[float, dict]:
@@ -50,7 +51,8 @@ def timed_command(args: list[str], cache: Path, out_dir: Path) -> tuple[float, d
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cells", default="pendulum,ant", help=f"comma-separated subset of {', '.join(CELLS)}")
-    parser.add_argument("--ant-updates", type=int, default=200, help="updates of the ant cells (their full budget is 4882)")
+    parser.add_argument("--updates", "--ant-updates", type=int, default=200,
+                        help=f"updates of the locomotion cells ({', '.join(PARTIAL)}: the ant's full budget is 4882)")
     parser.add_argument("--physics", default="jax", help="comma-separated: auto, jax, warp (one row pair each)")
     parser.add_argument("--no-bench", action="store_true", help="the command's rows only (no bench row)")
     parser.add_argument("--out", type=Path, default=None)
@@ -59,8 +61,8 @@ def main() -> None:
     unknown = [c for c in cells if c not in CELLS]
     if unknown:
         parser.exit(2, f"error: unknown cell {unknown}; valid choices: {', '.join(CELLS)}\n")
-    if args.ant_updates < 1:
-        parser.exit(2, "error: --ant-updates must be at least 1\n")
+    if args.updates < 1:
+        parser.exit(2, "error: --updates must be at least 1\n")
     import jax
 
     import hintsjax
@@ -76,7 +78,7 @@ def main() -> None:
         cfg = run_config({**values, "physics": physics})
         budget = [f"physics={physics}"]
         if cell in PARTIAL:
-            budget += [f"ppo.total_env_steps={args.ant_updates * cfg.ppo.batch_size}"]
+            budget += [f"ppo.total_env_steps={args.updates * cfg.ppo.batch_size}"]
         cache = Path(tempfile.mkdtemp(prefix="xla-cache-"))
         with tempfile.TemporaryDirectory() as out:
             for warm in (False, True):

@@ -164,6 +164,11 @@ def decided(interval: Interval) -> bool:
     return direction(interval) != 0
 
 
+def difference_decided(interval: Interval) -> bool:
+    """Interval of mean(X) - mean(Y) (`difference_ci`) -> whether it excludes 0 (strictly)."""
+    return interval.low > 0 or interval.high < 0
+
+
 def _fmt(value: float, digits: int) -> str:
     # + 0.0 turns the -0.0 that rounding a small negative gives into 0.0
     return f"{round(value, digits) + 0.0:.{digits}f}"

@@ -271,6 +271,16 @@ def test_decided_when_the_interval_excludes_one_half(interval, direction):
     assert stats.decided(interval) == (direction != 0)
 
 
+@pytest.mark.parametrize("interval, decided", [
+    (Interval(-33.0, -57.0, -8.0), True),
+    (Interval(2.0, 0.1, 4.0), True),
+    (Interval(0.2, -0.1, 0.3), False),   # inside [0, 0.5]: a POI test would call it decided
+    (Interval(1.0, 0.0, 2.0), False),    # touching 0 does not exclude it
+])
+def test_a_difference_is_decided_when_its_interval_excludes_zero(interval, decided):
+    assert stats.difference_decided(interval) == decided
+
+
 def test_ordering_text():
     assert (stats.ordering_text("composite", "ppo_rgb", Interval(0.92, 0.78, 1.0))
             == "P(composite > ppo_rgb) = 0.92 [0.78, 1.00]: decided")
