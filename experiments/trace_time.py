@@ -1,7 +1,7 @@
 """Seconds spent tracing (Python, before XLA compiles) the programs of one cell: training's init
 and chunk, and evaluation. No cache can save this time, so it bounds a warm start.
 
-    python experiments/trace_time.py [--envs pendulum,ant]
+    python experiments/trace_time.py [--envs pendulum,ant] [--physics auto|jax|warp]
 
 It lowers the programs without compiling them, so it runs on a CPU as on a GPU.
 """
@@ -22,9 +22,9 @@ from hintsjax.env_defaults import ENV_DEFAULTS
 from hintsjax.evaluate import eval_keys, make_task_evaluator
 
 
-def trace_seconds(env: str) -> tuple[float, float]:
+def trace_seconds(env: str, physics: str = envs.AUTO) -> tuple[float, float]:
     """(training's init and chunk, evaluation) tracing seconds of env's default hints/fc cell."""
-    cfg = run_config({"env": env, "agent": "hints", "hint": ENV_DEFAULTS[env]["hint"]})
+    cfg = run_config({"env": env, "agent": "hints", "hint": ENV_DEFAULTS[env]["hint"], "physics": physics})
     t = time.perf_counter()
     trainer = make_trainer(cfg)
     init = jax.jit(jax.vmap(trainer.init)).lower(cfg.seed_keys())
@@ -38,11 +38,13 @@ def trace_seconds(env: str) -> tuple[float, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--envs", default="pendulum,ant")
+    parser.add_argument("--physics", default=envs.AUTO, help="auto, jax or warp: what steps the MJX envs")
     args = parser.parse_args()
     for env in args.envs.split(","):
-        train, evaluate = trace_seconds(env)
+        train, evaluate = trace_seconds(env, args.physics)
         print(f"{env}: training programs traced in {train:.2f} s, evaluation in {evaluate:.2f} s "
-              f"({jax.default_backend()}, jax {jax.__version__})", flush=True)
+              f"(physics={envs.resolve_physics(env, args.physics)}; "
+              f"{jax.default_backend()}, jax {jax.__version__})", flush=True)
 
 
 if __name__ == "__main__":

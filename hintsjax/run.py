@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
+import hintsjax
 from hintsjax import checkpoint, compilation_cache, devices, expert, program_cache
 from hintsjax.config import RunConfig, load_run_config, run_config, save_run_config
 from hintsjax.devices import SeedLayout
@@ -185,14 +186,25 @@ def chunks_rate(training: Training, env_steps_per_update: int) -> float | None:
     return (updates - training.first) * env_steps_per_update / max(seconds, 1e-9)
 
 
+def check_warp_run() -> None:
+    """UsageError where a physics=warp run cannot go: over several processes (`seed_layout`), or
+    on a GPU without deterministic ops, where MuJoCo Warp's CUDA graph capture failed mid-run
+    ("Warp CUDA error 904: capturing stream has unjoined work"; the ant, twice on an H100:
+    docs/throughput.md)."""
+    if jax.process_count() > 1:
+        raise UsageError("physics=warp runs in one process (on one GPU); drop JAX_NUM_PROCESSES or use physics=jax")
+    if jax.default_backend() == "gpu" and not hintsjax.deterministic_gpu_ops():
+        raise UsageError("physics=warp needs deterministic GPU ops (MuJoCo Warp's graph capture failed without them): "
+                         "drop --xla_gpu_deterministic_ops=false from XLA_FLAGS, or use physics=jax")
+
+
 def seed_layout(cfg: RunConfig) -> SeedLayout:
     """cfg's seeds over every device (of every process) JAX sees; a run with physics=warp on this
     process's first device only (jit's partitioner cannot split MJX-Warp's custom call: every
     device would step every world)."""
     if cfg.physics != physics.WARP:
         return SeedLayout.of(cfg.seeds)
-    if jax.process_count() > 1:
-        raise UsageError("physics=warp runs in one process (on one GPU); drop JAX_NUM_PROCESSES or use physics=jax")
+    check_warp_run()
     return SeedLayout.of(cfg.seeds, jax.local_devices()[:1])
 
 
@@ -436,7 +448,7 @@ def main_from_values(values: dict[str, Any]) -> int:
         if cfg.agent_spec.imitates:
             expert.describe(cfg.env, cfg.expert)  # a missing or foreign expert fails before any folder is made
         if cfg.physics == physics.WARP:
-            seed_layout(cfg)  # physics=warp in several processes fails before any folder is made
+            check_warp_run()  # before any folder is made
     except UsageError as e:
         return fail(e)
     compilation_cache.enable(compilation_cache.folder(cache))

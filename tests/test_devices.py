@@ -132,3 +132,23 @@ def test_physics_warp_stays_on_one_device_and_in_one_process(monkeypatch):
     monkeypatch.setattr(jax, "process_count", lambda: 2)
     with pytest.raises(UsageError, match="physics=warp runs in one process"):
         run.seed_layout(cfg)
+
+
+def test_physics_warp_on_a_gpu_without_deterministic_ops_is_one_line(monkeypatch, tmp_path, capsys):
+    """MuJoCo Warp's CUDA graph capture failed mid-run without deterministic GPU ops (error 904,
+    the ant on an H100), so such a run is refused before any folder is made; on a CPU the flag
+    means nothing and is not checked, and a GPU with the flag on is let through."""
+    import jax
+
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    monkeypatch.setenv("XLA_FLAGS", "--xla_gpu_deterministic_ops=true --xla_gpu_deterministic_ops=false")
+    values = {"env": "ant", "physics": "warp", "out_dir": str(tmp_path / "runs")}
+    assert run.main_from_values(values) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "physics=warp needs deterministic GPU ops" in lines[0], lines
+    assert "--xla_gpu_deterministic_ops=false" in lines[0] and not (tmp_path / "runs").exists()
+    monkeypatch.setenv("XLA_FLAGS", "--xla_gpu_deterministic_ops=true")
+    run.check_warp_run()  # no error
+    monkeypatch.setattr(jax, "default_backend", lambda: "cpu")
+    monkeypatch.setenv("XLA_FLAGS", "--xla_gpu_deterministic_ops=false")
+    run.check_warp_run()
