@@ -35,6 +35,7 @@ def _manager(run_dir: Path, create: bool, background: bool = False) -> ocp.Check
 
 
 _WRITERS: dict[Path, ocp.CheckpointManager] = {}  # folders inside `writing`: their async managers
+_HANDED: dict[Path, int] = {}  # the update each of those managers was given last
 
 
 @contextlib.contextmanager
@@ -91,18 +92,25 @@ def _raw_keys(state):
 def save(run_dir: Path, state, update: int) -> None:
     """Save the seed-batched runner state after `update` updates: in the background inside
     `writing(run_dir)` (after this folder's previous write is done), else blocking.
-    CheckpointWriteError if this or an earlier background write failed."""
-    manager = _WRITERS.get(Path(run_dir).absolute())
+    CheckpointWriteError if this or an earlier background write failed, naming the one that did."""
+    key = Path(run_dir).absolute()
+    manager = _WRITERS.get(key)
     try:
         if manager is None:
             with _manager(run_dir, create=True) as blocking:
                 blocking.save(update, args=ocp.args.StandardSave(_raw_keys(state)))
                 blocking.wait_until_finished()
             return
+        manager.wait_until_finished()  # the write handed over last (the run loop saves only once it is done)
         manager.check_for_errors()
-        manager.save(update, args=ocp.args.StandardSave(_raw_keys(state)))
     except Exception as e:
-        raise CheckpointWriteError(f"could not write checkpoint {update} in {run_dir}: {_first_line(e)}") from None
+        failed = _HANDED.get(key, update) if manager is not None else update
+        raise CheckpointWriteError(f"could not write checkpoint {failed} in {key / CHECKPOINTS}: {_first_line(e)}") from None
+    try:
+        manager.save(update, args=ocp.args.StandardSave(_raw_keys(state)))
+        _HANDED[key] = update
+    except Exception as e:
+        raise CheckpointWriteError(f"could not write checkpoint {update} in {key / CHECKPOINTS}: {_first_line(e)}") from None
 
 
 def saving(run_dir: Path) -> bool:
@@ -114,14 +122,15 @@ def saving(run_dir: Path) -> bool:
 def flush(run_dir: Path) -> None:
     """Wait until the background writes into `run_dir` are complete and stop writing in the
     background; CheckpointWriteError naming the first that failed (the complete ones stay)."""
-    manager = _WRITERS.pop(Path(run_dir).absolute(), None)
+    key = Path(run_dir).absolute()
+    manager, handed = _WRITERS.pop(key, None), _HANDED.pop(key, None)
     if manager is None:
         return
     try:
         manager.wait_until_finished()
         manager.check_for_errors()
     except Exception as e:
-        raise CheckpointWriteError(f"could not write a checkpoint in {run_dir}: {_first_line(e)}") from None
+        raise CheckpointWriteError(f"could not write checkpoint {handed} in {key / CHECKPOINTS}: {_first_line(e)}") from None
     finally:
         with contextlib.suppress(Exception):
             manager.close()

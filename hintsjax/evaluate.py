@@ -13,7 +13,6 @@ progress) are kept from the state each episode ended in. Also a command:
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import sys
@@ -29,7 +28,7 @@ from flax import struct
 from hintsjax import envs, program_cache
 from hintsjax.config import RunConfig, env_params, load_run_config
 from hintsjax.devices import SeedLayout
-from hintsjax.errors import UsageError, fail
+from hintsjax.errors import ArgumentParser, UsageError, command, fail
 from hintsjax.generator import PROGRAMMATIC
 from hintsjax.ppo import Hyper, gaussian_sample, make_network, pick_hint
 from hintsjax.trainer import program_identity
@@ -208,10 +207,11 @@ def evaluate_params(cfg: RunConfig, params: Any, variant: str | None, episodes: 
     return evaluate_variants(cfg, params, (variant,), episodes, stochastic)[0][0]
 
 
+@command
 def main(argv: list[str] | None = None) -> int:
     from hintsjax import checkpoint
 
-    parser = argparse.ArgumentParser(prog="python -m hintsjax.evaluate", description=__doc__.splitlines()[0])
+    parser = ArgumentParser(prog="python -m hintsjax.evaluate", description=__doc__.splitlines()[0])
     parser.add_argument("run", type=Path, help="a run folder written by python -m hintsjax.run")
     parser.add_argument("--variant", default=None,
                         help="env variant(s) to evaluate on, comma-separated, all by one compiled program "

@@ -13,7 +13,6 @@ the packaged expert of an env; DAgger and GAIL take any object with the same two
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -27,7 +26,7 @@ from flax import struct
 from hintsjax import normalization
 from hintsjax.checkpoint import on_this_device, require_same_arrays
 from hintsjax.config import RunConfig, load_run_config, to_dict
-from hintsjax.errors import UsageError, fail
+from hintsjax.errors import ArgumentParser, UsageError, command, fail
 from hintsjax.networks import MLP
 
 EXPERTS_DIR = Path(__file__).resolve().parent / "experts"  # the packaged experts, one folder per env
@@ -153,8 +152,9 @@ def check_state_size(expert: Any, cfg: RunConfig, state_size: int) -> None:
             raise UsageError(f"the expert reads {n} state numbers but {cfg.env} has {state_size}")
 
 
+@command
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m hintsjax.expert", description=__doc__.splitlines()[0])
+    parser = ArgumentParser(prog="python -m hintsjax.expert", description=__doc__.splitlines()[0])
     parser.add_argument("run", type=Path, help="a finished run folder of agent=expert_ppo")
     parser.add_argument("--out", type=Path, default=None, help="expert folder (default: hintsjax/experts/<env>)")
     args = parser.parse_args(argv)

@@ -46,7 +46,7 @@ from hintsjax.arguments import parse_key_values
 from hintsjax.checkpoint import on_this_device, require_same_arrays
 from hintsjax.envs.core import Env, Step
 from hintsjax.envs.errors import ChoiceError, choose
-from hintsjax.errors import UsageError, fail, require_positive, require_range
+from hintsjax.errors import UsageError, command, fail, require_positive, require_range
 from hintsjax.networks import MLP, Encoder, scale_pixels
 from hintsjax.runlog import fresh_folder
 
@@ -478,6 +478,7 @@ def parse(argv: list[str]) -> GeneratorConfig:
     return parse_key_values(GeneratorConfig, argv).validate()
 
 
+@command
 def main(argv: list[str] | None = None) -> int:
     try:
         cfg = parse(sys.argv[1:] if argv is None else argv)

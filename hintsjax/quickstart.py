@@ -13,7 +13,6 @@ beside the picture, and prints where the run folder, learning curve and GIF are.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -25,6 +24,7 @@ from hintsjax import checkpoint, compilation_cache, run, video
 from hintsjax.algorithms import make_trainer
 from hintsjax.config import RunConfig, run_config, save_run_config
 from hintsjax.evaluate import eval_keys, evaluate_params
+from hintsjax.errors import ArgumentParser, command
 
 SETTINGS = {"env": "pendulum", "agent": "hints", "hint": "composite", "scheme": "fc", "seeds": 1, "eval_episodes": 20,
             "checkpoint_every": 10}
@@ -54,8 +54,9 @@ def swing_up_gif(cfg: RunConfig, run_dir: Path, candidates: int = 8) -> Path:
     return out
 
 
+@command
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m hintsjax.quickstart", description=__doc__.splitlines()[0])
+    parser = ArgumentParser(prog="python -m hintsjax.quickstart", description=__doc__.splitlines()[0])
     parser.add_argument("--updates", type=int, default=50, help="updates of 1024 env steps (default: 50)")
     parser.add_argument("--out-dir", type=Path, default=Path("runs"), help="where the run folder goes (default: runs)")
     args = parser.parse_args(argv)

@@ -47,7 +47,7 @@ from hintsjax import envs, rollouts
 from hintsjax.arguments import parse_key_values
 from hintsjax.conditioning import SCHEMES
 from hintsjax.envs.errors import ChoiceError, choose
-from hintsjax.errors import UsageError, fail, require_positive, require_range
+from hintsjax.errors import UsageError, command, fail, require_positive, require_range
 from hintsjax.networks import MLP, Encoder, scale_pixels
 from hintsjax.runlog import fresh_folder
 
@@ -317,6 +317,7 @@ def plot(path: Path, cfg: RankConfig, result: dict[str, Any]) -> None:
     plt.close(fig)
 
 
+@command
 def main(argv: list[str] | None = None) -> int:
     try:
         cfg = parse_key_values(RankConfig, sys.argv[1:] if argv is None else argv).validate()

@@ -28,13 +28,13 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 import hintsjax
-from hintsjax import checkpoint, compilation_cache, devices, expert, program_cache
+from hintsjax import checkpoint, command_line, compilation_cache, devices, expert, program_cache
 from hintsjax.config import RunConfig, load_run_config, run_config, save_run_config
 from hintsjax.devices import SeedLayout
 from hintsjax.evaluate import compile_evaluator, evaluate_group, evaluate_variants, metrics_text
 from hintsjax.algorithms import make_trainer
 from hintsjax.envs import physics
-from hintsjax.errors import UsageError, fail
+from hintsjax.errors import INTERRUPTED, UsageError, command, fail, report_bug
 from hintsjax.runlog import CURVE_PNG, METRICS_CSV, RunLog, fresh_folder, plot_curves, read_curves
 from hintsjax.trainer import Trainer
 
@@ -246,14 +246,16 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
     layout = compiled.layout
     bar = tqdm(total=total, initial=done, unit="upd", disable=not (progress and devices.is_main()), desc=f"{cfg.env} {label}")
     t0 = saved = time.perf_counter()
+    last_saved = written = done  # the newest update saved (or being saved), and logged
 
     def save(state: Any, update: int, finite: jax.Array) -> None:
         """Checkpoint `state` unless `finite` (its finite_seeds) says some seed's params are not."""
-        nonlocal saved
+        nonlocal saved, last_saved
         finite = layout.fetch(finite)
         if not finite.all():
             stop_nonfinite(run_dir, label, {"update": update, "quantity": "params",
                                             "seeds": np.flatnonzero(~finite).tolist()})
+        last_saved = update  # before the write starts: an interrupt never asks for it twice
         checkpoint.save(run_dir, layout.crop(state), update)  # the run's own seeds: it resumes on any device count
         saved = time.perf_counter()
         if devices.is_main():
@@ -264,9 +266,11 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
     arrivals = []
 
     def report(metrics: dict[str, jax.Array], after: int, n: int) -> None:
+        nonlocal written
         metrics = {k: v[:, :n] for k, v in layout.fetch(metrics).items()}  # waits for that chunk only
         arrivals.append((time.perf_counter() - t0, after + n))
         write(metrics, after)
+        written = after + n
         check_physics(cfg, label)  # before the NaN guard: a world that overflowed is NaN
         found = first_nonfinite(metrics, after)
         if found is not None:
@@ -279,21 +283,29 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
     pending = None  # (metrics, updates before, length) of the chunk dispatched last
     finite = None  # finite_seeds of `state` once a chunk has made it (the state a call starts from is never saved)
     try:
-        with checkpoint.writing(run_dir):
-            while done < total:
-                n = min(compiled.chunk, total - done)
-                following, metrics = compiled.run_chunk(state, np.int32(n))  # returns at once; the device works on
-                # queued behind the chunk, so reading it once the chunk has run never stalls the device
-                following_finite = finite_seeds(following.params)
-                if pending is not None:
+        with checkpoint.writing(run_dir):  # leaving it, even by Ctrl-C, waits for the writes under way
+            try:
+                while done < total:
+                    n = min(compiled.chunk, total - done)
+                    following, metrics = compiled.run_chunk(state, np.int32(n))  # returns at once; the device works on
+                    # queued behind the chunk, so reading it once the chunk has run never stalls the device
+                    following_finite = finite_seeds(following.params)
+                    if pending is not None:
+                        report(*pending)
+                    if devices.agree_that(done > training.first and time.perf_counter() - saved >= cfg.checkpoint_seconds
+                                          and not checkpoint.saving(run_dir)):  # process 0 decides for all
+                        save(state, done, finite)  # the state this chunk started from: computed, copied off as the chunk runs
+                    state, finite, pending, done = following, following_finite, (metrics, done, n), done + n
+                if pending is not None:  # something was trained (a run resumed at its end only evaluates)
                     report(*pending)
-                if devices.agree_that(done > training.first and time.perf_counter() - saved >= cfg.checkpoint_seconds
-                                      and not checkpoint.saving(run_dir)):  # process 0 decides for all
-                    save(state, done, finite)  # the state this chunk started from: computed, copied off as the chunk runs
-                state, finite, pending, done = following, following_finite, (metrics, done, n), done + n
-            if pending is not None:  # something was trained (a run resumed at its end only evaluates)
-                report(*pending)
-                save(state, total, finite)
+                    save(state, total, finite)
+            except KeyboardInterrupt:
+                # Ctrl-C: `state` (at `done`, its metrics logged) is saved when a checkpoint is due
+                # (one process only: several would have to agree); then the interrupt goes on up
+                if (jax.process_count() == 1 and finite is not None and written == done > last_saved
+                        and time.perf_counter() - saved >= cfg.checkpoint_seconds and not checkpoint.saving(run_dir)):
+                    save(state, done, finite)
+                raise
     finally:
         bar.close()
     return dataclasses.replace(training, state=state, done=done, seconds=time.perf_counter() - t0,
@@ -407,18 +419,10 @@ def places(values: dict[str, Any]) -> tuple[str | None, str, str | None]:
     return resume, out_dir or "runs", name
 
 
-def command_line_defaults() -> dict[str, Any]:
-    """conf/config.yaml's values, what Hydra hands over for every key the command line left alone."""
-    import yaml
-
-    conf = yaml.safe_load((Path(__file__).parent / "conf" / "config.yaml").read_text())
-    return {k: v for k, v in conf.items() if k not in ("defaults", "hydra")}  # not Hydra's own sections
-
-
 def refuse_overrides_on_resume(values: dict[str, Any]) -> None:
     """UsageError naming the settings given beside `resume` (a resumed run continues as it was
     configured: its config.yaml decides); values equal to the command line's defaults are none."""
-    defaults = command_line_defaults()
+    defaults = command_line.defaults()
     given = []
     for key, value in values.items():
         if key == "compilation_cache":
@@ -432,97 +436,72 @@ def refuse_overrides_on_resume(values: dict[str, Any]) -> None:
         raise UsageError(f"resume continues a run as its config.yaml says; drop {' '.join(given)} (or start a new run)")
 
 
+@dataclasses.dataclass(frozen=True)
+class Request:
+    """What a command line asks for, checked: a new run (`cfg`, to go in out_dir/name) or a
+    resumed one (`run_dir`, its config read from there)."""
+
+    cfg: RunConfig
+    run_dir: Path | None
+    out_dir: str
+    name: str | None
+
+
+def request(values: dict[str, Any]) -> Request:
+    """The run that plain config values (what Hydra resolved) ask for; UsageError for anything
+    that cannot run, found before any folder is made or anything compiled."""
+    values = dict(values)
+    values.pop("compilation_cache", None)
+    resume, out_dir, name = places(values)
+    if resume is not None:
+        refuse_overrides_on_resume(values)
+        run_dir = Path(resume)
+        cfg = load_run_config(run_dir)  # a missing or bad checkpoint is reported by train's restore
+    else:
+        cfg, run_dir = run_config(values), None
+    if cfg.agent_spec.imitates:
+        expert.describe(cfg.env, cfg.expert)  # a missing or foreign expert
+    if cfg.physics == physics.WARP:
+        check_warp_run()
+    return Request(cfg, run_dir, out_dir, name)
+
+
 def main_from_values(values: dict[str, Any]) -> int:
     """Run from plain config values (what Hydra resolved); returns the exit status."""
-    values = dict(values)
-    cache = values.pop("compilation_cache", None)
     try:
-        resume, out_dir, name = places(values)
-        if resume is not None:
-            refuse_overrides_on_resume(values)
-            run_dir = Path(resume)
-            cfg = load_run_config(run_dir)  # a missing or bad checkpoint is reported by train's restore
-        else:
-            cfg = run_config(values)
-            run_dir = None
-        if cfg.agent_spec.imitates:
-            expert.describe(cfg.env, cfg.expert)  # a missing or foreign expert fails before any folder is made
-        if cfg.physics == physics.WARP:
-            check_warp_run()  # before any folder is made
+        asked = request(values)
     except UsageError as e:
         return fail(e)
-    compilation_cache.enable(compilation_cache.folder(cache))
+    except Exception as e:  # noqa: BLE001  the boundary: a bug, not bad input
+        return report_bug(e)
+    cfg, run_dir = asked.cfg, asked.run_dir
+    compilation_cache.enable(compilation_cache.folder(values.get("compilation_cache")))
     if run_dir is None:
         if devices.is_main():
-            run_dir = new_run_dir(out_dir, name, cfg)
+            run_dir = new_run_dir(asked.out_dir, asked.name, cfg)
             save_run_config(run_dir, cfg)
         run_dir = Path(devices.agree(str(run_dir)))  # the folder process 0 made, on every process
     try:
-        train(cfg, run_dir, resume=resume is not None)
+        train(cfg, run_dir, resume=asked.run_dir is not None)
     except UsageError as e:
         return fail(e)
     except checkpoint.CheckpointWriteError as e:  # the newest complete checkpoint stays; resume from it
         print(f"error: {e}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:  # Ctrl-C: advance saved a checkpoint if one was due, and its writes are done
+        good = checkpoint.latest_update(run_dir)
+        print(f"interrupted; {f'checkpoint at update {good}' if good else 'no checkpoint yet'}; "
+              f"go on with: python -m hintsjax.run resume={run_dir}", file=sys.stderr)
+        return INTERRUPTED
     except NonFiniteError as e:  # its checkpoints were all written before it went non-finite
         good = checkpoint.latest_update(run_dir)  # read once the background writes are done
         if devices.is_main():
             (run_dir / NONFINITE_JSON).write_text(json.dumps({**e.found, "last_good_checkpoint": good}) + "\n")
         print(f"error: {e}; last good checkpoint: {f'update {good}' if good else 'none'} ({run_dir})", file=sys.stderr)
         return 1
+    except Exception as e:  # noqa: BLE001  the boundary: a bug, its traceback kept in the run folder
+        return report_bug(e, run_dir)
     return 0
-
-
-# Hydra's own flags that take the next argument as their value.
-HYDRA_VALUE_FLAGS = {"--config-name", "-cn", "--config-path", "-cp", "--config-dir", "-cd", "--cfg", "-c",
-                     "--package", "-p", "--experimental-rerun"}
-
-
-def config_keys() -> list[str]:
-    """Every key the command line accepts (conf/config.yaml's, nested ones as section.key)."""
-    conf = command_line_defaults()
-    return [*conf, *(f"{section}.{k}" for section, values in conf.items() if isinstance(values, dict) for k in values)]
-
-
-# Hydra's launchers that run a sweep's jobs elsewhere: the package that provides them (the cluster extra).
-LAUNCHERS = {"submitit_slurm": "hydra_plugins.hydra_submitit_launcher", "submitit_local": "hydra_plugins.hydra_submitit_launcher",
-             "basic": "hydra._internal.core_plugins.basic_launcher"}
-
-
-def check_launcher(name: str) -> None:
-    """UsageError in one line for a launcher Hydra does not have here (not one of LAUNCHERS, or its
-    plugin not installed)."""
-    import importlib.util
-
-    if name not in LAUNCHERS:
-        raise UsageError(f"unknown hydra/launcher {name!r}; valid choices: {', '.join(LAUNCHERS)}")
-    if importlib.util.find_spec(LAUNCHERS[name].rsplit(".", 1)[0]) is None or importlib.util.find_spec(LAUNCHERS[name]) is None:
-        raise UsageError(f"hydra/launcher={name} needs hydra-submitit-launcher: pip install -e '.[cluster]'")
-
-
-def check_overrides(argv: list[str]) -> None:
-    """UsageError for an argument that is not `key=value` with a known key, naming the closest
-    valid key (Hydra would print seven lines and exit 1)."""
-    import difflib
-
-    keys, skip = config_keys(), False
-    for arg in argv:
-        if skip or arg.startswith("-"):
-            skip = arg in HYDRA_VALUE_FLAGS and not skip
-            continue
-        if "=" not in arg:
-            raise UsageError(f"unexpected argument {arg!r}: give key=value pairs (e.g. env=pendulum)")
-        key, value = arg.split("=", 1)
-        key = key.lstrip("+~")
-        if key == "hydra/launcher":
-            check_launcher(value)
-        if key == "hydra" or key.startswith(("hydra.", "hydra/")):
-            continue
-        if key not in keys:
-            close = difflib.get_close_matches(key, keys, n=1)
-            hint = f"did you mean {close[0]!r}? " if close else ""
-            raise UsageError(f"unknown config key {key!r}; {hint}valid: {', '.join(k for k in keys if '.' not in k)}, "
-                             "ppo.<key>, dagger.<key>, gail.<key> (hintsjax/conf/config.yaml)")
 
 
 @hydra.main(version_base=None, config_path="conf", config_name="config")
@@ -532,12 +511,17 @@ def _hydra_main(cfg: DictConfig) -> None:
         sys.exit(status)  # SystemExit passes through Hydra's exception reporting
 
 
+@command
+def checked_main() -> int:
+    """The command line checked (every job of a sweep, before the first trains), then Hydra's run."""
+    command_line.check_overrides(sys.argv[1:])
+    command_line.check_sweep(sys.argv[1:], request)
+    _hydra_main()  # exits itself with a run's non-zero status
+    return 0
+
+
 def main() -> None:
-    try:
-        check_overrides(sys.argv[1:])
-    except UsageError as e:
-        sys.exit(fail(e))
-    _hydra_main()
+    sys.exit(checked_main())
 
 
 if __name__ == "__main__":

@@ -11,7 +11,6 @@ hint), the step and the return so far. Also a command:
 
 from __future__ import annotations
 
-import argparse
 import functools
 import sys
 from pathlib import Path
@@ -24,7 +23,7 @@ from flax import struct
 
 from hintsjax import envs
 from hintsjax.config import RunConfig, env_params, load_run_config
-from hintsjax.errors import UsageError, fail
+from hintsjax.errors import ArgumentParser, UsageError, command, fail
 from hintsjax.evaluate import eval_keys
 from hintsjax.ppo import gaussian_sample, make_network
 
@@ -224,10 +223,11 @@ def write_gif(frames: Sequence[np.ndarray], path: Path, fps: int = 25) -> None:
     )
 
 
+@command
 def main(argv: list[str] | None = None) -> int:
     from hintsjax import checkpoint
 
-    parser = argparse.ArgumentParser(prog="python -m hintsjax.video", description=__doc__.splitlines()[0])
+    parser = ArgumentParser(prog="python -m hintsjax.video", description=__doc__.splitlines()[0])
     parser.add_argument("run", type=Path, help="a run folder written by python -m hintsjax.run")
     parser.add_argument("--seed", type=int, default=0, help="which of the run's seeds acts (default: 0)")
     parser.add_argument("--variant", default=None, help="env variant (default: the training one)")

@@ -1,13 +1,15 @@
 """A run killed with SIGKILL, as a crash or the kernel's out-of-memory killer would: no clean-up,
 no `finally` blocks, no flushed files. Used by tests/test_cli.py.
 
-    python tests/killed_run.py after|during '<run values as JSON>'
+    python tests/killed_run.py after|during|interrupt '<run values as JSON>'
     python tests/killed_run.py group <folder>
 
 `after`: killed once the first checkpoint is completely written. `during`: killed as soon as the
 second checkpoint has been handed to the background writer, so its files are (most likely)
 half-written. `group`: tests/test_group.py's group of two cue-env configurations (`killed_group`)
-trained into <folder>, killed once the group's first checkpoint is written.
+trained into <folder>, killed once the group's first checkpoint is written. `interrupt`: not
+killed but sent SIGINT (Ctrl-C) once the first chunk's metrics are logged; it exits with the
+run's own status.
 """
 
 from __future__ import annotations
@@ -34,6 +36,17 @@ def main() -> None:
         if mode == "during" and len(saves) == 2:
             os.kill(os.getpid(), signal.SIGKILL)
 
+    if mode == "interrupt":
+        real_check, checks = run.check_physics, []
+
+        def check_then_interrupt(*args):  # run.advance's report calls it once a chunk's metrics are logged
+            real_check(*args)
+            checks.append(1)
+            if len(checks) == 1:
+                os.kill(os.getpid(), signal.SIGINT)  # as Ctrl-C: KeyboardInterrupt in the main thread
+
+        run.check_physics = check_then_interrupt
+        sys.exit(run.main_from_values(json.loads(sys.argv[2])))
     checkpoint.save = save_then_die
     if mode == "group":
         from test_group import killed_group

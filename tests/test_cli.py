@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
-from hintsjax import checkpoint, run
+from hintsjax import checkpoint, command_line, run
 from hintsjax.errors import UsageError
 from hintsjax.evaluate import main as evaluate_main
 
@@ -61,6 +61,15 @@ BAD_RUN_ARGS = {
     "ppo.actor_lr=abc": "actor_lr must be float, got 'abc'",
     "ppo.gamma=1.5": "ppo.gamma must be a finite number in [0.0, 1.0], got 1.5",
     "-m hydra/launcher=nope scheme=lc,fc": "unknown hydra/launcher 'nope'; valid choices: submitit_slurm, submitit_local, basic",
+    "seeds==3": "cannot read 'seeds==3'",
+    "seeds=[1,2": "cannot read 'seeds=[1,2'",
+    "name=\u00fc": "quote a value with other characters, key='value'",
+    "+seeds=3": "adds a key that exists already; write seeds=3",
+    "~seeds": "would delete a setting; give seeds=<value> instead",
+    # a sweep is checked job by job before the first job trains (or Hydra writes multirun.yaml)
+    "-m seeds=1,0,2": "sweep job 'seeds=0': seeds must be positive",
+    "-m hint=composite,nope": "sweep job 'hint=nope': unknown hint 'nope'",
+    "-m seeds=0,1": "sweep job 'seeds=0'",
 }
 
 
@@ -235,6 +244,93 @@ def test_a_run_killed_with_sigkill_resumes_to_the_uninterrupted_end_bit_for_bit(
     assert logged_returns(folder) == logged_returns(finished_run)
 
 
+def test_ctrl_c_saves_the_due_checkpoint_says_how_to_go_on_and_resumes_bit_for_bit(finished_run, tmp_path):
+    """SIGINT (Ctrl-C) once the first chunk's metrics are logged: a checkpoint is due
+    (checkpoint_seconds=0), so that state is saved; the run prints one line naming it and the
+    command that goes on, no traceback, and exits 130. Resumed, it ends as the uninterrupted run
+    did, every array equal bit for bit, with the same logged returns."""
+    values = tiny_values(out_dir=str(tmp_path), name="interrupted")
+    out = subprocess.run([sys.executable, str(Path(__file__).parent / "killed_run.py"), "interrupt", json.dumps(values)],
+                         cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    folder = tmp_path / "interrupted"
+    assert out.returncode == run.INTERRUPTED == 130, out.stderr[-2000:]
+    assert "Traceback" not in out.stderr + out.stdout
+    assert out.stderr.strip().splitlines()[-1] == (f"interrupted; checkpoint at update 2; "
+                                                   f"go on with: python -m hintsjax.run resume={folder}")
+    assert checkpoint.latest_update(folder) == 2 and not (folder / "eval.json").exists()
+    resumed = cli(f"resume={folder}", cwd=tmp_path)
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    for a, b in zip(state_arrays(folder), state_arrays(finished_run), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert logged_returns(folder) == logged_returns(finished_run)
+
+
+def test_a_sweep_is_expanded_in_hydras_order_with_every_value_checked_first():
+    jobs = command_line.sweep_jobs(["-m", "seeds=1,2", "scheme=lc,fc", "ppo.num_envs=4", "hydra/launcher=basic"])
+    assert [label for label, _ in jobs] == ["seeds=1 scheme=lc", "seeds=1 scheme=fc", "seeds=2 scheme=lc", "seeds=2 scheme=fc"]
+    values = jobs[3][1]
+    assert values["seeds"] == 2 and values["scheme"] == "fc" and values["ppo"]["num_envs"] == 4
+    assert values["env"] == command_line.defaults()["env"] and values["ppo"]["epochs"] == command_line.defaults()["ppo"]["epochs"]
+    assert command_line.sweep_jobs(["seeds=1"]) == []  # not a sweep
+    seen = []
+    command_line.check_sweep(["-m", "seed=0,1"], lambda v: seen.append(v["seed"]))
+    assert seen == [0, 1]
+    with pytest.raises(UsageError, match="sweep job 'seed=1': no"):
+        command_line.check_sweep(["-m", "seed=0,1"], lambda v: (_ for _ in ()).throw(UsageError("no")) if v["seed"] else None)
+
+
+def test_a_bug_is_one_line_saying_so_with_its_traceback_kept(monkeypatch, tmp_path, capsys):
+    """Anything but bad input that escapes a command is a bug in hintsjax: one line saying so and
+    where its traceback went (the run folder, for a run), exit 1; with HINTSJAX_DEBUG set, Python's
+    own traceback instead. argparse's usage errors are one line too."""
+    from hintsjax import evaluate, errors
+
+    monkeypatch.delenv(errors.DEBUG)
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("boom\nsecond line")
+
+    monkeypatch.setattr(run, "train", boom)
+    assert run.main_from_values(tiny_values(out_dir=str(tmp_path), name="r")) == 1
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines == [f"error: a bug in hintsjax (RuntimeError: boom); its traceback is in {tmp_path / 'r' / 'traceback.txt'}; "
+                     "please report it with that traceback"]
+    kept = (tmp_path / "r" / "traceback.txt").read_text()
+    assert kept.startswith("Traceback") and "in boom" in kept and "second line" in kept
+
+    monkeypatch.setattr(evaluate, "load_run_config", boom)
+    assert evaluate.main([str(tmp_path / "r")]) == 1
+    line = capsys.readouterr().err.strip()
+    assert "\n" not in line and "a bug in hintsjax (RuntimeError: boom)" in line
+    assert "boom" in Path(line.split("its traceback is in ")[1].split(";")[0]).read_text()
+
+    monkeypatch.setenv(errors.DEBUG, "1")
+    with pytest.raises(RuntimeError, match="boom"):
+        evaluate.main([str(tmp_path / "r")])
+    with pytest.raises(SystemExit) as exited:
+        evaluate.main([str(tmp_path / "r"), "--nope"])
+    assert exited.value.code == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "error: unrecognized arguments: --nope; see python -m hintsjax.evaluate --help"]
+
+
+def test_a_checkpoint_that_cannot_be_written_is_the_one_named(tmp_path):
+    """The file-size limit (as a disk that fills up) hit while the first checkpoint (update 2) is
+    written in the background: the run stops with exit 1 and its last line names that checkpoint
+    and its folder (the failure surfaces when the next one is handed over, update 4, which the
+    message named before), and nothing takes the half-written one for complete."""
+    command = " ".join([sys.executable, "-m", "hintsjax.run", "env=pendulum", *TINY, "out_dir=runs", "name=full",
+                        "compilation_cache=false"])
+    # ulimit -f: the KiB a file may hold; config.yaml and metrics.csv fit, the checkpoint's arrays do not
+    out = subprocess.run(["bash", "-c", f"ulimit -f 100 && exec {command}"], cwd=tmp_path, capture_output=True,
+                         text=True, timeout=300)
+    folder = (tmp_path / "runs" / "full").absolute()
+    assert out.returncode == 1, out.stderr[-2000:]
+    last = out.stderr.strip().splitlines()[-1]
+    assert last.startswith(f"error: could not write checkpoint 2 in {folder / 'checkpoints'}: "), last
+    assert checkpoint.latest_update(folder) is None
+
+
 def test_run_folder_holds_everything(finished_run):
     names = {p.name for p in finished_run.iterdir()}
     assert {"config.yaml", "metrics.csv", "tb", "checkpoints", "eval.json", "learning_curve.png"} <= names
@@ -292,8 +388,7 @@ def test_interrupted_then_resumed_run_ends_where_the_uninterrupted_one_ends(fini
         raise KeyboardInterrupt  # the process dies right after its first checkpoint
 
     monkeypatch.setattr(checkpoint, "save", save_then_crash)
-    with pytest.raises(KeyboardInterrupt):
-        run.main_from_values(dict(values))
+    assert run.main_from_values(dict(values)) == run.INTERRUPTED  # the interrupt is one line and exit 130
     monkeypatch.setattr(checkpoint, "save", real_save)
     interrupted = tmp_path / "interrupted"
     assert checkpoint.latest_update(interrupted) == 2
@@ -471,9 +566,9 @@ def test_seeds_sharded_over_two_devices_give_the_single_device_result(finished_r
 
 
 def test_a_launcher_whose_plugin_is_missing_is_one_line(monkeypatch):
-    monkeypatch.setitem(run.LAUNCHERS, "submitit_slurm", "hydra_plugins.no_such_launcher")
+    monkeypatch.setitem(command_line.LAUNCHERS, "submitit_slurm", "hydra_plugins.no_such_launcher")
     with pytest.raises(UsageError, match=r"hydra/launcher=submitit_slurm needs hydra-submitit-launcher: pip install -e '\.\[cluster\]'"):
-        run.check_overrides(["-m", "hydra/launcher=submitit_slurm", "scheme=lc,fc"])
+        command_line.check_overrides(["-m", "hydra/launcher=submitit_slurm", "scheme=lc,fc"])
 
 
 def test_a_sweep_runs_through_hydras_submitit_launcher(tmp_path):

@@ -1,0 +1,147 @@
+"""`python -m hintsjax.run`'s arguments, checked before Hydra sees them.
+
+Hydra answers a bad argument with several lines and exit 1, and a sweep (`-m`) runs its jobs
+one after another, so a bad value in the third job fails after two have trained. Here every
+argument is read first: a key that config.yaml lacks, an override Hydra's grammar cannot read,
+`+key` for a key that exists or `~key`, an unknown launcher; and a sweep is expanded into its
+jobs (Hydra's own basic sweeper's order), each job's values given to `check` before the first
+job starts. Each problem is a `UsageError` (one line, exit 2) and nothing is written.
+"""
+
+from __future__ import annotations
+
+import difflib
+import importlib.util
+from pathlib import Path
+from typing import Any, Callable
+
+from hintsjax.errors import UsageError
+
+# Hydra's own flags that take the next argument as their value.
+HYDRA_VALUE_FLAGS = {"--config-name", "-cn", "--config-path", "-cp", "--config-dir", "-cd", "--cfg", "-c",
+                     "--package", "-p", "--experimental-rerun"}
+MULTIRUN_FLAGS = {"-m", "--multirun"}
+
+# Hydra's launchers that run a sweep's jobs elsewhere: the package that provides them (the cluster extra).
+LAUNCHERS = {"submitit_slurm": "hydra_plugins.hydra_submitit_launcher", "submitit_local": "hydra_plugins.hydra_submitit_launcher",
+             "basic": "hydra._internal.core_plugins.basic_launcher"}
+GRAMMAR = "https://hydra.cc/docs/advanced/override_grammar/basic"
+
+
+def defaults() -> dict[str, Any]:
+    """conf/config.yaml's values, what Hydra hands over for every key the command line left alone."""
+    import yaml
+
+    conf = yaml.safe_load((Path(__file__).parent / "conf" / "config.yaml").read_text())
+    return {k: v for k, v in conf.items() if k not in ("defaults", "hydra")}  # not Hydra's own sections
+
+
+def config_keys() -> list[str]:
+    """Every key the command line accepts (conf/config.yaml's, nested ones as section.key)."""
+    conf = defaults()
+    return [*conf, *(f"{section}.{k}" for section, values in conf.items() if isinstance(values, dict) for k in values)]
+
+
+def check_launcher(name: str) -> None:
+    """UsageError in one line for a launcher Hydra does not have here (not one of LAUNCHERS, or its
+    plugin not installed)."""
+    if name not in LAUNCHERS:
+        raise UsageError(f"unknown hydra/launcher {name!r}; valid choices: {', '.join(LAUNCHERS)}")
+    if importlib.util.find_spec(LAUNCHERS[name].rsplit(".", 1)[0]) is None or importlib.util.find_spec(LAUNCHERS[name]) is None:
+        raise UsageError(f"hydra/launcher={name} needs hydra-submitit-launcher: pip install -e '.[cluster]'")
+
+
+def overrides_of(argv: list[str]) -> list[str]:
+    """The `key=value` arguments of argv, Hydra's flags (and their values) left out."""
+    found, skip = [], False
+    for arg in argv:
+        if skip or arg.startswith("-"):
+            skip = arg in HYDRA_VALUE_FLAGS and not skip
+            continue
+        found.append(arg)
+    return found
+
+
+def _is_hydras(key: str) -> bool:
+    return key == "hydra" or key.startswith(("hydra.", "hydra/"))
+
+
+def check_overrides(argv: list[str]) -> None:
+    """UsageError for an argument that is not `key=value` with a known key, naming the closest
+    valid key (Hydra would print seven lines and exit 1), or that Hydra's grammar cannot read."""
+    keys = config_keys()
+    overrides = overrides_of(argv)
+    for arg in overrides:
+        if "=" not in arg and not arg.startswith("~"):
+            raise UsageError(f"unexpected argument {arg!r}: give key=value pairs (e.g. env=pendulum)")
+        key, _, value = arg.partition("=")
+        if key.startswith("~"):
+            raise UsageError(f"{arg!r} would delete a setting; give {key.lstrip('~')}=<value> instead")
+        if key.startswith("+") and not key.startswith("++") and key.lstrip("+") in keys:
+            raise UsageError(f"{arg!r} adds a key that exists already; write {arg.lstrip('+')}")
+        key = key.lstrip("+")
+        if key == "hydra/launcher":
+            check_launcher(value)
+        if _is_hydras(key):
+            continue
+        if key not in keys:
+            close = difflib.get_close_matches(key, keys, n=1)
+            hint = f"did you mean {close[0]!r}? " if close else ""
+            raise UsageError(f"unknown config key {key!r}; {hint}valid: {', '.join(k for k in keys if '.' not in k)}, "
+                             "ppo.<key>, dagger.<key>, gail.<key> (hintsjax/conf/config.yaml)")
+    parse(overrides)
+
+
+def parse(overrides: list[str]) -> list[Any]:
+    """Hydra's parse of the overrides (`Override` objects); UsageError in one line naming the
+    argument Hydra's grammar cannot read."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import OverrideParseException
+
+    parser = OverridesParser.create()
+    for arg in overrides:  # one at a time, so the line can name the one that fails
+        try:
+            parser.parse_overrides([arg])
+        except OverrideParseException as e:
+            reason = " ".join(line.strip() for line in str(e).splitlines()[:-1] if line.strip() and line.strip() != "^")
+            raise UsageError(f"cannot read {arg!r} ({reason[:160]}); quote a value with other characters, "
+                             f"key='value' ({GRAMMAR})") from None
+    return parser.parse_overrides(overrides)
+
+
+def _set(values: dict[str, Any], key: str, value: Any) -> None:
+    *sections, last = key.split(".")
+    for section in sections:
+        values = values.setdefault(section, {})
+    values[last] = value
+
+
+def sweep_jobs(argv: list[str]) -> list[tuple[str, dict[str, Any]]]:
+    """A sweep's jobs (`-m`; [] for a single run) in the order Hydra's basic sweeper runs them:
+    (the job's swept values as one string, the values main_from_values would get)."""
+    if not MULTIRUN_FLAGS & set(argv):
+        return []
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+
+    overrides = [o for o in parse(overrides_of(argv)) if not _is_hydras(o.key_or_group)]
+    swept = {o.key_or_group for o in overrides if o.is_sweep_override()}
+    jobs = []
+    for batch in BasicSweeper.split_arguments(overrides, None):
+        for job in batch:
+            values, label = defaults(), []
+            for override in parse(job):
+                _set(values, override.key_or_group, override.value())
+                if override.key_or_group in swept:
+                    label.append(override.input_line)
+            jobs.append((" ".join(label), values))
+    return jobs
+
+
+def check_sweep(argv: list[str], check: Callable[[dict[str, Any]], Any]) -> None:
+    """`check` (which raises UsageError) on every job of a sweep before the first one runs; the
+    error names the job."""
+    for overrides, values in sweep_jobs(argv):
+        try:
+            check(values)
+        except UsageError as e:
+            raise UsageError(f"sweep job '{overrides}': {e}") from None
