@@ -103,8 +103,9 @@ def parse(overrides: list[str]) -> list[Any]:
         try:
             parser.parse_overrides([arg])
         except OverrideParseException as e:
-            reason = " ".join(line.strip() for line in str(e).splitlines()[:-1] if line.strip() and line.strip() != "^")
-            raise UsageError(f"cannot read {arg!r} ({reason[:160]}); quote a value with other characters, "
+            lines = [line.strip() for line in str(e).splitlines()[:-1] if line.strip() and line.strip() != "^"]
+            reason = lines[-1].split(" expecting ")[0] if lines else "Hydra's grammar"  # not its list of tokens
+            raise UsageError(f"cannot read {arg!r} ({reason[:120]}); quote a value with other characters, "
                              f"key='value' ({GRAMMAR})") from None
     return parser.parse_overrides(overrides)
 
