@@ -10,6 +10,7 @@ job starts. Each problem is a `UsageError` (one line, exit 2) and nothing is wri
 
 from __future__ import annotations
 
+import copy
 import difflib
 import importlib.util
 from pathlib import Path
@@ -98,16 +99,16 @@ def parse(overrides: list[str]) -> list[Any]:
     from hydra.core.override_parser.overrides_parser import OverridesParser
     from hydra.errors import OverrideParseException
 
-    parser = OverridesParser.create()
+    parser, parsed = OverridesParser.create(), []
     for arg in overrides:  # one at a time, so the line can name the one that fails
         try:
-            parser.parse_overrides([arg])
+            parsed += parser.parse_overrides([arg])
         except OverrideParseException as e:
             lines = [line.strip() for line in str(e).splitlines()[:-1] if line.strip() and line.strip() != "^"]
             reason = lines[-1].split(" expecting ")[0] if lines else "Hydra's grammar"  # not its list of tokens
             raise UsageError(f"cannot read {arg!r} ({reason[:120]}); quote a value with other characters, "
                              f"key='value' ({GRAMMAR})") from None
-    return parser.parse_overrides(overrides)
+    return parsed
 
 
 def _set(values: dict[str, Any], key: str, value: Any) -> None:
@@ -126,10 +127,10 @@ def sweep_jobs(argv: list[str]) -> list[tuple[str, dict[str, Any]]]:
 
     overrides = [o for o in parse(overrides_of(argv)) if not _is_hydras(o.key_or_group)]
     swept = {o.key_or_group for o in overrides if o.is_sweep_override()}
-    jobs = []
+    base, jobs = defaults(), []  # config.yaml read once, copied for each job
     for batch in BasicSweeper.split_arguments(overrides, None):
         for job in batch:
-            values, label = defaults(), []
+            values, label = copy.deepcopy(base), []
             for override in parse(job):
                 _set(values, override.key_or_group, override.value())
                 if override.key_or_group in swept:

@@ -28,7 +28,7 @@ from flax import struct
 from hintsjax import envs, program_cache
 from hintsjax.config import RunConfig, env_params, load_run_config
 from hintsjax.devices import SeedLayout
-from hintsjax.errors import ArgumentParser, UsageError, command, fail
+from hintsjax.errors import ArgumentParser, UsageError, command
 from hintsjax.generator import PROGRAMMATIC
 from hintsjax.ppo import Hyper, gaussian_sample, make_network, pick_hint
 from hintsjax.trainer import program_identity
@@ -224,19 +224,16 @@ def main(argv: list[str] | None = None) -> int:
                         help="the agent's hints at deploy: programmatic, or a generator folder (hintsjax.generator); "
                              "default: the run's eval_hint_source")
     args = parser.parse_args(argv)
-    try:
-        cfg = load_run_config(args.run)
-        if args.hint_source is not None:
-            cfg = dataclasses.replace(cfg, eval_hint_source=args.hint_source).validate()
-        variants = tuple(v.strip() for v in args.variant.split(",")) if args.variant else (cfg.variant,)
-        for variant in variants:
-            env_params(cfg.env, variant)
-        episodes = cfg.eval_episodes if args.episodes is None else args.episodes
-        if episodes <= 0:
-            raise UsageError(f"--episodes must be positive, got {episodes}")
-        state, _ = checkpoint.restore_latest(args.run, cfg)
-    except UsageError as e:
-        return fail(e)
+    cfg = load_run_config(args.run)
+    if args.hint_source is not None:
+        cfg = dataclasses.replace(cfg, eval_hint_source=args.hint_source).validate()
+    variants = tuple(v.strip() for v in args.variant.split(",")) if args.variant else (cfg.variant,)
+    for variant in variants:
+        env_params(cfg.env, variant)
+    episodes = cfg.eval_episodes if args.episodes is None else args.episodes
+    if episodes <= 0:
+        raise UsageError(f"--episodes must be positive, got {episodes}")
+    state, _ = checkpoint.restore_latest(args.run, cfg)
     stochastic = args.stochastic or (cfg.stochastic_eval and not args.deterministic)
     results, _ = evaluate_variants(cfg, state.params, variants, episodes, stochastic)
     mode = "stochastic" if stochastic else "deterministic"

@@ -26,7 +26,7 @@ from flax import struct
 from hintsjax import normalization
 from hintsjax.checkpoint import on_this_device, require_same_arrays
 from hintsjax.config import RunConfig, load_run_config, to_dict
-from hintsjax.errors import ArgumentParser, UsageError, command, fail
+from hintsjax.errors import ArgumentParser, UsageError, command
 from hintsjax.networks import MLP
 
 EXPERTS_DIR = Path(__file__).resolve().parent / "experts"  # the packaged experts, one folder per env
@@ -158,10 +158,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("run", type=Path, help="a finished run folder of agent=expert_ppo")
     parser.add_argument("--out", type=Path, default=None, help="expert folder (default: hintsjax/experts/<env>)")
     args = parser.parse_args(argv)
-    try:
-        out = export(args.run, args.out)
-    except UsageError as e:
-        return fail(e)
+    out = export(args.run, args.out)
     meta = json.loads((out / EXPERT_JSON).read_text())
     print(f"expert for {meta['env']}: seed {meta['seed_index']} of {args.run} "
           f"({meta['seed_eval_mean']:.2f} over {meta['episodes_per_seed']} episodes) -> {out}")

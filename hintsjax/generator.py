@@ -46,7 +46,7 @@ from hintsjax.arguments import parse_key_values
 from hintsjax.checkpoint import on_this_device, require_same_arrays
 from hintsjax.envs.core import Env, Step
 from hintsjax.envs.errors import ChoiceError, choose
-from hintsjax.errors import UsageError, command, fail, require_positive, require_range
+from hintsjax.errors import UsageError, command, require_positive, require_range
 from hintsjax.networks import MLP, Encoder, scale_pixels
 from hintsjax.runlog import fresh_folder
 
@@ -480,10 +480,7 @@ def parse(argv: list[str]) -> GeneratorConfig:
 
 @command
 def main(argv: list[str] | None = None) -> int:
-    try:
-        cfg = parse(sys.argv[1:] if argv is None else argv)
-    except UsageError as e:
-        return fail(e)
+    cfg = parse(sys.argv[1:] if argv is None else argv)
     print(f"generator of {cfg.env}/{cfg.hint} from {cfg.frames} pictures: {cfg.seeds} seed(s), "
           f"{cfg.num_envs} x {cfg.steps} steps of {cfg.policy} rollouts, {cfg.epochs} epochs", flush=True)
     folder, meta = train_folder(cfg)

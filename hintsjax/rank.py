@@ -47,7 +47,7 @@ from hintsjax import envs, rollouts
 from hintsjax.arguments import parse_key_values
 from hintsjax.conditioning import SCHEMES
 from hintsjax.envs.errors import ChoiceError, choose
-from hintsjax.errors import UsageError, command, fail, require_positive, require_range
+from hintsjax.errors import UsageError, command, require_positive, require_range
 from hintsjax.networks import MLP, Encoder, scale_pixels
 from hintsjax.runlog import fresh_folder
 
@@ -319,10 +319,7 @@ def plot(path: Path, cfg: RankConfig, result: dict[str, Any]) -> None:
 
 @command
 def main(argv: list[str] | None = None) -> int:
-    try:
-        cfg = parse_key_values(RankConfig, sys.argv[1:] if argv is None else argv).validate()
-    except UsageError as e:
-        return fail(e)
+    cfg = parse_key_values(RankConfig, sys.argv[1:] if argv is None else argv).validate()
     print(f"ranking {len(cfg.candidates)} hints of {cfg.env} by {cfg.scores}, {cfg.seeds} seeds", flush=True)
     folder = fresh_folder(Path(cfg.out_dir) / (cfg.name or f"rank-{cfg.env}-{time.strftime('%Y%m%d-%H%M%S')}"))
     (folder / "config.yaml").write_text(yaml.safe_dump(dataclasses.asdict(cfg), sort_keys=False))

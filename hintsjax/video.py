@@ -23,7 +23,7 @@ from flax import struct
 
 from hintsjax import envs
 from hintsjax.config import RunConfig, env_params, load_run_config
-from hintsjax.errors import ArgumentParser, UsageError, command, fail
+from hintsjax.errors import ArgumentParser, UsageError, command
 from hintsjax.evaluate import eval_keys
 from hintsjax.ppo import gaussian_sample, make_network
 
@@ -236,20 +236,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=None, help="GIF path (default: RUN/video-<variant>-seed<seed>.gif)")
     parser.add_argument("--fps", type=int, default=25, help="frames per second (default: 25)")
     args = parser.parse_args(argv)
-    try:
-        cfg = load_run_config(args.run)
-        variant = args.variant or cfg.variant or envs.variant_names(cfg.env)[0]
-        env_params(cfg.env, variant)
-        if not 0 <= args.seed < cfg.seeds:
-            raise UsageError(f"--seed must be in [0, {cfg.seeds}) for this run of {cfg.seeds} seeds, got {args.seed}")
-        env = cfg.make_env(deploy=True)
-        steps = min(env.max_steps, MAX_STEPS) if args.steps is None else args.steps
-        for name, value in (("--steps", steps), ("--scale", args.scale), ("--fps", args.fps)):
-            if value <= 0:
-                raise UsageError(f"{name} must be positive, got {value}")
-        state, _ = checkpoint.restore_latest(args.run, cfg)
-    except UsageError as e:
-        return fail(e)
+    cfg = load_run_config(args.run)
+    variant = args.variant or cfg.variant or envs.variant_names(cfg.env)[0]
+    env_params(cfg.env, variant)
+    if not 0 <= args.seed < cfg.seeds:
+        raise UsageError(f"--seed must be in [0, {cfg.seeds}) for this run of {cfg.seeds} seeds, got {args.seed}")
+    env = cfg.make_env(deploy=True)
+    steps = min(env.max_steps, MAX_STEPS) if args.steps is None else args.steps
+    for name, value in (("--steps", steps), ("--scale", args.scale), ("--fps", args.fps)):
+        if value <= 0:
+            raise UsageError(f"{name} must be positive, got {value}")
+    state, _ = checkpoint.restore_latest(args.run, cfg)
     params = jax.tree.map(lambda x: x[args.seed], state.params)
     episode = rollout(cfg, params, variant, steps, eval_keys(cfg)[args.seed]).cut()
     frames = compose_frames(episode, hint_labels(env.hint), args.scale, env.max_steps)
