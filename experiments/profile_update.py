@@ -42,6 +42,13 @@ VARIANTS = {
     # XLA's sort-and-prefix-scan rewrite of scatters that deterministic ops would otherwise turn
     # into while loops of one update per iteration (MJX's scatter-adds)
     "scatter_det": ("--xla_gpu_enable_scatter_determinism_expander=true", {}),
+    # deterministic ops off, autotuning persisted (XLA's docs/determinism.md: compilation is
+    # deterministic once autotuning is read from a cache): the first process tunes and writes the
+    # folder, later ones read it; `tuned_b` starts another folder
+    "tuned": ("--xla_gpu_deterministic_ops=false --xla_gpu_per_fusion_autotune_cache_dir=/tmp/hintsjax_autotune_a", {}),
+    "tuned_b": ("--xla_gpu_deterministic_ops=false --xla_gpu_per_fusion_autotune_cache_dir=/tmp/hintsjax_autotune_b", {}),
+    "tuned_scatter": ("--xla_gpu_deterministic_ops=false --xla_gpu_enable_scatter_determinism_expander=true "
+                      "--xla_gpu_per_fusion_autotune_cache_dir=/tmp/hintsjax_autotune_a", {}),
     "unroll_rollout": ("", {64: 8}),
     "unroll_learn": ("", {4: 4}),
     "unroll_both": ("", {64: 8, 4: 4}),
@@ -95,6 +102,9 @@ def one(args: argparse.Namespace) -> dict:
     from hintsjax.config import run_config
 
     unroll_scans(VARIANTS[args.variant][1])
+    for flag in os.environ.get("XLA_FLAGS", "").split():  # XLA wants the autotune folder made
+        if flag.startswith("--xla_gpu_per_fusion_autotune_cache_dir="):
+            Path(flag.split("=", 1)[1]).mkdir(parents=True, exist_ok=True)
     cfg = run_config({"env": args.env, "agent": "hints", "scheme": "fc", "seeds": args.seeds,
                       "checkpoint_every": args.updates})
     keys = cfg.seed_keys()

@@ -14,8 +14,8 @@ if not (_here / "envs").is_dir() and (_here.parent / "envs" / "__init__.py").is_
 # Same seed, same result on a GPU too. Without this flag two processes training the same seed on
 # an H100 ended with different params (XLA autotunes GPU kernels per compile; measured with
 # experiments/determinism.py). It must be set before jax starts; to opt out, put
-# --xla_gpu_deterministic_ops=false in XLA_FLAGS yourself (1.5-1.7x faster training on the MJX
-# envs: experiments/results/bench_h100_determinism.txt).
+# --xla_gpu_deterministic_ops=false in XLA_FLAGS yourself (1.5-1.8x faster training: below, and
+# experiments/results/bench_h100_determinism.txt).
 if "xla_gpu_deterministic_ops" not in _os.environ.get("XLA_FLAGS", ""):
     _os.environ["XLA_FLAGS"] = (_os.environ.get("XLA_FLAGS", "") + " --xla_gpu_deterministic_ops=true").strip()
 
@@ -35,6 +35,35 @@ def deterministic_gpu_ops() -> bool:
     """Whether XLA_FLAGS asks for deterministic GPU ops (the last setting of the flag wins)."""
     settings = [f.split("=", 1)[-1] for f in _os.environ.get("XLA_FLAGS", "").split() if f.startswith("--xla_gpu_deterministic_ops")]
     return bool(settings) and settings[-1].lower() in ("true", "1")
+
+
+# Reproducible without deterministic ops too, on one machine. With the flag off, XLA fuses the
+# networks' matrix products into Triton kernels whose tiling it autotunes by timing them, so two
+# compiles of one program may pick different kernels and round differently; XLA's own remedy is
+# a persisted autotune cache (its docs/determinism.md). So the first compile on a machine tunes
+# and writes the folder, and later ones read the same choices: the pendulum's training then gave
+# the same params in three processes, 1.52x faster than with deterministic ops; the ant's did
+# not, since MJX's sums over the body tree run as scatter-adds with float atomics
+# (experiments/results/profile_update_h100.json, docs/throughput.md). The folder sits beside the
+# compilation cache (HINTSJAX_COMPILATION_CACHE, or ~/.cache/hintsjax/xla; off when that is off).
+def _autotune_folder() -> str | None:
+    from importlib.metadata import PackageNotFoundError, version
+
+    root = _os.environ.get("HINTSJAX_COMPILATION_CACHE", "~/.cache/hintsjax/xla")
+    if root.strip().lower() in ("", "off", "none", "false", "0", "no"):
+        return None
+    try:
+        folder = _Path(root).expanduser() / f"autotune-jaxlib-{version('jaxlib')}"
+        folder.mkdir(parents=True, exist_ok=True)
+    except (OSError, PackageNotFoundError):
+        return None
+    return str(folder)
+
+
+if not deterministic_gpu_ops() and "xla_gpu_per_fusion_autotune_cache_dir" not in _os.environ["XLA_FLAGS"]:
+    _tuned = _autotune_folder()
+    if _tuned is not None:
+        _os.environ["XLA_FLAGS"] += f" --xla_gpu_per_fusion_autotune_cache_dir={_tuned}"
 
 
 # One run over several processes or hosts (hintsjax/devices.py): each process must join the

@@ -1,0 +1,42 @@
+"""The XLA flags hintsjax sets on import (hintsjax/__init__.py): deterministic GPU ops unless
+XLA_FLAGS says otherwise, and with them off a persisted autotune folder beside the compilation
+cache, so that compiles on one machine pick the same kernels (not where the user names a folder
+or turns the cache off)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+FLAG = "--xla_gpu_per_fusion_autotune_cache_dir="
+
+
+def flags_after_import(xla_flags: str | None, cache: str | None) -> list[str]:
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "HINTSJAX_COMPILATION_CACHE")}
+    env.update({k: v for k, v in (("XLA_FLAGS", xla_flags), ("HINTSJAX_COMPILATION_CACHE", cache)) if v is not None})
+    done = subprocess.run([sys.executable, "-c", "import hintsjax, os; print(os.environ['XLA_FLAGS'])"],
+                          env=env, capture_output=True, text=True, check=True)
+    return done.stdout.split()
+
+
+def test_deterministic_ops_by_default_and_no_autotune_folder(tmp_path):
+    flags = flags_after_import(None, str(tmp_path))
+    assert "--xla_gpu_deterministic_ops=true" in flags
+    assert not any(f.startswith(FLAG) for f in flags)
+    assert not list(tmp_path.iterdir())
+
+
+def test_deterministic_ops_off_gets_an_autotune_folder_beside_the_cache(tmp_path):
+    flags = flags_after_import("--xla_gpu_deterministic_ops=false", str(tmp_path))
+    (folder,) = [f[len(FLAG):] for f in flags if f.startswith(FLAG)]
+    assert os.path.dirname(folder) == str(tmp_path) and os.path.basename(folder).startswith("autotune-jaxlib-")
+    assert os.path.isdir(folder)  # XLA wants it made
+
+
+@pytest.mark.parametrize("xla_flags", ["--xla_gpu_deterministic_ops=false", f"--xla_gpu_deterministic_ops=false {FLAG}/mine"])
+def test_no_autotune_folder_of_ours_with_the_cache_off_or_a_folder_named(xla_flags, tmp_path):
+    flags = flags_after_import(xla_flags, "off" if FLAG not in xla_flags else str(tmp_path))
+    assert [f for f in flags if f.startswith(FLAG)] == ([f"{FLAG}/mine"] if FLAG in xla_flags else [])
