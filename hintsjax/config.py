@@ -246,12 +246,24 @@ def to_dict(cfg: RunConfig) -> dict[str, Any]:
 
 
 def save_run_config(run_dir: Path, cfg: RunConfig) -> None:
-    """Write the resolved config into a run folder (what load_run_config reads back)."""
-    (Path(run_dir) / CONFIG_YAML).write_text(yaml.safe_dump(to_dict(cfg), sort_keys=False))
+    """Write the resolved config into a run folder (what load_run_config reads back), whole or
+    not at all (a resumed run that trains longer rewrites it)."""
+    part = Path(run_dir) / f".{CONFIG_YAML}.part"
+    part.write_text(yaml.safe_dump(to_dict(cfg), sort_keys=False))
+    part.replace(Path(run_dir) / CONFIG_YAML)
 
 
-def load_run_config(run_dir: Path) -> RunConfig:
-    """The validated config a run folder was trained with."""
+def missing_keys(values: Mapping[str, Any]) -> list[str]:
+    """The settings of today's RunConfig that a saved config (to_dict's layout) lacks."""
+    missing = sorted(_fields(RunConfig) - set(SECTIONS) - set(values))
+    return missing + [f"{name}.{k}" for name, cls in SECTIONS.items()
+                      for k in sorted(_fields(cls) - set(values.get(name) or {}))]
+
+
+def load_run_config(run_dir: Path, complete: bool = False) -> RunConfig:
+    """The validated config a run folder was trained with. With `complete` (a run to go on with),
+    a config that lacks any of today's settings is refused, not filled in with defaults: it was
+    cut short, or written by an older hintsjax whose run would continue under other settings."""
     path = Path(run_dir) / CONFIG_YAML
     if not Path(run_dir).is_dir():
         raise UsageError(f"no run folder at {run_dir}")
@@ -261,4 +273,9 @@ def load_run_config(run_dir: Path) -> RunConfig:
         raise UsageError(f"cannot read {path}: {type(e).__name__}") from None
     if not isinstance(values, dict):
         raise UsageError(f"{path} is not a run config")
+    missing = missing_keys(values) if complete else []
+    if missing:
+        shown = " ".join(missing[:6]) + (f" and {len(missing) - 6} more" if len(missing) > 6 else "")
+        raise UsageError(f"{path} lacks {shown}: cut short, or written by another hintsjax version; "
+                         f"it cannot be resumed as it was trained (start a new run)")
     return run_config(values, resolved=True)

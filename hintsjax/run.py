@@ -29,7 +29,7 @@ from omegaconf import DictConfig, OmegaConf
 
 import hintsjax
 from hintsjax import checkpoint, command_line, compilation_cache, devices, expert, program_cache
-from hintsjax.config import RunConfig, load_run_config, run_config, save_run_config
+from hintsjax.config import RunConfig, load_run_config, run_config, save_run_config, to_dict
 from hintsjax.devices import SeedLayout
 from hintsjax.evaluate import compile_evaluator, evaluate_group, evaluate_variants, metrics_text
 from hintsjax.algorithms import make_trainer
@@ -445,6 +445,7 @@ class Request:
     run_dir: Path | None
     out_dir: str
     name: str | None
+    longer: bool = False  # a resumed run given a larger ppo.total_env_steps (its config.yaml is rewritten)
 
 
 def request(values: dict[str, Any]) -> Request:
@@ -453,17 +454,34 @@ def request(values: dict[str, Any]) -> Request:
     values = dict(values)
     values.pop("compilation_cache", None)
     resume, out_dir, name = places(values)
+    steps = None
     if resume is not None:
+        values["ppo"] = dict(values.get("ppo") or {})
+        steps = values["ppo"].pop("total_env_steps", None)  # the one setting a resumed run may change
         refuse_overrides_on_resume(values)
         run_dir = Path(resume)
-        cfg = load_run_config(run_dir)  # a missing or bad checkpoint is reported by train's restore
+        cfg = load_run_config(run_dir, complete=True)  # a missing or bad checkpoint is reported by train's restore
+        if steps is not None:
+            cfg = train_longer(cfg, steps)
     else:
         cfg, run_dir = run_config(values), None
     if cfg.agent_spec.imitates:
         expert.describe(cfg.env, cfg.expert)  # a missing or foreign expert
     if cfg.physics == physics.WARP:
         check_warp_run()
-    return Request(cfg, run_dir, out_dir, name)
+    return Request(cfg, run_dir, out_dir, name, longer=steps is not None)
+
+
+def train_longer(cfg: RunConfig, steps: Any) -> RunConfig:
+    """cfg with a budget of `steps` env steps a seed, for a resumed run to train on to; UsageError
+    for a budget smaller than the one it was started with. The learning rates are constant, so
+    training on from the saved state is the longer run, update for update."""
+    saved = to_dict(cfg)
+    longer = run_config({**saved, "ppo": {**saved["ppo"], "total_env_steps": steps}}, resolved=True)
+    if longer.ppo.num_updates < cfg.ppo.num_updates:
+        raise UsageError(f"a resumed run can train longer, not shorter: ppo.total_env_steps must be at least "
+                         f"{cfg.ppo.total_env_steps} (its budget), got {steps}")
+    return longer
 
 
 def main_from_values(values: dict[str, Any]) -> int:
@@ -481,6 +499,8 @@ def main_from_values(values: dict[str, Any]) -> int:
             run_dir = new_run_dir(asked.out_dir, asked.name, cfg)
             save_run_config(run_dir, cfg)
         run_dir = Path(devices.agree(str(run_dir)))  # the folder process 0 made, on every process
+    elif asked.longer and devices.is_main():
+        save_run_config(run_dir, cfg)  # the budget it now trains to
     try:
         train(cfg, run_dir, resume=asked.run_dir is not None)
     except UsageError as e:

@@ -552,6 +552,43 @@ def test_a_config_that_is_not_utf8_is_one_line(finished_run, tmp_path):
         run.load_run_config(copy)
 
 
+def test_a_resumed_run_trains_longer_to_the_longer_runs_end_bit_for_bit(finished_run, tmp_path):
+    """A run of 2 updates, resumed with the 4-update budget of `finished_run`, ends with its
+    state bit for bit and its logged returns; its config.yaml says the new budget. A smaller
+    budget is one line and leaves the folder alone."""
+    short = tmp_path / "short"
+    assert run.main_from_values(tiny_values(out_dir=str(tmp_path), name="short", ppo={**tiny_values()["ppo"], "total_env_steps": 128})) == 0
+    assert checkpoint.latest_update(short) == 2
+    shorter = cli(f"resume={short}", "ppo.total_env_steps=64", cwd=tmp_path)
+    assert shorter.returncode == 2 and shorter.stderr.strip().splitlines() == [
+        "error: a resumed run can train longer, not shorter: ppo.total_env_steps must be at least 128 (its budget), got 64"]
+    longer = cli(f"resume={short}", "ppo.total_env_steps=256", cwd=tmp_path)
+    assert longer.returncode == 0, longer.stderr[-2000:]
+    assert run.load_run_config(short) == run.load_run_config(finished_run)
+    for a, b in zip(state_arrays(short), state_arrays(finished_run), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert logged_returns(short) == logged_returns(finished_run)
+    assert json.loads((short / "eval.json").read_text())["evaluations"] == json.loads((finished_run / "eval.json").read_text())["evaluations"]
+
+
+@pytest.mark.parametrize("cut", ["ppo.clip_eps", "eval_episodes", "gail"])
+def test_a_config_that_lacks_a_setting_is_not_resumed(cut, finished_run, tmp_path):
+    """A config.yaml cut short (or from an older version) resumes under no guessed defaults: one
+    line naming what it lacks, exit 2, the run folder as it was."""
+    copy = tmp_path / "cut"
+    shutil.copytree(finished_run, copy)
+    values = yaml.safe_load((copy / "config.yaml").read_text())
+    section, _, key = cut.rpartition(".")
+    del (values[section] if section else values)[key]
+    (copy / "config.yaml").write_text(yaml.safe_dump(values))
+    before = sorted(p.relative_to(copy) for p in copy.rglob("*"))
+    out = subprocess.run([sys.executable, "-m", "hintsjax.run", f"resume={copy}"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1, out.stderr
+    assert "lacks " + (cut if cut != "gail" else "gail.") in out.stderr
+    assert sorted(p.relative_to(copy) for p in copy.rglob("*")) == before
+    assert run.load_run_config(copy).env == "pendulum"  # reports still read it
+
+
 def test_seeds_sharded_over_two_devices_give_the_single_device_result(finished_run, tmp_path):
     env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
     args = [*TINY, "out_dir=runs", "name=sharded"]
