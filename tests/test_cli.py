@@ -137,7 +137,8 @@ BAD_SETTINGS = {
     "name=../escape": "name must be one folder's name inside out_dir",
     "name=..": "name must be one folder's name inside out_dir",
     "resume=runs/x env=acrobot": "resume continues a run as its config.yaml says; drop env=acrobot",
-    "resume=runs/x ppo.total_env_steps=512": "drop ppo.total_env_steps=512",
+    "resume=runs/x ppo.total_env_steps=512 ppo.epochs=2": "drop ppo.epochs=2",  # a longer budget may stay
+    "resume=runs/x ppo.total_env_steps=512": "no run folder at runs/x",
 }
 
 
