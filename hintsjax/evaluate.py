@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from hintsjax import envs, program_cache
+from hintsjax import envs, memory, program_cache
 from hintsjax.config import RunConfig, env_params, load_run_config
 from hintsjax.devices import SeedLayout
 from hintsjax.errors import ArgumentParser, UsageError, command
@@ -233,6 +233,7 @@ def main(argv: list[str] | None = None) -> int:
     episodes = cfg.eval_episodes if args.episodes is None else args.episodes
     if episodes <= 0:
         raise UsageError(f"--episodes must be positive, got {episodes}")
+    memory.check_episodes(cfg, SeedLayout.of(cfg.seeds).per_device, episodes, "--episodes")
     state, _ = checkpoint.restore_latest(args.run, cfg)
     stochastic = args.stochastic or (cfg.stochastic_eval and not args.deterministic)
     results, _ = evaluate_variants(cfg, state.params, variants, episodes, stochastic)

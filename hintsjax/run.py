@@ -28,7 +28,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 import hintsjax
-from hintsjax import checkpoint, command_line, compilation_cache, devices, expert, program_cache
+from hintsjax import checkpoint, command_line, compilation_cache, devices, expert, memory, program_cache
 from hintsjax.config import RunConfig, load_run_config, run_config, save_run_config, to_dict
 from hintsjax.devices import SeedLayout
 from hintsjax.evaluate import compile_evaluator, evaluate_group, evaluate_variants, metrics_text
@@ -469,6 +469,7 @@ def request(values: dict[str, Any]) -> Request:
         expert.describe(cfg.env, cfg.expert)  # a missing or foreign expert
     if cfg.physics == physics.WARP:
         check_warp_run()
+    memory.check_run(cfg, seed_layout(cfg).per_device)  # sizes that cannot fit, before the seeds' keys are drawn
     return Request(cfg, run_dir, out_dir, name, longer=steps is not None)
 
 

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from hintsjax import envs
+from hintsjax import envs, memory
 from hintsjax.config import RunConfig, env_params, load_run_config
 from hintsjax.errors import ArgumentParser, UsageError, command
 from hintsjax.evaluate import eval_keys
@@ -246,6 +246,7 @@ def main(argv: list[str] | None = None) -> int:
     for name, value in (("--steps", steps), ("--scale", args.scale), ("--fps", args.fps)):
         if value <= 0:
             raise UsageError(f"{name} must be positive, got {value}")
+    memory.check_video(args.scale, steps, functools.partial(frame_shape, env.image_size))
     state, _ = checkpoint.restore_latest(args.run, cfg)
     params = jax.tree.map(lambda x: x[args.seed], state.params)
     episode = rollout(cfg, params, variant, steps, eval_keys(cfg)[args.seed]).cut()

@@ -136,6 +136,10 @@ BAD_SETTINGS = {
     "checkpoint_seconds=nan": "checkpoint_seconds must be 0 or more, got nan",
     "name=../escape": "name must be one folder's name inside out_dir",
     "name=..": "name must be one folder's name inside out_dir",
+    "ppo.total_env_steps=4000000000 ppo.batch_size=2000000000": "ppo.batch_size=2000000000 cannot fit: one seed's rollout",
+    "seeds=1000000000": "seeds=1000000000 cannot fit: 1000000000 seeds a device hold at least",
+    "eval_episodes=100000000000": "eval_episodes=100000000000 cannot fit: evaluating 5 seeds x",
+    "agent=ppo_state eval_episodes=100000000000000": "eval_episodes=100000000000000 cannot fit",
     "resume=runs/x env=acrobot": "resume continues a run as its config.yaml says; drop env=acrobot",
     "resume=runs/x ppo.total_env_steps=512 ppo.epochs=2": "drop ppo.epochs=2",  # a longer budget may stay
     "resume=runs/x ppo.total_env_steps=512": "no run folder at runs/x",
@@ -459,6 +463,8 @@ def test_evaluate_bad_inputs(finished_run, tmp_path, capsys):
     assert evaluate_main([str(finished_run), "--variant", "nope"]) == 2
     assert "valid choices: swingto, swingup" in capsys.readouterr().err
     assert evaluate_main([str(finished_run), "--episodes", "0"]) == 2
+    assert evaluate_main([str(finished_run), "--episodes", str(10**12)]) == 2  # 24 PiB of pictures at least
+    assert f"--episodes={10**12} cannot fit: evaluating 2 seeds x {10**12} episodes" in capsys.readouterr().err
     empty = tmp_path / "no_checkpoint"
     empty.mkdir()
     shutil.copy(finished_run / "config.yaml", empty / "config.yaml")

@@ -147,6 +147,7 @@ def test_bad_input_fails_in_one_line_and_writes_nothing(tiny_run, tmp_path, caps
         ("--seed", "5"): "--seed must be in [0, 2)",
         ("--variant", "nope"): "valid choices: swingto, swingup",
         ("--steps", "0"): "--steps must be positive",
+        ("--scale", "100000"): "--scale 100000 cannot fit:",  # frames of 6.4 M pixels a side
     }
     for args, message in cases.items():
         assert main([str(tiny_run), *args]) == 2
