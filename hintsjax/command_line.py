@@ -139,6 +139,35 @@ def sweep_jobs(argv: list[str]) -> list[tuple[str, dict[str, Any]]]:
     return jobs
 
 
+def jobs_values(argv: list[str]) -> list[dict[str, Any]]:
+    """The values main_from_values gets for each job: a sweep's jobs, or the one run."""
+    jobs = [values for _, values in sweep_jobs(argv)]
+    if jobs or MULTIRUN_FLAGS & set(argv):
+        return jobs
+    values = copy.deepcopy(defaults())
+    for override in parse(overrides_of(argv)):
+        if not _is_hydras(override.key_or_group):
+            _set(values, override.key_or_group, override.value())
+    return [values]
+
+
+def asks_only_for_warp(argv: list[str]) -> bool:
+    """Whether every job steps its physics with MuJoCo Warp (`physics=warp`, or a resumed run's
+    config.yaml says so), read without starting JAX."""
+    import yaml
+
+    def physics(values: dict[str, Any]) -> Any:
+        if values.get("resume") is None:
+            return values.get("physics")
+        try:
+            return yaml.safe_load((Path(str(values["resume"])) / "config.yaml").read_text()).get("physics")
+        except (OSError, UnicodeDecodeError, yaml.YAMLError, AttributeError):
+            return None  # request() says what is wrong with the folder
+
+    jobs = jobs_values(argv)
+    return bool(jobs) and all(physics(values) == "warp" for values in jobs)
+
+
 def check_sweep(argv: list[str], check: Callable[[dict[str, Any]], Any]) -> None:
     """`check` (which raises UsageError) on every job of a sweep before the first one runs; the
     error names the job."""

@@ -2,7 +2,7 @@
 
     python -m hintsjax.run env=pendulum agent=hints hint=composite scheme=fc seeds=5
     python -m hintsjax.run -m scheme=lc,ac,fc,mc          # a sweep, one folder per run
-    python -m hintsjax.run resume=runs/<folder>           # continue from the last checkpoint
+    python -m hintsjax.run resume=runs/<folder>           # go on (ppo.total_env_steps=N: train longer)
 
 A run folder holds config.yaml (resolved), metrics.csv, TensorBoard events (tb/), orbax
 checkpoints of the full train state (checkpoints/), eval.json and learning_curve.png.
@@ -27,8 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-import hintsjax
-from hintsjax import checkpoint, command_line, compilation_cache, devices, expert, memory, program_cache
+from hintsjax import checkpoint, command_line, compilation_cache, devices, expert, memory, program_cache, xla_flags
 from hintsjax.config import RunConfig, load_run_config, run_config, save_run_config, to_dict
 from hintsjax.devices import SeedLayout
 from hintsjax.evaluate import compile_evaluator, evaluate_group, evaluate_variants, metrics_text
@@ -187,15 +186,20 @@ def chunks_rate(training: Training, env_steps_per_update: int) -> float | None:
 
 
 def check_warp_run() -> None:
-    """UsageError where a physics=warp run cannot go: over several processes (`seed_layout`), or
-    on a GPU without deterministic ops, where MuJoCo Warp's CUDA graph capture failed mid-run
-    ("Warp CUDA error 904: capturing stream has unjoined work"; the ant, twice on an H100:
-    docs/throughput.md)."""
+    """UsageError where a physics=warp run cannot go: over several processes (`seed_layout`)."""
     if jax.process_count() > 1:
         raise UsageError("physics=warp runs in one process (on one GPU); drop JAX_NUM_PROCESSES or use physics=jax")
-    if jax.default_backend() == "gpu" and not hintsjax.deterministic_gpu_ops():
-        raise UsageError("physics=warp needs deterministic GPU ops (MuJoCo Warp's graph capture failed without them): "
-                         "drop --xla_gpu_deterministic_ops=false from XLA_FLAGS, or use physics=jax")
+
+
+def evaluation_compiles_first(cfg: RunConfig) -> bool:
+    """Whether the evaluation program compiles before training rather than beside it: under
+    physics=warp. MuJoCo Warp captures CUDA graphs and launches its kernels from a Python
+    callback, so a compile in another thread slows every physics call (the ant's first 100
+    updates: 40.4 K env steps/s beside, 56.4 K first) and, with deterministic ops off (XLA's
+    autotuner then runs kernels on the GPU while it compiles), broke the capture: a segfault, and
+    earlier "Warp CUDA error 904", in 3 of 4 runs beside, none of 3 first
+    (experiments/results/warp_det_off_h100.json)."""
+    return cfg.physics == physics.WARP
 
 
 def seed_layout(cfg: RunConfig) -> SeedLayout:
@@ -358,10 +362,13 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
     variants = (cfg.variant, *cfg.eval_variants)
     shapes = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=x.sharding), training.state.params)
     # The evaluation program compiles on the host while the device trains (it needs only the
-    # params' shapes), so its compile adds nothing to the wall-clock of a run that trains longer.
+    # params' shapes), so its compile adds nothing to the wall-clock of a run that trains longer;
+    # under physics=warp it compiles first (`evaluation_compiles_first`).
     with ThreadPoolExecutor(max_workers=1) as pool:
         evaluator = pool.submit(compile_evaluator, cfg, shapes, variants[0], cfg.eval_episodes, cfg.stochastic_eval,
                                 layout=training.compiled.layout)
+        if evaluation_compiles_first(cfg):
+            evaluator.result()
         try:
             training = advance(training, cfg, run_dir, log.write, progress, cfg.label)
         finally:
@@ -536,6 +543,8 @@ def _hydra_main(cfg: DictConfig) -> None:
 def checked_main() -> int:
     """The command line checked (every job of a sweep, before the first trains), then Hydra's run."""
     command_line.check_overrides(sys.argv[1:])
+    if command_line.asks_only_for_warp(sys.argv[1:]):
+        xla_flags.drop_determinism()  # nothing under MuJoCo Warp repeats bit for bit; they only cost speed
     command_line.check_sweep(sys.argv[1:], request)
     _hydra_main()  # exits itself with a run's non-zero status
     return 0

@@ -134,21 +134,39 @@ def test_physics_warp_stays_on_one_device_and_in_one_process(monkeypatch):
         run.seed_layout(cfg)
 
 
-def test_physics_warp_on_a_gpu_without_deterministic_ops_is_one_line(monkeypatch, tmp_path, capsys):
-    """MuJoCo Warp's CUDA graph capture failed mid-run without deterministic GPU ops (error 904,
-    the ant on an H100), so such a run is refused before any folder is made; on a CPU the flag
-    means nothing and is not checked, and a GPU with the flag on is let through."""
-    import jax
+def test_under_warp_the_evaluation_compiles_before_training_not_beside_it(monkeypatch, tmp_path):
+    """MuJoCo Warp's CUDA graph capture broke while XLA compiled beside it with deterministic ops
+    off, and its Python callbacks slow down while another thread compiles, so a Warp run compiles
+    its evaluation program first (experiments/results/warp_det_off_h100.json): here a run told
+    to, on the linear env, finishes that compile before its first chunk; told not to, it trains
+    while the compile runs (which waits until training has started)."""
+    import threading
 
-    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
-    monkeypatch.setenv("XLA_FLAGS", "--xla_gpu_deterministic_ops=true --xla_gpu_deterministic_ops=false")
-    values = {"env": "ant", "physics": "warp", "out_dir": str(tmp_path / "runs")}
-    assert run.main_from_values(values) == 2
-    lines = capsys.readouterr().err.strip().splitlines()
-    assert len(lines) == 1 and "physics=warp needs deterministic GPU ops" in lines[0], lines
-    assert "--xla_gpu_deterministic_ops=false" in lines[0] and not (tmp_path / "runs").exists()
-    monkeypatch.setenv("XLA_FLAGS", "--xla_gpu_deterministic_ops=true")
-    run.check_warp_run()  # no error
-    monkeypatch.setattr(jax, "default_backend", lambda: "cpu")
-    monkeypatch.setenv("XLA_FLAGS", "--xla_gpu_deterministic_ops=false")
-    run.check_warp_run()
+    from hintsjax.config import run_config
+
+    assert run.evaluation_compiles_first(run_config({"env": "ant", "physics": "warp"}))
+    assert not run.evaluation_compiles_first(run_config({"env": "ant", "physics": "jax"}))
+    compile_evaluator, advance = run.compile_evaluator, run.advance
+    for first in (True, False):
+        events, training = [], threading.Event()
+
+        def compiled(*args, **kwargs):
+            if not first:
+                training.wait(timeout=120)  # beside: training starts without this compile
+            result = compile_evaluator(*args, **kwargs)
+            events.append("compiled")
+            return result
+
+        def advanced(*args, **kwargs):
+            events.append("training")
+            training.set()
+            return advance(*args, **kwargs)
+
+        monkeypatch.setattr(run, "compile_evaluator", compiled)
+        monkeypatch.setattr(run, "advance", advanced)
+        monkeypatch.setattr(run, "evaluation_compiles_first", lambda cfg: first)
+        values = {"env": "linear", "agent": "ppo_state", "seeds": 2, "eval_episodes": 2, "checkpoint_every": 2,
+                  "ppo": {"total_env_steps": 128, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1},
+                  "out_dir": str(tmp_path), "name": f"first-{first}"}
+        assert run.main_from_values(values) == 0
+        assert events == (["compiled", "training"] if first else ["training", "compiled"])

@@ -40,3 +40,44 @@ def test_deterministic_ops_off_gets_an_autotune_folder_beside_the_cache(tmp_path
 def test_no_autotune_folder_of_ours_with_the_cache_off_or_a_folder_named(xla_flags, tmp_path):
     flags = flags_after_import(xla_flags, "off" if FLAG not in xla_flags else str(tmp_path))
     assert [f for f in flags if f.startswith(FLAG)] == ([f"{FLAG}/mine"] if FLAG in xla_flags else [])
+
+
+DROP = """
+import os, sys
+import hintsjax
+from hintsjax import xla_flags
+if sys.argv[1] == "started":
+    import jax
+    jax.devices()
+print(xla_flags.drop_determinism())
+print(os.environ["XLA_FLAGS"])
+"""
+
+
+@pytest.mark.parametrize("case", ["default", "chosen", "started"])
+def test_deterministic_ops_drop_for_warp_only_where_the_user_left_them_and_jax_has_not_started(case, tmp_path):
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    env.update(HINTSJAX_COMPILATION_CACHE=str(tmp_path), JAX_PLATFORMS="cpu")
+    if case == "chosen":
+        env["XLA_FLAGS"] = "--xla_gpu_deterministic_ops=true"
+    done = subprocess.run([sys.executable, "-c", DROP, case], env=env, capture_output=True, text=True, check=True)
+    dropped, flags = done.stdout.split("\n")[:2]
+    if case == "default":
+        assert dropped == "True" and "--xla_gpu_deterministic_ops=true" not in flags.split()
+        assert "--xla_gpu_deterministic_ops=false" in flags.split() and FLAG + str(tmp_path) in flags
+    else:  # the user's choice stands; flags read by a started backend are not changed under it
+        assert dropped == "False" and "--xla_gpu_deterministic_ops=true" in flags.split() and FLAG not in flags
+
+
+def test_a_command_asks_only_for_warp_when_every_job_does(tmp_path):
+    from hintsjax.command_line import asks_only_for_warp
+
+    warp_run = tmp_path / "warp_run"
+    warp_run.mkdir()
+    (warp_run / "config.yaml").write_text("env: ant\nphysics: warp\n")
+    assert asks_only_for_warp(["env=ant", "physics=warp"])
+    assert asks_only_for_warp(["-m", "env=ant", "physics=warp", "seeds=1,2"])
+    assert asks_only_for_warp([f"resume={warp_run}"])
+    assert not asks_only_for_warp(["env=ant"])  # physics=auto: JAX's solver
+    assert not asks_only_for_warp(["-m", "env=ant", "physics=warp,jax"])
+    assert not asks_only_for_warp([f"resume={tmp_path / 'missing'}"])

@@ -1,0 +1,96 @@
+"""The XLA flags hintsjax sets before JAX starts its backend (hintsjax/__init__.py calls
+`set_defaults` on import; XLA reads XLA_FLAGS once, when the first backend starts).
+
+- **Deterministic GPU ops** unless XLA_FLAGS names the flag already. Without it two processes
+  training the same seed on an H100 ended with different params (XLA autotunes GPU kernels per
+  compile; experiments/determinism.py). It costs 1.5-1.8x of the training speed
+  (experiments/results/bench_h100_determinism.txt, profile_update_h100.json).
+- **A persisted autotune folder** when they are off (`--xla_gpu_per_fusion_autotune_cache_dir`,
+  XLA's own remedy in its docs/determinism.md): the first compile on a machine tunes and writes
+  it, later ones read the same choices. The pendulum's training then gave the same params in
+  three processes, 1.52x faster than with deterministic ops; the ant's did not, since MJX sums
+  over the body tree with scatter-adds, float atomics without the flag. It sits beside the
+  compilation cache (HINTSJAX_COMPILATION_CACHE, or ~/.cache/hintsjax/xla; none when that is off).
+- **No deadlock on a CPU.** XLA's CPU runtime runs independent parts of a program at once on its
+  thread pool, and jaxlib's batched LAPACK kernels (MJX's Cholesky and triangular solves) split
+  their batch over that same pool and wait for the pieces: when every pool thread is such a
+  kernel, nothing is left to run the pieces (the ant's training program on 2 cores,
+  tests/test_cpu_deadlock.py). The schedule that puts them side by side is turned off.
+
+`drop_determinism` turns deterministic ops off for a command that cannot be reproducible anyway
+(physics=warp: MuJoCo Warp sums with atomics), where the user did not choose, before JAX starts.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+DETERMINISTIC = "--xla_gpu_deterministic_ops"
+AUTOTUNE_FOLDER = "--xla_gpu_per_fusion_autotune_cache_dir"
+CPU_SCHEDULER = "--xla_cpu_enable_concurrency_optimized_scheduler"
+OFF = ("", "off", "none", "false", "0", "no")
+
+# whether XLA_FLAGS named deterministic ops before hintsjax set them (the user's choice stands)
+user_chose_determinism = False
+
+
+def _flags() -> str:
+    return os.environ.get("XLA_FLAGS", "")
+
+
+def _add(flag: str) -> None:
+    os.environ["XLA_FLAGS"] = f"{_flags()} {flag}".strip()
+
+
+def deterministic_gpu_ops() -> bool:
+    """Whether XLA_FLAGS asks for deterministic GPU ops (the last setting of the flag wins)."""
+    settings = [f.split("=", 1)[-1] for f in _flags().split() if f.startswith(DETERMINISTIC)]
+    return bool(settings) and settings[-1].lower() in ("true", "1")
+
+
+def autotune_folder() -> str | None:
+    """The persisted autotune folder beside the compilation cache (made), or None where the
+    cache is off or the folder cannot be made."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    root = os.environ.get("HINTSJAX_COMPILATION_CACHE", "~/.cache/hintsjax/xla")
+    if root.strip().lower() in OFF:
+        return None
+    try:
+        folder = Path(root).expanduser() / f"autotune-jaxlib-{version('jaxlib')}"
+        folder.mkdir(parents=True, exist_ok=True)
+    except (OSError, PackageNotFoundError):
+        return None
+    return str(folder)
+
+
+def _persist_autotuning() -> None:
+    if not deterministic_gpu_ops() and AUTOTUNE_FOLDER not in _flags():
+        folder = autotune_folder()
+        if folder is not None:
+            _add(f"{AUTOTUNE_FOLDER}={folder}")
+
+
+def set_defaults() -> None:
+    """The flags above, each unless XLA_FLAGS names it already."""
+    global user_chose_determinism
+    user_chose_determinism = DETERMINISTIC in _flags()
+    if not user_chose_determinism:
+        _add(f"{DETERMINISTIC}=true")
+    if CPU_SCHEDULER not in _flags():
+        _add(f"{CPU_SCHEDULER}=false")
+    _persist_autotuning()
+
+
+def drop_determinism() -> bool:
+    """Deterministic GPU ops off (with the autotune folder), unless the user chose them or JAX's
+    backend has started (its flags are read); whether they are now off."""
+    from jax._src import xla_bridge
+
+    started = getattr(xla_bridge, "backends_are_initialized", lambda: True)()
+    if not (user_chose_determinism or started):
+        os.environ["XLA_FLAGS"] = " ".join(f for f in _flags().split() if not f.startswith(DETERMINISTIC))
+        _add(f"{DETERMINISTIC}=false")
+        _persist_autotuning()
+    return not deterministic_gpu_ops()
