@@ -65,7 +65,6 @@ def main() -> None:
         parser.exit(2, "error: --updates must be at least 1\n")
     import jax
 
-    import hintsjax
     from hintsjax import compilation_cache
     from hintsjax.config import run_config
 
@@ -90,7 +89,7 @@ def main() -> None:
                        "train_env_steps_per_s": result["train_env_steps_per_s"],
                        "chunks_env_steps_per_s": result.get("chunks_env_steps_per_s"),
                        "device": jax.devices()[0].device_kind, "jax": jax.__version__,
-                       "deterministic": jax.default_backend() == "cpu" or hintsjax.deterministic_gpu_ops(),
+                       "deterministic": result["deterministic"],  # the run's own (physics=warp turns them off)
                        "warm_cache": warm}
                 if updates < cfg.ppo.num_updates:  # extrapolated to the full budget at the measured rate
                     rest = (cfg.ppo.num_updates - updates) * cfg.ppo.batch_size * cfg.seeds

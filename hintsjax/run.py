@@ -328,7 +328,8 @@ def finish(cfg: RunConfig, run_dir: Path, training: Training, evaluations: list[
                / max(training.seconds, 1e-9),
                "chunks_env_steps_per_s": chunks_rate(training, cfg.ppo.batch_size * cfg.seeds),
                "env_steps": cfg.ppo.num_updates * cfg.ppo.batch_size, "physics": cfg.physics,
-               "devices": compiled.layout.count, "device": jax.devices()[0].device_kind, **(extra or {}),
+               "devices": compiled.layout.count, "device": jax.devices()[0].device_kind,
+               "deterministic": jax.default_backend() == "cpu" or xla_flags.deterministic_gpu_ops(), **(extra or {}),
                "evaluations": evaluations}
     if not devices.is_main():  # process 0 writes the run folder
         return results

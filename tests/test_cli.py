@@ -343,6 +343,7 @@ def test_run_folder_holds_everything(finished_run):
     config = yaml.safe_load((finished_run / "config.yaml").read_text())
     assert config["agent"] == "ppo_state" and config["ppo"]["total_env_steps"] == 256
     results = json.loads((finished_run / "eval.json").read_text())
+    assert results["deterministic"] is True and results["physics"] == "jax"  # on a CPU every op repeats
     variants = [e["variant"] for e in results["evaluations"]]
     assert variants == ["swingup", "swingto"]  # the training task, then pendulum's deploy variant
     for e in results["evaluations"]:
