@@ -31,6 +31,10 @@ AUTOTUNE_FOLDER = "--xla_gpu_per_fusion_autotune_cache_dir"
 CPU_SCHEDULER = "--xla_cpu_enable_concurrency_optimized_scheduler"
 OFF = ("", "off", "none", "false", "0", "no")
 
+# The flags hintsjax added, kept beside XLA_FLAGS for the processes this one starts (a sweep's
+# workers, run_path.py's commands): they inherit both, and tell the flags a user chose from ours.
+ADDED = "HINTSJAX_XLA_FLAGS_ADDED"
+
 # whether XLA_FLAGS named deterministic ops before hintsjax set them (the user's choice stands)
 user_chose_determinism = False
 
@@ -41,6 +45,12 @@ def _flags() -> str:
 
 def _add(flag: str) -> None:
     os.environ["XLA_FLAGS"] = f"{_flags()} {flag}".strip()
+    os.environ[ADDED] = f"{os.environ.get(ADDED, '')} {flag}".strip()
+
+
+def _drop(prefix: str) -> None:
+    for name in ("XLA_FLAGS", ADDED):
+        os.environ[name] = " ".join(f for f in os.environ.get(name, "").split() if not f.startswith(prefix))
 
 
 def deterministic_gpu_ops() -> bool:
@@ -73,8 +83,15 @@ def _persist_autotuning() -> None:
 
 
 def set_defaults() -> None:
-    """The flags above, each unless XLA_FLAGS names it already."""
+    """The flags above, each unless XLA_FLAGS names it already (not counting those a parent
+    hintsjax process added: they are set afresh here)."""
     global user_chose_determinism
+    inherited = os.environ.pop(ADDED, "").split()
+    mine = _flags().split()
+    for flag in inherited:  # one copy each, the user's own copies stay
+        if flag in mine:
+            mine.remove(flag)
+    os.environ["XLA_FLAGS"] = " ".join(mine)
     user_chose_determinism = DETERMINISTIC in _flags()
     if not user_chose_determinism:
         _add(f"{DETERMINISTIC}=true")
@@ -90,7 +107,7 @@ def drop_determinism() -> bool:
 
     started = getattr(xla_bridge, "backends_are_initialized", lambda: True)()
     if not (user_chose_determinism or started):
-        os.environ["XLA_FLAGS"] = " ".join(f for f in _flags().split() if not f.startswith(DETERMINISTIC))
+        _drop(DETERMINISTIC)
         _add(f"{DETERMINISTIC}=false")
         _persist_autotuning()
     return not deterministic_gpu_ops()

@@ -12,10 +12,11 @@ import sys
 import pytest
 
 FLAG = "--xla_gpu_per_fusion_autotune_cache_dir="
+ADDED = "HINTSJAX_XLA_FLAGS_ADDED"  # what a parent hintsjax process added (this suite's own, here)
 
 
 def flags_after_import(xla_flags: str | None, cache: str | None) -> list[str]:
-    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "HINTSJAX_COMPILATION_CACHE")}
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "HINTSJAX_COMPILATION_CACHE", ADDED)}
     env.update({k: v for k, v in (("XLA_FLAGS", xla_flags), ("HINTSJAX_COMPILATION_CACHE", cache)) if v is not None})
     done = subprocess.run([sys.executable, "-c", "import hintsjax, os; print(os.environ['XLA_FLAGS'])"],
                           env=env, capture_output=True, text=True, check=True)
@@ -56,7 +57,7 @@ print(os.environ["XLA_FLAGS"])
 
 @pytest.mark.parametrize("case", ["default", "chosen", "started"])
 def test_deterministic_ops_drop_for_warp_only_where_the_user_left_them_and_jax_has_not_started(case, tmp_path):
-    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", ADDED)}  # a fresh process's
     env.update(HINTSJAX_COMPILATION_CACHE=str(tmp_path), JAX_PLATFORMS="cpu")
     if case == "chosen":
         env["XLA_FLAGS"] = "--xla_gpu_deterministic_ops=true"
@@ -81,3 +82,20 @@ def test_a_command_asks_only_for_warp_when_every_job_does(tmp_path):
     assert not asks_only_for_warp(["env=ant"])  # physics=auto: JAX's solver
     assert not asks_only_for_warp(["-m", "env=ant", "physics=warp,jax"])
     assert not asks_only_for_warp([f"resume={tmp_path / 'missing'}"])
+
+
+def test_a_child_of_a_hintsjax_process_tells_its_parents_flags_from_the_users(tmp_path):
+    """run_path.py and the sweeps start `python -m hintsjax.run` from a process that imported
+    hintsjax: the child inherits XLA_FLAGS with deterministic ops on, set by hintsjax, not by
+    the user, so a Warp command there still turns them off; a flag the user set stays theirs."""
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", ADDED)}  # a fresh process's
+    env.update(HINTSJAX_COMPILATION_CACHE=str(tmp_path), JAX_PLATFORMS="cpu")
+    parent = subprocess.run([sys.executable, "-c", "import hintsjax, os; print(os.environ['XLA_FLAGS']); "
+                             "print(os.environ['HINTSJAX_XLA_FLAGS_ADDED'])"], env=env, capture_output=True, text=True, check=True)
+    flags, added = parent.stdout.splitlines()
+    for user in ("", "--xla_gpu_deterministic_ops=true"):
+        inherited = {**env, "XLA_FLAGS": f"{user} {flags}".strip(), "HINTSJAX_XLA_FLAGS_ADDED": added}
+        child = subprocess.run([sys.executable, "-c", DROP, "child"], env=inherited, capture_output=True, text=True, check=True)
+        dropped, child_flags = child.stdout.split("\n")[:2]
+        assert dropped == str(not user), child_flags
+        assert child_flags.split().count("--xla_cpu_enable_concurrency_optimized_scheduler=false") == 1
