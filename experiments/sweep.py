@@ -119,7 +119,7 @@ def train_one(runs: Path, run_ids: list[str], seeds: int, smoke: bool, experts: 
         (runs / run_id / "eval.json").write_text(json.dumps({**result, **extra}, indent=1))
     for run_id in run_ids:
         if run_id.split("/")[1] == EXPERT_RUN:
-            exported = expert.export(runs / run_id, None if experts is None else experts / run_id.split("/")[0])
+            exported = expert.export(runs / run_id, None if experts is None else experts / run_id.split("/")[0], force=True)
             print(f"exported the expert to {exported}", flush=True)
 
 

@@ -64,9 +64,10 @@ def packaged() -> list[str]:
     return sorted(p.name for p in EXPERTS_DIR.iterdir() if (p / EXPERT_JSON).is_file()) if EXPERTS_DIR.is_dir() else []
 
 
-def export(run_dir: Path, out_dir: Path | None = None) -> Path:
-    """Export the best seed of a finished state-based run as an expert folder; returns its path."""
-    from hintsjax import checkpoint
+def export(run_dir: Path, out_dir: Path | None = None, force: bool = False) -> Path:
+    """Export the best seed of a finished state-based run as an expert folder; returns its path.
+    An expert that is there already (a packaged one, by default) is replaced only with `force`."""
+    from hintsjax import checkpoint, paths
 
     cfg = load_run_config(run_dir)
     if cfg.agent_spec.observe != ("state",) or cfg.agent_spec.algorithm != "ppo":
@@ -74,6 +75,11 @@ def export(run_dir: Path, out_dir: Path | None = None) -> Path:
     eval_json = Path(run_dir) / "eval.json"
     if not eval_json.is_file():
         raise UsageError(f"{run_dir} has no eval.json: let the run finish (or resume it) before exporting")
+    out = Path(out_dir or EXPERTS_DIR / cfg.env).absolute()
+    paths.check_folder(out, "--out")
+    if (out / EXPERT_JSON).exists() and not force:
+        raise UsageError(f"{out} holds an expert already ({cfg.env}'s{' packaged' if out.parent == EXPERTS_DIR.absolute() else ''} "
+                         f"one); give --out another folder, or --force to replace it")
     evaluation = json.loads(eval_json.read_text())["evaluations"][0]
     best = max(range(len(evaluation["seed_means"])), key=lambda i: evaluation["seed_means"][i])
     state, update = checkpoint.restore_latest(run_dir, cfg)
@@ -82,7 +88,6 @@ def export(run_dir: Path, out_dir: Path | None = None) -> Path:
     if normalization.COLLECTION in state.params:
         stats = jax.tree.map(lambda x: x[best], state.params[normalization.COLLECTION][normalization.NAME])
         policy["state_norm"] = {"mean": stats["mean"], "var": stats["var"]}
-    out = Path(out_dir or EXPERTS_DIR / cfg.env).absolute()
     out.mkdir(parents=True, exist_ok=True)
     with ocp.StandardCheckpointer() as saver:
         saver.save(out / POLICY, policy, force=True)
@@ -157,8 +162,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = ArgumentParser(prog="python -m hintsjax.expert", description=__doc__.splitlines()[0])
     parser.add_argument("run", type=Path, help="a finished run folder of agent=expert_ppo")
     parser.add_argument("--out", type=Path, default=None, help="expert folder (default: hintsjax/experts/<env>)")
+    parser.add_argument("--force", action="store_true", help="replace the expert in that folder (a packaged one, by default)")
     args = parser.parse_args(argv)
-    out = export(args.run, args.out)
+    out = export(args.run, args.out, args.force)
     meta = json.loads((out / EXPERT_JSON).read_text())
     print(f"expert for {meta['env']}: seed {meta['seed_index']} of {args.run} "
           f"({meta['seed_eval_mean']:.2f} over {meta['episodes_per_seed']} episodes) -> {out}")

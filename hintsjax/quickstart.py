@@ -20,7 +20,7 @@ from pathlib import Path
 
 import jax
 
-from hintsjax import checkpoint, compilation_cache, run, video
+from hintsjax import checkpoint, compilation_cache, paths, run, video
 from hintsjax.algorithms import make_trainer
 from hintsjax.config import RunConfig, run_config, save_run_config
 from hintsjax.evaluate import eval_keys, evaluate_params
@@ -62,6 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.updates < 1:
         parser.exit(2, f"error: --updates must be at least 1, got {args.updates}\n")
+    paths.check_folder(args.out_dir, "--out-dir")
     t = time.perf_counter()
     cfg = run_config({**SETTINGS, "ppo": {"total_env_steps": 1024 * args.updates}})
     compilation_cache.enable(compilation_cache.folder(True))

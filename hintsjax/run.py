@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from hintsjax import checkpoint, command_line, compilation_cache, devices, expert, memory, program_cache, xla_flags
+from hintsjax import checkpoint, command_line, compilation_cache, devices, expert, memory, paths, program_cache, xla_flags
 from hintsjax.config import RunConfig, load_run_config, run_config, save_run_config, to_dict
 from hintsjax.devices import SeedLayout
 from hintsjax.evaluate import compile_evaluator, evaluate_group, evaluate_variants, metrics_text
@@ -473,6 +473,7 @@ def request(values: dict[str, Any]) -> Request:
             cfg = train_longer(cfg, steps)
     else:
         cfg, run_dir = run_config(values), None
+        paths.check_folder(out_dir, "out_dir")
     if cfg.agent_spec.imitates:
         expert.describe(cfg.env, cfg.expert)  # a missing or foreign expert
     if cfg.physics == physics.WARP:

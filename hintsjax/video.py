@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from hintsjax import envs, memory
+from hintsjax import envs, memory, paths
 from hintsjax.config import RunConfig, env_params, load_run_config
 from hintsjax.errors import ArgumentParser, UsageError, command
 from hintsjax.evaluate import eval_keys
@@ -247,11 +247,12 @@ def main(argv: list[str] | None = None) -> int:
         if value <= 0:
             raise UsageError(f"{name} must be positive, got {value}")
     memory.check_video(args.scale, steps, functools.partial(frame_shape, env.image_size))
+    out = args.out or args.run / f"video-{variant}-seed{args.seed}.gif"
+    paths.check_file(out, "--out")
     state, _ = checkpoint.restore_latest(args.run, cfg)
     params = jax.tree.map(lambda x: x[args.seed], state.params)
     episode = rollout(cfg, params, variant, steps, eval_keys(cfg)[args.seed]).cut()
     frames = compose_frames(episode, hint_labels(env.hint), args.scale, env.max_steps)
-    out = args.out or args.run / f"video-{variant}-seed{args.seed}.gif"
     out.parent.mkdir(parents=True, exist_ok=True)
     write_gif(frames, out, args.fps)
     ended = "episode ended" if episode.done.any() else f"cut at {steps} steps"

@@ -40,37 +40,8 @@ def cli(*args: str, cwd: Path, module: str = "hintsjax.run") -> subprocess.Compl
     return subprocess.run([sys.executable, "-m", module, *args], cwd=cwd, capture_output=True, text=True, timeout=300)
 
 
-BAD_RUN_ARGS = {
-    "env=nope": "valid choices: acrobot, ant, ant_fast, car_racing, halfcheetah, humanoid, idp, pendulum",
-    "agent=nope": "valid choices: dagger, expert_ppo, gail, hints, hints_blind, hints_state, ppo_noisy_state, ppo_rgb, ppo_state",
-    "scheme=nope": "valid choices: ac, fc, lc, mc",
-    "hint=nope": "valid choices: angular_velocity, composite, goal_distance, partial_state, state, torque",
-    "hint=angular_velocity+nope": "unknown hint 'nope'",
-    "variant=nope": "valid choices: swingto, swingup",
-    "seeds=0": "seeds must be positive",
-    "ppo.num_envs=-4": "ppo.num_envs must be positive",
-    "ppo.minibatch_size=300": "multiple of ppo.minibatch_size",
-    "resume=no/such/run": "no run folder",
-    "env=acrobot hint=torque": "valid choices: angular_velocity_1, angular_velocity_2, composite, goal_distance, joint, partial_state, state",
-    "env=idp variant=swingto": "valid choices: standard",
-    "foo=1": "unknown config key 'foo'",
-    "sead=3": "did you mean 'seed'?",
-    "ppo.epoch=3": "did you mean 'ppo.epochs'?",
-    "env=pendulum extra": "unexpected argument 'extra'",
-    "ppo.actor_lr=nan": "ppo.actor_lr must be a positive finite number, got nan",
-    "ppo.actor_lr=abc": "actor_lr must be float, got 'abc'",
-    "ppo.gamma=1.5": "ppo.gamma must be a finite number in [0.0, 1.0], got 1.5",
-    "-m hydra/launcher=nope scheme=lc,fc": "unknown hydra/launcher 'nope'; valid choices: submitit_slurm, submitit_local, basic",
-    "seeds==3": "cannot read 'seeds==3'",
-    "seeds=[1,2": "cannot read 'seeds=[1,2'",
-    "name=\u00fc": "quote a value with other characters, key='value'",
-    "+seeds=3": "adds a key that exists already; write seeds=3",
-    "~seeds": "would delete a setting; give seeds=<value> instead",
-    # a sweep is checked job by job before the first job trains (or Hydra writes multirun.yaml)
-    "-m seeds=1,0,2": "sweep job 'seeds=0': seeds must be positive",
-    "-m hint=composite,nope": "sweep job 'hint=nope': unknown hint 'nope'",
-    "-m seeds=0,1": "sweep job 'seeds=0'",
-}
+BAD = yaml.safe_load((Path(__file__).parent / "data" / "bad_inputs.yaml").read_text())  # every command's bad input
+BAD_RUN_ARGS = BAD["run_command_line"]  # through the real command line
 
 
 @pytest.mark.parametrize("arg", list(BAD_RUN_ARGS))
@@ -85,65 +56,11 @@ def test_bad_input_exits_2_with_one_line_and_writes_nothing(arg, tmp_path):
 
 
 # The same checks in-process (no interpreter start): the imitation agents' own settings.
-BAD_IMITATION_VALUES = {
-    "expert=no/such/expert": "no expert for pendulum at no/such/expert (packaged: acrobot, ant, car_racing, halfcheetah, humanoid, idp, pendulum)",
-    "gail.reward=nope": "unknown gail.reward 'nope'; valid: logit, original",
-    "dagger.buffer_size=16": "dagger.buffer_size (16) must hold one round",
-    "gail.demonstrations=0": "gail.demonstrations must be positive",
-    "dagger.nope=1": "unknown config keys ['dagger.nope']",
-}
+BAD_IMITATION_VALUES = BAD["run_imitation_settings"]
 
 
 # Settings as Hydra hands them over (numbers already parsed), checked in-process: one line each.
-BAD_SETTINGS = {
-    "ppo.actor_lr=-0.001": "ppo.actor_lr must be a positive finite number, got -0.001",
-    "ppo.encoder_lr=inf": "ppo.encoder_lr must be a positive finite number, got inf",
-    "ppo.critic_lr=0": "ppo.critic_lr must be positive, got 0",
-    "ppo.max_grad_norm=0.0": "ppo.max_grad_norm must be a positive finite number, got 0.0",
-    "ppo.clip_eps=-0.2": "ppo.clip_eps must be a positive finite number, got -0.2",
-    "ppo.reward_scale=nan": "ppo.reward_scale must be a positive finite number, got nan",
-    "ppo.gae_lambda=-0.1": "ppo.gae_lambda must be a finite number in [0.0, 1.0], got -0.1",
-    "ppo.ent_coef=nan": "ppo.ent_coef must be a finite number in [0.0, inf], got nan",
-    "ppo.vf_coef=-1": "ppo.vf_coef must be a finite number in [0.0, inf], got -1",
-    "ppo.epochs=0": "ppo.epochs must be positive, got 0",
-    "ppo.epochs=2.5": "epochs must be int, got 2.5",
-    "ppo.total_env_steps=10": "ppo.total_env_steps (10) is less than one update's batch (1024)",
-    "ppo.hidden=[0]": "ppo.hidden widths must be positive, got [0]",
-    "ppo.target_kl=-1": "ppo.target_kl (-1) must be positive, or null for no KL early stop",
-    "ppo.action_head=beta": "unknown ppo.action_head 'beta'; valid: gaussian, tanh, sigmoid",
-    "agent=expert_ppo ppo.action_head=tanh": "ppo.action_head=tanh is for PPO's learners; expert_ppo keeps the gaussian head",
-    "agent=dagger ppo.action_head=sigmoid": "ppo.action_head=sigmoid is for PPO's learners; dagger keeps the gaussian head",
-    "eval_episodes=0": "eval_episodes must be positive, got 0",
-    "checkpoint_every=0": "checkpoint_every must be positive, got 0",
-    "checkpoint_seconds=-1": "checkpoint_seconds must be 0 or more, got -1",
-    "seeds=2.5": "seeds must be int, got 2.5",
-    "stochastic_eval=maybe": "stochastic_eval must be bool, got 'maybe'",
-    "eval_variants=[nope]": "unknown variant 'nope' for pendulum; valid choices: swingto, swingup",
-    "scheme=FC": "unknown scheme 'FC'; valid choices: ac, fc, lc, mc",
-    "env=car_racing hint=torque": "unknown hint 'torque' for env 'car_racing'",
-    "gail.disc_lr=nan": "gail.disc_lr must be a positive finite number, got nan",
-    "physics=mujoco": "unknown physics 'mujoco'; valid choices: auto, jax, warp",
-    "env=car_racing physics=warp": "car_racing has no MuJoCo model; physics=warp is for acrobot, ant, ant_fast, halfcheetah",
-    "env=ant warp_capacity=0.5": "warp_capacity must be a number of at least 1, got 0.5",
-    "env=ant warp_capacity=nan": "warp_capacity must be a number of at least 1, got nan",
-    # issue 49's settings that did not fit together
-    "agent=hints hint=none": "agent=hints sees a hint, so hint=none leaves it nothing; valid for pendulum: ",
-    "agent=ppo_state hint=nope": "unknown hint 'nope' for env 'pendulum'",
-    "hint=composite+composite": "hint 'composite+composite' gives",
-    "ppo.hidden=[]": "ppo.hidden must be a list of at least one whole number, got []",
-    "ppo.hidden=[1.5,2.7]": "ppo.hidden must be a list of at least one whole number, got [1.5, 2.7]",
-    "ppo.hidden=64": "ppo.hidden must be a list of layer widths such as [256,256], got 64",
-    "checkpoint_seconds=nan": "checkpoint_seconds must be 0 or more, got nan",
-    "name=../escape": "name must be one folder's name inside out_dir",
-    "name=..": "name must be one folder's name inside out_dir",
-    "ppo.total_env_steps=4000000000 ppo.batch_size=2000000000": "ppo.batch_size=2000000000 cannot fit: one seed's rollout",
-    "seeds=1000000000": "seeds=1000000000 cannot fit: 1000000000 seeds a device hold at least",
-    "eval_episodes=100000000000": "eval_episodes=100000000000 cannot fit: evaluating 5 seeds x",
-    "agent=ppo_state eval_episodes=100000000000000": "eval_episodes=100000000000000 cannot fit",
-    "resume=runs/x env=acrobot": "resume continues a run as its config.yaml says; drop env=acrobot",
-    "resume=runs/x ppo.total_env_steps=512 ppo.epochs=2": "drop ppo.epochs=2",  # a longer budget may stay
-    "resume=runs/x ppo.total_env_steps=512": "no run folder at runs/x",
-}
+BAD_SETTINGS = BAD["run_settings"]
 
 
 def test_names_and_folders_are_strings_whatever_yaml_makes_of_them():

@@ -199,6 +199,18 @@ def test_export_keeps_the_best_seed_and_load_acts_like_it(expert_run, tmp_path):
     np.testing.assert_array_equal(loaded.log_std, best["params"]["log_std"])
 
 
+def test_an_expert_is_replaced_only_when_asked(expert_run, tmp_path):
+    """An expert folder that exists (the packaged one, by default) is not overwritten by an export
+    unless --force says so: the first export's files stay as they were."""
+    _, run_dir = expert_run
+    out = expert.export(run_dir, tmp_path / "expert")
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    with pytest.raises(UsageError, match="holds an expert already .*--force to replace it"):
+        expert.export(run_dir, out)
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+    assert expert.export(run_dir, out, force=True) == out and expert.load("linear", out) is not None
+
+
 def test_expert_errors_name_the_problem(expert_run, tmp_path):
     _, run_dir = expert_run
     out = expert.export(run_dir, tmp_path / "expert")

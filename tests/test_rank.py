@@ -7,7 +7,6 @@ import json
 
 import jax.numpy as jnp
 import numpy as np
-import pytest
 
 import cue_env  # noqa: F401  (registers the test env "cue": hints cue (the right action) and distractor (noise))
 from hintsjax import envs, rank
@@ -61,23 +60,3 @@ def test_learning_curve_area_by_hand():
 
 def test_ranking_by_mean():
     assert rank.ranking(np.array([[0.1, 0.5, 0.3], [0.1, 0.7, 0.1]])) == [3, 1, 2]
-
-
-@pytest.mark.parametrize("argv, message", [
-    (["env=nowhere"], "unknown env 'nowhere'"),
-    (["env=pendulum", "hints=joint"], "unknown hint 'joint'"),
-    (["env=pendulum", "hints="], "hints is empty"),
-    (["env=pendulum", "hints=composite,,torque"], "hints is empty"),
-    (["env=pendulum", "hints=torque,torque"], "lists a hint twice"),
-    (["env=pendulum", "scores=vibes"], "unknown score 'vibes'"),
-    (["env=pendulum", "scheme=xx"], "unknown scheme 'xx'"),
-    (["probe_fraction=0"], "probe_fraction must be above 0"),
-    (["probe_fraction=1.5"], "probe_fraction must be a finite number in [0.0, 1.0]"),
-    (["seeds=0"], "seeds must be positive"),
-    (["hint=composite"], "give key=value with a key of env, hints"),
-])
-def test_bad_input_is_one_line(argv, message, tmp_path, capsys):
-    assert rank.main([*argv, f"out_dir={tmp_path / 'out'}"]) == 2
-    err = capsys.readouterr().err
-    assert message in err and err.count("\n") == 1
-    assert not (tmp_path / "out").exists()

@@ -1,0 +1,85 @@
+"""Bad input for every command, from one table (tests/data/bad_inputs.yaml): each case exits 2
+with one line that names what is wrong, prints no traceback and writes nothing. The run
+command's command-line and settings sections run in tests/test_cli.py (through the real command
+line and as Hydra hands them over); this file runs the rest: evaluate, video, expert,
+quickstart, rank and generator through their `main(argv)`, and the run's folders in-process."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from hintsjax import evaluate, expert, generator, quickstart, rank, run, video
+
+TABLE = yaml.safe_load((Path(__file__).parent / "data" / "bad_inputs.yaml").read_text())
+COMMANDS = {"evaluate": evaluate.main, "video": video.main, "expert": expert.main, "quickstart": quickstart.main,
+            "rank": rank.main, "generator": generator.main}
+# the commands of key=value arguments write into out_dir: a case must leave it unmade
+EXTRA = {"rank": ["out_dir={tmp}/out"], "generator": ["out_dir={tmp}/out"]}
+TINY = {"env": "pendulum", "agent": "ppo_state", "seeds": 2, "eval_episodes": 3, "checkpoint_every": 2,
+        "ppo": {"total_env_steps": 128, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}}
+
+
+@pytest.fixture(scope="module")
+def places(tmp_path_factory) -> dict[str, str]:
+    """The table's placeholders: a finished tiny run and folders damaged in known ways."""
+    root = tmp_path_factory.mktemp("bad_inputs")
+    assert run.main_from_values({**TINY, "out_dir": str(root), "name": "run"}) == 0
+    config = (root / "run" / "config.yaml").read_text()
+    folders = {"noconf": "", "nockpt": config, "badyaml": "env: [\n", "listyaml": "- 1\n- 2\n",
+               "hints_run": config.replace("agent: ppo_state", "agent: hints")}
+    for name, text in folders.items():
+        (root / name).mkdir()
+        if text:
+            (root / name / "config.yaml").write_text(text)
+    (root / "file").write_text("not a folder\n")
+    return {"run": str(root / "run"), "file": str(root / "file"), **{name: str(root / name) for name in folders}}
+
+
+def tree(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() if p.is_file() else b"/" for p in sorted(folder.rglob("*"))}
+
+
+def refused(main, args: str, message: str, places: dict[str, str], tmp_path: Path, capsys) -> None:
+    """`main(args)` with the placeholders filled: exit 2, its one line holds `message`, no traceback,
+    and neither the fixture's folders nor tmp_path changed."""
+    filled = {**places, "tmp": str(tmp_path)}
+    argv = [a.format(**filled) for a in args.split()]
+    watched = Path(places["run"]).parent
+    before = (tree(watched), tree(tmp_path))
+    try:
+        status = main(argv)
+    except SystemExit as e:  # argparse's errors exit from inside the parser
+        status = e.code
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert status == 2, err
+    assert len(lines) == 1 and lines[0].startswith("error: ") and message.format(**filled) in lines[0], lines
+    assert "Traceback" not in err
+    assert (tree(watched), tree(tmp_path)) == before
+
+
+CASES = [(name, args, message) for name in COMMANDS for args, message in TABLE[name].items()]
+
+
+@pytest.mark.parametrize("name, args, message", CASES, ids=[f"{n}: {a}" for n, a, _ in CASES])
+def test_a_command_refuses_bad_input_in_one_line_and_writes_nothing(name, args, message, places, tmp_path, capsys):
+    extra = " ".join(EXTRA.get(name, []))
+    refused(COMMANDS[name], f"{args} {extra}".strip(), message, places, tmp_path, capsys)
+
+
+@pytest.mark.parametrize("args", list(TABLE["run_folders"]))
+def test_a_run_refuses_an_out_dir_it_cannot_make(args, places, tmp_path, capsys):
+    def main(argv: list[str]) -> int:
+        key, value = argv[0].split("=", 1)
+        return run.main_from_values({"env": "pendulum", key: value})
+
+    refused(main, args, TABLE["run_folders"][args], places, tmp_path, capsys)
+
+
+def test_the_table_holds_at_least_120_cases_across_all_seven_commands():
+    commands = {name.split("_")[0] for name in TABLE}
+    assert commands == {"run", *COMMANDS} and sum(map(len, TABLE.values())) >= 120
+    assert all(isinstance(section, dict) and all(isinstance(m, str) for m in section.values()) for section in TABLE.values())
