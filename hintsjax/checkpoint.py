@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import sys
 from pathlib import Path
 
 import jax
@@ -21,6 +22,23 @@ from hintsjax.config import RunConfig
 from hintsjax.errors import UsageError
 
 CHECKPOINTS = "checkpoints"
+
+
+def _quiet_closed_loops(previous=sys.unraisablehook):
+    """An unraisable-exception hook that drops asyncio's "Event loop is closed": when a background
+    write fails (a full disk), orbax closes its event loop while tensorstore's threads still call
+    back into it, and each callback printed a traceback of that error (38 to 84 of them before the
+    one line naming the checkpoint, under `ulimit -f`). Anything else goes to `previous`."""
+
+    def hook(unraisable) -> None:
+        value = unraisable.exc_value
+        if not (isinstance(value, RuntimeError) and str(value) == "Event loop is closed"):
+            previous(unraisable)
+
+    return hook
+
+
+sys.unraisablehook = _quiet_closed_loops()
 
 
 class CheckpointWriteError(RuntimeError):
