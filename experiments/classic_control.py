@@ -31,7 +31,7 @@ from typing import Callable
 
 from report import (archive_runs, cell, iqm_cell, load, markdown_table, mean_of, metrics_path, ordering,
                     refuse_lost_cells, sweep_seconds, wall_clock, write_report)
-from sweep import add_arguments, chosen_envs, chosen_runs, hints_run, sweep
+from sweep import add_arguments, chosen_envs, chosen_runs, chosen_settings, hints_run, sweep
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("pendulum", "acrobot", "idp")
@@ -332,7 +332,7 @@ def main() -> None:
     if args.table == 4:  # the fc row is Table 2's
         run_ids = [r for r in run_ids if "-fc-" not in r or not (args.runs / r / "eval.json").exists()]
     sweep(args.runs, run_ids, args.workers, args.seeds, args.table, args.smoke, args.launch_until, args.experts, args.gpus,
-          args.group_size)
+          args.group_size, chosen_settings(parser, args))
 
 
 if __name__ == "__main__":

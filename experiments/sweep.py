@@ -51,12 +51,14 @@ SMOKE = {"eval_episodes": 2, "ppo": {"total_env_steps": 1024, "num_envs": 8, "ba
                                      "minibatch_size": 256, "epochs": 1}}
 
 
-def run_values(env: str, label: str, seeds: int, smoke: bool = False, experts: Path | None = None) -> dict:
-    """Config values of a run label (the inverse of RunConfig.label)."""
+def run_values(env: str, label: str, seeds: int, smoke: bool = False, experts: Path | None = None,
+               settings: dict | None = None) -> dict:
+    """Config values of a run label (the inverse of RunConfig.label); `settings` (top-level keys
+    given with --set, e.g. physics or the first seed) apply to every run of the sweep."""
     from hintsjax.agents import AGENTS
 
     values = {"env": env, "seeds": seeds, "checkpoint_every": 50, "checkpoint_seconds": CHECKPOINT_SECONDS,
-              **(SMOKE if smoke else {})}
+              **(SMOKE if smoke else {}), **(settings or {})}
     if label in AGENTS and AGENTS[label].imitates:
         return {**values, "agent": label, "expert": None if experts is None else str(experts / env)}
     if label in AGENTS:
@@ -78,7 +80,8 @@ def group_folder(runs: Path, run_ids: list[str]) -> Path:
     return runs / env / GROUPS / digest
 
 
-def train_one(runs: Path, run_ids: list[str], seeds: int, smoke: bool, experts: Path | None) -> None:
+def train_one(runs: Path, run_ids: list[str], seeds: int, smoke: bool, experts: Path | None,
+              settings: dict | None = None) -> None:
     """Train and evaluate runs `env/label` (one, or a group that shares a program) into
     runs/env/label; export an expert's. A group that does not fit in memory is split in halves."""
     import jax
@@ -89,7 +92,7 @@ def train_one(runs: Path, run_ids: list[str], seeds: int, smoke: bool, experts: 
     cfgs = []
     for run_id in run_ids:
         env, label = run_id.split("/")
-        cfg = run_config(run_values(env, label, seeds, smoke, experts))
+        cfg = run_config(run_values(env, label, seeds, smoke, experts, settings))
         assert cfg.label == label, (cfg.label, label)
         cfgs.append(cfg)
         (runs / run_id).mkdir(parents=True, exist_ok=True)
@@ -112,7 +115,7 @@ def train_one(runs: Path, run_ids: list[str], seeds: int, smoke: bool, experts: 
             half = len(run_ids) // 2
             print(f"{e}: splitting the group into {half} and {len(run_ids) - half} runs", flush=True)
             for part in (run_ids[:half], run_ids[half:]):
-                train_one(runs, part, seeds, smoke, experts)
+                train_one(runs, part, seeds, smoke, experts, settings)
             return
     extra = {"wall_seconds": before + time.time() - t, "device": jax.devices()[0].device_kind}
     for run_id, result in zip(run_ids, results):
@@ -123,14 +126,14 @@ def train_one(runs: Path, run_ids: list[str], seeds: int, smoke: bool, experts: 
             print(f"exported the expert to {exported}", flush=True)
 
 
-def plan_jobs(run_ids: list[str], seeds: int, smoke: bool, group_size: int = 0) -> list[list[str]]:
+def plan_jobs(run_ids: list[str], seeds: int, smoke: bool, group_size: int = 0, settings: dict | None = None) -> list[list[str]]:
     """The runs partitioned into groups that train together, each cut into parts of at most
     `group_size` runs (0: no limit; 1: every run its own job). Smaller groups suit calls with a
     time limit: each part is a job that finishes on its own."""
     from hintsjax.config import run_config
     from hintsjax.group import plan
 
-    cfgs = [run_config(run_values(*r.split("/"), seeds, smoke)) for r in run_ids]
+    cfgs = [run_config(run_values(*r.split("/"), seeds, smoke, settings=settings)) for r in run_ids]
     size = group_size or len(run_ids)
     return [[run_ids[i] for i in members[k:k + size]] for members in plan(cfgs) for k in range(0, len(members), size)]
 
@@ -156,13 +159,14 @@ def begun_groups(runs: Path, run_ids: list[str], seeds: int) -> list[list[str]]:
     return jobs
 
 
-def todo_jobs(runs: Path, run_ids: list[str], seeds: int, smoke: bool, group_size: int = 0) -> list[list[str]]:
+def todo_jobs(runs: Path, run_ids: list[str], seeds: int, smoke: bool, group_size: int = 0,
+              settings: dict | None = None) -> list[list[str]]:
     """The jobs that train the unfinished runs of `run_ids`: the groups begun earlier
     (`begun_groups`), resumed as they were, then the other unfinished runs grouped by `plan_jobs`."""
     begun = begun_groups(runs, run_ids, seeds)
     taken = {r for job in begun for r in job}
     rest = [r for r in run_ids if r not in taken and not (runs / r / "eval.json").exists()]
-    return begun + plan_jobs(rest, seeds, smoke, group_size)
+    return begun + plan_jobs(rest, seeds, smoke, group_size, settings)
 
 
 def prerequisite(run_id: str) -> str | None:
@@ -192,14 +196,16 @@ def stopped(*_: Any) -> None:
 
 def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int | str, smoke: bool,
           launch_until: float = float("inf"), experts: Path | None = None, gpus: tuple[str, ...] = (),
-          group_size: int = 0) -> None:
+          group_size: int = 0, settings: dict | None = None) -> None:
     """Train every unfinished run, grouped (`todo_jobs`: a group begun earlier resumes whole),
     `workers` groups at a time, starting none after `launch_until` seconds (so that a
     time-limited call ends with finished runs, not killed ones); append the sweep's wall-clock to runs/sweeps.jsonl. With `gpus` (CUDA device
     ids), each worker gets the least busy of them to itself (CUDA_VISIBLE_DEVICES); without, all
-    workers share the visible devices. `group_size` caps the runs of a group (`plan_jobs`)."""
+    workers share the visible devices. `group_size` caps the runs of a group (`plan_jobs`);
+    `settings` (--set) go to every run."""
     unfinished = [r for r in run_ids if not (runs / r / "eval.json").exists()]
-    todo = sorted(todo_jobs(runs, run_ids, seeds, smoke, group_size), key=lambda job: sum(map(budget, job)), reverse=True)
+    todo = sorted(todo_jobs(runs, run_ids, seeds, smoke, group_size, settings), key=lambda job: sum(map(budget, job)),
+                  reverse=True)
     print(f"table {table}: {len(run_ids) - len(unfinished)} of {len(run_ids)} runs done already; "
           f"training {len(unfinished)} in {len(todo)} group(s), {workers} at a time, {seeds} seeds each", flush=True)
     launched = 0
@@ -226,7 +232,8 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int |
                 name = ",".join(job)
                 log_of(job).parent.mkdir(parents=True, exist_ok=True)
                 cmd = [sys.executable, str(Path(__file__).resolve()), "--runs", str(runs), "--seeds", str(seeds), "--one", name,
-                       *(["--smoke"] if smoke else []), *(["--experts", str(experts)] if experts else [])]
+                       *(["--smoke"] if smoke else []), *(["--experts", str(experts)] if experts else []),
+                       *(f"--set={k}={v}" for k, v in (settings or {}).items())]
                 if gpus:
                     busy = [gpu_of[",".join(j)] for j, _ in active]
                     gpu_of[name] = min(gpus, key=busy.count)
@@ -251,7 +258,7 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int |
         record = {"table": table, "runs": len(run_ids), "trained": launched - len(failed) - len(interrupted),
                   "failed": failed, "interrupted": interrupted, "workers": workers, "seconds": seconds,
                   "seeds": seeds, "grouped": group_size != 1, "finished": time.strftime("%Y-%m-%d %H:%M:%S"),
-                  "gpus": list(gpus)}
+                  "gpus": list(gpus), **({"settings": settings} if settings else {})}
         devices = {(load(runs, *r.split("/")) or {}).get("device", "").lower() for r in run_ids} - {""}
         if devices == {"cpu"}:  # the workers' device (the parent keeps off it): CPU sweeps leave the GPU totals
             record["device"] = "cpu"
@@ -286,6 +293,34 @@ def add_arguments(parser: argparse.ArgumentParser, runs: str, envs: tuple[str, .
     parser.add_argument("--experts", type=lambda s: Path(s).absolute(), default=None,
                         help="where expert_ppo runs export their expert and dagger/gail read it "
                              "(default: the package's hintsjax/experts/<env>)")
+    add_settings(parser)
+
+
+def add_settings(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="settings",
+                        help="a top-level run setting for every run, e.g. --set physics=warp --set seed=10 "
+                             "(give each part of a row's seeds its own --runs folder)")
+
+
+def chosen_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict:
+    """--set's KEY=VALUE pairs (values as YAML reads them); exit 2 on one that is not KEY=VALUE or a
+    setting RunConfig refuses."""
+    import yaml
+
+    from hintsjax.config import run_config
+    from hintsjax.errors import UsageError
+
+    settings = {}
+    for item in args.settings:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            parser.exit(2, f"error: --set takes KEY=VALUE, got {item!r}\n")
+        settings[key] = yaml.safe_load(value)
+    try:
+        run_config({"env": "pendulum", **settings})
+    except UsageError as e:
+        parser.exit(2, f"error: --set: {e}\n")
+    return settings
 
 
 def chosen_envs(parser: argparse.ArgumentParser, args: argparse.Namespace, envs: tuple[str, ...]) -> list[str]:
@@ -326,8 +361,9 @@ def table_main(description: str, default_runs: str, envs: tuple[str, ...], table
         return
     names = chosen_envs(parser, args, envs)
     ids = chosen_runs(parser, args, run_ids(names))
+    settings = chosen_settings(parser, args)
     sweep(args.runs, ids, args.workers, args.seeds, table, args.smoke, args.launch_until, args.experts, args.gpus,
-          args.group_size)
+          args.group_size, settings)
 
 
 def main() -> None:
@@ -337,8 +373,14 @@ def main() -> None:
     parser.add_argument("--one", required=True, help="env/label, or comma-separated env/labels of one group")
     parser.add_argument("--smoke", action="store_true")
     parser.add_argument("--experts", type=Path, default=None)
+    add_settings(parser)
     args = parser.parse_args()
-    train_one(args.runs, args.one.split(","), args.seeds, args.smoke, args.experts)
+    settings = chosen_settings(parser, args)
+    if settings.get("physics") == "warp":  # nothing repeats bit for bit under Warp: no deterministic ops
+        from hintsjax import xla_flags
+
+        xla_flags.drop_determinism()
+    train_one(args.runs, args.one.split(","), args.seeds, args.smoke, args.experts, settings)
 
 
 if __name__ == "__main__":

@@ -497,3 +497,28 @@ def test_learned_hints_compares_with_the_archived_ppo_rgb_or_trains_its_own(tmp_
     assert learned_hints.rgb_folder(tmp_path, "pendulum") == learned_hints.PPO_RGB / "pendulum" / "ppo_rgb"
     assert (learned_hints.rgb_folder(tmp_path, "pendulum") / "eval.json").is_file()
     assert learned_hints.rgb_folder(tmp_path, "halfcheetah") == tmp_path / "halfcheetah-ppo_rgb"
+
+
+def test_set_gives_every_run_of_a_sweep_a_setting_and_bad_ones_are_one_line(tmp_path, capsys):
+    """--set physics=warp --set seed=10 reach each run's values (and so its config.yaml: seeds
+    10-19 of a row are a part of its own); what is not KEY=VALUE, or what RunConfig refuses, is
+    one line and exit 2."""
+    import argparse
+
+    import cue_env  # noqa: F401  (tests/cue_env.py: the "cue" env and its hints)
+
+    def parsed(*items: str) -> dict:
+        parser = argparse.ArgumentParser()
+        sweep.add_settings(parser)
+        return sweep.chosen_settings(parser, parser.parse_args([f"--set={item}" for item in items]))
+
+    assert parsed("physics=warp", "seed=10") == {"physics": "warp", "seed": 10}
+    assert sweep.run_values("ant", "ppo_rgb", 2, settings={"physics": "warp", "seed": 10})["physics"] == "warp"
+    for bad, message in [("physics", "--set takes KEY=VALUE, got 'physics'"), ("physics=mujoco", "unknown physics 'mujoco'"),
+                         ("seedz=3", "unknown config keys ['seedz']")]:
+        with pytest.raises(SystemExit) as exit_:
+            parsed(bad)
+        err = capsys.readouterr().err.strip().splitlines()
+        assert exit_.value.code == 2 and len(err) == 1 and message in err[0], err
+    sweep.train_one(tmp_path, ["cue/hints-fc-cue"], seeds=2, smoke=True, experts=None, settings={"seed": 10})
+    assert "seed: 10\n" in (tmp_path / "cue/hints-fc-cue" / "config.yaml").read_text()
