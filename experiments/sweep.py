@@ -302,13 +302,10 @@ def add_settings(parser: argparse.ArgumentParser) -> None:
                              "(give each part of a row's seeds its own --runs folder)")
 
 
-def chosen_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict:
+def chosen_settings(parser: argparse.ArgumentParser, args: argparse.Namespace, before_jax: Callable[[dict], Any] = None) -> dict:
     """--set's KEY=VALUE pairs (values as YAML reads them); exit 2 on one that is not KEY=VALUE or a
-    setting RunConfig refuses."""
+    setting RunConfig refuses. `before_jax(settings)` runs before the check starts JAX's backend."""
     import yaml
-
-    from hintsjax.config import run_config
-    from hintsjax.errors import UsageError
 
     settings = {}
     for item in args.settings:
@@ -316,6 +313,11 @@ def chosen_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -
         if not sep or not key:
             parser.exit(2, f"error: --set takes KEY=VALUE, got {item!r}\n")
         settings[key] = yaml.safe_load(value)
+    if before_jax is not None:
+        before_jax(settings)
+    from hintsjax.config import run_config
+    from hintsjax.errors import UsageError
+
     try:
         run_config({"env": "pendulum", **settings})
     except UsageError as e:
@@ -366,6 +368,15 @@ def table_main(description: str, default_runs: str, envs: tuple[str, ...], table
           args.group_size, settings)
 
 
+def drop_determinism_for_warp(settings: dict) -> None:
+    """A worker of a physics=warp sweep trains without deterministic GPU ops (nothing repeats bit
+    for bit under Warp's atomics); it must say so before anything starts JAX's backend."""
+    if settings.get("physics") == "warp":
+        from hintsjax import xla_flags
+
+        xla_flags.drop_determinism()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description="train and evaluate one run of a sweep (a worker process)")
     parser.add_argument("--runs", type=Path, required=True)
@@ -375,11 +386,7 @@ def main() -> None:
     parser.add_argument("--experts", type=Path, default=None)
     add_settings(parser)
     args = parser.parse_args()
-    settings = chosen_settings(parser, args)
-    if settings.get("physics") == "warp":  # nothing repeats bit for bit under Warp: no deterministic ops
-        from hintsjax import xla_flags
-
-        xla_flags.drop_determinism()
+    settings = chosen_settings(parser, args, before_jax=drop_determinism_for_warp)
     train_one(args.runs, args.one.split(","), args.seeds, args.smoke, args.experts, settings)
 
 

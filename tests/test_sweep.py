@@ -522,3 +522,28 @@ def test_set_gives_every_run_of_a_sweep_a_setting_and_bad_ones_are_one_line(tmp_
         assert exit_.value.code == 2 and len(err) == 1 and message in err[0], err
     sweep.train_one(tmp_path, ["cue/hints-fc-cue"], seeds=2, smoke=True, experts=None, settings={"seed": 10})
     assert "seed: 10\n" in (tmp_path / "cue/hints-fc-cue" / "config.yaml").read_text()
+
+
+WORKER_SETTINGS = """
+import argparse, os, sys
+sys.path.insert(0, "experiments")
+import sweep
+parser = argparse.ArgumentParser()
+sweep.add_settings(parser)
+settings = sweep.chosen_settings(parser, parser.parse_args(sys.argv[1:]), before_jax=sweep.drop_determinism_for_warp)
+from jax._src import xla_bridge
+print(xla_bridge.backends_are_initialized(), "--xla_gpu_deterministic_ops=false" in os.environ["XLA_FLAGS"].split())
+"""
+
+
+@pytest.mark.parametrize("physics, dropped", [("warp", True), ("jax", False)])
+def test_a_warp_sweeps_worker_drops_deterministic_ops_before_jax_starts(physics, dropped):
+    """The check of --set starts JAX's backend (it resolves the physics), so a Warp worker drops
+    deterministic ops before it; a JAX worker keeps them."""
+    import os
+    import subprocess
+
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "HINTSJAX_XLA_FLAGS_ADDED")}
+    out = subprocess.run([sys.executable, "-c", WORKER_SETTINGS, f"--set=physics={physics}"], env={**env, "JAX_PLATFORMS": "cpu"},
+                         cwd=Path(__file__).resolve().parents[1], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["True", str(dropped)], out.stderr[-2000:]
