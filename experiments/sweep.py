@@ -302,9 +302,9 @@ def add_settings(parser: argparse.ArgumentParser) -> None:
                              "(give each part of a row's seeds its own --runs folder)")
 
 
-def chosen_settings(parser: argparse.ArgumentParser, args: argparse.Namespace, before_jax: Callable[[dict], Any] = None) -> dict:
-    """--set's KEY=VALUE pairs (values as YAML reads them); exit 2 on one that is not KEY=VALUE or a
-    setting RunConfig refuses. `before_jax(settings)` runs before the check starts JAX's backend."""
+def parsed_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict:
+    """--set's KEY=VALUE pairs, values as YAML reads them; exit 2 on one that is not KEY=VALUE.
+    Starts nothing (a worker reads them before JAX's backend starts)."""
     import yaml
 
     settings = {}
@@ -313,8 +313,12 @@ def chosen_settings(parser: argparse.ArgumentParser, args: argparse.Namespace, b
         if not sep or not key:
             parser.exit(2, f"error: --set takes KEY=VALUE, got {item!r}\n")
         settings[key] = yaml.safe_load(value)
-    if before_jax is not None:
-        before_jax(settings)
+    return settings
+
+
+def check_settings(parser: argparse.ArgumentParser, settings: dict) -> dict:
+    """`settings`, or exit 2 in one line on one that RunConfig refuses (this starts JAX's backend:
+    resolving the physics asks it for the platform)."""
     from hintsjax.config import run_config
     from hintsjax.errors import UsageError
 
@@ -323,6 +327,11 @@ def chosen_settings(parser: argparse.ArgumentParser, args: argparse.Namespace, b
     except UsageError as e:
         parser.exit(2, f"error: --set: {e}\n")
     return settings
+
+
+def chosen_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict:
+    """--set's settings, read and checked."""
+    return check_settings(parser, parsed_settings(parser, args))
 
 
 def chosen_envs(parser: argparse.ArgumentParser, args: argparse.Namespace, envs: tuple[str, ...]) -> list[str]:
@@ -368,13 +377,16 @@ def table_main(description: str, default_runs: str, envs: tuple[str, ...], table
           args.group_size, settings)
 
 
-def drop_determinism_for_warp(settings: dict) -> None:
-    """A worker of a physics=warp sweep trains without deterministic GPU ops (nothing repeats bit
-    for bit under Warp's atomics); it must say so before anything starts JAX's backend."""
+def worker_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict:
+    """A worker's --set settings, read and checked. Under physics=warp it trains without
+    deterministic GPU ops (nothing repeats bit for bit under Warp's atomics), which it must say
+    before the check starts JAX's backend."""
+    settings = parsed_settings(parser, args)
     if settings.get("physics") == "warp":
         from hintsjax import xla_flags
 
         xla_flags.drop_determinism()
+    return check_settings(parser, settings)
 
 
 def main() -> None:
@@ -386,7 +398,7 @@ def main() -> None:
     parser.add_argument("--experts", type=Path, default=None)
     add_settings(parser)
     args = parser.parse_args()
-    settings = chosen_settings(parser, args, before_jax=drop_determinism_for_warp)
+    settings = worker_settings(parser, args)
     train_one(args.runs, args.one.split(","), args.seeds, args.smoke, args.experts, settings)
 
 

@@ -24,7 +24,7 @@ from hintsjax.errors import UsageError
 CHECKPOINTS = "checkpoints"
 
 
-def _quiet_closed_loops(previous=sys.unraisablehook):
+def _quiet_closed_loops(previous):
     """An unraisable-exception hook that drops asyncio's "Event loop is closed": when a background
     write fails (a full disk), orbax closes its event loop while tensorstore's threads still call
     back into it, and each callback printed a traceback of that error (38 to 84 of them before the
@@ -36,9 +36,6 @@ def _quiet_closed_loops(previous=sys.unraisablehook):
             previous(unraisable)
 
     return hook
-
-
-sys.unraisablehook = _quiet_closed_loops()
 
 
 class CheckpointWriteError(RuntimeError):
@@ -60,12 +57,18 @@ _HANDED: dict[Path, int] = {}  # the update each of those managers was given las
 def writing(run_dir: Path):
     """Within this block `save(run_dir, ...)` writes in the background; leaving it waits for the
     writes to finish (CheckpointWriteError if one failed), also when the block is left by an
-    exception, so an interrupted run keeps the checkpoint it was writing."""
+    exception, so an interrupted run keeps the checkpoint it was writing. Meanwhile a failed write's
+    "Event loop is closed" noise is dropped (`_quiet_closed_loops`)."""
     _WRITERS[Path(run_dir).absolute()] = _manager(run_dir, create=True, background=True)
+    previous = sys.unraisablehook
+    sys.unraisablehook = _quiet_closed_loops(previous)
     try:
         yield
     finally:
-        flush(run_dir)
+        try:
+            flush(run_dir)
+        finally:
+            sys.unraisablehook = previous
 
 
 def _array_specs(tree) -> list[tuple[tuple[int, ...], str]]:

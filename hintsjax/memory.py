@@ -23,9 +23,6 @@ import jax
 
 from hintsjax.errors import UsageError
 
-GiB = 2**30
-
-
 def sized(n: float) -> str:
     """Bytes as the largest unit that keeps the number at least 1 (binary units)."""
     for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
@@ -66,12 +63,11 @@ def transition_bytes(cfg: Any) -> int:
 def check_run(cfg: Any, seeds_per_device: int) -> None:
     """UsageError where a run's rollouts or its evaluation cannot fit on a device holding
     `seeds_per_device` of its seeds."""
-    have = device_bytes()
-    seed = cfg.ppo.batch_size * transition_bytes(cfg)
+    have, step = device_bytes(), transition_bytes(cfg)
+    seed = cfg.ppo.batch_size * step
     if seed > have:
-        most = have // transition_bytes(cfg)
         raise UsageError(f"ppo.batch_size={cfg.ppo.batch_size} cannot fit: one seed's rollout holds at least "
-                         f"{sized(seed)}, a device has {sized(have)} (at most {most} transitions a seed)")
+                         f"{sized(seed)}, a device has {sized(have)} (at most {have // step} transitions a seed)")
     if seeds_per_device * seed > have:
         raise UsageError(f"seeds={cfg.seeds} cannot fit: {seeds_per_device} seeds a device hold at least "
                          f"{sized(seeds_per_device * seed)} of rollouts ({sized(seed)} a seed), a device has "
@@ -82,12 +78,12 @@ def check_run(cfg: Any, seeds_per_device: int) -> None:
 def check_episodes(cfg: Any, seeds_per_device: int, episodes: int, key: str) -> None:
     """UsageError where evaluating `episodes` episodes of each of `seeds_per_device` seeds at
     once cannot fit on a device (`key` names the setting in the message)."""
-    have, one = device_bytes(), max(transition_bytes(cfg), 1)
+    have, one = device_bytes(), transition_bytes(cfg)  # at least an action, reward, value and flag: never 0
     need = seeds_per_device * episodes * one
     if need > have:
         raise UsageError(f"{key}={episodes} cannot fit: evaluating {seeds_per_device} seeds x {episodes} episodes at once "
                          f"holds at least {sized(need)} of pictures and actions, a device has {sized(have)} "
-                         f"(at most {max(have // (seeds_per_device * one), 0)} episodes)")
+                         f"(at most {have // (seeds_per_device * one)} episodes)")
 
 
 def check_video(scale: int, frames: int, frame_shape: Callable[[int], tuple[int, int]]) -> None:

@@ -476,9 +476,8 @@ def request(values: dict[str, Any]) -> Request:
         paths.check_folder(out_dir, "out_dir")
     if cfg.agent_spec.imitates:
         expert.describe(cfg.env, cfg.expert)  # a missing or foreign expert
-    if cfg.physics == physics.WARP:
-        check_warp_run()
-    memory.check_run(cfg, seed_layout(cfg).per_device)  # sizes that cannot fit, before the seeds' keys are drawn
+    # seed_layout refuses a Warp run it cannot place; then sizes that cannot fit, before the seeds' keys are drawn
+    memory.check_run(cfg, seed_layout(cfg).per_device)
     return Request(cfg, run_dir, out_dir, name, longer=steps is not None)
 
 
