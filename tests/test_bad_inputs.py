@@ -42,11 +42,15 @@ def tree(folder: Path) -> dict[str, bytes]:
     return {str(p.relative_to(folder)): p.read_bytes() if p.is_file() else b"/" for p in sorted(folder.rglob("*"))}
 
 
-def refused(main, args: str, message: str, places: dict[str, str], tmp_path: Path, capsys) -> None:
-    """`main(args)` with the placeholders filled: exit 2, its one line holds `message`, no traceback,
-    and neither the fixture's folders nor tmp_path changed."""
-    filled = {**places, "tmp": str(tmp_path)}
-    argv = [a.format(**filled) for a in args.split()]
+def filled(text: str, places: dict[str, str], tmp_path: Path) -> str:
+    """`text` with the table's placeholders filled in."""
+    return text.format(**places, tmp=str(tmp_path))
+
+
+def outcome(main, args: str, places: dict[str, str], tmp_path: Path, capsys) -> tuple[int, list[str], str, bool]:
+    """`main(args)` with the placeholders filled: (exit status, the lines on stderr, stderr, whether
+    the fixture's folders and tmp_path are as they were)."""
+    argv = [filled(a, places, tmp_path) for a in args.split()]
     watched = Path(places["run"]).parent
     before = (tree(watched), tree(tmp_path))
     try:
@@ -54,11 +58,8 @@ def refused(main, args: str, message: str, places: dict[str, str], tmp_path: Pat
     except SystemExit as e:  # argparse's errors exit from inside the parser
         status = e.code
     err = capsys.readouterr().err
-    lines = err.strip().splitlines()
-    assert status == 2, err
-    assert len(lines) == 1 and lines[0].startswith("error: ") and message.format(**filled) in lines[0], lines
-    assert "Traceback" not in err
-    assert (tree(watched), tree(tmp_path)) == before
+    return status, err.strip().splitlines(), err, (tree(watched), tree(tmp_path)) == before
+
 
 
 CASES = [(name, args, message) for name in COMMANDS for args, message in TABLE[name].items()]
@@ -67,7 +68,10 @@ CASES = [(name, args, message) for name in COMMANDS for args, message in TABLE[n
 @pytest.mark.parametrize("name, args, message", CASES, ids=[f"{n}: {a}" for n, a, _ in CASES])
 def test_a_command_refuses_bad_input_in_one_line_and_writes_nothing(name, args, message, places, tmp_path, capsys):
     extra = " ".join(EXTRA.get(name, []))
-    refused(COMMANDS[name], f"{args} {extra}".strip(), message, places, tmp_path, capsys)
+    status, lines, err, unchanged = outcome(COMMANDS[name], f"{args} {extra}".strip(), places, tmp_path, capsys)
+    assert status == 2, err
+    assert len(lines) == 1 and lines[0].startswith("error: ") and filled(message, places, tmp_path) in lines[0], lines
+    assert "Traceback" not in err and unchanged
 
 
 @pytest.mark.parametrize("args", list(TABLE["run_folders"]))
@@ -76,7 +80,10 @@ def test_a_run_refuses_an_out_dir_it_cannot_make(args, places, tmp_path, capsys)
         key, value = argv[0].split("=", 1)
         return run.main_from_values({"env": "pendulum", key: value})
 
-    refused(main, args, TABLE["run_folders"][args], places, tmp_path, capsys)
+    status, lines, err, unchanged = outcome(main, args, places, tmp_path, capsys)
+    assert status == 2, err
+    assert len(lines) == 1 and lines[0].startswith("error: ") and filled(TABLE["run_folders"][args], places, tmp_path) in lines[0], lines
+    assert "Traceback" not in err and unchanged
 
 
 def test_the_table_holds_at_least_120_cases_across_all_seven_commands():

@@ -530,7 +530,7 @@ sys.path.insert(0, "experiments")
 import sweep
 parser = argparse.ArgumentParser()
 sweep.add_settings(parser)
-settings = sweep.chosen_settings(parser, parser.parse_args(sys.argv[1:]), before_jax=sweep.drop_determinism_for_warp)
+settings = sweep.worker_settings(parser, parser.parse_args(sys.argv[1:]))
 from jax._src import xla_bridge
 print(xla_bridge.backends_are_initialized(), "--xla_gpu_deterministic_ops=false" in os.environ["XLA_FLAGS"].split())
 """
