@@ -13,9 +13,11 @@ stage computed, while `qpos` and `qvel` are the integrated ones. Gymnasium reads
 way, so the forward reward's "position before" is the previous step's stale value (or, after a
 reset, a fresh one), and `LocomotionState.position` keeps it.
 
-Actions are clipped to the actuators' control range before they act and before the control
-cost is taken (Gymnasium charges the raw action; an agent that clips before stepping, as
-Stable-Baselines3's do, sees the same numbers as ours).
+Actions are clipped to the actuators' control range before they act and, by default, before the
+control cost is taken. Gymnasium charges the raw action (an agent that clips before stepping, as
+Stable-Baselines3's do, sees the same numbers as ours); `LocomotionParams.raw_action_ctrl_cost`
+charges it as Gymnasium does, for comparison with published returns (docs/environments.md gives
+the difference it makes to the experts).
 
 The picture is drawn by the shared ray caster `render3d` from a camera that follows the
 centre of mass in the ground plane at a fixed height, so that a fall shows as a fall.
@@ -47,6 +49,9 @@ class LocomotionParams:
     healthy_z_high: float = jnp.inf
     reset_noise_scale: float = 0.1
     target_height: float = 0.0  # the torso height that the `goal_height` hint is measured from (m)
+    # Charge the control cost on the action as given (Gymnasium's rule) instead of the clipped one
+    # (ours by default: module docstring); for comparison with published Gymnasium returns.
+    raw_action_ctrl_cost: bool = struct.field(pytree_node=False, default=False)
 
 
 @struct.dataclass
@@ -103,7 +108,8 @@ class LocomotionEnv(MjxEnv):
         raise NotImplementedError
 
     def outcome(self, data: Readout, velocity: jax.Array, ctrl: jax.Array, params) -> tuple[jax.Array, jax.Array]:
-        """(reward, terminated) of a step that ended in `data` with `velocity` (float32[2])."""
+        """(reward, terminated) of a step that ended in `data` with `velocity` (float32[2]), its
+        control cost charged on `ctrl` (the clipped action, or the raw one: `raw_action_ctrl_cost`)."""
         raise NotImplementedError
 
     def observe_data(self, data: Readout) -> jax.Array:
@@ -154,7 +160,8 @@ class LocomotionEnv(MjxEnv):
         data = self.physics.run(state.qpos, state.qvel, ctrl, params.frame_skip, self.contact_forces)
         position = self.position(data)
         velocity = (position - state.position) / self.dt
-        reward, terminated = self.outcome(data, velocity, ctrl, params)
+        charged = jnp.reshape(action, (self.action_size,)) if params.raw_action_ctrl_cost else ctrl
+        reward, terminated = self.outcome(data, velocity, charged, params)
         max_velocity = jnp.maximum(state.max_velocity, velocity[0])
         return Step(self._state(data, position, velocity, reward, max_velocity, state.t), reward, terminated)
 

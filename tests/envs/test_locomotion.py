@@ -223,6 +223,29 @@ def test_humanoid_hints():
     np.testing.assert_allclose(hint("humanoid", "goal_height", state), [1.1 - 1.4], atol=1e-6)
 
 
+def test_raw_action_ctrl_cost_charges_the_action_as_gymnasium_does(cheetah):
+    """Out-of-range actions (2x the control range) from a Gymnasium state: with
+    `raw_action_ctrl_cost` our reward is HalfCheetah-v5's (which charges the raw action); by
+    default the cost is charged on the clipped action, so ours is higher by exactly the weight
+    times the clipped-away part of |a|^2. The dynamics are the same either way."""
+    import gymnasium as gym
+
+    gym_env = gym.make("HalfCheetah-v5").unwrapped
+    gym_env.reset(seed=3)
+    qpos, qvel = (np.asarray(x, np.float32).astype(np.float64) for x in (gym_env.data.qpos, gym_env.data.qvel))
+    gym_env.set_state(qpos, qvel)
+    action = np.random.default_rng(3).uniform(-2, 2, 6).astype(np.float32)
+    _, gym_reward, _, _, _ = gym_env.step(action)
+    state = cheetah.state_at(qpos, qvel)
+    raw = cheetah.transition(KEY, state, jnp.asarray(action), cheetah.params.replace(raw_action_ctrl_cost=True))
+    clipped = cheetah.transition(KEY, state, jnp.asarray(action), cheetah.params)
+    assert float(raw.reward) == pytest.approx(gym_reward, abs=2e-5)
+    clipped_away = 0.1 * (np.sum(action.astype(np.float64) ** 2) - np.sum(np.clip(action, -1, 1).astype(np.float64) ** 2))
+    assert clipped_away > 0.2
+    assert float(clipped.reward) - float(raw.reward) == pytest.approx(clipped_away, abs=1e-4)
+    np.testing.assert_array_equal(raw.state.qvel, clipped.state.qvel)
+
+
 def test_halfcheetah_hints():
     state = hand_set("halfcheetah", velocity=[-2.0, 0.0], max_velocity=3.5, reward=-0.7)
     np.testing.assert_allclose(hint("halfcheetah", "velocity", state), [-2.0])
