@@ -26,24 +26,35 @@ hairpin variant measures the joint's perpendicular offset. `first_corner_angle` 
 corner: at most 45 degrees on 99.35% of hairpin tracks and 18.8% of standard ones (4000 each).
 Hairpin tracks have 294.5 +- 26.1 tiles.
 
-Car: ours, not Box2D. A rigid body (Gymnasium's hull mass and inertia) on two axles with
-Gymnasium's wheel model: a wheel's force is proportional to its slip velocity (rim speed minus
+Car: Gymnasium's car (car_dynamics.py) without Box2D. One rigid body (the hull's and wheels' mass
+and inertia, turning about their centre of mass, MASS_BEHIND the hull's origin) on four WHEELS at
+Gymnasium's places. Each wheel's force is proportional to its slip velocity (rim speed minus
 ground speed along the wheel, and the sideways ground speed), scaled down onto a friction circle
-of FRICTION_LIMIT per wheel, times 0.6 where the axle is off the road. The engine feeds the rear
-wheels' spin with Gymnasium's power law; brakes slow both axles' spin (>= 0.9 locks them); gas
-rises by at most 0.1 per step and steering turns at 3 rad/s to at most 0.4 rad, as in Gymnasium
-(steer +1 turns right). Full gas spins the rear wheels, whose force then goes mostly lengthwise:
-the rear loses side grip and the car oversteers. SUBSTEPS semi-implicit Euler steps per 1/50 s
-frame, finite at rest. No drag: the top speed is Box2D's cap of 2 u per 1/50 s step, 100 u/s, as
-in Gymnasium: 0 to 44.9 u/s in 1 s, 86.6 in 2 s, 100 after 2.6 s (Gymnasium: 46, 86, 98, 100). A
-quadratic drag that set a top speed of 108 until 2026-11-25 ate up to 60% of the rear tyres'
-grip at speed, and a scripted driver left the road 2.5x as often as on Gymnasium's car
-(experiments/results/car_driver.md). 1 u is a track unit (the car is 5 u long).
+of FRICTION_LIMIT, times the grass grip (0.6) while the wheel touches no tile: each wheel grips by
+the surface under it, as Box2D's per-wheel friction limit does, so a car with two wheels on the
+grass yaws towards them and can spin. The engine feeds each rear wheel's spin with Gymnasium's
+power law; brakes slow every wheel's spin (>= 0.9 locks them); gas rises by at most 0.1 per step;
+the front wheels turn at 3 rad/s towards the target, to at most STEER_LIMIT (Box2D's 0.4 rad joint
+limit and its slop), as in Gymnasium (steer +1 turns right). Full gas spins the rear wheels,
+whose force then goes mostly lengthwise: the rear loses side grip and the car oversteers. A frame
+is one step as Gymnasium's (`Car.step`, then `world.Step`): forces from the frame's start, then
+velocities, then positions (semi-implicit Euler); finite at rest. No drag: Box2D caps a body at 2
+u per step, 100 u/s. Stepped beside Gymnasium's Box2D car under the same actions
+(test_the_car_steps_beside_box2ds_car): 0 to 45.5 u/s in 1 s and 87.6 in 2 s in both (0.01
+apart); a coasting full-lock corner 0.08 apart in speed and yaw rate; the full-gas spin and a
+spin on the grass within 1 u/s and 0.5 rad/s. Until issue 50 (2026-11-26) the grip was per axle,
+forces were recomputed over 4 substeps and the turn was about the hull's origin: that car did not
+spin on a skidpad where Box2D's does (experiments/results/car_skidpad.md). 1 u is a track unit
+(the car is 5 u long).
 
 Reward and episode, as Gymnasium: +1000/N for each tile first visited, -0.1 per frame; leaving
-the +-PLAYFIELD square pays -100 and ends the episode; the lap ends it when more than 95% of the
-tiles are visited and the car is on tile 0, or all are visited. A tile is visited when the car's
-centre lies inside its quad (Gymnasium: when a wheel touches it). At most 1000 steps.
+the +-PLAYFIELD square pays -100 and ends the episode. A tile is visited when a wheel touches it:
+Gymnasium's FrictionDetector counts a tile when a wheel's box begins to overlap its quad; here
+when a corner of a wheel's box (the front pair steered) lies inside the quad (`wheel_contact`), so
+a car touches 2 or 3 tiles at once. Along Gymnasium's own driven trajectories the two counts are
+at most 2 tiles apart (experiments/results/car_driver.md). The lap ends the episode when tile 0 is
+first touched while more than 95% of the tiles are visited (Gymnasium's new_lap; its start
+touches tile 0, so in practice when all are visited), or when all are visited. At most 1000 steps.
 
 Picture: Gymnasium's 96x96 state view without its indicator bar or first-second zoom-in. Its
 1000x800 window at 16.2 px/u is shrunk to 96x96, so 1.56 px/u across and 1.94 px/u along; the car
@@ -89,6 +100,19 @@ FRICTION_LIMIT = 1e6 * 0.02**2  # per wheel, on road
 TYRE_STIFFNESS = 205000 * 0.02**2  # force per u/s of slip
 BRAKE_RATE = 15 * WHEEL_R * FPS  # u/s^2 of rim speed at full brake
 MAX_SPEED = 100.0  # u/s: Box2D's cap on a body's translation, b2_maxTranslation = 2 u per 1/50 s step
+# Gymnasium's wheels (WHEELPOS, WHEEL_W, WHEEL_R times SIZE) in the car's frame [right, forward] (u):
+# front-left, front-right, rear-left, rear-right; each a box WHEEL_HALF [across, along] either side.
+WHEELS = np.array([(-55, 80), (55, 80), (-55, -82), (55, -82)], np.float32) * 0.02
+WHEEL_HALF = np.array([14, 27], np.float32) * 0.02
+WHEEL_FORWARD, WHEEL_LEFT = WHEELS[:, 1], -WHEELS[:, 0]  # FRONT, FRONT, -REAR, -REAR; +-1.1
+# Box2D's centre of mass of the hull (density 1) and the wheels (0.1) lies MASS_BEHIND behind the hull's
+# origin (the car's xy); the car turns about it and its velocity is the centre of mass's.
+MASS_BEHIND = 0.0805
+# The front wheels' joint limit is 0.4 rad, which Box2D holds with a slop: pushed by the steering
+# motor, Gymnasium's wheels settle at 0.4202 rad (measured); a target within it is met exactly.
+STEER_LIMIT = 0.42
+STEERED = np.array([1.0, 1.0, 0.0, 0.0], np.float32)
+DRIVEN = np.array([0.0, 0.0, 1.0, 1.0], np.float32)
 
 # -- ours --------------------------------------------------------------------------------------
 MAX_TILES = 400
@@ -97,7 +121,6 @@ TRACE_STEPS = 800
 # (11-13 ms per reset batch of 256 to 4096 on an H100 at 1) and unrolling is untried.
 TRACE_UNROLL = 1
 CANDIDATES = 3
-SUBSTEPS = 4
 LOOKAHEAD = 10  # tiles (35 u) ahead for the curvature hint
 PREVIEW = (1, 3, 6, 10, 15, 21, 28, 36)  # tiles ahead in the state observation
 
@@ -148,7 +171,8 @@ class Track:
 @struct.dataclass
 class Car:
     """Pose (u, rad: forward is (-sin angle, cos angle)), body-frame velocity [forward, left] (u/s),
-    yaw rate (rad/s), front wheel angle (rad, + left), throttle, rim speeds [front, rear] (u/s)."""
+    yaw rate (rad/s), front wheel angle (rad, + left), throttle, rim speeds float32[4] of the WHEELS
+    [front-left, front-right, rear-left, rear-right] (u/s)."""
 
     xy: jax.Array
     angle: jax.Array
@@ -160,8 +184,8 @@ class Car:
 
     @classmethod
     def at(cls, xy, angle, speed=0.0, lateral=0.0, yaw_rate=0.0, steer=0.0, gas=0.0, wheel_speed=None):
-        """A hand-set car; the wheels roll at `speed` unless given."""
-        wheels = (speed, speed) if wheel_speed is None else wheel_speed
+        """A hand-set car; the four wheels roll at `speed` unless given."""
+        wheels = (speed,) * 4 if wheel_speed is None else wheel_speed
         return cls(jnp.asarray(xy, f32), f32(angle), jnp.asarray([speed, lateral], f32), f32(yaw_rate),
                    f32(steer), f32(gas), jnp.asarray(wheels, f32))
 
@@ -239,14 +263,33 @@ def _lap(key: jax.Array, params: CarRacingParams) -> tuple[Track, jax.Array]:
     n = jnp.clip(n, 50, MAX_TILES)
     i = jnp.arange(MAX_TILES)
     xy, beta = jnp.where((i < n)[:, None], xy, 0.0), jnp.where(i < n, beta, 0.0)
-    # kerbs where BORDER_MIN_COUNT successive heading steps turn one way by more than 0.2 the rate;
+    return Track(xy, beta, _kerbs(beta, n), n.astype(jnp.int32)), ok
+
+
+def _kerbs(beta: jax.Array, n: jax.Array) -> jax.Array:
+    """bool[MAX_TILES] kerb flags of a track with across-track angles beta[MAX_TILES] (n valid): where
+    BORDER_MIN_COUNT successive heading steps turn one way by more than 0.2 the rate, and the
+    BORDER_MIN_COUNT - 1 tiles before."""
     # the headings repeat with period n, padded by c on either side so that shifts are slices
-    c = BORDER_MIN_COUNT
+    c, i = BORDER_MIN_COUNT, jnp.arange(MAX_TILES)
     dbeta = wrap(jnp.diff(beta[jnp.arange(-c, MAX_TILES + c) % n]))  # dbeta[k]: the turn into tile k - c + 1
     turns = jnp.stack([dbeta[c - 1 - k: c - 1 - k + MAX_TILES + c - 1] for k in range(c)])
     sharp = (jnp.abs(turns) > 0.2 * TRACK_TURN_RATE).all(0) & (jnp.abs(jnp.sign(turns).sum(0)) == c)
-    kerb = jnp.stack([sharp[k: k + MAX_TILES] for k in range(c)]).any(0) & (i < n)
-    return Track(xy, beta, kerb, n.astype(jnp.int32)), ok
+    return jnp.stack([sharp[k: k + MAX_TILES] for k in range(c)]).any(0) & (i < n)
+
+
+def track_from_gymnasium(points: np.ndarray) -> Track:
+    """A Track holding Gymnasium's track `env.unwrapped.track` (float[n, 4] of alpha, beta, x, y per
+    centre point; its tile i spans point i-1 to i, as ours), padded to MAX_TILES; kerbs by `_kerbs`."""
+    points = np.asarray(points, np.float64)
+    n = len(points)
+    if not CONTACT_TILES <= n <= MAX_TILES:  # fewer would repeat tiles in wheel_contact's window
+        raise ValueError(f"a track of {n} centre points does not fit {CONTACT_TILES}..{MAX_TILES}")
+    xy = np.zeros((MAX_TILES, 2), np.float32)
+    beta = np.zeros(MAX_TILES, np.float32)
+    xy[:n], beta[:n] = points[:, 2:4], points[:, 1]
+    n_tiles = jnp.asarray(n, jnp.int32)
+    return Track(jnp.asarray(xy), jnp.asarray(beta), _kerbs(jnp.asarray(beta), n_tiles), n_tiles)
 
 
 def generate_track(key: jax.Array, params: CarRacingParams) -> Track:
@@ -305,6 +348,42 @@ def tile_at(track: Track, p: jax.Array) -> tuple[jax.Array, jax.Array]:
     return tiles[jnp.argmax(inside)], inside.any()
 
 
+CONTACT_TILES = 6  # tiles searched for wheel contacts: nearest point - 2 .. + 3 (the car spans <= 2.7 u)
+
+
+@struct.dataclass
+class WheelContact:
+    """Which tiles the wheels touch: `tiles` int32[CONTACT_TILES] searched around the car, `touched`
+    bool[CONTACT_TILES] whether a wheel touches each, `on_road` bool[4] whether each wheel touches any."""
+
+    tiles: jax.Array
+    touched: jax.Array
+    on_road: jax.Array
+
+
+def wheel_corners(car: Car) -> jax.Array:
+    """float32[4, 4, 2] world corners of the four WHEELS' boxes, the front pair turned by the steering."""
+    half_across, half_along = WHEEL_HALF
+    corner_along = np.array([1.0, 1.0, -1.0, -1.0], np.float32) * half_along
+    corner_left = np.array([1.0, -1.0, -1.0, 1.0], np.float32) * half_across
+    delta = STEERED[:, None] * car.steer
+    c, s = jnp.cos(delta), jnp.sin(delta)
+    ahead = WHEEL_FORWARD[:, None] + c * corner_along - s * corner_left  # [4 wheels, 4 corners]
+    left = WHEEL_LEFT[:, None] + s * corner_along + c * corner_left
+    cs, sn = jnp.cos(car.angle), jnp.sin(car.angle)  # forward (-sin, cos), left (-cos, -sin)
+    return jnp.stack([car.xy[0] - ahead * sn - left * cs, car.xy[1] + ahead * cs - left * sn], -1)
+
+
+def wheel_contact(track: Track, car: Car) -> WheelContact:
+    """The tiles the wheels touch. Box2D touches a tile when a wheel's box overlaps its quad; here when
+    a corner of the box lies inside the quad (a tile's corner poking into a wheel is missed)."""
+    tiles = (nearest_point(track, car.xy) + jnp.arange(-2, CONTACT_TILES - 2)) % track.n_tiles
+    normal, offset = _edge_lines(_quads(track, tiles))  # [K, 4, 2], [K, 4]
+    p = wheel_corners(car).reshape(16, 1, 1, 2)
+    inside = (p[..., 0] * normal[..., 0] + p[..., 1] * normal[..., 1] - offset >= 0).all(-1)  # [16, K]
+    return WheelContact(tiles, inside.any(0), inside.reshape(4, 4 * CONTACT_TILES).any(-1))
+
+
 def _track_frame(track: Track, car: Car):
     """Nearest point index, the car's signed offset left of the centre line (u), heading error (rad)."""
     j = nearest_point(track, car.xy)
@@ -322,50 +401,46 @@ def _curvature(track: Track, j: jax.Array, half: int = 3) -> jax.Array:
 # -- the car -------------------------------------------------------------------------------------
 
 
-def _substep(car: Car, target: jax.Array, gas: jax.Array, brake: jax.Array, limit: jax.Array) -> Car:
-    """One semi-implicit Euler step of 1/(FPS SUBSTEPS) s; limit float32[2] per front/rear wheel."""
-    dt = 1.0 / (FPS * SUBSTEPS)
-    steer = car.steer + jnp.clip(50.0 * (target - car.steer), -3.0, 3.0) * dt
-    u, v, r = car.vel[0], car.vel[1], car.yaw_rate
-    c, s = jnp.cos(steer), jnp.sin(steer)
-    # ground velocity at each axle along and across its wheels
-    vf, vl = jnp.stack([u * c + (v + FRONT * r) * s, u]), jnp.stack([-u * s + (v + FRONT * r) * c, v - REAR * r])
-    spin = car.wheel_speed + dt * jnp.stack([0.0, 1.0]) * ENGINE_POWER * gas * WHEEL_R**2 / WHEEL_INERTIA / (
-        jnp.abs(car.wheel_speed) + 5.0 * WHEEL_R)
-    spin = jnp.sign(spin) * jnp.maximum(jnp.abs(spin) - BRAKE_RATE * brake * dt, 0.0)
-    spin = jnp.where(brake >= 0.9, 0.0, spin)
-    f_long, f_lat = TYRE_STIFFNESS * (spin - vf), -TYRE_STIFFNESS * vl
-    scale = jnp.minimum(1.0, limit / jnp.maximum(jnp.sqrt(f_long**2 + f_lat**2), 1e-6))
-    f_long, f_lat = f_long * scale, f_lat * scale
-    spin = spin - dt * f_long * WHEEL_R**2 / WHEEL_INERTIA
-    # two wheels per axle; the front pair's force turned by the steering angle
-    fx = 2 * (f_long[0] * c - f_lat[0] * s + f_long[1])
-    fy_front, fy_rear = 2 * (f_long[0] * s + f_lat[0] * c), 2 * f_lat[1]
-    u, v = u + dt * (fx / MASS + v * r), v + dt * ((fy_front + fy_rear) / MASS - u * r)
-    cap = jnp.minimum(1.0, MAX_SPEED / jnp.maximum(jnp.sqrt(u**2 + v**2), 1e-6))  # Box2D's speed cap
-    u, v = u * cap, v * cap
-    r = r + dt * (FRONT * fy_front - REAR * fy_rear) / INERTIA
-    angle = car.angle + dt * r
-    fwd, left = jnp.stack([-jnp.sin(angle), jnp.cos(angle)]), jnp.stack([-jnp.cos(angle), -jnp.sin(angle)])
-    return car.replace(xy=car.xy + dt * (u * fwd + v * left), angle=angle, vel=jnp.stack([u, v]), yaw_rate=r,
-                       steer=steer, wheel_speed=spin)
-
-
 # [steer, gas, brake]: steering left to right, gas and brake from none to full (Gymnasium's Box).
 ACTION_RANGE = (np.array([-1.0, 0.0, 0.0], np.float32), np.array([1.0, 1.0, 1.0], np.float32))
 
 
 def drive(car: Car, action: jax.Array, grip: jax.Array) -> Car:
-    """One 1/50 s frame under action [steer, gas, brake] (clipped) with grip float32[2] (front, rear)."""
-    steer, gas, brake = jnp.clip(action, *ACTION_RANGE)
-    car = car.replace(gas=car.gas + jnp.minimum(gas - car.gas, 0.1))
-    target, limit = jnp.clip(-steer, -0.4, 0.4), grip * FRICTION_LIMIT
-    return jax.lax.fori_loop(0, SUBSTEPS, lambda _, car: _substep(car, target, car.gas, brake, limit), car)
-
-
-def _axles(car: Car) -> jax.Array:
-    fwd = jnp.stack([-jnp.sin(car.angle), jnp.cos(car.angle)])
-    return jnp.stack([car.xy + FRONT * fwd, car.xy - REAR * fwd])
+    """One 1/50 s frame under action [steer, gas, brake] (clipped) with grip float32[4] per wheel (1 on
+    the road), in the WHEELS' order. As Gymnasium's `Car.step` then Box2D's `world.Step`: each wheel's
+    force from the velocities and wheel angle at the frame's start, held for the frame; velocities
+    then positions updated (semi-implicit Euler); the wheels turn towards the steering target."""
+    steer_action, gas, brake = jnp.clip(action, *ACTION_RANGE)
+    gas = car.gas + jnp.minimum(gas - car.gas, 0.1)
+    target, limit, dt = jnp.clip(-steer_action, -STEER_LIMIT, STEER_LIMIT), grip * FRICTION_LIMIT, 1.0 / FPS
+    u, v, r = car.vel[0], car.vel[1], car.yaw_rate
+    c, s = jnp.cos(STEERED * car.steer), jnp.sin(STEERED * car.steer)
+    # each wheel's ground velocity [forward, left] in the car's frame, then along and across the wheel
+    arm = WHEEL_FORWARD + MASS_BEHIND  # ahead of the mass centre
+    ground_u, ground_v = u - r * WHEEL_LEFT, v + r * arm
+    along, across = ground_u * c + ground_v * s, -ground_u * s + ground_v * c
+    spin = car.wheel_speed + dt * DRIVEN * ENGINE_POWER * gas * WHEEL_R**2 / WHEEL_INERTIA / (
+        jnp.abs(car.wheel_speed) + 5.0 * WHEEL_R)
+    spin = jnp.sign(spin) * jnp.maximum(jnp.abs(spin) - BRAKE_RATE * brake * dt, 0.0)
+    spin = jnp.where(brake >= 0.9, 0.0, spin)
+    f_long, f_lat = TYRE_STIFFNESS * (spin - along), -TYRE_STIFFNESS * across
+    scale = jnp.minimum(1.0, limit / jnp.maximum(jnp.sqrt(f_long**2 + f_lat**2), 1e-6))
+    f_long, f_lat = f_long * scale, f_lat * scale
+    spin = spin - dt * f_long * WHEEL_R**2 / WHEEL_INERTIA
+    # each wheel's force in the car's frame, and its moment about the mass centre (+ turns left)
+    fx, fy = f_long * c - f_lat * s, f_long * s + f_lat * c
+    u, v = u + dt * fx.sum() / MASS, v + dt * fy.sum() / MASS  # in the frame at the frame's start
+    cap = jnp.minimum(1.0, MAX_SPEED / jnp.maximum(jnp.sqrt(u**2 + v**2), 1e-6))  # Box2D's speed cap
+    u, v = u * cap, v * cap
+    r = r + dt * jnp.sum(arm * fy - WHEEL_LEFT * fx) / INERTIA
+    angle = car.angle + dt * r
+    fwd0, left0 = jnp.stack([-jnp.sin(car.angle), jnp.cos(car.angle)]), jnp.stack([-jnp.cos(car.angle), -jnp.sin(car.angle)])
+    fwd = jnp.stack([-jnp.sin(angle), jnp.cos(angle)])
+    xy = car.xy + dt * (u * fwd0 + v * left0) + MASS_BEHIND * (fwd - fwd0)  # the origin, about the mass centre
+    turn_c, turn_s = jnp.cos(dt * r), jnp.sin(dt * r)  # the same velocity in the turned car's frame
+    vel = jnp.stack([u * turn_c + v * turn_s, v * turn_c - u * turn_s])
+    steer = car.steer + jnp.clip(50.0 * (target - car.steer), -3.0, 3.0) * dt
+    return car.replace(xy=xy, angle=angle, vel=vel, yaw_rate=r, steer=steer, gas=gas, wheel_speed=spin)
 
 
 # -- the picture ---------------------------------------------------------------------------------
@@ -390,8 +465,6 @@ BLOCK_CENTRES = VIEW_BLOCKS.mean((1, 2))
 HULL_POLYS = [[(-60, 130), (60, 130), (60, 110), (-60, 110)], [(-15, 120), (15, 120), (20, 20), (-20, 20)],
               [(25, 20), (50, -10), (50, -40), (20, -90), (-20, -90), (-50, -40), (-50, -10), (-25, 20)],
               [(-50, -120), (50, -120), (50, -90), (-50, -90)]]
-WHEELS = np.array([(-55, 80), (55, 80), (-55, -82), (55, -82)], np.float32) * 0.02
-WHEEL_HALF = np.array([14, 27], np.float32) * 0.02
 
 
 def _hull_cover() -> np.ndarray:
@@ -517,16 +590,19 @@ class CarRacing(Env):
 
     def transition(self, key, state: CarRacingState, action, params: CarRacingParams) -> Step:
         track = state.track
-        on_road = jax.vmap(lambda p: tile_at(track, p)[1])(_axles(state.car))
-        car = drive(state.car, jnp.asarray(action, f32), jnp.where(on_road, 1.0, params.grass_grip))
-        tile, on_track = tile_at(track, car.xy)
-        new = on_track & ~state.visited[tile]
-        visited = state.visited.at[tile].set(state.visited[tile] | on_track)
+        # a wheel grips as on the road while it touches a tile (Box2D: the contacts of the last step)
+        grip = jnp.where(wheel_contact(track, state.car).on_road, 1.0, params.grass_grip)
+        car = drive(state.car, jnp.asarray(action, f32), grip)
+        contact = wheel_contact(track, car)
+        before = state.visited[contact.tiles]
+        new = contact.touched & ~before
+        visited = state.visited.at[contact.tiles].set(before | contact.touched)
         count = visited.sum()
+        # Gymnasium's FrictionDetector ends the lap when tile 0 is first touched past the share
         past = count > params.lap_complete_percent * track.n_tiles
-        lap = (count == track.n_tiles) | (on_track & (tile == 0) & past)
+        lap = (count == track.n_tiles) | ((new & (contact.tiles == 0)).any() & past)
         out = (jnp.abs(car.xy) > PLAYFIELD).any()
-        reward = jnp.where(out, -100.0, 1000.0 / track.n_tiles * new - 0.1)
+        reward = jnp.where(out, -100.0, 1000.0 / track.n_tiles * new.sum() - 0.1)
         return Step(state.replace(car=car, visited=visited), reward.astype(f32), lap | out)
 
     def render(self, state: CarRacingState, params: CarRacingParams) -> jax.Array:
@@ -551,7 +627,7 @@ def state_observation(state: CarRacingState) -> jax.Array:
     j, lateral, error = _track_frame(track, car)
     c, s = jnp.cos(car.angle), jnp.sin(car.angle)
     ahead = (track.xy[(j + jnp.asarray(PREVIEW)) % track.n_tiles] - car.xy) @ jnp.array([[-s, -c], [c, -s]])
-    slip = car.wheel_speed - car.vel[0]
+    slip = car.wheel_speed.reshape(2, 2).mean(-1) - car.vel[0]  # [front, rear] pairs
     on = tile_at(track, car.xy)[1].astype(f32)
     head = jnp.stack([car.vel[0] / 100, car.vel[1] / 100, car.yaw_rate / 5, car.steer / 0.4, car.gas,
                       slip[1] / 100, slip[0] / 100, lateral / TRACK_WIDTH, jnp.sin(error), jnp.cos(error),

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -59,7 +60,7 @@ def ours_run(target: float, steer: float) -> np.ndarray:
 
     from hintsjax.envs.car_racing import Car, drive
 
-    step = jax.jit(lambda car, action: drive(car, action, jnp.full(2, 0.6)))
+    step = jax.jit(lambda car, action: drive(car, action, jnp.full(4, 0.6)))
     car = Car.at([0.0, 0.0], 0.0)
     out = []
     for t in range(STRAIGHT + TURN):
@@ -91,10 +92,11 @@ def main() -> None:
                                                           ("speed", "yaw_rate", "lateral_acceleration", "slip_degrees")])
             print(rows[-1], flush=True)
     lines = ["# Skidpad: Gymnasium's Box2D car / ours", "",
-             f"Made by `python experiments/car_skidpad.py --speeds {args.speeds} --steers {args.steers}` (2-core CPU, "
-             "Gymnasium 1.4.0, Box2D 2.3.10, 2026-11-25). Each cell: Gymnasium's value / ours, the mean over the last "
+             f"Made by `python experiments/car_skidpad.py --speeds {args.speeds} --steers {args.steers}` (2-core CPU "
+             f"development machine, Gymnasium 1.4.0, Box2D 2.3.10, {time.strftime('%Y-%m-%d', time.gmtime())}). "
+             "Each cell: Gymnasium's value / ours, the mean over the last "
              f"{MEASURE} of {TURN} frames at a fixed steering input, after {STRAIGHT} frames straight; on grass "
-             "(both cars' grip 0.6 of the road's). Steer 1 is full lock (0.4 rad at the wheels in both).", "",
+             "(both cars' grip 0.6 of the road's). Steer 1 is full lock (0.42 rad at the wheels in both: Box2D holds its 0.4 rad joint limit with a slop).", "",
              *markdown_table(["target speed (u/s)", "steer", "speed (u/s)", "yaw rate (rad/s)",
                               "lateral acceleration (u/s^2)", "slip angle (deg)"], rows), ""]
     args.out.write_text("\n".join(lines))

@@ -16,8 +16,8 @@ from gymnasium.utils import seeding
 
 from hintsjax.envs.car_racing import (
     FRONT, MAX_SPEED, MAX_TILES, PLAYFIELD, REAR, START_ALPHA, TRACK_DETAIL_STEP, TRACK_RAD, TRACK_TURN_RATE,
-    TRACK_WIDTH, VARIANTS, Car, CarRacing, CarRacingState, Track, drive, first_corner_angle,
-    generate_track, nearest_point, progress, target_speed, trace,
+    TRACK_WIDTH, VARIANTS, Car, CarRacing, CarRacingState, Track, _quads, drive, first_corner_angle,
+    generate_track, nearest_point, progress, target_speed, trace, track_from_gymnasium, wheel_contact,
 )
 from hintsjax.envs.hints import make_hint
 
@@ -45,6 +45,11 @@ def render(env):
 @pytest.fixture(scope="module")
 def reset(env):
     return jax.jit(env.reset)
+
+
+@pytest.fixture(scope="module")
+def on_track_hint():
+    return jax.jit(lambda state: make_hint("car_racing", "on_track")(state, STANDARD)[0])
 
 
 @pytest.fixture(scope="module")
@@ -151,6 +156,25 @@ def test_trace_equals_gymnasium_for_the_same_checkpoints():
     assert compared >= 20 and same_count >= 0.8 * compared
 
 
+def test_gymnasium_tracks_load_into_our_track():
+    """track_from_gymnasium keeps Gymnasium's tile count, centre points and tile quads (its Box2D tile
+    fixtures' vertices, float32 apart), and flags as many kerb tiles as Gymnasium draws kerbs, but
+    for its spreading across the joint (test_kerbs_as_gymnasium_flags_them; seed 0: 76 against 75)."""
+    genv = gym.make("CarRacing-v3").unwrapped
+    quads = jax.jit(lambda track: _quads(track, jnp.arange(MAX_TILES)))
+    for seed in (0, 1):
+        genv.reset(seed=seed)
+        track = track_from_gymnasium(np.array(genv.track))
+        n = len(genv.track)
+        assert int(track.n_tiles) == n and not np.asarray(track.xy[n:]).any()
+        np.testing.assert_allclose(np.asarray(track.xy[:n]), np.array(genv.track)[:, 2:], atol=1e-4)
+        theirs = np.array([[tuple(v) for v in tile.fixtures[0].shape.vertices] for tile in genv.road])
+        ours = np.asarray(quads(track))[:n]  # Box2D keeps a fixture's vertices in its own order
+        assert np.linalg.norm(ours[:, :, None] - theirs[:, None], axis=-1).min(-1).max() < 1e-3
+        kerbs = len(genv.road_poly) - n  # a tile's quad, then its kerb's if it has one
+        assert 0.1 * n < kerbs and abs(int(np.asarray(track.kerb).sum()) - kerbs) <= 2  # 2: the joint, as above
+
+
 def test_tile_counts_match_gymnasium(tracks):
     """Tile counts of 1000 of our tracks against Gymnasium CarRacing-v3's own resets of seeds 0..199
     (7 s). Measured: Gymnasium 294.3 +- 22.6 (224..366); ours 291.4 +- 22.7 (227..389), KS 0.07."""
@@ -250,23 +274,25 @@ def test_same_key_same_track_and_vmap_equals_loop(env, reset, step, tracks):
 
 
 def test_centre_line_lap_pays_1000_less_a_tenth_per_frame(step, tracks):
-    """The car set down at rest on each tile's centre in turn (tiles 1..n-1, then 0) is paid
-    1000/n per tile, -0.1 per frame, and the lap ends on tile 0: 1000 - 0.1 n in n frames."""
+    """The car set down at rest on each tile's centre in turn (tiles 1..n-2): its wheels, 4.3 u from
+    front to back, touch that tile and both neighbours (3.5 u long), so the first frame is paid for
+    tiles 0, 1 and 2, each later one for the tile ahead, less 0.1 per frame; touching the last
+    tile, n-1, ends the lap: 1000 - 0.1 (n - 2) in n - 2 frames."""
     track = one(tracks["standard"][0], 0)
     n = int(track.n_tiles)
     xy, beta = np.asarray(track.xy), np.asarray(track.beta)
     state = at_start(track)
     rewards, terminated = [], []
-    for tile in [*range(1, n), 0]:
+    for tile in range(1, n - 1):
         car = Car.at(0.5 * (xy[tile] + xy[(tile - 1) % n]), beta[tile])
         ts = step(KEY, state.replace(car=car), jnp.zeros(3), STANDARD)
         state = ts.state
         rewards.append(float(ts.reward))
         terminated.append(bool(ts.terminated))
-    np.testing.assert_allclose(rewards, 1000 / n - 0.1, rtol=1e-5)
-    np.testing.assert_allclose(sum(rewards), 1000 - 0.1 * n, atol=1e-2)
+    np.testing.assert_allclose(rewards, [3000 / n - 0.1] + [1000 / n - 0.1] * (n - 3), rtol=1e-4)
+    np.testing.assert_allclose(sum(rewards), 1000 - 0.1 * (n - 2), atol=1e-2)
     assert terminated[-1] and not any(terminated[:-1])
-    assert float(progress(state)) == 1.0 and int(state.t) == n
+    assert float(progress(state)) == 1.0 and int(state.t) == n - 2
 
 
 def test_pure_pursuit_laps(env, tracks):
@@ -304,7 +330,8 @@ def test_pure_pursuit_laps(env, tracks):
 
 
 def test_a_tile_is_paid_once(env, step, tracks):
-    """Also: the evaluation metric progress is P = visited / all tiles, here 1 / n."""
+    """The car at rest on tile 5's centre touches tiles 4, 5 and 6 with its wheels: paid for them in
+    the first frame only. Also: the evaluation metric progress is P = visited / all tiles, here 3 / n."""
     track = one(tracks["standard"][0], 0)
     n = int(track.n_tiles)
     centre = 0.5 * (track.xy[5] + track.xy[4])
@@ -314,9 +341,36 @@ def test_a_tile_is_paid_once(env, step, tracks):
         ts = step(KEY, state, jnp.zeros(3), STANDARD)
         state = ts.state
         rewards.append(float(ts.reward))
-    np.testing.assert_allclose(rewards, [1000 / n - 0.1] + [-0.1] * 4, rtol=1e-5)
-    assert int(state.visited.sum()) == 1 and bool(state.visited[5])
-    assert env.metrics(state, STANDARD)["progress"] == progress(state) == np.float32(1 / n)
+    np.testing.assert_allclose(rewards, [3000 / n - 0.1] + [-0.1] * 4, rtol=1e-5)
+    assert np.flatnonzero(np.asarray(state.visited)).tolist() == [4, 5, 6]
+    assert env.metrics(state, STANDARD)["progress"] == progress(state) == np.float32(3 / n)
+
+
+def test_a_tile_is_visited_when_a_wheel_touches_it(step, on_track_hint):
+    """On the stadium's right straight (x = 40 +- TRACK_WIDTH, heading north; tile k spans y_{k-1}..y_k),
+    a car whose centre is on the grass 0.5 u left of the road, its right wheels (1.1 u right of the
+    centre, 0.28 u either side) reaching 0.88 u onto it: the tiles under those wheels are visited
+    though the centre is on none. Front wheels 1.06..2.14 u ahead, rear ones 1.10..2.18 u behind: on
+    a tile's centre they touch its neighbours too; at a seam y_m, tiles m and m+1 only. A car 1.6 u
+    off the road touches nothing; its wheels then grip as grass, the centred car's as road."""
+    state = on_stadium(north(40.0, 0.0))
+    n = int(state.track.n_tiles)
+    y = -70.0 + np.arange(n) * (280 + 2 * math.pi * 40) / n  # the straight's centre points
+
+    def visited(x, y0):
+        ts = step(KEY, on_stadium(north(x, y0)), jnp.zeros(3), STANDARD)
+        return np.flatnonzero(np.asarray(ts.state.visited)).tolist(), float(ts.reward)
+
+    edge = 40.0 - TRACK_WIDTH
+    tiles, reward = visited(edge - 0.5, 0.5 * (y[9] + y[10]))  # centre mid tile 10
+    assert tiles == [9, 10, 11] and reward == pytest.approx(3000 / n - 0.1, rel=1e-5)
+    assert float(on_track_hint(on_stadium(north(edge - 0.5, 0.5 * (y[9] + y[10]))))) == 0.0
+    assert visited(edge - 0.5, y[20])[0] == [20, 21]
+    assert visited(edge - 1.6, y[20]) == ([], pytest.approx(-0.1))
+    contact = jax.jit(wheel_contact)
+    assert np.asarray(contact(state.track, north(edge - 1.6, y[20])).on_road).tolist() == [False] * 4
+    assert np.asarray(contact(state.track, north(40.0, y[20])).on_road).tolist() == [True] * 4
+    assert np.asarray(contact(state.track, north(edge, y[20])).on_road).tolist() == [False, True, False, True]
 
 
 def test_leaving_the_playfield_costs_100_and_ends(step):
@@ -327,15 +381,19 @@ def test_leaving_the_playfield_costs_100_and_ends(step):
     assert not bool(inside.terminated) and float(inside.reward) == pytest.approx(-0.1)
 
 
-def test_the_lap_ends_on_tile_0_past_95_percent(step):
+def test_the_lap_ends_when_tile_0_is_first_touched_past_95_percent(step):
+    """Gymnasium's FrictionDetector sets new_lap when tile 0 is first touched while more than 95% of
+    the tiles are visited: the car on tile 0's centre (touching tiles n-1, 0, 1), tiles 1..k and n-1
+    visited before. Its own start touches tile 0, so a lap there ends only when all are visited."""
     state = on_stadium(north(40.0, -70.0 + 0.5 * STEP))  # on tile 1
     n = int(state.track.n_tiles)
-    tile0 = 0.5 * (state.track.xy[0] + state.track.xy[n - 1])
+    tile0 = north(*np.asarray(0.5 * (state.track.xy[0] + state.track.xy[n - 1])))
     for share, ends in [(0.94, False), (0.96, True)]:
-        visited = jnp.arange(MAX_TILES) < int(share * n) + 1  # tile 0 already among them
-        at_start = state.replace(visited=visited, car=north(*np.asarray(tile0)))
-        assert bool(step(KEY, at_start, jnp.zeros(3), STANDARD).terminated) == ends, share
-        elsewhere = state.replace(visited=visited)
+        visited = ((jnp.arange(MAX_TILES) >= 1) & (jnp.arange(MAX_TILES) < int(share * n))).at[n - 1].set(True)
+        assert bool(step(KEY, state.replace(visited=visited, car=tile0), jnp.zeros(3), STANDARD).terminated) == ends
+        again = state.replace(visited=visited.at[0].set(True), car=tile0)  # tile 0 touched before: no lap
+        assert not bool(step(KEY, again, jnp.zeros(3), STANDARD).terminated)
+        elsewhere = state.replace(visited=visited, car=north(40.0, -70.0 + 10.5 * STEP))  # on tile 11
         assert not bool(step(KEY, elsewhere, jnp.zeros(3), STANDARD).terminated)
     everything = state.replace(visited=(jnp.arange(MAX_TILES) < n).at[1].set(False))
     assert bool(step(KEY, everything, jnp.zeros(3), STANDARD).terminated)  # all tiles visited
@@ -368,16 +426,17 @@ def after(cars, frame: int) -> Car:
 
 
 def test_straight_line_acceleration_and_top_speed(run_car):
-    """Full gas from rest (u/s): 44.9 after 1 s, 86.6 after 2 s, then Box2D's cap of 2 u per frame,
-    100, after 2.6 s (Gymnasium's car: 46, 86, 98, then 100). The rear wheels spin at the start;
-    on grass (0.6 grip) the start is slower; full brake stops it from top speed within a second."""
+    """Full gas from rest (u/s): 45.5 after 1 s, 87.6 after 2 s, then Box2D's cap of 2 u per frame,
+    100, after 2.6 s (as Gymnasium's car: test_the_car_steps_beside_box2ds_car). The rear wheels
+    spin at the start, the front ones roll; on grass (0.6 grip) the start is slower; full brake
+    stops it from top speed within a second."""
     rest = Car.at([0.0, 0.0], 0.0)
-    road, grass = jnp.ones(2), jnp.full(2, 0.6)
+    road, grass = jnp.ones(4), jnp.full(4, 0.6)
     cars, (speed, *_, wheels) = run_car(rest, jnp.array([0.0, 1.0, 0.0]), road)
     speed, wheels = np.asarray(speed), np.asarray(wheels)
     assert 40 < speed[49] < 50 and 80 < speed[99] < 90 and 95 < speed[149] <= MAX_SPEED + 1e-3
     assert speed[-1] == pytest.approx(MAX_SPEED)  # capped
-    assert wheels[10, 1] > speed[10] + 10  # wheelspin
+    assert (wheels[10, 2:] > speed[10] + 10).all() and (wheels[10, :2] <= speed[10]).all()  # rear spin
     _, (on_grass, *_) = run_car(rest, jnp.array([0.0, 1.0, 0.0]), grass)
     assert float(on_grass[24]) < 0.8 * speed[24]
     _, (braking, *_) = run_car(after(cars, FRAMES), jnp.array([0.0, 0.0, 1.0]), road)
@@ -388,21 +447,105 @@ def test_full_gas_in_a_tight_corner_spins(run_car):
     """From 35 u/s, full right lock: coasting, the yaw rate stays at or below the kinematic rate
     u tan(delta) / L that the front wheels ask for (tyres rolling without side slip; the car
     understeers a little); with full gas the spinning rear wheels give up their side grip, the rear
-    steps out and the yaw rate exceeds it (measured: -11.4 rad/s against -1.4 after 0.56 s)."""
-    cars, _ = run_car(Car.at([0.0, 0.0], 0.0), jnp.array([0.0, 0.5, 0.0]), jnp.ones(2))
+    steps out and the yaw rate exceeds it (measured: -8.1 rad/s against -4.2 after 0.56 s;
+    Gymnasium's car: -8.4)."""
+    cars, _ = run_car(Car.at([0.0, 0.0], 0.0), jnp.array([0.0, 0.5, 0.0]), jnp.ones(4))
     cruising = after(cars, 40)
     assert 30 < float(cruising.vel[0]) < 40
-    _, (_, yaw, kinematic, lateral, _) = run_car(cruising, jnp.array([1.0, 0.0, 0.0]), jnp.ones(2))
+    _, (_, yaw, kinematic, lateral, _) = run_car(cruising, jnp.array([1.0, 0.0, 0.0]), jnp.ones(4))
     yaw, kinematic = np.asarray(yaw)[10:28], np.asarray(kinematic)[10:28]
     assert (yaw < 0).all() and (np.abs(yaw) <= 1.02 * np.abs(kinematic)).all()
-    _, (_, yaw, kinematic, lateral, _) = run_car(cruising, jnp.array([1.0, 1.0, 0.0]), jnp.ones(2))
+    _, (_, yaw, kinematic, lateral, _) = run_car(cruising, jnp.array([1.0, 1.0, 0.0]), jnp.ones(4))
     yaw, kinematic, lateral = np.asarray(yaw)[27], np.asarray(kinematic)[27], np.asarray(lateral)[27]
-    assert abs(yaw) > 2 * abs(kinematic) and abs(lateral) > 15
+    assert abs(yaw) > 1.6 * abs(kinematic) and abs(lateral) > 15
+
+
+class Road:
+    """What Box2D's Car reads of a tile it touches."""
+
+    road_friction = 1.0
+
+
+def box2d_car(actions: np.ndarray, on_road: bool) -> np.ndarray:
+    """float[T, 3] forward speed, yaw rate and leftward speed of Gymnasium's Box2D car from rest under
+    actions [T, 3], stepped as CarRacing-v3 steps it, its wheels on a tile or (no tiles) the grass."""
+    import Box2D
+    from gymnasium.envs.box2d.car_dynamics import Car as Box2DCar
+
+    world = Box2D.b2World((0, 0))
+    car = Box2DCar(world, 0.0, 0.0, 0.0)
+    for wheel in car.wheels:
+        wheel.tiles = {Road()} if on_road else set()
+    out = []
+    for steer, gas, brake in actions:
+        car.steer(-float(steer))
+        car.gas(float(gas))
+        car.brake(float(brake))
+        car.step(1.0 / 50)
+        world.Step(1.0 / 50, 6 * 30, 2 * 30)
+        v = np.array(car.hull.linearVelocity)
+        out.append([v @ car.hull.GetWorldVector((0, 1)), car.hull.angularVelocity, -v @ car.hull.GetWorldVector((1, 0))])
+    return np.array(out)
+
+
+def test_the_car_steps_beside_box2ds_car():
+    """Our car and Gymnasium's Box2D car from rest under the same 100 actions (speeds u/s, yaw rates
+    rad/s): full gas on the road (45.5 and 87.6 after 50 and 100 frames in both, 0.01 apart); 40
+    frames at half gas, then full right lock coasting (yaw -4.3 in both; speeds and yaw rate at most
+    0.08 apart), or with full gas, when the rear steps out (at most 1.0 apart over 20 frames; 28
+    frames in, yaw -8.4 Box2D, -8.1 ours); on the grass, half gas then a quarter lock, where both
+    spin (yaw -6.1 / -6.2 after 100 frames; at most 0.83 apart). Tolerances: those gaps, rounded up."""
+    follow = jax.jit(lambda actions, grip: jax.lax.scan(
+        lambda car, a: (lambda c: (c, jnp.stack([c.vel[0], c.yaw_rate, c.vel[1]])))(drive(car, a, grip)),
+        Car.at([0.0, 0.0], 0.0), actions)[1])
+    straight = np.tile([0.0, 1.0, 0.0], (100, 1))
+    cruise = np.tile([0.0, 0.5, 0.0], (40, 1))
+    coast, gas = np.vstack([cruise, np.tile([1.0, 0.0, 0.0], (60, 1))]), np.vstack([cruise, np.tile([1.0, 1.0, 0.0], (60, 1))])
+    grass = np.vstack([cruise, np.tile([0.25, 0.5, 0.0], (60, 1))])
+    road, off = jnp.ones(4), jnp.full(4, STANDARD.grass_grip)
+    runs = {name: (box2d_car(a, grip is road), np.asarray(follow(jnp.asarray(a, jnp.float32), grip)))
+            for name, a, grip in [("straight", straight, road), ("coast", coast, road), ("gas", gas, road),
+                                  ("grass", grass, off)]}
+    theirs, ours = runs["straight"]
+    np.testing.assert_allclose(ours[[49, 99], 0], theirs[[49, 99], 0], rtol=1e-3)
+    theirs, ours = runs["coast"]
+    np.testing.assert_allclose(ours[40:], theirs[40:], atol=0.1)
+    theirs, ours = runs["gas"]
+    np.testing.assert_allclose(ours[40:60], theirs[40:60], atol=1.5)
+    assert theirs[67, 1] < -8 and ours[67, 1] < -7.5
+    theirs, ours = runs["grass"]
+    np.testing.assert_allclose(ours[40:], theirs[40:], atol=1.0)
+    assert theirs[99, 1] < -5.5 and ours[99, 1] < -5.5
+
+
+def test_two_wheels_on_the_grass_turn_the_car_towards_them(env):
+    """Each wheel grips by the surface under it (Box2D's per-wheel friction limit). From rest, full
+    gas, straight wheels, the car centred on the stadium straight's left edge (its left wheels on the
+    grass, 0.6 grip, its right ones on the road): the right rear wheel pushes harder and the car
+    yaws left, onto the grass, and spins (measured: 1.8 rad in 1 s); on the right edge it yaws right
+    as much; on the road's centre it keeps straight. Braking from 60 u/s with its left wheels on the
+    grass, the road side brakes harder and it yaws right, away from the grass."""
+
+    def rollout(car, action):
+        def frame(state, _):
+            state = env.transition(KEY, state, action, STANDARD).state
+            return state, state.car.angle
+        return jax.lax.scan(frame, on_stadium(car), None, length=50)[1]
+
+    run = jax.jit(rollout)
+    gas, brake = jnp.array([0.0, 1.0, 0.0]), jnp.array([0.0, 0.0, 0.5])
+    left, right = np.asarray(run(north(40.0 - TRACK_WIDTH, -60.0), gas)), np.asarray(run(north(40.0 + TRACK_WIDTH, -60.0), gas))
+    centred = np.asarray(run(north(40.0, -60.0), gas))
+    assert left[-1] > 1.0 and (np.diff(left[:40]) > 0).all()
+    np.testing.assert_allclose(right, -left, atol=1e-3)
+    assert np.abs(centred).max() < 1e-4
+    braking = np.asarray(run(north(40.0 - TRACK_WIDTH, -60.0, speed=60.0), brake))
+    assert braking[10] < -0.01
 
 
 def test_the_car_is_finite_at_rest(run_car):
     for action in ([0.0, 0.0, 0.0], [1.0, 0.0, 1.0], [-1.0, 1.0, 0.5], [0.3, 0.0, 0.95]):
-        out = run_car(Car.at([0.0, 0.0], 0.3), jnp.array(action), jnp.full(2, 0.6))
+        out = run_car(Car.at([0.0, 0.0], 0.3), jnp.array(action), jnp.full(4, 0.6))
         assert all(np.isfinite(np.asarray(a)).all() for a in jax.tree.leaves(out)), action
 
 
@@ -471,6 +614,6 @@ def test_the_scripted_driver_keeps_to_the_road_at_30():
     sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "experiments"))
     import car_driver
 
-    result = car_driver.drive_ours(2, 30.0)
+    result = car_driver.drive_ours(car_driver.our_tracks(2), 30.0)
     assert result["exits_per_lap"] == 0.0
     assert 0.5 < result["progress"] < 0.7 and abs(result["top_speed"] - 30) < 4
