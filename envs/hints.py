@@ -9,11 +9,20 @@ To add a hint of your own, write the function and register it:
     @register_hint("pendulum", "height", dim=1, unit="m")
     def height(state, params):
         return jnp.cos(state.theta)[None]
+
+A file (or module) of such registrations is loaded without editing hintsjax by `load_hints`
+(`python -m hintsjax.run hints_from=my_hints.py hint=height`); `check_hint_shapes` then checks
+that each hint returns the width it was registered with.
 """
 
 from __future__ import annotations
 
+import hashlib
+import importlib
+import importlib.util
+import sys
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Callable
 
 import jax
@@ -149,3 +158,52 @@ def make_hint(env: str, spec: str) -> Hint:
         else:
             raise ChoiceError("hint", token, hint_names(env), where=f"env '{env}'")
     return Hint(env, spec, tuple(_HINTS[env][n] for n in names))
+
+
+class HintFileError(ValueError):
+    """A hint file that does not import, or a hint that returns another width than it registered."""
+
+
+def load_hints(source: str) -> str:
+    """Import `source`, a Python file (`*.py`, a path) or an importable module's dotted name, whose
+    `register_hint` calls add hints; once per file in a process. Its module name (a file's is
+    `hintsjax_hints_<digest of its path>`); HintFileError in one line when it cannot be imported."""
+    path = Path(source).expanduser()
+    try:
+        if source.endswith(".py") or path.exists():
+            if not path.is_file():
+                raise HintFileError(f"hints_from={source}: no such file")
+            path = path.resolve()
+            name = f"hintsjax_hints_{hashlib.sha256(str(path).encode()).hexdigest()[:12]}"
+            if name not in sys.modules:
+                spec = importlib.util.spec_from_file_location(name, path)
+                module = importlib.util.module_from_spec(spec)
+                sys.modules[name] = module  # first: what it registers is named after it (program_cache digests it)
+                try:
+                    spec.loader.exec_module(module)
+                except BaseException:
+                    del sys.modules[name]
+                    raise
+            return name
+        importlib.import_module(source)
+        return source
+    except HintFileError:
+        raise
+    except (Exception, SystemExit) as e:  # noqa: BLE001  whatever the user's file raised, in one line
+        what = f"{type(e).__name__}: {str(e).strip().splitlines()[0][:200]}" if str(e).strip() else type(e).__name__
+        raise HintFileError(f"hints_from={source} does not import ({what})") from None
+
+
+def check_hint_shapes(hint: Hint, state: Any, params: Any) -> None:
+    """HintFileError naming the first part of `hint` whose function, given `state` (one env's
+    state; abstract shapes are enough), returns another number of values than its registered dim."""
+    for part in hint.parts:
+        try:
+            out = jax.eval_shape(part.fn, state, params)
+        except Exception as e:  # noqa: BLE001  the user's function fails to trace: one line naming it
+            raise HintFileError(f"hint '{part.name}' of {hint.env} fails on the env's state "
+                                f"({type(e).__name__}: {str(e).strip().splitlines()[0][:160] if str(e).strip() else ''})") from None
+        shape = getattr(out, "shape", None)
+        if shape is None or len(shape) > 1 or (shape[0] if shape else 1) != part.dim:
+            raise HintFileError(f"hint '{part.name}' of {hint.env} returns shape {shape}, not the ({part.dim},) it "
+                                f"was registered with (dim={part.dim})")

@@ -53,6 +53,7 @@ class RunConfig:
     checkpoint_every: int = 10  # updates between progress reports and checkpoints
     checkpoint_seconds: float = 30.0  # at least this long between checkpoints (0: after every report)
     expert: str | None = None  # dagger/gail: an exported expert folder (None: the env's packaged one)
+    hints_from: str | None = None  # a Python file or module whose register_hint calls add hints (docs/playground.md)
     hint_source: str = "programmatic"  # where training's hint comes from: programmatic, or a generator folder
     eval_hint_source: str | None = None  # the same at deploy (None: as hint_source)
     # What steps an MJX env: auto (resolved when the config is built: Warp on an NVIDIA GPU with
@@ -105,6 +106,8 @@ class RunConfig:
         try:
             choose("env", self.env, envs.REGISTRY)
             choose("agent", self.agent, AGENTS)
+            if self.agent_spec.pixels:
+                envs.check_drawable(self.env)
             choose("scheme", self.scheme, SCHEMES)
             if self.hint not in (RunConfig.hint, ENV_DEFAULTS.get(self.env, {}).get("hint")):
                 envs.make_hint(self.env, self.hint)  # a hint asked for is named right, even where the agent sees none
@@ -119,6 +122,8 @@ class RunConfig:
         if self.agent_spec.hint and not names:
             raise UsageError(f"agent={self.agent} sees a hint, so hint=none leaves it nothing; valid for {self.env}: "
                              f"{', '.join(envs.hint_names(self.env))} (or agent=ppo_rgb, which sees none)")
+        if self.hints_from is not None:
+            self._check_hint_widths(hint)
         if not 1 <= self.warp_capacity < float("inf"):
             raise UsageError(f"warp_capacity must be a number of at least 1, got {self.warp_capacity}")
         for v in (self.variant, *self.eval_variants):
@@ -135,6 +140,16 @@ class RunConfig:
         if self.agent_spec.algorithm == "dagger" and self.dagger.buffer_size < self.ppo.batch_size:
             raise UsageError(f"dagger.buffer_size ({self.dagger.buffer_size}) must hold one round, ppo.batch_size ({self.ppo.batch_size})")
         return self
+
+    def _check_hint_widths(self, hint: envs.Hint) -> None:
+        """UsageError naming a hint (of a hint file) that returns another width than it registered."""
+        env = envs.make(self.env, envs.NO_HINT, ("state",))
+        params = env_params(self.env, self.variant)
+        state = jax.eval_shape(env.initial_state, jax.random.key(0), params)
+        try:
+            envs.check_hint_shapes(hint, state, params)
+        except envs.HintFileError as e:
+            raise UsageError(f"hints_from={self.hints_from}: {e}") from None
 
     def _check_hint_sources(self) -> None:
         from hintsjax.generator import PROGRAMMATIC, check_matches
@@ -198,6 +213,8 @@ def run_config(values: Mapping[str, Any], resolved: bool = False) -> RunConfig:
         defaults = dict(choose("env", env, ENV_DEFAULTS))
     except ChoiceError as e:
         raise UsageError(str(e)) from None
+    if values.get("hints_from") is not None:
+        values["hints_from"] = hint_file(str(values["hints_from"]))
     per_agent = defaults.pop("agents", {})
     if resolved:
         merged = {k: dict(v) if k in SECTIONS and isinstance(v, Mapping) else v for k, v in values.items()}
@@ -221,6 +238,17 @@ def run_config(values: Mapping[str, Any], resolved: bool = False) -> RunConfig:
         raise UsageError(f"bad config value: {e}") from None
     cfg = cfg.validate()
     return dataclasses.replace(cfg, physics=envs.resolve_physics(cfg.env, cfg.physics))  # what the run steps with, kept
+
+
+def hint_file(source: str) -> str:
+    """`hints_from`'s file or module loaded (its registered hints added): the absolute path of a
+    file, so that a run folder's config finds it from elsewhere; UsageError if it does not import."""
+    try:
+        envs.load_hints(source)
+    except envs.HintFileError as e:
+        raise UsageError(str(e)) from None
+    path = Path(source).expanduser()
+    return str(path.resolve()) if source.endswith(".py") or path.exists() else source
 
 
 def _check_types(cfg: RunConfig) -> None:
@@ -253,9 +281,14 @@ def save_run_config(run_dir: Path, cfg: RunConfig) -> None:
     part.replace(Path(run_dir) / CONFIG_YAML)
 
 
+# Settings added since runs were first saved whose absence means their default (a run saved before
+# hints_from had no hint file), so a saved config without them is complete.
+OPTIONAL_IN_SAVED = {"hints_from"}
+
+
 def missing_keys(values: Mapping[str, Any]) -> list[str]:
     """The settings of today's RunConfig that a saved config (to_dict's layout) lacks."""
-    missing = sorted(_fields(RunConfig) - set(SECTIONS) - set(values))
+    missing = sorted(_fields(RunConfig) - set(SECTIONS) - OPTIONAL_IN_SAVED - set(values))
     return missing + [f"{name}.{k}" for name, cls in SECTIONS.items()
                       for k in sorted(_fields(cls) - set(values.get(name) or {}))]
 

@@ -41,5 +41,27 @@ def _env_defaults(training: dict[str, Any]) -> dict[str, Any]:
     return {**training, "agents": agents}
 
 
+class EnvDefaults(dict):
+    """ENV_DEFAULTS: the suite's envs' defaults, and an adapted env's (`playground:<task>`,
+    `brax:<name>`: its adapter's table, envs/playground.py) added when it is first looked up."""
+
+    def __contains__(self, name: object) -> bool:
+        if not dict.__contains__(self, name) and name in envs.REGISTRY:  # adapts a `<source>:<task>`
+            self[name] = _env_defaults(envs.REGISTRY[name].training)
+        return dict.__contains__(self, name)
+
+    def __missing__(self, name: str) -> dict[str, Any]:
+        if name in self:
+            return dict.__getitem__(self, name)
+        raise KeyError(name)
+
+    def get(self, name: str, default: Any = None) -> Any:
+        return self[name] if name in self else default
+
+    def keys(self) -> list[str]:
+        """The names an unknown env's error lists: the registry's (envs.EnvRegistry.keys)."""
+        return envs.REGISTRY.keys()
+
+
 # Per env, defaults over the dataclasses' (hintsjax.algorithm_settings, hintsjax.config.RunConfig).
-ENV_DEFAULTS: dict[str, dict[str, Any]] = {name: _env_defaults(entry.training) for name, entry in envs.REGISTRY.items()}
+ENV_DEFAULTS: EnvDefaults = EnvDefaults({name: _env_defaults(entry.training) for name, entry in envs.REGISTRY.items()})

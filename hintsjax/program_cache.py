@@ -41,7 +41,7 @@ import numpy as np
 
 ENV_VAR = "HINTSJAX_TRACE_CACHE"  # "off" turns the traced-program cache off (the compile cache stays)
 FOLDER = "traced"
-LIBRARIES = ("jax", "jaxlib", "flax", "optax", "chex", "numpy", "mujoco", "mujoco-mjx", "orbax-checkpoint")
+LIBRARIES = ("jax", "jaxlib", "flax", "optax", "chex", "numpy", "mujoco", "mujoco-mjx", "orbax-checkpoint", "brax", "playground")
 NUMERIC_SETTINGS = ("jax_enable_x64", "jax_default_matmul_precision", "jax_default_prng_impl", "jax_threefry_partitionable")
 _OFF = ("off", "0", "false", "no", "none")
 

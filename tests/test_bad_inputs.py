@@ -35,7 +35,8 @@ def places(tmp_path_factory) -> dict[str, str]:
         if text:
             (root / name / "config.yaml").write_text(text)
     (root / "file").write_text("not a folder\n")
-    return {"run": str(root / "run"), "file": str(root / "file"), **{name: str(root / name) for name in folders}}
+    return {"run": str(root / "run"), "file": str(root / "file"), "hints": str(Path(__file__).parent / "data" / "hints"),
+            **{name: str(root / name) for name in folders}}
 
 
 def tree(folder: Path) -> dict[str, bytes]:
@@ -83,6 +84,22 @@ def test_a_run_refuses_an_out_dir_it_cannot_make(args, places, tmp_path, capsys)
     status, lines, err, unchanged = outcome(main, args, places, tmp_path, capsys)
     assert status == 2, err
     assert len(lines) == 1 and lines[0].startswith("error: ") and filled(TABLE["run_folders"][args], places, tmp_path) in lines[0], lines
+    assert "Traceback" not in err and unchanged
+
+
+@pytest.mark.parametrize("args", list(TABLE["run_adapted_envs"]))
+def test_a_run_on_a_playground_or_brax_task_refuses_bad_input(args, places, tmp_path, capsys):
+    """An unknown Playground or Brax name (listing the valid ones), a hint file that does not
+    import, a hint of the wrong width: one line, exit 2, nothing written (in-process, as Hydra
+    hands the values over)."""
+    pytest.importorskip("mujoco_playground", reason="the Playground adapter needs the playground extra")
+
+    def main(argv: list[str]) -> int:
+        return run.main_from_values({"out_dir": str(tmp_path / "runs"), **dict(arg.split("=", 1) for arg in argv)})
+
+    status, lines, err, unchanged = outcome(main, args, places, tmp_path, capsys)
+    assert status == 2, err
+    assert len(lines) == 1 and lines[0].startswith("error: ") and filled(TABLE["run_adapted_envs"][args], places, tmp_path) in lines[0], lines
     assert "Traceback" not in err and unchanged
 
 
