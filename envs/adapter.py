@@ -128,7 +128,7 @@ class AdaptedEnv(Env):
     """A `Task` as an Env: its reset and step, with the adapter's picture, state observation,
     truncation and hints. Made by `envs.make('<source>:<task>', ...)`."""
 
-    def __init__(self, hint: Hint, observe: tuple[str, ...] = OBS_KEYS, task: Task | None = None):
+    def __init__(self, hint: Hint, observe: tuple[str, ...] = OBS_KEYS, *, task: Task):
         super().__init__(hint, observe)
         self.task = task
         self.name = task.name

@@ -547,3 +547,29 @@ def test_a_warp_sweeps_worker_drops_deterministic_ops_before_jax_starts(physics,
     out = subprocess.run([sys.executable, "-c", WORKER_SETTINGS, f"--set=physics={physics}"], env={**env, "JAX_PLATFORMS": "cpu"},
                          cwd=Path(__file__).resolve().parents[1], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["True", str(dropped)], out.stderr[-2000:]
+
+
+def test_the_playground_side_by_side_gives_hintsjax_brax_s_settings_and_the_report_its_cells(tmp_path):
+    """experiments/playground.py: Playground's published Brax PPO settings for CartpoleSwingup
+    mapped onto hintsjax's (an update of batch_size x num_minibatches x unroll_length = 1024 x 32 x
+    30 env steps over 2048 envs, minibatches of 1024 x 30, 16 epochs), a config hintsjax accepts;
+    and the report's row of hand-written runs: IQMs and P(HINTS > PPO-RGB)."""
+    pytest.importorskip("mujoco_playground", reason="the Playground adapter needs the playground extra")
+    import playground
+
+    from hintsjax.config import run_config
+
+    values = playground.hintsjax_values(playground.brax_settings(smoke=False), seeds=5, steps=60_000_000, smoke=False)
+    cfg = run_config(values)
+    assert (cfg.ppo.batch_size, cfg.ppo.num_envs, cfg.ppo.rollout_length, cfg.ppo.minibatch_size, cfg.ppo.epochs) == \
+        (983_040, 2048, 480, 30_720, 16)
+    assert (cfg.ppo.gamma, cfg.ppo.actor_lr, cfg.ppo.reward_scale, cfg.ppo.normalize_state) == (0.995, 1e-3, 10.0, True)
+    assert cfg.agent == "ppo_state" and cfg.ppo.num_updates == 61  # 60 M steps in whole updates of 983,040
+    runs = tmp_path / "playground"
+    env = "playground:CartpoleSwingup"
+    write_run(runs, env, "ppo_rgb", [evaluation(100.0, 10.0, [90.0, 95.0, 100.0, 105.0, 110.0])])
+    write_run(runs, env, "hints-fc-pole_angle", [evaluation(300.0, 10.0, [280.0, 290.0, 300.0, 310.0, 320.0])])
+    out = tmp_path / "playground.md"
+    playground.report(runs, True, out)
+    row = next(line for line in out.read_text().splitlines() if line.startswith("| CartpoleSwingup"))
+    assert "| 100.0 [" in row and "| 300.0 [" in row and "P(HINTS > PPO-RGB) = 1.00 [1.00, 1.00]: decided" in row
