@@ -2,12 +2,14 @@
 and observation).
 
 Two overrides of Gymnasium's file (`Humanoid.options`):
-- Solver (`locomotion.SOLVER`): Gymnasium's file asks for PGS with 50 iterations, which MJX does
-  not implement; we use Newton with at most 4 iterations and 8 line-search steps, as the Ant and
-  HalfCheetah do.
+- Solver: Gymnasium's file asks for PGS with 50 iterations, which MJX does not implement; we use
+  Newton with at most 4 iterations and 8 line-search steps. More (8 and 16, 16 and 32, 100 and
+  50) changed nothing that the integrator's difference does not swamp (experiments/fidelity.py).
 - Integrator: semi-implicit Euler instead of the file's RK4, for the GPU budget, not for MJX
   (which has RK4). RK4 evaluates the whole forward pass, contacts included, four times a
-  substep; Euler once. On 2 CPU cores, 64 envs: 272 env steps/s with RK4, 1160 with Euler
+  substep; Euler once. Training with RK4 cost 1.74x (MJX-Warp) and 2.54x (MJX-JAX) the time
+  of Euler on an H100, beyond issue 50's 1.5x, so Euler stays, and with it the largest share
+  of the humanoid's distance from Gymnasium (docs/environments.md, "Fidelity"). On 2 CPU cores, 64 envs: 272 env steps/s with RK4, 1160 with Euler
   (4.3x) in a first run; 326 and 803 (2.5x) in `experiments/humanoid_contacts.py`'s rerun (CPU
   timings vary). A Table 3 row (5 seeds x 10 M steps) would take over an hour of GPU with RK4.
   The parity tests measure both sides of this: against Gymnasium with the same integrator
@@ -32,8 +34,8 @@ import jax.numpy as jnp
 import mujoco
 
 from hintsjax.envs.hints import register_hint
-from hintsjax.envs.locomotion import (SOLVER, LocomotionEnv, LocomotionParams, LocomotionState,
-                                      forward_velocity, torso_height_above_target)
+from hintsjax.envs.locomotion import (LocomotionEnv, LocomotionParams, LocomotionState, forward_velocity,
+                                      torso_height_above_target)
 from hintsjax.envs.physics import Readout
 
 NAME = "humanoid"
@@ -50,7 +52,8 @@ VARIANTS = {
 class Humanoid(LocomotionEnv):
     name = NAME
     asset = "humanoid.xml"
-    options = {**SOLVER, "integrator": mujoco.mjtIntegrator.mjINT_EULER}  # module docstring
+    options = dict(solver=mujoco.mjtSolver.mjSOL_NEWTON, iterations=4, ls_iterations=8,
+                   integrator=mujoco.mjtIntegrator.mjINT_EULER)  # module docstring
     variants = VARIANTS
     action_size = 17
     camera = dict(distance=3.0, elevation_deg=-15.0, azimuth_deg=90.0)

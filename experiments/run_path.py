@@ -32,7 +32,7 @@ from pathlib import Path
 
 CELLS = {"pendulum": ["env=pendulum", "agent=hints", "hint=composite", "scheme=fc"],
          "ant": ["env=ant", "agent=hints", "hint=speed", "scheme=fc"],
-         # the ant with cheaper physics (Euler, 2 Newton iterations, 9 contacts: docs/environments.md)
+         # a different, cheaper task on the ant's body (Euler, 2 Newton iterations, 9 contacts: docs/environments.md)
          "ant_fast": ["env=ant_fast", "agent=hints", "hint=speed", "scheme=fc"],
          "humanoid": ["env=humanoid", "agent=hints", "hint=velocity", "scheme=fc"]}
 PARTIAL = ("ant", "ant_fast", "humanoid")  # cells trained for --updates updates, their full wall extrapolated

@@ -27,11 +27,12 @@ class Compiled:
 
 
 def parity(compiled: Compiled, gym_id: str, steps: int, gym_options: dict | None = None, adapt=None,
-           same_termination: bool = True) -> dict[str, float]:
+           same_termination: bool = True, policy=None, episode_steps: int = 20) -> dict[str, float]:
     """Worst |d obs|, |d reward|, |d qpos|, |d qvel| along gym's trajectories (a fresh gym
-    episode every 20 steps and after each termination), asserting equal termination (or, with
-    `same_termination` False, counting the steps where it differs); counts of terminal and
-    contact steps. gym's model takes `gym_options` and then `adapt(model)`, if given."""
+    episode every `episode_steps` steps and after each termination), asserting equal termination
+    (or, with `same_termination` False, counting the steps where it differs); counts of terminal
+    and contact steps. Actions are uniform in the action space, or `policy(gym's observation)`
+    clipped to it. gym's model takes `gym_options` and then `adapt(model)`, if given."""
     params, step, state_at = compiled.params, compiled.transition, compiled.state_at
     gym_env = gym.make(gym_id).unwrapped
     for field, value in (gym_options or {}).items():
@@ -43,11 +44,14 @@ def parity(compiled: Compiled, gym_id: str, steps: int, gym_options: dict | None
     worst = dict(obs=0.0, reward=0.0, qpos=0.0, qvel=0.0, terminal=0, contact=0, termination_differs=0)
     fresh = True
     for i in range(steps):
-        if fresh or i % 20 == 0:
+        if fresh or i % episode_steps == 0:
             gym_env.reset(seed=i)
         qpos, qvel = f32(gym_env.data.qpos), f32(gym_env.data.qvel)
         gym_env.set_state(qpos, qvel)
-        action = rng.uniform(low, high).astype(np.float32)
+        if policy is None:
+            action = rng.uniform(low, high).astype(np.float32)
+        else:
+            action = np.clip(np.asarray(policy(jnp.asarray(gym_env._get_obs(), jnp.float32))), low, high).astype(np.float32)
         out = step(KEY, state_at(qpos, qvel), jnp.asarray(action), params)
         obs, reward, terminated, _, _ = gym_env.step(action)
         assert bool(out.terminated) == terminated or not same_termination, f"step {i}"

@@ -118,8 +118,8 @@ def test_warp_halfcheetah_parity(warp_cheetah):
 
 @warp_lang
 def test_warp_ant_parity_as_shipped(warp_ant):
-    """MJX-Warp against Ant-v5 as Gymnasium ships it (pyramidal cones, Newton capped at 4
-    iterations), with the JAX path's bounds (test_ant_parity_as_shipped; JAX measured |d obs|
+    """MJX-Warp against Ant-v5 as Gymnasium ships it (pyramidal cones; Newton capped at 8
+    iterations since 2026-11-26, 4 when measured), with the JAX path's bounds (test_ant_parity_as_shipped; JAX measured |d obs|
     1.49, |d reward| 0.41). Measured (CPU, 60 steps, 24 with contacts): |d obs| 2.0 (a clipped
     contact force at +1 on one side, -1 on the other), |d qvel| 1.49, |d reward| 0.41;
     termination identical."""
