@@ -2,6 +2,7 @@
 
     python experiments/locomotion.py [--envs halfcheetah,ant] [--workers 2] [--launch-until 300]
     python experiments/locomotion.py --report     # experiments/results/locomotion_table3.md + curves
+    python experiments/locomotion.py --learners-report experiments/results/table3_seeds20.md --runs runs/table3_20
 
 Per env: PPO-RGB, PPO-x (the state) and HINTS-FC with each of the paper's hint columns, at the
 paper's budgets (config.ENV_DEFAULTS: 1k, 5k and 10k episodes counted at 1000 steps), 5 seeds
@@ -15,8 +16,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from report import (KEPT, apart_text, cell, cell_stats, curve_lines, footer, kept_rows, kl_cell, load, markdown_table,
-                    metrics_path, references_note, trained_ppo, training_cell, wall_clock, write_report)
+from report import (ARCHIVE, KEPT, apart_text, cell, cell_stats, curve_lines, footer, iqm_cell, kept_rows, kl_cell, load,
+                    markdown_table, metrics_path, read_about, references_note, sweep_seconds, trained_ppo, training_cell,
+                    wall_clock, write_report)
 from sweep import hints_run, table_main
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -182,8 +184,105 @@ def report(runs: Path, force: bool = False) -> None:
     write_report(RESULTS / REPORT, lines, force)
 
 
+# The paper's orderings that Table 3's locomotion rows speak to (section 5): O1, hints beat vision
+# only; O4, hints close the gap to the state-based agent (PPO-x, "dominated by all hints on the
+# Ant and Humanoid"); O5, a specific hint beats the full state given as a hint.
+ORDERINGS_ABOUT = (
+    "Orderings: probabilities of improvement P(X > Y) over the per-seed mean returns with 95 % bootstrap intervals "
+    "(hintsjax/stats.py). Decided for: the interval lies above 0.5; decided against: below 0.5; undecided: it "
+    "contains 0.5. The best hint is the HINTS-FC row with the highest IQM, chosen on the same seeds, which favours "
+    "it a little.")
+
+
+def verdict(interval) -> str:
+    from hintsjax import stats
+
+    return {1: "decided for", -1: "decided against", 0: "undecided"}[stats.direction(interval)]
+
+
+def seed_means(result: dict) -> list[float]:
+    return result["evaluations"][0]["seed_means"]
+
+
+def poi_cell(x: dict | None, y: dict | None) -> str:
+    """'P [low, high]' of P(x > y) over seeds, or '-'."""
+    from hintsjax import stats
+
+    if x is None or y is None:
+        return "-"
+    ci = stats.poi_ci(seed_means(x), seed_means(y))
+    return f"{ci.point:.2f} [{ci.low:.2f}, {ci.high:.2f}]"
+
+
+def ordering_lines(runs: Path, env: str) -> list[str]:
+    """O1, O4 and (where the env has the `state` hint) O5 as probabilities of improvement."""
+    from hintsjax import stats
+
+    run = lambda label: load(runs, env, label)  # noqa: E731
+    hints = {h: run(hints_run("fc", h)) for h in HINTS[env]}
+    hints = {h: r for h, r in hints.items() if r is not None}
+    if not hints:
+        return []
+    best = max(hints, key=lambda h: stats.iqm(seed_means(hints[h])))
+    label = lambda h: hints_run("fc", h)  # noqa: E731
+    pairs = [("O1 (hints beat vision only)", label(best), hints[best], "ppo_rgb", run("ppo_rgb")),
+             ("O4 (hints close the gap to PPO on the state)", label(best), hints[best], "ppo_state", run("ppo_state"))]
+    specific = {h: r for h, r in hints.items() if h != "state"}
+    if "state" in hints and specific:
+        top = max(specific, key=lambda h: stats.iqm(seed_means(specific[h])))
+        pairs.append(("O5 (a specific hint beats the full state as a hint)", label(top), specific[top], label("state"),
+                      hints["state"]))
+    lines = []
+    for tag, name_x, x, name_y, y in pairs:
+        if x is None or y is None:
+            continue
+        ci = stats.poi_ci(seed_means(x), seed_means(y))
+        lines.append(f"- {tag}: P({name_x} > {name_y}) = {ci.point:.2f} [{ci.low:.2f}, {ci.high:.2f}]: {verdict(ci)}")
+    return lines
+
+
+def learners_report(runs: Path, names: list[str], path: Path) -> None:
+    """The learner rows of Table 3 for `names` from a runs folder at any seed count (the 20-seed
+    table, issue 46): per row mean ± std, IQM [95 % CI] and P(row > PPO-RGB); the orderings O1,
+    O4 and O5; learning curves with bootstrap bands. The plan and the hardware stay in `path`
+    above the generated part (everything from GENERATED on is rewritten)."""
+    from hintsjax.config import run_config
+
+    head = path.read_text().split(GENERATED)[0].rstrip("\n").splitlines() if path.exists() else []
+    about = read_about(ARCHIVE / runs.name)
+    lines = [*head, "", GENERATED, "",
+             f"Made by `python experiments/locomotion.py --learners-report experiments/results/{path.name} "
+             f"--runs runs/{runs.name}` from the archived runs (experiments/results/runs/{runs.name}).",
+             "Cells: mean ± std over all seeds x 50 evaluation episodes (in brackets the std of the per-seed means), the",
+             "IQM of the per-seed means with a 95 % stratified bootstrap interval, and P(row > PPO-RGB) over the seeds.",
+             f"GPU wall-clock of the sweeps (runs/{runs.name}/sweeps.jsonl): {sweep_seconds(runs, TABLE):.0f} s.", ""]
+    for env in names:
+        labels = [*BASELINES, *(hints_run("fc", h) for h in HINTS[env])]
+        results = {label: load(runs, env, label) for label in labels}
+        trained = {label: r for label, r in results.items() if r is not None}
+        budget = run_config({"env": env}).ppo.total_env_steps / 1e6
+        if not trained:
+            lines += [f"## {env} ({budget:g} M env steps per seed)", "", "Not trained yet.", ""]
+            continue
+        seeds = sorted({len(seed_means(r)) for r in trained.values()})
+        lines += [f"## {env} ({budget:g} M env steps per seed, {', '.join(map(str, seeds))} seeds per row)", "",
+                  *settings_lines(runs, env, labels), ""]
+        rgb = results["ppo_rgb"]
+        rows = [[label, cell(r), iqm_cell(r), "-" if label == "ppo_rgb" else poi_cell(r, rgb), PAPER[env].get(label, "-"),
+                 wall_clock(r)] for label, r in results.items()]
+        lines += markdown_table(["agent", "ours", "IQM [95% CI]", "P(row > PPO-RGB)", "paper", "wall-clock (s)"], rows)
+        lines += ["", ORDERINGS_ABOUT, "", *ordering_lines(runs, env), ""]
+        lines += curve_lines(runs, env, list(trained), RESULTS / f"table3_seeds20_curves_{env}.png",
+                             f"{env}: Table 3 learners, {', '.join(map(str, seeds))} seeds")
+    lines += ["## Where these numbers come from", "", *(f"- {k}: {v}" for k, v in about.items()), ""] if about else []
+    write_report(path, lines, force=True)
+
+
+GENERATED = "<!-- generated by experiments/locomotion.py --learners-report: everything below -->"
+
+
 def main() -> None:
-    table_main(__doc__.splitlines()[0], DEFAULT_RUNS, ENVS, TABLE, run_ids, report)
+    table_main(__doc__.splitlines()[0], DEFAULT_RUNS, ENVS, TABLE, run_ids, report, learners_report)
 
 
 if __name__ == "__main__":

@@ -360,12 +360,21 @@ def chosen_runs(parser: argparse.ArgumentParser, args: argparse.Namespace, run_i
 
 
 def table_main(description: str, default_runs: str, envs: tuple[str, ...], table: str,
-               run_ids: Callable[[list[str]], list[str]], report: Callable[[Path, bool], None]) -> None:
-    """The command line of a table's sweep script: train its runs for --envs, or --report."""
+               run_ids: Callable[[list[str]], list[str]], report: Callable[[Path, bool], None],
+               learners_report: Callable[[Path, list[str], Path], None] | None = None) -> None:
+    """The command line of a table's sweep script: train its runs for --envs, or --report (and,
+    where the script has one, --learners-report FILE: the learner rows at any seed count)."""
     parser = argparse.ArgumentParser(description=description)
     add_arguments(parser, default_runs, envs)
+    if learners_report is not None:
+        parser.add_argument("--learners-report", type=Path, default=None, metavar="FILE",
+                            help="write the learner rows of --envs from --runs (any seed count) with IQM and orderings")
     args = parser.parse_args()
     os.environ["JAX_PLATFORMS"] = "cpu"  # the parent only reads configs; workers get the devices
+    if getattr(args, "learners_report", None):
+        archive_runs(args.runs, run_ids(list(envs)))
+        learners_report(args.runs, chosen_envs(parser, args, envs), args.learners_report)
+        return
     if args.report:
         archive_runs(args.runs, run_ids(list(envs)))
         report(args.runs, args.force)
