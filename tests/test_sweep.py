@@ -573,3 +573,33 @@ def test_the_playground_side_by_side_gives_hintsjax_brax_s_settings_and_the_repo
     playground.report(runs, True, out)
     row = next(line for line in out.read_text().splitlines() if line.startswith("| CartpoleSwingup"))
     assert "| 100.0 [" in row and "| 300.0 [" in row and "P(HINTS > PPO-RGB) = 1.00 [1.00, 1.00]: decided" in row
+
+
+def test_locomotion_learners_report_gives_each_ordering_its_verdict(tmp_path, monkeypatch):
+    """Table 3 at any seed count (`--learners-report`), on hand-written halfcheetah runs of 6 seeds:
+    the state hint's seeds all lie above PPO-RGB's (O1 decided for) and all below PPO on the state
+    (O4 decided against), and the reward hint's interleave with the state hint's (O5 undecided);
+    the plan above the marker is kept, and a row not trained reads '-'."""
+    import locomotion
+
+    monkeypatch.setattr(report, "ARCHIVE", tmp_path / "archive")
+    monkeypatch.setattr(locomotion, "ARCHIVE", tmp_path / "archive")
+    monkeypatch.setattr(locomotion, "RESULTS", tmp_path)
+    runs = tmp_path / "runs" / "t20"
+    seeds = {"ppo_rgb": [0.0, 10, 20, 30, 40, 50], "ppo_state": [900.0, 910, 920, 930, 940, 950],
+             "hints-fc-state": [500.0, 510, 520, 530, 540, 550], "hints-fc-reward": [495.0, 505, 515, 525, 535, 545],
+             "hints-fc-velocity": [100.0, 110, 120, 130, 140, 150]}
+    for label, means in seeds.items():
+        write_run(runs, "halfcheetah", label, [evaluation(float(np.mean(means)), 10.0, means)])
+    path = tmp_path / "table3.md"
+    path.write_text(f"# The plan\n\nRows and budgets.\n\n{locomotion.GENERATED}\n\nstale table\n")
+    locomotion.learners_report(runs, ["halfcheetah"], path)
+    text = path.read_text()
+    assert text.startswith("# The plan\n\nRows and budgets.\n") and "stale table" not in text
+    assert "halfcheetah (1 M env steps per seed, 6 seeds per row)" in text
+    assert "- O1 (hints beat vision only): P(hints-fc-state > ppo_rgb) = 1.00 [1.00, 1.00]: decided for" in text
+    assert "- O4 (hints close the gap to PPO on the state): P(hints-fc-state > ppo_state) = 0.00 [0.00, 0.00]: decided against" in text
+    assert "P(hints-fc-reward > hints-fc-state) = 0.4" in text and text.count(": undecided") == 1
+    assert "| hints-fc-max_velocity | - | - | - |" in text  # not trained
+    locomotion.learners_report(runs, ["halfcheetah"], path)
+    assert path.read_text() == text  # the report rewrites only its own part
