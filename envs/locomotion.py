@@ -159,11 +159,12 @@ class LocomotionEnv(MjxEnv):
         return self.ctrl_range[:, 0], self.ctrl_range[:, 1]  # the actuators' ctrlrange
 
     def transition(self, key, state: LocomotionState, action, params: LocomotionParams) -> Step:
-        ctrl = jnp.clip(jnp.reshape(action, (self.action_size,)), *self.action_range(params))
+        action = jnp.reshape(action, (self.action_size,))
+        ctrl = jnp.clip(action, *self.action_range(params))
         data = self.physics.run(state.qpos, state.qvel, ctrl, params.frame_skip, self.contact_forces)
         position = self.position(data)
         velocity = (position - state.position) / self.dt
-        charged = jnp.reshape(action, (self.action_size,)) if params.raw_action_ctrl_cost else ctrl
+        charged = action if params.raw_action_ctrl_cost else ctrl
         reward, terminated = self.outcome(data, velocity, charged, params)
         max_velocity = jnp.maximum(state.max_velocity, velocity[0])
         return Step(self._state(data, position, velocity, reward, max_velocity, state.t), reward, terminated)

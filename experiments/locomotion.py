@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from report import (ARCHIVE, KEPT, apart_text, cell, cell_stats, curve_lines, footer, iqm_cell, kept_rows, kl_cell, load,
+from report import (ARCHIVE, KEPT, about_lines, apart_text, cell, cell_stats, curve_lines, footer, iqm_cell, kept_rows, kl_cell, load,
                     markdown_table, metrics_path, read_about, references_note, sweep_seconds, trained_ppo, training_cell,
                     wall_clock, write_report)
 from sweep import hints_run, table_main
@@ -204,14 +204,15 @@ def seed_means(result: dict) -> list[float]:
     return result["evaluations"][0]["seed_means"]
 
 
+def interval_text(ci) -> str:
+    return f"{ci.point:.2f} [{ci.low:.2f}, {ci.high:.2f}]"
+
+
 def poi_cell(x: dict | None, y: dict | None) -> str:
     """'P [low, high]' of P(x > y) over seeds, or '-'."""
     from hintsjax import stats
 
-    if x is None or y is None:
-        return "-"
-    ci = stats.poi_ci(seed_means(x), seed_means(y))
-    return f"{ci.point:.2f} [{ci.low:.2f}, {ci.high:.2f}]"
+    return "-" if x is None or y is None else interval_text(stats.poi_ci(seed_means(x), seed_means(y)))
 
 
 def ordering_lines(runs: Path, env: str) -> list[str]:
@@ -237,7 +238,7 @@ def ordering_lines(runs: Path, env: str) -> list[str]:
         if x is None or y is None:
             continue
         ci = stats.poi_ci(seed_means(x), seed_means(y))
-        lines.append(f"- {tag}: P({name_x} > {name_y}) = {ci.point:.2f} [{ci.low:.2f}, {ci.high:.2f}]: {verdict(ci)}")
+        lines.append(f"- {tag}: P({name_x} > {name_y}) = {interval_text(ci)}: {verdict(ci)}")
     return lines
 
 
@@ -274,7 +275,7 @@ def learners_report(runs: Path, names: list[str], path: Path) -> None:
         lines += ["", ORDERINGS_ABOUT, "", *ordering_lines(runs, env), ""]
         lines += curve_lines(runs, env, list(trained), RESULTS / f"table3_seeds20_curves_{env}.png",
                              f"{env}: Table 3 learners, {', '.join(map(str, seeds))} seeds")
-    lines += ["## Where these numbers come from", "", *(f"- {k}: {v}" for k, v in about.items()), ""] if about else []
+    lines += about_lines(about)
     write_report(path, lines, force=True)
 
 
