@@ -2,6 +2,7 @@
 
     python experiments/car_racing.py [--workers 2] [--launch-until 300]
     python experiments/car_racing.py --report     # experiments/results/car_table3.md + curves
+    python experiments/car_racing.py --learners-report experiments/results/table3_seeds20.md --runs runs/table3_20
 
 PPO-RGB and HINTS-MC with each of the paper's car hint columns (curvature, on_track and their
 composite), trained on the standard tracks at the paper's budget (config.ENV_DEFAULTS: 1000
@@ -18,7 +19,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from report import (ARCHIVE, about_lines, cell, curve_lines, footer, load, markdown_table, metric_cell, read_about, references_note, training_cell, wall_clock, write_report)
+from report import (ARCHIVE, ORDERINGS_ABOUT, about_lines, cell, curve_lines, footer, generated_marker, iqm_cell, load,
+                    markdown_table, metric_cell, ordering_line, poi_cell, ppo_text, read_about, references_note,
+                    seed_means, sweep_seconds, trained_ppo, training_cell, wall_clock, write_report, write_section)
 from sweep import hints_run, table_main
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -129,8 +132,72 @@ def report(runs: Path, force: bool = False) -> None:
     write_report(RESULTS / "car_table3.md", lines, force)
 
 
+def ordering_lines(runs: Path, env: str) -> list[str]:
+    """O1 on the standard tracks (the best hint by IQM over PPO-RGB) and O3 on the hairpin ones
+    (the composite over PPO-RGB), as probabilities of improvement of the per-seed mean returns."""
+    from hintsjax import stats
+
+    rgb = load(runs, env, "ppo_rgb")
+    hints = {hints_run("mc", h): load(runs, env, hints_run("mc", h)) for h in HINTS[env]}
+    hints = {label: r for label, r in hints.items() if r is not None}
+    if rgb is None or not hints:
+        return []
+    best = max(hints, key=lambda label: stats.iqm(seed_means(hints[label])))
+    lines = [ordering_line("O1 (hints beat vision only; standard tracks)", best, hints[best], "ppo_rgb", rgb)]
+    composite = hints_run("mc", "composite")
+    if composite in hints:
+        lines.append(ordering_line("O3 (composite hints carry the car round hairpins; hairpin tracks)", composite,
+                                   hints[composite], "ppo_rgb", rgb, VARIANTS.index("hairpin")))
+    return lines
+
+
+def learners_report(runs: Path, names: list[str], path: Path) -> None:
+    """The car's learner rows of Table 3 (PPO-RGB and HINTS-MC with each hint column) from a runs
+    folder at any seed count (the 20-seed table, issue 46): per row and track variant the IQM
+    [95 % CI] of the per-seed mean returns, P(row > PPO-RGB) and the progress; O1 and O3; learning
+    curves with bootstrap bands. Written as the section of `path` that GENERATED opens
+    (report.write_section): the plan and the locomotion section stay. `names` is the car alone."""
+    from hintsjax.config import run_config
+
+    env = ENVS[0]
+    labels = [*BASELINES, *(hints_run("mc", h) for h in HINTS[env])]
+    results = {label: load(runs, env, label) for label in labels}
+    trained = {label: r for label, r in results.items() if r is not None}
+    ppo = run_config({"env": env}).ppo
+    heading = f"## {env} ({ppo.total_env_steps / 1e6:g} M env steps per seed"
+    lines = [f"Made by `python experiments/car_racing.py --learners-report experiments/results/{path.name} "
+             f"--runs runs/{runs.name}` from the archived runs (experiments/results/runs/{runs.name}).",
+             "Agents train on standard tracks and are deployed on standard and hairpin ones. Cells per track variant:",
+             "the IQM of the per-seed mean returns with a 95 % stratified bootstrap interval, P(row > PPO-RGB) over the",
+             "seeds, and the progress P (visited tiles / all tiles at an episode's end), mean ± std over all seeds x",
+             "50 evaluation episodes (in brackets the std of the per-seed means).",
+             f"GPU wall-clock of the sweeps (runs/{runs.name}/sweeps.jsonl): {sweep_seconds(runs, TABLE):.0f} s.", ""]
+    if not trained:
+        lines += [heading + ")", "", "Not trained yet.", ""]
+    else:
+        seeds = ", ".join(map(str, sorted({len(seed_means(r)) for r in trained.values()})))
+        rgb = results["ppo_rgb"]
+        rows = [[label, *(c for i in range(len(VARIANTS)) for c in (
+                    iqm_cell(r, i), "-" if label == "ppo_rgb" else poi_cell(r, rgb, i),
+                    metric_cell(r, "progress", i, percent=True))),
+                 " / ".join(PAPER[label][v] for v in VARIANTS), wall_clock(r)] for label, r in results.items()]
+        header = ["agent", *(f"{v} {what}" for v in VARIANTS for what in ("IQM [95% CI]", "P(row > PPO-RGB)", "P")),
+                  "paper standard / hairpin", "wall-clock (s)"]
+        lines += [f"{heading}, {seeds} seeds per row)", "",
+                  f"PPO: {ppo_text(trained_ppo(runs, env, next(iter(trained))) or ppo)}.", "",
+                  *markdown_table(header, rows), "", ORDERINGS_ABOUT, "", *ordering_lines(runs, env), "",
+                  findings(runs, env), ""]
+        lines += curve_lines(runs, env, list(trained), RESULTS / f"table3_seeds20_curves_{env}.png",
+                             f"{env} (standard tracks): Table 3 learners, {seeds} seeds")
+    about = {k: v for k, v in read_about(ARCHIVE / runs.name).items() if k in ENVS}
+    write_section(path, GENERATED, [*lines, *about_lines(about)])
+
+
+GENERATED = generated_marker("car_racing.py")
+
+
 def main() -> None:
-    table_main(__doc__.splitlines()[0], DEFAULT_RUNS, ENVS, TABLE, run_ids, report)
+    table_main(__doc__.splitlines()[0], DEFAULT_RUNS, ENVS, TABLE, run_ids, report, learners_report)
 
 
 if __name__ == "__main__":

@@ -16,9 +16,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from report import (ARCHIVE, KEPT, about_lines, apart_text, cell, cell_stats, curve_lines, footer, iqm_cell, kept_rows, kl_cell, load,
-                    markdown_table, metrics_path, read_about, references_note, sweep_seconds, trained_ppo, training_cell,
-                    wall_clock, write_report)
+from report import (ARCHIVE, KEPT, ORDERINGS_ABOUT, about_lines, apart_text, cell, cell_stats, curve_lines, footer,
+                    generated_marker, iqm_cell, kept_rows, kl_cell, load, markdown_table, metrics_path, ordering_line,
+                    poi_cell, ppo_text, read_about, references_note, seed_means, sweep_seconds, trained_ppo,
+                    training_cell, wall_clock, write_report, write_section)
 from sweep import hints_run, table_main
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -113,14 +114,6 @@ def findings(runs: Path, env: str, kept: dict[tuple[str, str], list[str]]) -> st
             "(Beyond: the means differ by more than the two stds of the per-seed means together.)")
 
 
-def ppo_text(ppo) -> str:
-    return (f"{ppo.num_envs} envs per seed, batches of {ppo.batch_size}, {ppo.epochs} epochs of minibatches of "
-            f"{ppo.minibatch_size}, learning rates encoder {ppo.encoder_lr:g}, actor {ppo.actor_lr:g}, critic {ppo.critic_lr:g}"
-            + (f", KL early stop at {ppo.target_kl:g}" if ppo.target_kl else "")
-            + (f", rewards x {ppo.reward_scale:g}" if ppo.reward_scale != 1.0 else "")
-            + (", the state normalised" if ppo.normalize_state else ""))
-
-
 def settings_lines(runs: Path, env: str, labels: list[str],
                    kept: dict[tuple[str, str], list[str]] | None = None) -> list[str]:
     """The PPO settings the rows were trained with (each run's config.yaml), grouped when they
@@ -187,34 +180,6 @@ def report(runs: Path, force: bool = False) -> None:
 # The paper's orderings that Table 3's locomotion rows speak to (section 5): O1, hints beat vision
 # only; O4, hints close the gap to the state-based agent (PPO-x, "dominated by all hints on the
 # Ant and Humanoid"); O5, a specific hint beats the full state given as a hint.
-ORDERINGS_ABOUT = (
-    "Orderings: probabilities of improvement P(X > Y) over the per-seed mean returns with 95 % bootstrap intervals "
-    "(hintsjax/stats.py). Decided for: the interval lies above 0.5; decided against: below 0.5; undecided: it "
-    "contains 0.5. The best hint is the HINTS-FC row with the highest IQM, chosen on the same seeds, which favours "
-    "it a little.")
-
-
-def verdict(interval) -> str:
-    from hintsjax import stats
-
-    return {1: "decided for", -1: "decided against", 0: "undecided"}[stats.direction(interval)]
-
-
-def seed_means(result: dict) -> list[float]:
-    return result["evaluations"][0]["seed_means"]
-
-
-def interval_text(ci) -> str:
-    return f"{ci.point:.2f} [{ci.low:.2f}, {ci.high:.2f}]"
-
-
-def poi_cell(x: dict | None, y: dict | None) -> str:
-    """'P [low, high]' of P(x > y) over seeds, or '-'."""
-    from hintsjax import stats
-
-    return "-" if x is None or y is None else interval_text(stats.poi_ci(seed_means(x), seed_means(y)))
-
-
 def ordering_lines(runs: Path, env: str) -> list[str]:
     """O1, O4 and (where the env has the `state` hint) O5 as probabilities of improvement."""
     from hintsjax import stats
@@ -233,26 +198,18 @@ def ordering_lines(runs: Path, env: str) -> list[str]:
         top = max(specific, key=lambda h: stats.iqm(seed_means(specific[h])))
         pairs.append(("O5 (a specific hint beats the full state as a hint)", label(top), specific[top], label("state"),
                       hints["state"]))
-    lines = []
-    for tag, name_x, x, name_y, y in pairs:
-        if x is None or y is None:
-            continue
-        ci = stats.poi_ci(seed_means(x), seed_means(y))
-        lines.append(f"- {tag}: P({name_x} > {name_y}) = {interval_text(ci)}: {verdict(ci)}")
-    return lines
+    return [ordering_line(*pair) for pair in pairs if pair[2] is not None and pair[4] is not None]
 
 
 def learners_report(runs: Path, names: list[str], path: Path) -> None:
     """The learner rows of Table 3 for `names` from a runs folder at any seed count (the 20-seed
     table, issue 46): per row mean ± std, IQM [95 % CI] and P(row > PPO-RGB); the orderings O1,
-    O4 and O5; learning curves with bootstrap bands. The plan and the hardware stay in `path`
-    above the generated part (everything from GENERATED on is rewritten)."""
+    O4 and O5; learning curves with bootstrap bands. Written as the section of `path` that
+    GENERATED opens (report.write_section): the plan above it and the car's section stay."""
     from hintsjax.config import run_config
 
-    head = path.read_text().split(GENERATED)[0].rstrip("\n").splitlines() if path.exists() else []
-    about = read_about(ARCHIVE / runs.name)
-    lines = [*head, "", GENERATED, "",
-             f"Made by `python experiments/locomotion.py --learners-report experiments/results/{path.name} "
+    about = {k: v for k, v in read_about(ARCHIVE / runs.name).items() if k in (*ENVS, "references")}
+    lines = [f"Made by `python experiments/locomotion.py --learners-report experiments/results/{path.name} "
              f"--runs runs/{runs.name}` from the archived runs (experiments/results/runs/{runs.name}).",
              "Cells: mean ± std over all seeds x 50 evaluation episodes (in brackets the std of the per-seed means), the",
              "IQM of the per-seed means with a 95 % stratified bootstrap interval, and P(row > PPO-RGB) over the seeds.",
@@ -275,11 +232,10 @@ def learners_report(runs: Path, names: list[str], path: Path) -> None:
         lines += ["", ORDERINGS_ABOUT, "", *ordering_lines(runs, env), ""]
         lines += curve_lines(runs, env, list(trained), RESULTS / f"table3_seeds20_curves_{env}.png",
                              f"{env}: Table 3 learners, {', '.join(map(str, seeds))} seeds")
-    lines += about_lines(about)
-    write_report(path, lines, force=True)
+    write_section(path, GENERATED, [*lines, *about_lines(about)])
 
 
-GENERATED = "<!-- generated by experiments/locomotion.py --learners-report: everything below -->"
+GENERATED = generated_marker("locomotion.py")
 
 
 def main() -> None:

@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from report import archive_runs, load
+from report import ARCHIVE, archive_runs, load
 
 from hintsjax.agents import EXPERT_AGENT
 
@@ -363,14 +363,22 @@ def table_main(description: str, default_runs: str, envs: tuple[str, ...], table
                run_ids: Callable[[list[str]], list[str]], report: Callable[[Path, bool], None],
                learners_report: Callable[[Path, list[str], Path], None] | None = None) -> None:
     """The command line of a table's sweep script: train its runs for --envs, or --report (and,
-    where the script has one, --learners-report FILE: the learner rows at any seed count)."""
+    where the script has one, --learners-report FILE: the learner rows at any seed count), or
+    --archive (only archive the finished runs)."""
     parser = argparse.ArgumentParser(description=description)
     add_arguments(parser, default_runs, envs)
     if learners_report is not None:
         parser.add_argument("--learners-report", type=Path, default=None, metavar="FILE",
                             help="write the learner rows of --envs from --runs (any seed count) with IQM and orderings")
+    parser.add_argument("--archive", action="store_true",
+                        help="only copy what the reports need of the finished runs into experiments/results/runs "
+                             "(a few hundred KB a run: what a GPU machine sends back)")
     args = parser.parse_args()
     os.environ["JAX_PLATFORMS"] = "cpu"  # the parent only reads configs; workers get the devices
+    if args.archive:
+        done = archive_runs(args.runs, run_ids(list(envs)))
+        print(f"archived {len(done)} finished run(s) of {args.runs} in {ARCHIVE / args.runs.name}: {', '.join(done)}")
+        return
     if getattr(args, "learners_report", None):
         archive_runs(args.runs, run_ids(list(envs)))
         learners_report(args.runs, chosen_envs(parser, args, envs), args.learners_report)

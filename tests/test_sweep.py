@@ -603,3 +603,71 @@ def test_locomotion_learners_report_gives_each_ordering_its_verdict(tmp_path, mo
     assert "| hints-fc-max_velocity | - | - | - |" in text  # not trained
     locomotion.learners_report(runs, ["halfcheetah"], path)
     assert path.read_text() == text  # the report rewrites only its own part
+
+
+def test_car_learners_report_gives_o1_and_o3_their_verdicts_beside_the_locomotion_section(tmp_path, monkeypatch):
+    """The car's Table 3 at any seed count, on hand-written runs of 6 seeds: on standard tracks the
+    on_track hint's seeds all lie above PPO-RGB's (O1 decided for, the best hint by IQM), on
+    hairpins the composite's all lie below (O3 decided against), and the progress difference reads
+    as the car's findings do. The car's section and the locomotion section share one file: each
+    rewrite keeps the other section and the plan above both, and changes nothing on a second run."""
+    import car_racing
+    import locomotion
+
+    for module in (report, car_racing, locomotion):
+        monkeypatch.setattr(module, "ARCHIVE", tmp_path / "archive")
+    for module in (car_racing, locomotion):
+        monkeypatch.setattr(module, "RESULTS", tmp_path)
+    runs = tmp_path / "runs" / "t20"
+    seeds = {  # label: (standard seed means, hairpin seed means, hairpin progress seed means)
+        "ppo_rgb": ([100.0, 110, 120, 130, 140, 150], [300.0, 310, 320, 330, 340, 350], [0.50, 0.52, 0.54, 0.56, 0.58, 0.60]),
+        "hints-mc-on_track": ([400.0, 410, 420, 430, 440, 450], [305.0, 315, 325, 335, 345, 355], [0.5] * 6),
+        "hints-mc-composite": ([200.0, 210, 220, 230, 240, 250], [0.0, 10, 20, 30, 40, 50], [0.30, 0.32, 0.34, 0.36, 0.38, 0.40]),
+    }
+    for label, (standard, hairpin, progress) in seeds.items():
+        write_run(runs, "car_racing", label, [
+            evaluation(float(np.mean(standard)), 10.0, standard),
+            evaluation(float(np.mean(hairpin)), 10.0, hairpin, progress_mean=float(np.mean(progress)), progress_std=0.1,
+                       progress_seed_means=progress)])
+    write_run(runs, "halfcheetah", "ppo_rgb", [evaluation(5.0, 1.0, [4.0, 6.0])])
+    path = tmp_path / "table3.md"
+    path.write_text("# The plan\n\nRows and budgets.\n")
+    locomotion.learners_report(runs, ["halfcheetah"], path)
+    car_racing.learners_report(runs, ["car_racing"], path)
+    text = path.read_text()
+    loco, car = text.index(locomotion.GENERATED), text.index(car_racing.GENERATED)
+    assert text.startswith("# The plan\n\nRows and budgets.\n") and loco < car
+    assert "halfcheetah (1 M env steps per seed, 2 seeds per row)" in text[loco:car]
+    section = text[car:]
+    assert "car_racing (1 M env steps per seed, 6 seeds per row)" in section and "halfcheetah" not in section
+    assert ("- O1 (hints beat vision only; standard tracks): P(hints-mc-on_track > ppo_rgb) = 1.00 [1.00, 1.00]: "
+            "decided for") in section
+    assert ("- O3 (composite hints carry the car round hairpins; hairpin tracks): P(hints-mc-composite > ppo_rgb) = "
+            "0.00 [0.00, 0.00]: decided against") in section
+    assert "Composite minus vision only: -20 points" in section and ": decided." in section
+    assert "| hints-mc-curvature | - | - | - | - | - | - |" in section  # not trained
+    assert "| hints-mc-on_track | 425.0 [" in section and "| 1.00 [1.00, 1.00] | - | " in section
+    locomotion.learners_report(runs, ["halfcheetah"], path)
+    assert path.read_text() == text  # the locomotion rewrite keeps the car's section
+    car_racing.learners_report(runs, ["car_racing"], path)
+    assert path.read_text() == text
+
+
+def test_archive_flag_archives_the_finished_runs_and_nothing_else(tmp_path, monkeypatch, capsys):
+    """`--archive` (what a GPU machine runs before sending its runs back): the finished run's
+    eval.json, config and binned curve go to the archive; the unfinished run and no report do."""
+    import locomotion
+
+    monkeypatch.setattr(report, "ARCHIVE", tmp_path / "archive")
+    monkeypatch.setattr(sweep, "ARCHIVE", tmp_path / "archive")
+    runs = tmp_path / "runs" / "t20"
+    write_run(runs, "ant", "ppo_rgb", [evaluation(5.0, 1.0, [4.0, 6.0])], returns=[[1.0, 2.0, 3.0], [2.0, 3.0, 4.0]])
+    (runs / "ant" / "ppo_rgb" / "config.yaml").write_text("env: ant\n")
+    write_run(runs, "ant", "ppo_state", returns=[[1.0, 2.0]])  # not finished: no eval.json
+    monkeypatch.setattr(sys, "argv", ["locomotion.py", "--archive", "--runs", str(runs)])
+    locomotion.main()
+    archived = tmp_path / "archive" / "t20"
+    assert sorted(p.name for p in (archived / "ant").iterdir()) == ["ppo_rgb"]
+    assert sorted(p.name for p in (archived / "ant" / "ppo_rgb").iterdir()) == \
+        ["config.yaml", "eval.json", "metrics.csv", "summary.json"]
+    assert "archived 1 finished run(s)" in capsys.readouterr().out
