@@ -18,15 +18,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import markdown_table  # noqa: E402
+from hintsjax.reproduce.report import markdown_table
 
 RESULTS = Path(__file__).resolve().parent / "results"
 LOOKAHEAD = 5  # centre points (about 3.5 u each) ahead of the nearest

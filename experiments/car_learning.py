@@ -22,13 +22,10 @@ import csv
 import json
 import math
 import shutil
-import sys
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import (ARCHIVE, SUMMARY_JSON, about_lines, archive_run, iqm_cell, load, markdown_table, metric_cell, ordering,  # noqa: E402
+from hintsjax.reproduce.report import (ARCHIVE, SUMMARY_JSON, about_lines, archive_run, iqm_cell, load, markdown_table, metric_cell, ordering,
                     read_about, run_folder, training_cell, training_seed_means)
 
 RESULTS = Path(__file__).resolve().parent / "results"

@@ -11,7 +11,7 @@ standard tracks and on the hairpin deploy variant (ENV_DEFAULTS' eval_variants).
 return the report gives the paper's progress P = visited tiles / all tiles, of the state each
 evaluation episode ended in. The converged references (expert PPO on the state, DAgger and GAIL
 learning from it) come first; the paper has no car numbers for them. Finished folders are
-skipped, so an interrupted sweep resumes where it stopped (see sweep.py).
+skipped, so an interrupted sweep resumes where it stopped (see hintsjax/reproduce/sweep.py).
 """
 
 from __future__ import annotations
@@ -19,10 +19,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from report import (ARCHIVE, ORDERINGS_ABOUT, about_lines, cell, curve_lines, footer, generated_marker, iqm_cell, load,
+from hintsjax.reproduce.report import (ARCHIVE, ORDERINGS_ABOUT, about_lines, cell, curve_lines, footer, generated_marker, iqm_cell, load,
                     markdown_table, metric_cell, ordering_line, poi_cell, ppo_text, read_about, references_note,
                     seed_means, sweep_seconds, trained_ppo, training_cell, wall_clock, write_report, write_section)
-from sweep import hints_run, table_main
+from hintsjax.reproduce.sweep import hints_run, table_main
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("car_racing",)

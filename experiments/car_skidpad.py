@@ -13,14 +13,11 @@ Box2D world stepped as CarRacing-v3 steps it; ours is `envs/car_racing.py: drive
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import markdown_table  # noqa: E402
+from hintsjax.reproduce.report import markdown_table
 
 RESULTS = Path(__file__).resolve().parent / "results"
 FPS, STRAIGHT, TURN, MEASURE = 50, 200, 150, 50

@@ -29,9 +29,9 @@ import os
 from pathlib import Path
 from typing import Callable
 
-from report import (archive_runs, cell, iqm_cell, load, markdown_table, mean_of, metrics_path, ordering,
+from hintsjax.reproduce.report import (archive_runs, cell, iqm_cell, load, markdown_table, mean_of, metrics_path, ordering,
                     refuse_lost_cells, sweep_seconds, wall_clock, write_report)
-from sweep import add_arguments, chosen_envs, chosen_runs, chosen_settings, hints_run, sweep
+from hintsjax.reproduce.sweep import add_arguments, chosen_envs, chosen_runs, chosen_settings, hints_run, sweep
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("pendulum", "acrobot", "idp")

@@ -21,7 +21,7 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
-import flag_variants
+from hintsjax.reproduce import flag_variants
 
 # name -> XLA flags appended to the defaults (deterministic ops stay on in every variant)
 VARIANTS = {

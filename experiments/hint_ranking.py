@@ -19,15 +19,12 @@ from __future__ import annotations
 import argparse
 import json
 import re
-import sys
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from classic_control import TABLE2_HINTS  # noqa: E402
-from locomotion import HINTS as LOCOMOTION_HINTS  # noqa: E402
-from report import markdown_table  # noqa: E402
+from classic_control import TABLE2_HINTS
+from locomotion import HINTS as LOCOMOTION_HINTS
+from hintsjax.reproduce.report import markdown_table
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ARCHIVE = RESULTS / "runs" / "classic20"

@@ -20,13 +20,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import about_lines, markdown_table, read_about  # noqa: E402
+from hintsjax.reproduce.report import about_lines, markdown_table, read_about
 
 RESULTS = Path(__file__).resolve().parent / "results"
 CASES = "pendulum:composite,pendulum:angular_velocity,acrobot:composite,idp:composite,halfcheetah:velocity"

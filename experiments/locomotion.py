@@ -7,7 +7,7 @@
 Per env: PPO-RGB, PPO-x (the state) and HINTS-FC with each of the paper's hint columns, at the
 paper's budgets (config.ENV_DEFAULTS: 1k, 5k and 10k episodes counted at 1000 steps), 5 seeds
 vmapped in one call, 50 evaluation episodes per seed. Finished folders are skipped, so an
-interrupted sweep resumes where it stopped (see sweep.py). The DAgger column's expert is PPO
+interrupted sweep resumes where it stopped (see hintsjax/reproduce/sweep.py). The DAgger column's expert is PPO
 on the state at the env's expert budget (config.ENV_DEFAULTS), exported to hintsjax/experts/<env>
 when it finishes; dagger and gail start only then.
 """
@@ -16,11 +16,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from report import (ARCHIVE, KEPT, ORDERINGS_ABOUT, about_lines, apart_text, cell, cell_stats, curve_lines, footer,
+from hintsjax.reproduce.report import (ARCHIVE, KEPT, ORDERINGS_ABOUT, about_lines, apart_text, cell, cell_stats, curve_lines, footer,
                     generated_marker, iqm_cell, kept_rows, kl_cell, load, markdown_table, metrics_path, ordering_line,
                     poi_cell, ppo_text, read_about, references_note, seed_means, sweep_seconds, trained_ppo,
                     training_cell, wall_clock, write_report, write_section)
-from sweep import hints_run, table_main
+from hintsjax.reproduce.sweep import hints_run, table_main
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("halfcheetah", "ant", "humanoid")

@@ -9,7 +9,7 @@ Item 5: on CartpoleSwingup, CheetahRun, WalkerWalk and ReacherEasy (adapted by e
 seen as 64x64 renders from each task's table camera, envs/playground.py), PPO-RGB and HINTS-FC
 with one natural hint each (the table's), 5 seeds vmapped in one call, at the table's budget (1 M
 env steps), 50 evaluation episodes per seed; the report gives each row's IQM [95 % CI] over seeds
-and P(HINTS > PPO-RGB) (hintsjax.stats). Finished folders are skipped (sweep.py).
+and P(HINTS > PPO-RGB) (hintsjax.stats). Finished folders are skipped (hintsjax/reproduce/sweep.py).
 
 Item 6: CartpoleSwingup from its state vector, one process on one device, the same env-step
 budget and seeds: hintsjax's `ppo_state` (its seeds vmapped in one program) with Playground's
@@ -32,8 +32,8 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from report import archive_runs, footer, iqm_cell, load, markdown_table, ordering, sweep_hardware, wall_clock, write_report
-from sweep import add_arguments, chosen_envs, chosen_runs, chosen_settings, hints_run, sweep
+from hintsjax.reproduce.report import archive_runs, footer, iqm_cell, load, markdown_table, ordering, sweep_hardware, wall_clock, write_report
+from hintsjax.reproduce.sweep import add_arguments, chosen_envs, chosen_runs, chosen_settings, hints_run, sweep
 
 RESULTS = Path(__file__).resolve().parent / "results"
 REPORT = "playground.md"  # under RESULTS

@@ -21,7 +21,7 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
-import flag_variants
+from hintsjax.reproduce import flag_variants
 
 # name -> (extra XLA flags, {scan length: unroll}); a variant runs in its own process with its
 # flags appended, and its scans of those lengths unrolled (the pendulum's rollout and GAE scan 64

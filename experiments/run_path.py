@@ -67,8 +67,6 @@ def main() -> None:
 
     from hintsjax import compilation_cache
     from hintsjax.config import run_config
-
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
     from bench import bench_train
 
     rows = []

@@ -39,7 +39,6 @@ AUTHORS_CPU_ENV_STEPS_PER_S = 45.0  # SPEC.md: the authors' PyTorch implementati
 
 
 def learner_rows(env: str) -> list[str]:
-    sys.path.insert(0, str(HERE))
     from classic_control import REFERENCES, table_runs
 
     return [label for label in table_runs(2, env) if label not in REFERENCES]
@@ -85,9 +84,7 @@ def cpu_rate(env: str, seeds: int, updates: int) -> dict:
     """Env steps/s of `updates` updates of the table's HINTS-FC group on this machine's CPU."""
     from hintsjax import run
     from hintsjax.config import run_config, save_run_config
-
-    sys.path.insert(0, str(HERE))
-    from sweep import run_values
+    from hintsjax.reproduce.sweep import run_values
 
     labels = [label for label in learner_rows(env) if label.startswith("hints-")]
     cfgs = [run_config(run_values(env, label, seeds)) for label in labels]
@@ -130,7 +127,6 @@ def main() -> None:
     # This process measures the ceiling after the tables; until then it must not hold the
     # device's memory (JAX preallocates 75 % of it on first use), which the workers need.
     os.environ["XLA_PYTHON_CLIENT_PREALLOCATE"] = "false"
-    sys.path.insert(0, str(HERE))
     from bench import bench_ceiling
 
     rows = []

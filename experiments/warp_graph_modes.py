@@ -17,9 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
-from pathlib import Path
 
 import jax
 
@@ -60,7 +58,6 @@ def main() -> None:
     parser.add_argument("--envs", type=int, default=1280)
     parser.add_argument("--train", action="store_true", help="the env's training cell too, per variant")
     args = parser.parse_args()
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
     from bench import bench_train
 
     hint = envs.REGISTRY[args.env].training.get("hint", envs.NO_HINT)

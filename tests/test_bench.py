@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
 
 import mujoco
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
-import bench  # noqa: E402  (experiments/ is a folder of scripts, not a package)
+import bench  # experiments/bench.py: experiments/ is on pytest's path (pyproject's pythonpath)
 
 
 def test_model_options_parse_enums_by_name_and_numbers():

@@ -561,14 +561,14 @@ def test_classic_envs_train_from_the_command_line(env, tmp_path):
 def test_the_checkout_runs_without_the_editable_installs_finder():
     """After a normal `pip install .`, a command run from the checkout's root imports the
     checkout's hintsjax/, which has no envs/ (pyproject maps hintsjax.envs to the top-level envs/).
-    Simulated here by starting Python without site processing (no editable finder), then adding
-    site-packages as a plain path: hintsjax.envs must still import."""
+    Simulated here by starting Python without site processing (no editable finder), with
+    site-packages as a plain path (PYTHONPATH, after the checkout's root): hintsjax.envs must still import."""
     import site
 
     root = Path(__file__).resolve().parents[1]
-    script = (f"import sys; sys.path.append({site.getsitepackages()[0]!r}); "
-              "sys.argv = ['hintsjax.run', 'env=nope']; import runpy; runpy.run_module('hintsjax.run', run_name='__main__')")
-    out = subprocess.run([sys.executable, "-S", "-c", script], cwd=root, capture_output=True, text=True, timeout=300)
+    env = {**os.environ, "PYTHONPATH": site.getsitepackages()[0]}
+    out = subprocess.run([sys.executable, "-S", "-m", "hintsjax.run", "env=nope"], cwd=root, env=env, capture_output=True,
+                         text=True, timeout=300)
     assert out.returncode == 2 and out.stderr.startswith("error: unknown env 'nope'"), out.stderr[-500:]
 
 

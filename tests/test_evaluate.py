@@ -5,7 +5,7 @@ from __future__ import annotations
 import jax
 import numpy as np
 
-import countdown_env  # registers the "countdown" env (tests/ is on sys.path)
+import countdown_env  # registers the "countdown" env (tests/ is on pytest's path: its rootdir conftest)
 from hintsjax.config import run_config
 from hintsjax.envs.core import Env
 from hintsjax.evaluate import eval_keys, make_evaluator, summarize

@@ -14,7 +14,7 @@ import numpy as np
 import optax
 import pytest
 
-import linear_env  # registers the "linear" env (tests/ is on sys.path)
+import linear_env  # registers the "linear" env (tests/ is on pytest's path: its rootdir conftest)
 from hintsjax import config, dagger, expert, gail
 from hintsjax.algorithm_settings import GAIL_REWARDS
 from hintsjax.errors import UsageError

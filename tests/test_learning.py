@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import cue_env  # registers the "cue" env, its hint and its defaults (tests/ is on sys.path)
+import cue_env  # registers the "cue" env, its hint and its defaults (tests/ is on pytest's path: its rootdir conftest)
 from hintsjax import config, ppo
 from hintsjax.errors import UsageError
 

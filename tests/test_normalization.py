@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-import linear_env  # registers the "linear" env (tests/ is on sys.path)
+import linear_env  # registers the "linear" env (tests/ is on pytest's path: its rootdir conftest)
 from hintsjax import config, dagger, normalization
 from hintsjax.agents import AGENTS
 from hintsjax.networks import ActorCritic

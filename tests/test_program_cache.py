@@ -120,10 +120,9 @@ def test_a_corrupt_entry_is_traced_again_with_one_warning_line(trainer, cache, c
 
 RUN = """
 import json, sys
-sys.path.insert(0, sys.argv[1])
-import linear_env  # noqa: F401
+import linear_env  # noqa: F401  (tests/ is on PYTHONPATH)
 from hintsjax import run
-values = json.loads(sys.argv[2])
+values = json.loads(sys.argv[1])
 assert run.main_from_values(values) == 0
 """
 
@@ -133,11 +132,12 @@ def test_a_second_process_loads_the_runs_programs_and_trains_the_same(tmp_path):
     neither its training nor its evaluation programs, and its evaluations and learning curve
     equal the first run's."""
     env = {k: v for k, v in os.environ.items() if k != program_cache.ENV_VAR}
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(Path(__file__).parent), env.get("PYTHONPATH")) if p)
     results = []
     for name in ("first", "second"):
         values = {"env": "linear", "agent": "ppo_state", "seeds": 2, "eval_episodes": 2, "checkpoint_every": 3,
                   "ppo": TINY_PPO, "out_dir": str(tmp_path), "name": name, "compilation_cache": str(tmp_path / "xla")}
-        done = subprocess.run([sys.executable, "-c", RUN, str(Path(__file__).parent), json.dumps(values)], env=env,
+        done = subprocess.run([sys.executable, "-c", RUN, json.dumps(values)], env=env,
                               capture_output=True, text=True, timeout=300)
         assert done.returncode == 0, done.stderr
         results.append((json.loads((tmp_path / name / "eval.json").read_text()), (tmp_path / name / "metrics.csv").read_text()))

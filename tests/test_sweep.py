@@ -1,4 +1,5 @@
-"""The sweep scripts (experiments/sweep.py) and their tables and archive (experiments/report.py), on hand-written run folders."""
+"""The sweeps (hintsjax/reproduce/sweep.py) and their tables and archive (hintsjax/reproduce/report.py), and the
+table scripts of experiments/ (on pytest's path: pyproject's pythonpath), on hand-written run folders."""
 
 from __future__ import annotations
 
@@ -10,9 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
-import report  # noqa: E402  (experiments/ is a folder of scripts, not a package)
-import sweep  # noqa: E402
+from hintsjax.reproduce import report, sweep
 
 
 def write_run(runs: Path, env: str, label: str, evaluations: list[dict] | None = None, returns=None,
@@ -526,8 +525,7 @@ def test_set_gives_every_run_of_a_sweep_a_setting_and_bad_ones_are_one_line(tmp_
 
 WORKER_SETTINGS = """
 import argparse, os, sys
-sys.path.insert(0, "experiments")
-import sweep
+from hintsjax.reproduce import sweep
 parser = argparse.ArgumentParser()
 sweep.add_settings(parser)
 settings = sweep.worker_settings(parser, parser.parse_args(sys.argv[1:]))

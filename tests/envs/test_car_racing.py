@@ -608,11 +608,7 @@ def test_the_scripted_driver_keeps_to_the_road_at_30():
     leaves the road, and in 1000 frames (20 s, about 600 u at 30 u/s, a track being about 290 tiles
     of 3.5 u) it visits about 60% of the tiles (on Gymnasium's tracks for seeds 0..9 under the same
     driver, Gymnasium's car 0.637 +- 0.052, ours 0.638 +- 0.052; experiments/results/car_driver.md)."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "experiments"))
-    import car_driver
+    import car_driver  # experiments/car_driver.py (experiments/ is on pytest's path)
 
     result = car_driver.drive_ours(car_driver.our_tracks(2), 30.0)
     assert result["exits_per_lap"] == 0.0

@@ -5,10 +5,10 @@ hints-<scheme>-<hint>); its folder runs/<sweep>/env/label holds config.yaml, met
 checkpoints and, once finished, eval.json. `sweep` groups the unfinished runs of a list that
 share a network's shapes (hintsjax.group: e.g. HINTS-FC with every hint, or PPO-x with
 PPO-x+N(0,1)) and trains each group, all its runs and seeds in one compiled program,
-`workers` processes at a time, each a call of this file with `--one` and the group's runs:
+`workers` processes at a time, each a call of this module with `--one` and the group's runs:
 
-    python experiments/sweep.py --runs runs/classic --seeds 20 --one idp/ppo_rgb [--smoke]
-    python experiments/sweep.py --runs runs/classic --seeds 20 --one pendulum/ppo_state,pendulum/ppo_noisy_state
+    python -m hintsjax.reproduce.sweep --runs runs/classic --seeds 20 --one idp/ppo_rgb [--smoke]
+    python -m hintsjax.reproduce.sweep --runs runs/classic --seeds 20 --one pendulum/ppo_state,pendulum/ppo_noisy_state
 
 A group's checkpoints and train.log are in runs/<sweep>/env/_groups/<its runs' digest>; a group
 too big for the device's memory is split in halves until each part fits.
@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from report import ARCHIVE, archive_runs, load
+from hintsjax.reproduce.report import ARCHIVE, archive_runs, load
 
 from hintsjax.agents import EXPERT_AGENT
 
@@ -40,6 +40,7 @@ CHECKPOINT_SECONDS = 60
 CHILD_ENVIRON = dict(os.environ)  # the workers' environment: a sweep's parent process keeps off the GPU
 EXPERT_RUN = EXPERT_AGENT  # the run whose best seed becomes its env's expert for dagger and gail
 GROUPS = "_groups"  # under runs/<sweep>/<env>: the groups' checkpoints and logs
+WORKER = "hintsjax.reproduce.sweep"  # the module a worker process runs (`main`)
 
 
 def hints_run(scheme: str, hint: str) -> str:
@@ -231,7 +232,7 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int |
                 todo.remove(job)
                 name = ",".join(job)
                 log_of(job).parent.mkdir(parents=True, exist_ok=True)
-                cmd = [sys.executable, str(Path(__file__).resolve()), "--runs", str(runs), "--seeds", str(seeds), "--one", name,
+                cmd = [sys.executable, "-m", WORKER, "--runs", str(runs), "--seeds", str(seeds), "--one", name,
                        *(["--smoke"] if smoke else []), *(["--experts", str(experts)] if experts else []),
                        *(f"--set={k}={v}" for k, v in (settings or {}).items())]
                 if gpus:

@@ -23,7 +23,9 @@ import sys
 import time
 from pathlib import Path
 
-ARCHIVE = Path(__file__).resolve().parent / "results" / "runs"
+# The checkout's experiments/results/runs: the tables and their archive live beside the table
+# scripts, in a checkout (an editable install) rather than in an installed package.
+ARCHIVE = Path(__file__).resolve().parents[2] / "experiments" / "results" / "runs"
 ABOUT_JSON = "about.json"  # in an archive folder, beside its runs: how they were made
 SUMMARY_JSON = "summary.json"
 KL_ABOVE = 0.5  # kl_cell's threshold: an update whose approx. KL exceeds it blew up

@@ -1,0 +1,13 @@
+"""Reproducing the paper's tables: the library under the table scripts of experiments/.
+
+- `sweep`: train a table's runs (grouped, several worker processes, resumable, over GPUs) and
+  the command line every table script shares (`table_main`);
+- `report`: read finished runs into table cells, statistics (hintsjax.stats) and curves, and keep
+  the committed archive of what the tables need (experiments/results/runs);
+- `flag_variants`: one measurement per XLA flag variant, each in a fresh process.
+
+It may import any of hintsjax (training, configs, statistics, the run log); nothing in hintsjax
+imports it. A table script in experiments/ declares its runs and rows and calls `table_main`.
+The archive is the checkout's experiments/results/runs, so these tools work in a checkout (an
+editable install, `make setup`).
+"""
