@@ -15,6 +15,7 @@ import pytest
 import yaml
 
 from hintsjax import checkpoint, command_line, run
+from hintsjax.algorithms import make_trainer
 from hintsjax.errors import UsageError
 from hintsjax.evaluate import main as evaluate_main
 
@@ -133,7 +134,7 @@ def finished_run(tmp_path_factory) -> Path:
 
 def state_arrays(run_dir: Path) -> list[np.ndarray]:
     """Every array of a run's newest checkpoint (params, optimiser state, env state, key, update)."""
-    state, _ = checkpoint.restore_latest(run_dir, run.load_run_config(run_dir))
+    state, _ = checkpoint.restore_latest(run_dir, make_trainer(run.load_run_config(run_dir)).abstract_state())
     return [np.asarray(jax.random.key_data(x) if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key) else x)
             for x in jax.tree.leaves(state)]
 
@@ -320,8 +321,8 @@ def test_interrupted_then_resumed_run_ends_where_the_uninterrupted_one_ends(fini
 
     assert run.main_from_values({"resume": str(interrupted)}) == 0
     cfg = run.load_run_config(interrupted)
-    resumed, step = checkpoint.restore_latest(interrupted, cfg)
-    full, full_step = checkpoint.restore_latest(finished_run, cfg)
+    resumed, step = checkpoint.restore_latest(interrupted, make_trainer(cfg).abstract_state())
+    full, full_step = checkpoint.restore_latest(finished_run, make_trainer(cfg).abstract_state())
     assert step == full_step == 4
     for a, b in zip(jax.tree.leaves(resumed.params), jax.tree.leaves(full.params)):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-6, atol=1e-7)
@@ -401,8 +402,9 @@ def test_a_checkpoint_saved_on_another_device_restores_here(finished_run, tmp_pa
     script = (  # a second CPU device stands in for a device this process lacks
         "import sys, jax\n"
         "from hintsjax import checkpoint, run\n"
+        "from hintsjax.algorithms import make_trainer\n"
         f"src, dest = {str(finished_run)!r}, {str(copy)!r}\n"
-        "state, update = checkpoint.restore_latest(src, run.load_run_config(src))\n"
+        "state, update = checkpoint.restore_latest(src, make_trainer(run.load_run_config(src)).abstract_state())\n"
         "checkpoint.save(dest, jax.device_put(state, jax.devices()[1]), update)\n"
     )
     env = {**os.environ, "JAX_PLATFORMS": "cpu", "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
@@ -410,8 +412,8 @@ def test_a_checkpoint_saved_on_another_device_restores_here(finished_run, tmp_pa
     assert out.returncode == 0, out.stderr[-2000:]
     assert len(jax.devices()) == 1
     cfg = run.load_run_config(finished_run)
-    moved, update = checkpoint.restore_latest(copy, cfg)
-    original, _ = checkpoint.restore_latest(finished_run, cfg)
+    moved, update = checkpoint.restore_latest(copy, make_trainer(cfg).abstract_state())
+    original, _ = checkpoint.restore_latest(finished_run, make_trainer(cfg).abstract_state())
     assert update == 4
     for a, b in zip(jax.tree.leaves(original), jax.tree.leaves(moved)):
         if jax.dtypes.issubdtype(a.dtype, jax.dtypes.prng_key):
@@ -429,7 +431,7 @@ def test_mismatched_checkpoint_is_refused(finished_run, tmp_path):
     before = sorted(p.name for p in copy.rglob("*"))
     # Refused from the stored shapes, before any array is read.
     with pytest.raises(UsageError, match=r"does not match its config.yaml: its \d+ arrays differ in shape"):
-        checkpoint.restore_latest(copy, run.load_run_config(copy))
+        checkpoint.restore_latest(copy, make_trainer(run.load_run_config(copy)).abstract_state())
     assert sorted(p.name for p in copy.rglob("*")) == before  # nothing written or removed
 
 

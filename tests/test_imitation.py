@@ -191,7 +191,7 @@ def test_export_keeps_the_best_seed_and_load_acts_like_it(expert_run, tmp_path):
     assert meta["seed_index"] == int(np.argmax(seed_means)) and meta["env"] == "linear"
     loaded = expert.load("linear", out)
     assert meta["normalize_state"] == cfg.ppo.normalize_state == (loaded.state_norm is not None)
-    state, _ = checkpoint.restore_latest(run_dir, cfg)
+    state, _ = checkpoint.restore_latest(run_dir, make_trainer(cfg).abstract_state())
     best = jax.tree.map(lambda x: x[meta["seed_index"]], state.params)
     states = 3.0 * jax.random.normal(jax.random.key(1), (32, 2))
     network = make_trainer(cfg).network
