@@ -32,6 +32,10 @@ from hintsjax.networks import MLP
 EXPERTS_DIR = Path(__file__).resolve().parent / "experts"  # the packaged experts, one folder per env
 EXPERT_JSON = "expert.json"
 POLICY = "policy"  # the orbax checkpoint inside an expert folder
+# What orbax writes into a checkpoint about the machine that wrote it, which a restore here does not
+# read: the folder's absolute path (commit_success.txt) and the device each array was on (_sharding;
+# `load` names its own). An exported expert drops them, so a packaged one ships only what a restore needs.
+MACHINE_FILES = ("commit_success.txt", "_sharding")
 
 
 @struct.dataclass
@@ -89,6 +93,8 @@ def export(run_dir: Path, out_dir: Path | None = None, force: bool = False) -> P
     out.mkdir(parents=True, exist_ok=True)
     with ocp.StandardCheckpointer() as saver:
         saver.save(out / POLICY, policy, force=True)
+    for name in MACHINE_FILES:
+        (out / POLICY / name).unlink(missing_ok=True)
     meta = {
         "env": cfg.env,
         "state_size": int(params["actor"]["Dense_0"]["kernel"].shape[0]),

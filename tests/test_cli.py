@@ -592,6 +592,22 @@ def test_a_built_wheel_runs_from_the_checkout_root_and_from_elsewhere(where, tmp
         assert probe.stdout.strip().startswith(str(target)), probe.stdout + probe.stderr
 
 
+def test_a_built_wheels_experts_restore_and_hold_only_what_a_restore_reads(tmp_path_factory):
+    """The wheel's package data holds every packaged expert, which restores from the installed copy,
+    and none of orbax's notes of the machine that wrote it (hintsjax/expert.py MACHINE_FILES)."""
+    target = wheel_install(tmp_path_factory)
+    installed = target / "hintsjax" / "experts"
+    assert sorted(p.name for p in installed.iterdir() if (p / "expert.json").is_file()) == sorted(
+        p.name for p in (Path(__file__).resolve().parents[1] / "hintsjax" / "experts").iterdir() if (p / "expert.json").is_file())
+    assert [p for p in installed.rglob("*") if p.name in ("commit_success.txt", "_sharding")] == []
+    script = ("import hintsjax.expert as x, jax; assert x.__file__.startswith(%r), x.__file__\n"
+              "for env in x.packaged(): assert jax.numpy.isfinite(x.load(env).log_std).all(), env\n"
+              "print(len(x.packaged()))" % str(target))
+    out = subprocess.run([sys.executable, "-c", script], cwd=tmp_path_factory.mktemp("elsewhere"),
+                         env={**os.environ, "PYTHONPATH": str(target)}, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0 and out.stdout.strip() == "7", out.stderr[-2000:]
+
+
 _WHEEL: dict[str, Path] = {}
 
 
