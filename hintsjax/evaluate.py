@@ -13,6 +13,7 @@ progress) are kept from the state each episode ended in. Also a command:
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import json
 import sys
@@ -25,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from hintsjax import checkpoint, envs, memory, program_cache
+from hintsjax import checkpoint, choices, envs, memory, program_cache
 from hintsjax.algorithms import make_trainer
 from hintsjax.config import RunConfig, env_params, load_run_config
 from hintsjax.devices import SeedLayout
@@ -209,7 +210,8 @@ def evaluate_params(cfg: RunConfig, params: Any, variant: str | None, episodes: 
 
 @command
 def main(argv: list[str] | None = None) -> int:
-    parser = ArgumentParser(prog="python -m hintsjax.evaluate", description=__doc__.splitlines()[0])
+    parser = ArgumentParser(prog="python -m hintsjax.evaluate", description=__doc__.splitlines()[0], epilog=choices.text(),
+                            formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("run", type=Path, help="a run folder written by python -m hintsjax.run")
     parser.add_argument("--variant", default=None,
                         help="env variant(s) to evaluate on, comma-separated, all by one compiled program "

@@ -254,7 +254,7 @@ def train_folder(cfg: GeneratorConfig) -> tuple[Path, dict[str, Any]]:
 
 def parse(argv: list[str]) -> GeneratorConfig:
     """GeneratorConfig from `key=value` arguments; UsageError naming the valid keys."""
-    return parse_key_values(GeneratorConfig, argv).validate()
+    return parse_key_values(GeneratorConfig, argv, "python -m hintsjax.generator", __doc__.splitlines()[0]).validate()
 
 
 @command

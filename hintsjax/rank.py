@@ -315,7 +315,8 @@ def plot(path: Path, cfg: RankConfig, result: dict[str, Any]) -> None:
 
 @command
 def main(argv: list[str] | None = None) -> int:
-    cfg = parse_key_values(RankConfig, sys.argv[1:] if argv is None else argv).validate()
+    cfg = parse_key_values(RankConfig, sys.argv[1:] if argv is None else argv, "python -m hintsjax.rank",
+                           __doc__.splitlines()[0]).validate()
     print(f"ranking {len(cfg.candidates)} hints of {cfg.env} by {cfg.scores}, {cfg.seeds} seeds", flush=True)
     folder = fresh_folder(Path(cfg.out_dir) / (cfg.name or f"rank-{cfg.env}-{time.strftime('%Y%m%d-%H%M%S')}"))
     (folder / "config.yaml").write_text(yaml.safe_dump(dataclasses.asdict(cfg), sort_keys=False))

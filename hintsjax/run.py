@@ -28,7 +28,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
-from hintsjax import checkpoint, command_line, compilation_cache, devices, expert, memory, paths, program_cache, xla_flags
+from hintsjax import checkpoint, choices, command_line, compilation_cache, devices, expert, memory, paths, program_cache, xla_flags
 from hintsjax.config import RunConfig, load_run_config, run_config, save_run_config, to_dict
 from hintsjax.devices import SeedLayout
 from hintsjax.evaluate import compile_evaluator, evaluate_group, evaluate_variants, metrics_text
@@ -540,7 +540,10 @@ def _hydra_main(cfg: DictConfig) -> None:
 
 @command
 def checked_main() -> int:
-    """The command line checked (every job of a sweep, before the first trains), then Hydra's run."""
+    """The command line checked (every job of a sweep, before the first trains), then Hydra's run.
+    --help: the registries' choices, then Hydra's page of the settings."""
+    if {"-h", "--help"} & set(sys.argv[1:]):
+        print(f"{__doc__.strip()}\n\n{choices.text()}\n")
     command_line.check_overrides(sys.argv[1:])
     if command_line.asks_only_for_warp(sys.argv[1:]):
         xla_flags.drop_determinism()  # nothing under MuJoCo Warp repeats bit for bit; they only cost speed

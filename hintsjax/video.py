@@ -11,6 +11,7 @@ hint), the step and the return so far. Also a command:
 
 from __future__ import annotations
 
+import argparse
 import functools
 import sys
 from pathlib import Path
@@ -21,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from hintsjax import checkpoint, envs, memory, paths
+from hintsjax import checkpoint, choices, envs, memory, paths
 from hintsjax.algorithms import make_trainer
 from hintsjax.config import RunConfig, env_params, load_run_config
 from hintsjax.errors import ArgumentParser, UsageError, command
@@ -227,7 +228,8 @@ def write_gif(frames: Sequence[np.ndarray], path: Path, fps: int = 25) -> None:
 
 @command
 def main(argv: list[str] | None = None) -> int:
-    parser = ArgumentParser(prog="python -m hintsjax.video", description=__doc__.splitlines()[0])
+    parser = ArgumentParser(prog="python -m hintsjax.video", description=__doc__.splitlines()[0], epilog=choices.text(),
+                            formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("run", type=Path, help="a run folder written by python -m hintsjax.run")
     parser.add_argument("--seed", type=int, default=0, help="which of the run's seeds acts (default: 0)")
     parser.add_argument("--variant", default=None, help="env variant (default: the training one)")

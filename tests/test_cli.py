@@ -600,6 +600,8 @@ def test_a_built_wheels_experts_restore_and_hold_only_what_a_restore_reads(tmp_p
     assert sorted(p.name for p in installed.iterdir() if (p / "expert.json").is_file()) == sorted(
         p.name for p in (Path(__file__).resolve().parents[1] / "hintsjax" / "experts").iterdir() if (p / "expert.json").is_file())
     assert [p for p in installed.rglob("*") if p.name in ("commit_success.txt", "_sharding")] == []
+    entry_points = "".join(p.read_text() for p in target.glob("hintsjax-*.dist-info/entry_points.txt"))
+    assert "[console_scripts]\nhintsjax = hintsjax.console:main" in entry_points
     script = ("import hintsjax.expert as x, jax; assert x.__file__.startswith(%r), x.__file__\n"
               "for env in x.packaged(): assert jax.numpy.isfinite(x.load(env).log_std).all(), env\n"
               "print(len(x.packaged()))" % str(target))
