@@ -16,6 +16,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
+import jax
+
 from hintsjax.envs import physics as _physics  # first: imports mujoco.mjx without its Warp backend (envs/physics.py)
 from hintsjax.envs import acrobot, adapter, ant, car_racing, halfcheetah, humanoid, idp, pendulum  # noqa: E402
 from hintsjax.envs.adapter import EnvUnavailable
@@ -143,8 +145,6 @@ def resolve_physics(name: str, physics: str = AUTO) -> str:
     """`jax` or `warp`: what `physics` (auto, jax or warp) steps env `name` with on this
     platform (envs/physics.py `resolve`). ChoiceError for an unknown value; PhysicsUnavailable
     for warp where it cannot run, or for an env with no MuJoCo model."""
-    import jax
-
     cls = choose("env", name, REGISTRY).cls
     if not issubclass(cls, MjxEnv):
         choose("physics", physics, dict.fromkeys(_physics.CHOICES))

@@ -24,7 +24,7 @@ class PPOConfig:
     """PPO settings (SPEC section 5). The budget is counted in environment steps."""
 
     total_env_steps: int = 200_000
-    num_envs: int = 16  # a speed choice: it does not change the budget
+    num_envs: int = 16  # a speed choice: it does not change the budget (an env's TRAINING may set its own, which wins)
     batch_size: int = 1024  # transitions per update: num_envs * rollout length
     epochs: int = 8
     minibatch_size: int = 256

@@ -18,7 +18,6 @@ from pathlib import Path
 import jax
 import orbax.checkpoint as ocp
 
-from hintsjax.config import RunConfig
 from hintsjax.errors import UsageError
 
 CHECKPOINTS = "checkpoints"
@@ -181,19 +180,15 @@ def latest_update(run_dir: Path) -> int | None:
         return manager.latest_step()
 
 
-def restore_latest(run_dir: Path, cfg: RunConfig, trainer=None):
+def restore_latest(run_dir: Path, abstract):
     """(runner state, update) of the newest checkpoint; UsageError if missing, corrupt or mismatched.
 
-    `trainer` (cfg's, built if not given) supplies the state's expected shapes.
+    `abstract` is the seed-batched state's shapes and types, which the caller knows (a run's
+    `Trainer.abstract_state()`), so that checkpointing needs nothing of the code that trains.
     """
-    from hintsjax.algorithms import make_trainer
-
     update = latest_update(run_dir)
     if update is None:
         raise UsageError(f"no checkpoint in {Path(run_dir) / CHECKPOINTS}")
-    trainer = trainer or make_trainer(cfg)
-    keys = jax.random.split(jax.random.key(0), cfg.seeds)
-    abstract = jax.eval_shape(jax.vmap(trainer.init), keys)
     expected = on_this_device(jax.eval_shape(_raw_keys, abstract))
     try:
         with _quiet(), _manager(run_dir, create=False) as manager:

@@ -16,6 +16,11 @@ import importlib.util
 from pathlib import Path
 from typing import Any, Callable
 
+import yaml
+from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.errors import OverrideParseException
+
 from hintsjax.errors import UsageError
 
 # Hydra's own flags that take the next argument as their value.
@@ -31,8 +36,6 @@ GRAMMAR = "https://hydra.cc/docs/advanced/override_grammar/basic"
 
 def defaults() -> dict[str, Any]:
     """conf/config.yaml's values, what Hydra hands over for every key the command line left alone."""
-    import yaml
-
     conf = yaml.safe_load((Path(__file__).parent / "conf" / "config.yaml").read_text())
     return {k: v for k, v in conf.items() if k not in ("defaults", "hydra")}  # not Hydra's own sections
 
@@ -96,9 +99,6 @@ def check_overrides(argv: list[str]) -> None:
 def parse(overrides: list[str]) -> list[Any]:
     """Hydra's parse of the overrides (`Override` objects); UsageError in one line naming the
     argument Hydra's grammar cannot read."""
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-    from hydra.errors import OverrideParseException
-
     parser, parsed = OverridesParser.create(), []
     for arg in overrides:  # one at a time, so the line can name the one that fails
         try:
@@ -123,8 +123,6 @@ def sweep_jobs(argv: list[str]) -> list[tuple[str, dict[str, Any]]]:
     (the job's swept values as one string, the values main_from_values would get)."""
     if not MULTIRUN_FLAGS & set(argv):
         return []
-    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
-
     overrides = [o for o in parse(overrides_of(argv)) if not _is_hydras(o.key_or_group)]
     swept = {o.key_or_group for o in overrides if o.is_sweep_override()}
     base, jobs = defaults(), []  # config.yaml read once, copied for each job
@@ -154,8 +152,6 @@ def jobs_values(argv: list[str]) -> list[dict[str, Any]]:
 def asks_only_for_warp(argv: list[str]) -> bool:
     """Whether every job steps its physics with MuJoCo Warp (`physics=warp`, or a resumed run's
     config.yaml says so), read without starting JAX."""
-    import yaml
-
     def physics(values: dict[str, Any]) -> Any:
         if values.get("resume") is None:
             return values.get("physics")

@@ -23,6 +23,7 @@ from hintsjax.conditioning import SCHEMES
 from hintsjax.env_defaults import ENV_DEFAULTS
 from hintsjax.envs.errors import ChoiceError, choose
 from hintsjax.errors import UsageError, require_positive
+from hintsjax.hint_sources import PROGRAMMATIC, check_matches, hinted_env, hinted_params
 
 
 CONFIG_YAML = "config.yaml"  # a run folder's resolved config
@@ -89,8 +90,6 @@ class RunConfig:
     def make_env(self, observe: tuple[str, ...] | None = None, hint: str | None = None, deploy: bool = False) -> envs.Env:
         """The env the agent acts in (its hint `hint`, default its own, from the hint source of
         training or of deployment); its params are `task_params`'."""
-        from hintsjax.generator import hinted_env
-
         observe = self.agent_spec.observe if observe is None else observe
         env = hinted_env(self.env, self.effective_hint if hint is None else hint, observe, self.hint_source_for(deploy),
                          physics=self.physics, warp_capacity=self.warp_capacity)
@@ -98,8 +97,6 @@ class RunConfig:
 
     def task_params(self, variant: str | None, deploy: bool = False) -> Any:
         """The params of `make_env(deploy=deploy)`'s env on `variant` (None: the training variant's default)."""
-        from hintsjax.generator import hinted_params
-
         return hinted_params(self.env, env_params(self.env, variant), self.agent_spec.observe, self.hint_source_for(deploy))
 
     def validate(self) -> "RunConfig":
@@ -152,8 +149,6 @@ class RunConfig:
             raise UsageError(f"hints_from={self.hints_from}: {e}") from None
 
     def _check_hint_sources(self) -> None:
-        from hintsjax.generator import PROGRAMMATIC, check_matches
-
         for name in ("hint_source", "eval_hint_source"):
             source = getattr(self, name)
             if source in (None, PROGRAMMATIC):

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import optax
 from flax import struct
 
-from hintsjax import envs, normalization
+from hintsjax import envs, expert as experts, normalization
 from hintsjax.config import RunConfig
 from hintsjax.ppo import Hyper, RunnerState, make_network, start_runner
 from hintsjax.trainer import Trainer, episode_metrics
@@ -82,8 +82,6 @@ def imitation_loss(predicted: jax.Array, label: jax.Array) -> jax.Array:
 
 def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
     """DAgger's trainer; `expert` (anything with `mean(state)`) defaults to the env's packaged one."""
-    from hintsjax import expert as experts
-
     ppo, dagger = cfg.ppo, cfg.dagger
     env = envs.AutoReset(cfg.make_env())
     env_params = cfg.task_params(cfg.variant)

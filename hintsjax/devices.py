@@ -22,6 +22,7 @@ from typing import Any, Callable
 
 import jax
 import numpy as np
+from jax.experimental import multihost_utils
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 AXIS = "seeds"
@@ -56,8 +57,6 @@ def agree(text: str) -> str:
     """Process 0's `text`, on every process (e.g. the run folder it chose)."""
     if jax.process_count() == 1:
         return text
-    from jax.experimental import multihost_utils
-
     data = np.zeros(4096, np.uint8)
     raw = text.encode()[:4096]
     data[: len(raw)] = np.frombuffer(raw, np.uint8)
@@ -69,8 +68,6 @@ def agree_that(flag: bool) -> bool:
     writing a checkpoint now: each process writes its share)."""
     if jax.process_count() == 1:
         return flag
-    from jax.experimental import multihost_utils
-
     return bool(multihost_utils.broadcast_one_to_all(np.asarray(flag)))
 
 
@@ -144,8 +141,6 @@ class SeedLayout:
     def fetch(self, tree: Any) -> Any:
         """Leaves as numpy arrays on this host, the run's S seeds of each (gathered from every
         process's devices when they are not all this process's)."""
-        from jax.experimental import multihost_utils
-
         def host(x: Any) -> np.ndarray:
             if isinstance(x, jax.Array) and not x.is_fully_addressable:
                 x = multihost_utils.process_allgather(x, tiled=True)

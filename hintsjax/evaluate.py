@@ -13,6 +13,7 @@ progress) are kept from the state each episode ended in. Also a command:
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import json
 import sys
@@ -25,11 +26,13 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from hintsjax import envs, memory, program_cache
+from hintsjax import checkpoint, choices, envs, memory, program_cache
+from hintsjax.algorithms import make_trainer
 from hintsjax.config import RunConfig, env_params, load_run_config
 from hintsjax.devices import SeedLayout
 from hintsjax.errors import ArgumentParser, UsageError, command
-from hintsjax.generator import PROGRAMMATIC
+from hintsjax.group import cell_state
+from hintsjax.hint_sources import PROGRAMMATIC
 from hintsjax.ppo import Hyper, gaussian_sample, make_network, pick_hint
 from hintsjax.trainer import program_identity
 
@@ -186,8 +189,6 @@ def evaluate_group(group: Any, state: Any, layout: SeedLayout | None = None) -> 
     over the hint axis padded with zero terms."""
     cfg = group.cfgs[0]
     if len({(c.eval_episodes, c.stochastic_eval) for c in group.cfgs}) > 1:  # not one program: each alone
-        from hintsjax.group import cell_state
-
         results = [evaluate_variants(c, cell_state(group, state, k).params, (c.variant, *c.eval_variants),
                                      c.eval_episodes, c.stochastic_eval, layout=layout) for k, c in enumerate(group.cfgs)]
         return [r for r, _ in results], sum(t for _, t in results)
@@ -209,9 +210,8 @@ def evaluate_params(cfg: RunConfig, params: Any, variant: str | None, episodes: 
 
 @command
 def main(argv: list[str] | None = None) -> int:
-    from hintsjax import checkpoint
-
-    parser = ArgumentParser(prog="python -m hintsjax.evaluate", description=__doc__.splitlines()[0])
+    parser = ArgumentParser(prog="python -m hintsjax.evaluate", description=__doc__.splitlines()[0], epilog=choices.text(),
+                            formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("run", type=Path, help="a run folder written by python -m hintsjax.run")
     parser.add_argument("--variant", default=None,
                         help="env variant(s) to evaluate on, comma-separated, all by one compiled program "
@@ -234,7 +234,7 @@ def main(argv: list[str] | None = None) -> int:
     if episodes <= 0:
         raise UsageError(f"--episodes must be positive, got {episodes}")
     memory.check_episodes(cfg, SeedLayout.of(cfg.seeds).per_device, episodes, "--episodes")
-    state, _ = checkpoint.restore_latest(args.run, cfg)
+    state, _ = checkpoint.restore_latest(args.run, make_trainer(cfg).abstract_state())
     stochastic = args.stochastic or (cfg.stochastic_eval and not args.deterministic)
     results, _ = evaluate_variants(cfg, state.params, variants, episodes, stochastic)
     mode = "stochastic" if stochastic else "deterministic"

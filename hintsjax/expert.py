@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import orbax.checkpoint as ocp
 from flax import struct
 
-from hintsjax import normalization
+from hintsjax import checkpoint, normalization, paths, ppo
 from hintsjax.checkpoint import on_this_device, require_same_arrays
 from hintsjax.config import RunConfig, load_run_config, to_dict
 from hintsjax.errors import ArgumentParser, UsageError, command
@@ -32,6 +32,10 @@ from hintsjax.networks import MLP
 EXPERTS_DIR = Path(__file__).resolve().parent / "experts"  # the packaged experts, one folder per env
 EXPERT_JSON = "expert.json"
 POLICY = "policy"  # the orbax checkpoint inside an expert folder
+# What orbax writes into a checkpoint about the machine that wrote it, which a restore here does not
+# read: the folder's absolute path (commit_success.txt) and the device each array was on (_sharding;
+# `load` names its own). An exported expert drops them, so a packaged one ships only what a restore needs.
+MACHINE_FILES = ("commit_success.txt", "_sharding")
 
 
 @struct.dataclass
@@ -67,8 +71,6 @@ def packaged() -> list[str]:
 def export(run_dir: Path, out_dir: Path | None = None, force: bool = False) -> Path:
     """Export the best seed of a finished state-based run as an expert folder; returns its path.
     An expert that is there already (a packaged one, by default) is replaced only with `force`."""
-    from hintsjax import checkpoint, paths
-
     cfg = load_run_config(run_dir)
     if cfg.agent_spec.observe != ("state",) or cfg.agent_spec.algorithm != "ppo":
         raise UsageError(f"{run_dir} trained {cfg.agent}; an expert comes from a state PPO run (agent=expert_ppo)")
@@ -82,7 +84,7 @@ def export(run_dir: Path, out_dir: Path | None = None, force: bool = False) -> P
                          f"one); give --out another folder, or --force to replace it")
     evaluation = json.loads(eval_json.read_text())["evaluations"][0]
     best = max(range(len(evaluation["seed_means"])), key=lambda i: evaluation["seed_means"][i])
-    state, update = checkpoint.restore_latest(run_dir, cfg)
+    state, update = checkpoint.restore_latest(run_dir, ppo.make_trainer(cfg).abstract_state())
     params = jax.tree.map(lambda x: x[best], state.params["params"])
     policy = {"actor": params["actor"], "log_std": params["log_std"]}
     if normalization.COLLECTION in state.params:
@@ -91,6 +93,8 @@ def export(run_dir: Path, out_dir: Path | None = None, force: bool = False) -> P
     out.mkdir(parents=True, exist_ok=True)
     with ocp.StandardCheckpointer() as saver:
         saver.save(out / POLICY, policy, force=True)
+    for name in MACHINE_FILES:
+        (out / POLICY / name).unlink(missing_ok=True)
     meta = {
         "env": cfg.env,
         "state_size": int(params["actor"]["Dense_0"]["kernel"].shape[0]),

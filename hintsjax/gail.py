@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import optax
 from flax import struct
 
+from hintsjax import expert as experts
 from hintsjax.algorithm_settings import GailConfig
 from hintsjax.config import RunConfig
 from hintsjax.networks import MLP
@@ -126,8 +127,6 @@ def pairs(state: jax.Array, action: jax.Array) -> jax.Array:
 
 def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
     """GAIL's trainer; `expert` (anything with `sample(key, state)`) defaults to the env's packaged one."""
-    from hintsjax import expert as experts
-
     ppo, gail = cfg.ppo, cfg.gail
     parts = make_ppo(cfg)
     expert = experts.load(cfg.env, cfg.expert) if expert is None else expert

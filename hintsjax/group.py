@@ -23,7 +23,7 @@ import jax.numpy as jnp
 from hintsjax import envs, ppo
 from hintsjax.config import RunConfig
 from hintsjax.errors import UsageError
-from hintsjax.generator import PROGRAMMATIC
+from hintsjax.hint_sources import PROGRAMMATIC
 from hintsjax.ppo import Hyper, RunnerState
 from hintsjax.trainer import Trainer, program_identity
 

@@ -21,6 +21,7 @@ from typing import Any, Callable
 
 import jax
 
+from hintsjax import envs
 from hintsjax.errors import UsageError
 
 def sized(n: float) -> str:
@@ -46,8 +47,6 @@ def device_bytes(device: Any = None) -> int:
 
 def picture_bytes(cfg: Any) -> int:
     """One observation's picture (uint8 [S, S, 3]), or 0 for an agent that sees none."""
-    from hintsjax import envs
-
     if "pixels" not in cfg.agent_spec.observe:
         return 0
     return 3 * envs.REGISTRY[cfg.env].cls.image_size ** 2
@@ -55,8 +54,6 @@ def picture_bytes(cfg: Any) -> int:
 
 def transition_bytes(cfg: Any) -> int:
     """What a rollout keeps of one step at least: its picture, action, reward, value, done flag."""
-    from hintsjax import envs
-
     return picture_bytes(cfg) + 4 * (envs.REGISTRY[cfg.env].cls.action_size + 3)
 
 

@@ -38,6 +38,12 @@ from typing import Any, Callable
 
 import jax
 import numpy as np
+from jax import export
+from jax.api_util import shaped_abstractify
+
+import hintsjax
+from hintsjax import envs
+from hintsjax.envs import hints
 
 ENV_VAR = "HINTSJAX_TRACE_CACHE"  # "off" turns the traced-program cache off (the compile cache stays)
 FOLDER = "traced"
@@ -75,10 +81,6 @@ def sources_digest() -> str | None:
     """A digest of the package's source and data files (wherever it is installed) and of every
     loaded module outside the installed libraries (a script's or a test's own envs and hints);
     None when a registered env or hint has no source file, so that nothing can key its program."""
-    import hintsjax
-    from hintsjax import envs
-    from hintsjax.envs import hints
-
     registered = [entry.cls for entry in envs.REGISTRY.values()]
     registered += [spec.fn for table in hints._HINTS.values() for spec in table.values()]
     if any(_source_file(obj) is None for obj in registered):
@@ -116,8 +118,6 @@ def _versions() -> str:
 def _spec(x: Any) -> jax.ShapeDtypeStruct:
     """An argument's shape and dtype, weak (a Python number's) or not, as `jax.jit` sees it."""
     if not hasattr(x, "dtype"):  # a Python number
-        from jax.api_util import shaped_abstractify
-
         x = shaped_abstractify(x)
     return jax.ShapeDtypeStruct(x.shape, x.dtype, weak_type=bool(getattr(x, "weak_type", False)))
 
@@ -187,8 +187,6 @@ class Traced:
 
 def trace(fn: Callable[..., Any], leaves: list[Any], in_tree: Any) -> Traced:
     """Trace `fn` (a function of the pytrees `in_tree` holds) for arguments shaped like `leaves`."""
-    from jax import export
-
     out_tree = []
 
     def flat(*args):
@@ -201,8 +199,6 @@ def trace(fn: Callable[..., Any], leaves: list[Any], in_tree: Any) -> Traced:
 
 
 def _load(path: Path) -> Traced | None:
-    from jax import export
-
     try:
         with path.open("rb") as f:
             blob, in_tree, out_tree = pickle.load(f)

@@ -41,7 +41,7 @@ def random_policy(cfg: RunConfig, variant: str | None) -> dict:
 def swing_up_gif(cfg: RunConfig, run_dir: Path, candidates: int = 8) -> Path:
     """A GIF of seed 0's trained agent on the episode, of `candidates` evaluation starts, that
     begins farthest from upright (its first reward the lowest): the one with the most to show."""
-    state, _ = checkpoint.restore_latest(run_dir, cfg)
+    state, _ = checkpoint.restore_latest(run_dir, make_trainer(cfg).abstract_state())
     params = jax.tree.map(lambda x: x[0], state.params)
     env = cfg.make_env()
     steps = min(env.max_steps, video.MAX_STEPS)

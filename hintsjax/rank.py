@@ -43,11 +43,13 @@ import optax
 import yaml
 from flax import struct
 
-from hintsjax import envs, rollouts
+from hintsjax import envs, expert, rollouts
 from hintsjax.arguments import parse_key_values
 from hintsjax.conditioning import SCHEMES
+from hintsjax.config import run_config
 from hintsjax.envs.errors import ChoiceError, choose
 from hintsjax.errors import UsageError, command, require_positive, require_range
+from hintsjax.group import make_group, make_group_trainer
 from hintsjax.networks import MLP, Encoder, scale_pixels
 from hintsjax.runlog import fresh_folder
 
@@ -160,8 +162,6 @@ def make_information(cfg: RankConfig, policy: Any = None) -> Callable[[jax.Array
     take = jnp.asarray([list(t) + [0] * (width - len(t)) for t in takes + [()]], jnp.int32)  # the last: no hint
     keep = jnp.asarray([[i < len(t) for i in range(width)] for t in takes + [()]])
     if policy is None and cfg.policy == "auto":
-        from hintsjax import expert
-
         policy = expert.load(cfg.env) if cfg.env in expert.packaged() else None
     env = envs.AutoReset(envs.make(cfg.env, union, rollouts.observed(policy)))
     params = envs.make_params(cfg.env)
@@ -222,8 +222,6 @@ def make_information(cfg: RankConfig, policy: Any = None) -> Callable[[jax.Array
 
 def probe_configs(cfg: RankConfig) -> list:
     """The HINTS runs of the probe: every candidate at probe_fraction of the env's budget."""
-    from hintsjax.config import run_config
-
     base = run_config({"env": cfg.env, "agent": "hints", "scheme": cfg.scheme, "hint": cfg.candidates[0]})
     updates = max(1, round(cfg.probe_fraction * base.ppo.num_updates))
     ppo = {"total_env_steps": updates * base.ppo.batch_size}
@@ -233,8 +231,6 @@ def probe_configs(cfg: RankConfig) -> list:
 
 def probe_scores(cfg: RankConfig) -> tuple[np.ndarray, str]:
     """([S, K] each seed's and candidate's area under its short run's learning curve, its measure)."""
-    from hintsjax.group import make_group, make_group_trainer
-
     cfgs = probe_configs(cfg)
     trainer = make_group_trainer(make_group(cfgs))
     _, metrics = jax.jit(jax.vmap(trainer.train))(cfgs[0].seed_keys())
@@ -296,7 +292,7 @@ def write_folder(folder: Path, cfg: RankConfig, result: dict[str, Any]) -> list[
 
 
 def plot(path: Path, cfg: RankConfig, result: dict[str, Any]) -> None:
-    import matplotlib
+    import matplotlib  # here: matplotlib takes about a second to import, and only the written report draws
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -319,7 +315,8 @@ def plot(path: Path, cfg: RankConfig, result: dict[str, Any]) -> None:
 
 @command
 def main(argv: list[str] | None = None) -> int:
-    cfg = parse_key_values(RankConfig, sys.argv[1:] if argv is None else argv).validate()
+    cfg = parse_key_values(RankConfig, sys.argv[1:] if argv is None else argv, "python -m hintsjax.rank",
+                           __doc__.splitlines()[0]).validate()
     print(f"ranking {len(cfg.candidates)} hints of {cfg.env} by {cfg.scores}, {cfg.seeds} seeds", flush=True)
     folder = fresh_folder(Path(cfg.out_dir) / (cfg.name or f"rank-{cfg.env}-{time.strftime('%Y%m%d-%H%M%S')}"))
     (folder / "config.yaml").write_text(yaml.safe_dump(dataclasses.asdict(cfg), sort_keys=False))

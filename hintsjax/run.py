@@ -26,14 +26,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
+from tqdm import tqdm
 
-from hintsjax import checkpoint, command_line, compilation_cache, devices, expert, memory, paths, program_cache, xla_flags
+from hintsjax import checkpoint, choices, command_line, compilation_cache, devices, expert, memory, paths, program_cache, xla_flags
 from hintsjax.config import RunConfig, load_run_config, run_config, save_run_config, to_dict
 from hintsjax.devices import SeedLayout
 from hintsjax.evaluate import compile_evaluator, evaluate_group, evaluate_variants, metrics_text
 from hintsjax.algorithms import make_trainer
 from hintsjax.envs import physics
 from hintsjax.errors import INTERRUPTED, UsageError, command, fail, report_bug
+from hintsjax.group import cell_state, make_group, make_group_trainer
 from hintsjax.runlog import CURVE_PNG, METRICS_CSV, RunLog, fresh_folder, plot_curves, read_curves
 from hintsjax.trainer import Trainer
 
@@ -222,7 +224,7 @@ def start(trainer: Trainer, cfg: RunConfig, run_dir: Path, resume: bool, label: 
     if check_memory:
         check_fits(compiled.run_chunk, label)
     if resume:  # a checkpoint holds the run's own seeds, restored onto one device: padded and placed as at the start
-        state, done = checkpoint.restore_latest(run_dir, cfg, trainer)
+        state, done = checkpoint.restore_latest(run_dir, trainer.abstract_state())
         state = layout.pad(state)
     else:
         state, done = compiled.init(keys), 0
@@ -244,8 +246,6 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
     is skipped (the newest complete checkpoint is then at most one write old); the last update
     is always saved. Compile seconds are reported apart from training seconds.
     """
-    from tqdm import tqdm
-
     compiled, state, done, total = training.compiled, training.state, training.done, cfg.ppo.num_updates
     layout = compiled.layout
     bar = tqdm(total=total, initial=done, unit="upd", disable=not (progress and devices.is_main()), desc=f"{cfg.env} {label}")
@@ -388,8 +388,6 @@ def train_group(group_cfgs: list[RunConfig], group_dir: Path, cell_dirs: list[Pa
     then gets what its own run would have written in its folder (cell_dirs, each holding its
     config.yaml): metrics.csv, its final state as a checkpoint, eval.json, learning_curve.png.
     GroupTooBig if the group's program would not fit on the device (before anything is written)."""
-    from hintsjax.group import cell_state, make_group, make_group_trainer
-
     group = make_group(group_cfgs)
     cfg = group.cfgs[0]
     label = f"group of {len(group.cfgs)} ({', '.join(c.label for c in group.cfgs)})"
@@ -542,7 +540,10 @@ def _hydra_main(cfg: DictConfig) -> None:
 
 @command
 def checked_main() -> int:
-    """The command line checked (every job of a sweep, before the first trains), then Hydra's run."""
+    """The command line checked (every job of a sweep, before the first trains), then Hydra's run.
+    --help: the registries' choices, then Hydra's page of the settings."""
+    if {"-h", "--help"} & set(sys.argv[1:]):
+        print(f"{__doc__.strip()}\n\n{choices.text()}\n")
     command_line.check_overrides(sys.argv[1:])
     if command_line.asks_only_for_warp(sys.argv[1:]):
         xla_flags.drop_determinism()  # nothing under MuJoCo Warp repeats bit for bit; they only cost speed

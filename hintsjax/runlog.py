@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from hintsjax.errors import UsageError
+
 METRICS_CSV = "metrics.csv"
 CURVE_PNG = "learning_curve.png"
 CURVE_POINTS = 250  # points per seed of a plotted (and an archived) learning curve
@@ -30,7 +32,7 @@ class RunLog:
     """Appends per-update, per-seed metric rows to metrics.csv and means to TensorBoard."""
 
     def __init__(self, run_dir: Path, resume_update: int = 0):
-        from tensorboardX import SummaryWriter
+        from tensorboardX import SummaryWriter  # here: it loads protobuf (0.4 s), which only a run that logs needs
 
         self.path = Path(run_dir) / METRICS_CSV
         self.columns: list[str] | None = None
@@ -53,8 +55,6 @@ class RunLog:
         """Drop rows written after the checkpoint being resumed from; UsageError, the file left as
         it is, if it is not a metrics.csv this package wrote (no `update` column, or a row whose
         update is not a whole number)."""
-        from hintsjax.errors import UsageError
-
         try:
             rows = self._rows()
             kept = [r for r in rows if int(r["update"]) <= update]
@@ -150,7 +150,7 @@ def plot_curves(curves: dict[str, tuple[np.ndarray, np.ndarray]], out: Path, tit
     """One line per label (mean over seeds) with a 95% bootstrap confidence band for the mean;
     x is environment steps. Long curves are first averaged into CURVE_POINTS bins (`bin_means`):
     per-update returns of runs with few, long episodes are too noisy to read."""
-    import matplotlib
+    import matplotlib  # here: matplotlib takes about a second to import, and only a finished run draws
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

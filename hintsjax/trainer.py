@@ -19,6 +19,8 @@ import jax
 import jax.numpy as jnp
 
 from hintsjax.config import RunConfig
+from hintsjax.envs import WARP
+from hintsjax.hint_sources import PROGRAMMATIC
 
 
 @dataclass(frozen=True)
@@ -57,6 +59,11 @@ class Trainer:
         """The whole run from a seed key: the function that is vmapped over seeds."""
         return self.run(self.init(key), self.cfg.ppo.num_updates)
 
+    def abstract_state(self) -> Any:
+        """The shapes and types of the run's seed-batched state ([S, ...] for cfg's seeds), computed
+        without any arrays: what a checkpoint of the run restores into (hintsjax.checkpoint)."""
+        return jax.eval_shape(jax.vmap(self.init), jax.random.split(jax.random.key(0), self.cfg.seeds))
+
 
 def program_identity(cfg: RunConfig, *more: Any) -> str | None:
     """The description of a run's programs that the traced-program cache keys them by: its
@@ -64,9 +71,6 @@ def program_identity(cfg: RunConfig, *more: Any) -> str | None:
     files that no configuration value digests (an imitation agent's expert, a learned hint
     generator), which are then traced every time; and None for MJX-Warp physics, whose programs
     call Warp's kernels through handlers that the tracing process registers."""
-    from hintsjax.envs import WARP
-    from hintsjax.generator import PROGRAMMATIC
-
     if cfg.agent_spec.imitates or {cfg.hint_source_for(False), cfg.hint_source_for(True)} != {PROGRAMMATIC}:
         return None
     if cfg.physics == WARP:

@@ -11,6 +11,7 @@ hint), the step and the return so far. Also a command:
 
 from __future__ import annotations
 
+import argparse
 import functools
 import sys
 from pathlib import Path
@@ -21,7 +22,8 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from hintsjax import envs, memory, paths
+from hintsjax import checkpoint, choices, envs, memory, paths
+from hintsjax.algorithms import make_trainer
 from hintsjax.config import RunConfig, env_params, load_run_config
 from hintsjax.errors import ArgumentParser, UsageError, command
 from hintsjax.evaluate import eval_keys
@@ -140,6 +142,7 @@ class FrameComposer:
     """Draws frames of one video: a matplotlib figure (Agg, no pyplot) built once, updated per frame."""
 
     def __init__(self, labels: Sequence[str], limits: np.ndarray, image_size: int, scale: int, max_steps: int | None = None):
+        # here: matplotlib takes about a second to import, and only a video draws with it
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
 
@@ -215,7 +218,7 @@ def compose_frames(episode: Rollout, labels: Sequence[str], scale: int, max_step
 
 def write_gif(frames: Sequence[np.ndarray], path: Path, fps: int = 25) -> None:
     """Write uint8[H, W, 3] frames as a looping GIF."""
-    from PIL import Image
+    from PIL import Image  # here, as matplotlib above: only writing a GIF needs it
 
     images = [Image.fromarray(np.asarray(f, np.uint8)) for f in frames]
     images[0].save(
@@ -225,9 +228,8 @@ def write_gif(frames: Sequence[np.ndarray], path: Path, fps: int = 25) -> None:
 
 @command
 def main(argv: list[str] | None = None) -> int:
-    from hintsjax import checkpoint
-
-    parser = ArgumentParser(prog="python -m hintsjax.video", description=__doc__.splitlines()[0])
+    parser = ArgumentParser(prog="python -m hintsjax.video", description=__doc__.splitlines()[0], epilog=choices.text(),
+                            formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("run", type=Path, help="a run folder written by python -m hintsjax.run")
     parser.add_argument("--seed", type=int, default=0, help="which of the run's seeds acts (default: 0)")
     parser.add_argument("--variant", default=None, help="env variant (default: the training one)")
@@ -249,7 +251,7 @@ def main(argv: list[str] | None = None) -> int:
     memory.check_video(args.scale, steps, functools.partial(frame_shape, env.image_size))
     out = args.out or args.run / f"video-{variant}-seed{args.seed}.gif"
     paths.check_file(out, "--out")
-    state, _ = checkpoint.restore_latest(args.run, cfg)
+    state, _ = checkpoint.restore_latest(args.run, make_trainer(cfg).abstract_state())
     params = jax.tree.map(lambda x: x[args.seed], state.params)
     episode = rollout(cfg, params, variant, steps, eval_keys(cfg)[args.seed]).cut()
     frames = compose_frames(episode, hint_labels(env.hint), args.scale, env.max_steps)

@@ -24,6 +24,7 @@
 from __future__ import annotations
 
 import os
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 DETERMINISTIC = "--xla_gpu_deterministic_ops"
@@ -62,8 +63,6 @@ def deterministic_gpu_ops() -> bool:
 def autotune_folder() -> str | None:
     """The persisted autotune folder beside the compilation cache (made), or None where the
     cache is off or the folder cannot be made."""
-    from importlib.metadata import PackageNotFoundError, version
-
     root = os.environ.get("HINTSJAX_COMPILATION_CACHE", "~/.cache/hintsjax/xla")
     if root.strip().lower() in OFF:
         return None
@@ -103,7 +102,7 @@ def set_defaults() -> None:
 def drop_determinism() -> bool:
     """Deterministic GPU ops off (with the autotune folder), unless the user chose them or JAX's
     backend has started (its flags are read); whether they are now off."""
-    from jax._src import xla_bridge
+    from jax._src import xla_bridge  # here: hintsjax/__init__ imports this module to set XLA's flags, before jax
 
     started = getattr(xla_bridge, "backends_are_initialized", lambda: True)()
     if not (user_chose_determinism or started):

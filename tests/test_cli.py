@@ -15,6 +15,7 @@ import pytest
 import yaml
 
 from hintsjax import checkpoint, command_line, run
+from hintsjax.algorithms import make_trainer
 from hintsjax.errors import UsageError
 from hintsjax.evaluate import main as evaluate_main
 
@@ -133,7 +134,7 @@ def finished_run(tmp_path_factory) -> Path:
 
 def state_arrays(run_dir: Path) -> list[np.ndarray]:
     """Every array of a run's newest checkpoint (params, optimiser state, env state, key, update)."""
-    state, _ = checkpoint.restore_latest(run_dir, run.load_run_config(run_dir))
+    state, _ = checkpoint.restore_latest(run_dir, make_trainer(run.load_run_config(run_dir)).abstract_state())
     return [np.asarray(jax.random.key_data(x) if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key) else x)
             for x in jax.tree.leaves(state)]
 
@@ -320,8 +321,8 @@ def test_interrupted_then_resumed_run_ends_where_the_uninterrupted_one_ends(fini
 
     assert run.main_from_values({"resume": str(interrupted)}) == 0
     cfg = run.load_run_config(interrupted)
-    resumed, step = checkpoint.restore_latest(interrupted, cfg)
-    full, full_step = checkpoint.restore_latest(finished_run, cfg)
+    resumed, step = checkpoint.restore_latest(interrupted, make_trainer(cfg).abstract_state())
+    full, full_step = checkpoint.restore_latest(finished_run, make_trainer(cfg).abstract_state())
     assert step == full_step == 4
     for a, b in zip(jax.tree.leaves(resumed.params), jax.tree.leaves(full.params)):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-6, atol=1e-7)
@@ -401,8 +402,9 @@ def test_a_checkpoint_saved_on_another_device_restores_here(finished_run, tmp_pa
     script = (  # a second CPU device stands in for a device this process lacks
         "import sys, jax\n"
         "from hintsjax import checkpoint, run\n"
+        "from hintsjax.algorithms import make_trainer\n"
         f"src, dest = {str(finished_run)!r}, {str(copy)!r}\n"
-        "state, update = checkpoint.restore_latest(src, run.load_run_config(src))\n"
+        "state, update = checkpoint.restore_latest(src, make_trainer(run.load_run_config(src)).abstract_state())\n"
         "checkpoint.save(dest, jax.device_put(state, jax.devices()[1]), update)\n"
     )
     env = {**os.environ, "JAX_PLATFORMS": "cpu", "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
@@ -410,8 +412,8 @@ def test_a_checkpoint_saved_on_another_device_restores_here(finished_run, tmp_pa
     assert out.returncode == 0, out.stderr[-2000:]
     assert len(jax.devices()) == 1
     cfg = run.load_run_config(finished_run)
-    moved, update = checkpoint.restore_latest(copy, cfg)
-    original, _ = checkpoint.restore_latest(finished_run, cfg)
+    moved, update = checkpoint.restore_latest(copy, make_trainer(cfg).abstract_state())
+    original, _ = checkpoint.restore_latest(finished_run, make_trainer(cfg).abstract_state())
     assert update == 4
     for a, b in zip(jax.tree.leaves(original), jax.tree.leaves(moved)):
         if jax.dtypes.issubdtype(a.dtype, jax.dtypes.prng_key):
@@ -429,7 +431,7 @@ def test_mismatched_checkpoint_is_refused(finished_run, tmp_path):
     before = sorted(p.name for p in copy.rglob("*"))
     # Refused from the stored shapes, before any array is read.
     with pytest.raises(UsageError, match=r"does not match its config.yaml: its \d+ arrays differ in shape"):
-        checkpoint.restore_latest(copy, run.load_run_config(copy))
+        checkpoint.restore_latest(copy, make_trainer(run.load_run_config(copy)).abstract_state())
     assert sorted(p.name for p in copy.rglob("*")) == before  # nothing written or removed
 
 
@@ -588,6 +590,24 @@ def test_a_built_wheel_runs_from_the_checkout_root_and_from_elsewhere(where, tmp
         probe = subprocess.run([sys.executable, "-c", "import hintsjax.envs as e; print(e.__file__)"], cwd=cwd, env=env,
                                capture_output=True, text=True, timeout=300)
         assert probe.stdout.strip().startswith(str(target)), probe.stdout + probe.stderr
+
+
+def test_a_built_wheels_experts_restore_and_hold_only_what_a_restore_reads(tmp_path_factory):
+    """The wheel's package data holds every packaged expert, which restores from the installed copy,
+    and none of orbax's notes of the machine that wrote it (hintsjax/expert.py MACHINE_FILES)."""
+    target = wheel_install(tmp_path_factory)
+    installed = target / "hintsjax" / "experts"
+    assert sorted(p.name for p in installed.iterdir() if (p / "expert.json").is_file()) == sorted(
+        p.name for p in (Path(__file__).resolve().parents[1] / "hintsjax" / "experts").iterdir() if (p / "expert.json").is_file())
+    assert [p for p in installed.rglob("*") if p.name in ("commit_success.txt", "_sharding")] == []
+    entry_points = "".join(p.read_text() for p in target.glob("hintsjax-*.dist-info/entry_points.txt"))
+    assert "[console_scripts]\nhintsjax = hintsjax.console:main" in entry_points
+    script = ("import hintsjax.expert as x, jax; assert x.__file__.startswith(%r), x.__file__\n"
+              "for env in x.packaged(): assert jax.numpy.isfinite(x.load(env).log_std).all(), env\n"
+              "print(len(x.packaged()))" % str(target))
+    out = subprocess.run([sys.executable, "-c", script], cwd=tmp_path_factory.mktemp("elsewhere"),
+                         env={**os.environ, "PYTHONPATH": str(target)}, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0 and out.stdout.strip() == "7", out.stderr[-2000:]
 
 
 _WHEEL: dict[str, Path] = {}

@@ -68,7 +68,7 @@ def test_a_checkpoint_written_on_four_devices_resumes_on_one(runs, tmp_path):
     run_dir = tmp_path / "alone"
     shutil.copytree(folder / "alone", run_dir)
     cfg = load_run_config(run_dir)
-    state, done = checkpoint.restore_latest(run_dir, cfg, make_trainer(cfg))
+    state, done = checkpoint.restore_latest(run_dir, make_trainer(cfg).abstract_state())
     assert done == cfg.ppo.num_updates and state.update.shape == (3,)  # the run's own seeds, no padding
     last = run_dir / "checkpoints" / str(done)
     assert len([p for p in (run_dir / "checkpoints").iterdir() if p.name.isdigit()]) >= 2  # an earlier one to go on from

@@ -1,4 +1,4 @@
-"""The learned hint generator (hintsjax.generator): it learns a hint that the picture determines,
+"""The learned hint generator (hintsjax.generator, read by hintsjax.hint_sources): it learns a hint that the picture determines,
 its training is the same vmapped as looped, the env that carries its pictures keeps the task's
 dynamics, and an agent given `hint_source` sees the generator's hint and nothing else."""
 
@@ -16,7 +16,7 @@ import pytest
 
 import cue_env  # noqa: F401  (registers the test env "cue")
 import dot_env  # noqa: F401  (registers the test env "dot": the hint is the dot's position in the picture)
-from hintsjax import envs, evaluate, generator, ppo, run
+from hintsjax import envs, evaluate, generator, hint_sources, ppo, run
 from hintsjax.config import run_config
 from hintsjax.errors import UsageError
 
@@ -54,11 +54,11 @@ def test_stacked_pictures_repeat_an_episodes_first():
 
 
 def test_the_env_carrying_pictures_keeps_the_tasks_dynamics(tiny_generator):
-    gen, params = generator.load(tiny_generator)
+    gen, params = hint_sources.load(tiny_generator)
     inner = envs.make("dot", "position", ("pixels", "state"))
-    framed = generator.GeneratedHintEnv(envs.make("dot", "position", ("pixels",)), gen, ("pixels", "state", "hint"))
+    framed = hint_sources.GeneratedHintEnv(envs.make("dot", "position", ("pixels",)), gen, ("pixels", "state", "hint"))
     task = envs.make_params("dot")
-    both = generator.GeneratedParams(task, params)
+    both = hint_sources.GeneratedParams(task, params)
     key = jax.random.key(3)
     a, b = inner.reset(key, task), framed.reset(key, both)
     assert np.array_equal(b.state.frames, np.stack([a.obs["pixels"]] * gen.frames))
@@ -87,7 +87,7 @@ def constant_generator(tiny_generator, tmp_path_factory) -> Path:
     """The tiny generator with its network's weights zeroed and its mean set: it says CONSTANT."""
     folder = tmp_path_factory.mktemp("constant")
     cfg = generator.GeneratorConfig(frames=2, seeds=1, **TINY)
-    _, params = generator.load(tiny_generator)
+    _, params = hint_sources.load(tiny_generator)
     params = jax.tree.map(lambda x: x[None], params.replace(net=jax.tree.map(jnp.zeros_like, params.net),
                                                            mean=jnp.full((1,), CONSTANT)))
     blank = jnp.zeros((1, 1))
@@ -96,12 +96,12 @@ def constant_generator(tiny_generator, tmp_path_factory) -> Path:
 
 
 def test_the_cli_writes_a_folder_that_loads(tiny_generator):
-    meta = json.loads((tiny_generator / generator.GENERATOR_JSON).read_text())
+    meta = json.loads((tiny_generator / hint_sources.GENERATOR_JSON).read_text())
     assert (meta["env"], meta["hint"], meta["frames"], meta["seeds"], meta["dimensions"]) == ("dot", "position", 2, 2, ["position"])
     rows = (tiny_generator / "metrics.csv").read_text().splitlines()
     assert rows[0].startswith("seed,dimension,train_mse,heldout_mse,train_r2,heldout_r2") and len(rows) == 3
-    gen, params = generator.load(tiny_generator, seed=1)
-    assert gen == generator.Generator("dot", "position", 2, 16) and params.mean.shape == (1,)
+    gen, params = hint_sources.load(tiny_generator, seed=1)
+    assert gen == hint_sources.Generator("dot", "position", 2, 16) and params.mean.shape == (1,)
 
 
 def test_the_agent_sees_only_the_generators_hint(constant_generator):
@@ -110,11 +110,11 @@ def test_the_agent_sees_only_the_generators_hint(constant_generator):
     state = parts.init(jax.random.key(0))
     _, traj, _ = parts.rollout(state, jax.random.key(1))
     assert np.all(np.asarray(traj.obs["hint"]) == CONSTANT)  # the programmatic hint is in [-1, 1]
-    programmatic = ppo.make_ppo(dataclasses.replace(cfg, hint_source=generator.PROGRAMMATIC))
+    programmatic = ppo.make_ppo(dataclasses.replace(cfg, hint_source=hint_sources.PROGRAMMATIC))
     _, traj, _ = programmatic.rollout(programmatic.init(jax.random.key(0)), jax.random.key(1))
     assert np.all(np.abs(np.asarray(traj.obs["hint"])) <= 1.0)  # the control: the same rollout without it
     # at deploy: eval_hint_source alone switches the evaluation env's hint
-    deployed = dataclasses.replace(cfg, hint_source=generator.PROGRAMMATIC, eval_hint_source=str(constant_generator))
+    deployed = dataclasses.replace(cfg, hint_source=hint_sources.PROGRAMMATIC, eval_hint_source=str(constant_generator))
     env, task = deployed.make_env(deploy=True), deployed.task_params(None, deploy=True)
     assert float(env.reset(jax.random.key(2), task).obs["hint"][0]) == CONSTANT
     env, task = deployed.make_env(), deployed.task_params(None)
@@ -147,7 +147,7 @@ def test_bad_generators_are_one_line_errors(tiny_generator, tmp_path):
     assert "applies to agents that see a hint" in refused(str(tiny_generator), agent="ppo_rgb")
     corrupt = tmp_path / "corrupt"
     shutil.copytree(tiny_generator, corrupt)
-    for f in (corrupt / generator.PARAMS).rglob("*"):
+    for f in (corrupt / hint_sources.PARAMS).rglob("*"):
         if f.is_file() and f.stat().st_size > 1000:
             f.write_bytes(b"\0" * 100)
     assert "corrupt" in refused(str(corrupt))

@@ -18,6 +18,7 @@ import pytest
 import cue_env  # noqa: F401  (registers the test env "cue" and its hints cue [1] and cue_pair [2])
 import linear_env  # noqa: F401  (registers the test env "linear")
 from hintsjax import checkpoint, group, ppo, run
+from hintsjax.algorithms import make_trainer
 from hintsjax.config import run_config, save_run_config
 from hintsjax.errors import UsageError
 
@@ -159,7 +160,7 @@ def test_train_group_writes_each_members_folder_as_its_own_run(tmp_path, capsys)
         assert saved["label"] == c.label and saved["group"] == [x.label for x in cfgs] and saved == r
         rows = (d / "metrics.csv").read_text().splitlines()
         assert len(rows) == 1 + UPDATES * SEEDS
-        state, update = checkpoint.restore_latest(d, c)
+        state, update = checkpoint.restore_latest(d, make_trainer(c).abstract_state())
         assert update == UPDATES and state.obs["hint"].shape[-1] == ppo.hint_width(c)
     again = run.train_group(cfgs, tmp_path / "group", dirs, resume=True, progress=False)
     assert [r["evaluations"] for r in again] == [r["evaluations"] for r in results]
@@ -205,5 +206,6 @@ def test_a_group_killed_with_sigkill_resumes_to_the_uninterrupted_end_bit_for_bi
     _, whole_dir, whole_dirs = killed_group(tmp_path / "whole")
     run.train_group(cfgs, whole_dir, whole_dirs, progress=False)
     for cfg, d, w in zip(cfgs, dirs, whole_dirs):
-        for a, b in zip(arrays(checkpoint.restore_latest(d, cfg)[0]), arrays(checkpoint.restore_latest(w, cfg)[0]), strict=True):
+        abstract = make_trainer(cfg).abstract_state()
+        for a, b in zip(arrays(checkpoint.restore_latest(d, abstract)[0]), arrays(checkpoint.restore_latest(w, abstract)[0]), strict=True):
             np.testing.assert_array_equal(a, b)

@@ -189,9 +189,11 @@ def test_export_keeps_the_best_seed_and_load_acts_like_it(expert_run, tmp_path):
     meta = json.loads((out / expert.EXPERT_JSON).read_text())
     seed_means = json.loads((run_dir / "eval.json").read_text())["evaluations"][0]["seed_means"]
     assert meta["seed_index"] == int(np.argmax(seed_means)) and meta["env"] == "linear"
+    assert (out / expert.POLICY / "_METADATA").is_file()  # what orbax wrote is there but its notes of this machine
+    assert not [name for name in expert.MACHINE_FILES if (out / expert.POLICY / name).exists()]
     loaded = expert.load("linear", out)
     assert meta["normalize_state"] == cfg.ppo.normalize_state == (loaded.state_norm is not None)
-    state, _ = checkpoint.restore_latest(run_dir, cfg)
+    state, _ = checkpoint.restore_latest(run_dir, make_trainer(cfg).abstract_state())
     best = jax.tree.map(lambda x: x[meta["seed_index"]], state.params)
     states = 3.0 * jax.random.normal(jax.random.key(1), (32, 2))
     network = make_trainer(cfg).network
@@ -235,6 +237,14 @@ PACKAGED = ["acrobot", "ant", "car_racing", "halfcheetah", "humanoid", "idp", "p
 
 def test_the_packaged_experts_are_the_listed_ones():
     assert expert.packaged() == PACKAGED
+
+
+def test_the_packaged_experts_ship_nothing_of_the_machine_that_wrote_them():
+    """No packaged expert holds orbax's notes of where it was written (commit_success.txt named the
+    author's folder) or on what device; `test_packaged_experts_load_and_act` restores them without."""
+    shipped = [p for p in expert.EXPERTS_DIR.rglob("*") if p.is_file()]
+    assert len(shipped) > 10 * len(PACKAGED)
+    assert [str(p) for p in shipped if p.name in expert.MACHINE_FILES] == []
 
 
 @pytest.mark.parametrize("env", PACKAGED)
