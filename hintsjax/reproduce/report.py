@@ -59,7 +59,7 @@ def iqm_cell(result: dict | None, variant: int = 0) -> str:
     seeds (hintsjax.stats), or '-' when not run."""
     from hintsjax import stats
 
-    return "-" if result is None else stats.iqm_cell(result["evaluations"][variant]["seed_means"])
+    return "-" if result is None else stats.iqm_cell(seed_means(result, variant))
 
 
 def ordering(name_x: str, x: dict | None, name_y: str, y: dict | None, variant: int = 0) -> str | None:
@@ -69,8 +69,7 @@ def ordering(name_x: str, x: dict | None, name_y: str, y: dict | None, variant: 
 
     if x is None or y is None:
         return None
-    seeds = [r["evaluations"][variant]["seed_means"] for r in (x, y)]
-    return stats.ordering_text(name_x, name_y, stats.poi_ci(*seeds))
+    return stats.ordering_text(name_x, name_y, stats.poi_ci(seed_means(x, variant), seed_means(y, variant)))
 
 
 def seed_means(result: dict, variant: int = 0) -> list[float]:
