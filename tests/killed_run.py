@@ -8,8 +8,8 @@ no `finally` blocks, no flushed files. Used by tests/test_cli.py.
 second checkpoint has been handed to the background writer, so its files are (most likely)
 half-written. `group`: tests/test_group.py's group of two cue-env configurations (`killed_group`)
 trained into <folder>, killed once the group's first checkpoint is written. `interrupt`: not
-killed but sent SIGINT (Ctrl-C) once the first chunk's metrics are logged; it exits with the
-run's own status.
+killed but sent SIGINT (Ctrl-C) once the first chunk's metrics are logged, raised in the main
+thread so that it takes effect there and then; it exits with the run's own status.
 """
 
 from __future__ import annotations
@@ -43,7 +43,10 @@ def main() -> None:
             real_check(*args)
             checks.append(1)
             if len(checks) == 1:
-                os.kill(os.getpid(), signal.SIGINT)  # as Ctrl-C: KeyboardInterrupt in the main thread
+                # As Ctrl-C, but sent to this (the main) thread: os.kill's process-wide signal may land
+                # in any of XLA's threads and be handled later, under load after the run has gone on
+                # past this report (or inside orbax's asyncio loop, which takes SIGINT for itself)
+                signal.raise_signal(signal.SIGINT)
 
         run.check_physics = check_then_interrupt
         sys.exit(run.main_from_values(json.loads(sys.argv[2])))
