@@ -189,8 +189,24 @@ def learners_report(runs: Path, names: list[str], path: Path) -> None:
                   findings(runs, env), ""]
         lines += curve_lines(runs, env, list(trained), RESULTS / f"table3_seeds20_curves_{env}.png",
                              f"{env} (standard tracks): Table 3 learners, {seeds} seeds")
-    about = {k: v for k, v in read_about(ARCHIVE / runs.name).items() if k in ENVS}
+    lines += references_lines(runs, env)
+    about = {k: v for k, v in read_about(ARCHIVE / runs.name).items() if k.split()[0] in ENVS}  # and "<env> references"
     write_section(path, GENERATED, [*lines, *about_lines(about)])
+
+
+def references_lines(runs: Path, env: str) -> list[str]:
+    """The references of a learners report (expert_ppo, dagger, gail; upper bounds, in no
+    ordering): per track variant the IQM [95 % CI] and the progress; [] when none trained."""
+    refs = {label: load(runs, env, label) for label in REFERENCES}
+    trained = [r for r in refs.values() if r is not None]
+    if not trained:
+        return []
+    seeds = ", ".join(map(str, sorted({len(seed_means(r)) for r in trained})))
+    rows = [[label, *(c for i in range(len(VARIANTS)) for c in (iqm_cell(r, i), metric_cell(r, "progress", i, percent=True))),
+             wall_clock(r)] for label, r in refs.items()]
+    header = ["reference", *(f"{v} {what}" for v in VARIANTS for what in ("IQM [95% CI]", "P")), "wall-clock (s)"]
+    return [f"References ({seeds} seeds; upper bounds, not in any ordering):", "", *markdown_table(header, rows), "",
+            references_note(runs, env, REFERENCES), ""]
 
 
 GENERATED = generated_marker("car_racing.py")

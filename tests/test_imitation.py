@@ -264,7 +264,7 @@ def test_packaged_experts_load_and_act(env):
 # policy (pendulum about -1200, acrobot -500, idp about 100, halfcheetah about -300, the car -100:
 # no tile, -0.1 per step) and, for the ant, above the ~1000 of standing still. Measured on 2 CPU
 # cores: -208, -67, 9356, 4478 (80 s with the compiles); ant 4080 (episodes 4761, 2058, 4557, 4945;
-# 41 s); car 724 on its per-wheel grip since 2026-11-26 (931, 524, 547, 893; 839 on the per-axle one);
+# 41 s); car 910 (889, 938, 909, 906), the expert retrained on the per-wheel grip on 2026-11-27;
 # humanoid 5820 (9855, 3925, 4876, 4624; 55 s), where
 # a random policy falls in about 25 steps and standing still for 1000 steps earns about 5000.
 PACKAGED_FLOORS = {"pendulum": -400.0, "acrobot": -120.0, "idp": 9000.0, "halfcheetah": 3000.0, "ant": 2500.0,

@@ -137,6 +137,12 @@ def test_car_references_come_first_and_the_note_describes_gail():
     note = report.references_note(Path("/nowhere"), "car_racing", car_racing.REFERENCES)
     assert "2 M steps" in note and "250 K expert-labelled steps" in note
     assert "gail learns from 16 of that expert's episodes, by PPO for 2 M steps on the discriminator's reward -log(1 - D)" in note
+    # Archived runs name their own expert_ppo's best seed, not the packaged expert that replaced it
+    # (the car's of 2026-11-26, seed 0, was retrained on the per-wheel grip: seed 2, 866).
+    assert "its best seed (seed 0, 839 over 50 episodes) over" in report.references_note(
+        Path("runs/car_racing"), "car_racing", car_racing.REFERENCES)
+    assert "its best seed (seed 2, 866 over 50 episodes) over" in report.references_note(
+        Path("runs/table3_20"), "car_racing", car_racing.REFERENCES)
 
 
 def test_car_findings_decide_o3_by_the_interval_of_the_difference_in_hairpin_progress(tmp_path):

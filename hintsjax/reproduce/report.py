@@ -227,15 +227,22 @@ def trained_ppo(runs: Path, env: str, label: str):
 
 def references_note(runs: Path, env: str, references: tuple[str, ...]) -> str:
     """The references' budgets (as trained, else today's defaults) and the expert that dagger
-    and gail learnt from (the packaged one)."""
+    and gail learnt from: the best seed of the runs' own expert_ppo, which their sweep exported
+    before they began (so an archived report does not change when the packaged expert is
+    replaced), else the packaged expert."""
     from hintsjax.config import run_config
     from hintsjax.expert import EXPERT_JSON, EXPERTS_DIR
 
     cfg = {a: trained_config(runs, env, a) or run_config({"env": env, "agent": a}) for a in references}
     expert = cfg["expert_ppo"].ppo
-    meta = EXPERTS_DIR / env / EXPERT_JSON
-    source = (f"its best seed (seed {m['seed_index']}, {m['seed_eval_mean']:.0f} over {m['episodes_per_seed']} episodes; "
-              f"hintsjax/experts/{env})" if meta.exists() and (m := json.loads(meta.read_text())) else "its best seed")
+    source = "its best seed"
+    if (result := load(runs, env, "expert_ppo")) is not None:  # the one its sweep exported (expert.export's choice)
+        means = result["evaluations"][0]["seed_means"]
+        best = max(range(len(means)), key=means.__getitem__)
+        source += f" (seed {best}, {means[best]:.0f} over {result['evaluations'][0]['episodes_per_seed']} episodes)"
+    elif (meta := EXPERTS_DIR / env / EXPERT_JSON).exists():  # not trained here: the packaged expert
+        m = json.loads(meta.read_text())
+        source += f" (seed {m['seed_index']}, {m['seed_eval_mean']:.0f} over {m['episodes_per_seed']} episodes; hintsjax/experts/{env})"
     text = (f"References (no budget limit): expert_ppo is PPO on the state for {expert.total_env_steps / 1e6:g} M steps "
             f"({expert.num_envs} envs per seed, batches of {expert.batch_size}, {expert.epochs} epochs of minibatches of "
             f"{expert.minibatch_size}); dagger learns from {source} over {cfg['dagger'].ppo.total_env_steps / 1e3:g} K "
