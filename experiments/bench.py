@@ -34,10 +34,11 @@ import mujoco
 import numpy as np
 import optax
 
-from hintsjax import compilation_cache, envs
-from hintsjax.config import run_config
-from hintsjax.env_defaults import ENV_DEFAULTS
-from hintsjax.ppo import Hyper, gaussian_log_prob, make_network, make_optimizer, make_trainer
+from hintsjax.system import compilation_cache
+from hintsjax import envs
+from hintsjax.settings.config import run_config
+from hintsjax.settings.env_defaults import ENV_DEFAULTS
+from hintsjax.algorithms.ppo import Hyper, gaussian_log_prob, make_network, make_optimizer, make_trainer
 
 
 def best_time(fn, *args, repeats: int = 3) -> float:
@@ -190,7 +191,7 @@ def update_parts(cfg, state) -> dict:
     the policy's actions), the learning (GAE and the epochs of minibatch steps), and the env steps
     alone without their pictures (physics, reward and hint under random actions, as `bench_env`
     times them)."""
-    from hintsjax.ppo import make_ppo
+    from hintsjax.algorithms.ppo import make_ppo
 
     parts = make_ppo(cfg)
     key = jax.random.split(jax.random.key(1), cfg.seeds)

@@ -65,9 +65,10 @@ def train(runs: Path, names: list[str], seeds: int, smoke: bool) -> None:
     """Train and evaluate each variant not finished yet (both evaluations); resumable. Variants
     that differ only in numbers (the reward scale: hintsjax.group's Hyper) train as one group, in
     one program (<runs>/car_racing/_groups/<names>); the policy heads each need their own."""
-    from hintsjax import checkpoint, evaluate, run
-    from hintsjax.config import run_config, save_run_config
-    from hintsjax.group import plan
+    from hintsjax.system import checkpoint
+    from hintsjax import evaluate, run
+    from hintsjax.settings.config import run_config, save_run_config
+    from hintsjax.algorithms.group import plan
 
     cfgs = [run_config(variant_settings(n, seeds, smoke)) for n in names]
     for members in plan(cfgs):  # a group with one member finished (cut while writing results) resumes whole
@@ -127,7 +128,7 @@ def evaluation_of(folder: Path, track: int, stochastic: bool) -> dict | None:
 
 
 def report(runs: Path, out: Path) -> None:
-    from hintsjax import stats
+    from hintsjax.reproduce import stats
 
     names = [n for n in VARIANTS if load(runs, ENV, n) is not None]
     for name in names:  # the archive keeps what the report reads, the stochastic evaluations too

@@ -20,10 +20,11 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from hintsjax import checkpoint, run
-from hintsjax.algorithms import make_trainer
-from hintsjax.config import run_config
-from hintsjax.env_defaults import ENV_DEFAULTS
+from hintsjax.system import checkpoint
+from hintsjax import run
+from hintsjax.algorithms.registry import make_trainer
+from hintsjax.settings.config import run_config
+from hintsjax.settings.env_defaults import ENV_DEFAULTS
 
 
 def main() -> None:

@@ -37,10 +37,11 @@ def one(args: argparse.Namespace) -> dict:
     import jax
     import numpy as np
 
-    from hintsjax import compilation_cache, run
-    from hintsjax.algorithms import make_trainer
-    from hintsjax.config import run_config
-    from hintsjax.env_defaults import ENV_DEFAULTS
+    from hintsjax.system import compilation_cache
+    from hintsjax import run
+    from hintsjax.algorithms.registry import make_trainer
+    from hintsjax.settings.config import run_config
+    from hintsjax.settings.env_defaults import ENV_DEFAULTS
 
     seconds: dict[str, float] = defaultdict(float)
     jax.monitoring.register_event_duration_secs_listener(lambda event, s, **_: seconds.__setitem__(event, seconds[event] + s))

@@ -49,8 +49,10 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
-from hintsjax import envs, stats, xla_flags
-from hintsjax.expert import load
+from hintsjax import envs
+from hintsjax.reproduce import stats
+from hintsjax.system import xla_flags
+from hintsjax.algorithms.experts import load
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "results" / "fidelity.json"
@@ -225,8 +227,8 @@ def cost_row(name: str, setting: str, physics: str, updates: int, seeds: int = 5
     warm-up chunk, nothing else on the host (experiments/bench.py's `scan_env_steps_per_s`;
     the command delivers 81-96 % of it, docs/throughput.md)."""
     from hintsjax import run
-    from hintsjax.algorithms import make_trainer
-    from hintsjax.config import run_config
+    from hintsjax.algorithms.registry import make_trainer
+    from hintsjax.settings.config import run_config
 
     entry = envs.REGISTRY[name]
     envs.REGISTRY[name] = dataclasses.replace(entry, cls=env_class(name, setting))

@@ -18,8 +18,8 @@ from pathlib import Path
 import jax
 
 from hintsjax import run
-from hintsjax.config import run_config
-from hintsjax.group import make_group, make_group_trainer
+from hintsjax.settings.config import run_config
+from hintsjax.algorithms.group import make_group, make_group_trainer
 
 from classic_control import TABLE2_HINTS  # experiments/, beside this script
 

@@ -104,7 +104,7 @@ def hintsjax_values(brax: dict, seeds: int, steps: int, smoke: bool) -> dict:
 
 def train_hintsjax(runs: Path, brax: dict, seeds: int, steps: int, smoke: bool) -> SideResult:
     from hintsjax import run
-    from hintsjax.config import run_config, to_dict
+    from hintsjax.settings.config import run_config, to_dict
 
     cfg = run_config(hintsjax_values(brax, seeds, steps, smoke))
     folder = runs / "versus_brax" / "hintsjax"
@@ -194,7 +194,7 @@ def versus_brax(runs: Path, seeds: int, steps: int | None, smoke: bool) -> None:
 
 
 def versus_lines(runs: Path) -> list[str]:
-    from hintsjax import stats
+    from hintsjax.reproduce import stats
 
     path = runs / VERSUS_JSON
     lines = ["## hintsjax's ppo_state beside Brax's PPO (item 6)", ""]

@@ -98,8 +98,8 @@ def one(args: argparse.Namespace) -> dict:
     import numpy as np
 
     from hintsjax import run
-    from hintsjax.algorithms import make_trainer
-    from hintsjax.config import run_config
+    from hintsjax.algorithms.registry import make_trainer
+    from hintsjax.settings.config import run_config
 
     unroll_scans(VARIANTS[args.variant][1])
     for flag in os.environ.get("XLA_FLAGS", "").split():  # XLA wants the autotune folder made

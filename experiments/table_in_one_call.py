@@ -65,7 +65,7 @@ def table(env: str, seeds: int, alone: bool, workers: int, runs: Path, sweep_arg
     wall = time.perf_counter() - t
     results = [json.loads((runs / env / label / "eval.json").read_text()) for label in labels]
     env_steps = sum(r["env_steps"] * seeds for r in results)
-    from hintsjax.config import run_config
+    from hintsjax.settings.config import run_config
 
     epochs = run_config({"env": env, "agent": "hints"}).ppo.epochs
     groups = {tuple(r.get("group", [r["label"]])) for r in results}
@@ -83,7 +83,7 @@ def table(env: str, seeds: int, alone: bool, workers: int, runs: Path, sweep_arg
 def cpu_rate(env: str, seeds: int, updates: int) -> dict:
     """Env steps/s of `updates` updates of the table's HINTS-FC group on this machine's CPU."""
     from hintsjax import run
-    from hintsjax.config import run_config, save_run_config
+    from hintsjax.settings.config import run_config, save_run_config
     from hintsjax.reproduce.sweep import run_values
 
     labels = [label for label in learner_rows(env) if label.startswith("hints-")]

@@ -33,7 +33,7 @@ def main() -> None:
 
     import hintsjax
     from hintsjax import run
-    from hintsjax.config import run_config
+    from hintsjax.settings.config import run_config
 
     run.check_warp_run = lambda: None  # the refusal under test
     run.evaluation_compiles_first = lambda cfg: args.eval_compile == "first"

@@ -20,11 +20,13 @@ from pathlib import Path
 
 import jax
 
-from hintsjax import checkpoint, compilation_cache, paths, run, video
-from hintsjax.algorithms import make_trainer
-from hintsjax.config import RunConfig, run_config, save_run_config
-from hintsjax.evaluate import eval_keys, evaluate_params
-from hintsjax.errors import ArgumentParser, command
+from hintsjax.system import checkpoint, compilation_cache, paths
+from hintsjax import run
+from hintsjax.evaluation import recording
+from hintsjax.algorithms.registry import make_trainer
+from hintsjax.settings.config import RunConfig, run_config, save_run_config
+from hintsjax.evaluation.evaluator import eval_keys, evaluate_params
+from hintsjax.system.errors import ArgumentParser, command
 
 SETTINGS = {"env": "pendulum", "agent": "hints", "hint": "composite", "scheme": "fc", "seeds": 1, "eval_episodes": 20,
             "checkpoint_every": 10}
@@ -44,12 +46,12 @@ def swing_up_gif(cfg: RunConfig, run_dir: Path, candidates: int = 8) -> Path:
     state, _ = checkpoint.restore_latest(run_dir, make_trainer(cfg).abstract_state())
     params = jax.tree.map(lambda x: x[0], state.params)
     env = cfg.make_env()
-    steps = min(env.max_steps, video.MAX_STEPS)
+    steps = min(env.max_steps, recording.MAX_STEPS)
     key = eval_keys(cfg)[0]
-    episodes = [video.rollout(cfg, params, cfg.variant, steps, jax.random.fold_in(key, i)) for i in range(candidates)]
+    episodes = [recording.rollout(cfg, params, cfg.variant, steps, jax.random.fold_in(key, i)) for i in range(candidates)]
     episode = min(episodes, key=lambda e: float(e.rewards[0])).cut()
     out = run_dir / "swing-up.gif"
-    video.write_gif(video.compose_frames(episode, video.hint_labels(env.hint), 4, env.max_steps), out, 25)
+    recording.write_gif(recording.compose_frames(episode, recording.hint_labels(env.hint), 4, env.max_steps), out, 25)
     print(f"{out}: {int(episode.valid.sum())} frames, return {float(episode.rewards.sum()):.2f}")
     return out
 

@@ -28,16 +28,18 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
-from hintsjax import checkpoint, choices, command_line, compilation_cache, devices, expert, memory, paths, program_cache, xla_flags
-from hintsjax.config import RunConfig, load_run_config, run_config, save_run_config, to_dict
-from hintsjax.devices import SeedLayout
-from hintsjax.evaluate import compile_evaluator, evaluate_group, evaluate_variants, metrics_text
-from hintsjax.algorithms import make_trainer
+from hintsjax.system import checkpoint, compilation_cache, devices, memory, paths, program_cache, xla_flags
+from hintsjax.cli import choices, overrides
+from hintsjax.algorithms import experts
+from hintsjax.settings.config import RunConfig, load_run_config, run_config, save_run_config, to_dict
+from hintsjax.system.devices import SeedLayout
+from hintsjax.evaluation.evaluator import compile_evaluator, evaluate_group, evaluate_variants, metrics_text
+from hintsjax.algorithms.registry import make_trainer
 from hintsjax.envs import physics
-from hintsjax.errors import INTERRUPTED, UsageError, command, fail, report_bug
-from hintsjax.group import cell_state, make_group, make_group_trainer
-from hintsjax.runlog import CURVE_PNG, METRICS_CSV, RunLog, fresh_folder, plot_curves, read_curves
-from hintsjax.trainer import Trainer
+from hintsjax.system.errors import INTERRUPTED, UsageError, command, fail, report_bug
+from hintsjax.algorithms.group import cell_state, make_group, make_group_trainer
+from hintsjax.training.runlog import CURVE_PNG, METRICS_CSV, RunLog, fresh_folder, plot_curves, read_curves
+from hintsjax.algorithms.trainer import Trainer
 
 EVAL_JSON = "eval.json"
 
@@ -80,7 +82,7 @@ def compile_training(trainer: Trainer, keys: jax.Array, chunk: int, layout: Seed
     layout = layout or SeedLayout.of(keys.shape[0], sorted(keys.devices(), key=lambda d: d.id))
     init_fn = layout.spread(jax.vmap(trainer.init), batched=1)
     chunk_fn = layout.spread(jax.vmap(partial(trainer.run_chunk, length=chunk), in_axes=(0, None)), batched=1, shared=1)
-    # traced, or loaded as traced by an earlier process (hintsjax/program_cache.py: one device's programs only)
+    # traced, or loaded as traced by an earlier process (hintsjax/system/program_cache.py: one device's programs only)
     identity = trainer.identity if layout.count == 1 else None
     init = program_cache.lower(init_fn, keys, name="init", context=identity)
     run_chunk = program_cache.lower(chunk_fn, init.out_info, np.int32(chunk), name=f"chunk{chunk}",
@@ -383,7 +385,7 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
 
 def train_group(group_cfgs: list[RunConfig], group_dir: Path, cell_dirs: list[Path], resume: bool = False,
                 progress: bool = True) -> list[dict[str, Any]]:
-    """Train configurations that share a network's shapes together (hintsjax.group), all seeds of
+    """Train configurations that share a network's shapes together (hintsjax.algorithms.group), all seeds of
     all of them in one compiled program; checkpoints of the group go to group_dir. Each member
     then gets what its own run would have written in its folder (cell_dirs, each holding its
     config.yaml): metrics.csv, its final state as a checkpoint, eval.json, learning_curve.png.
@@ -428,7 +430,7 @@ def places(values: dict[str, Any]) -> tuple[str | None, str, str | None]:
 def refuse_overrides_on_resume(values: dict[str, Any]) -> None:
     """UsageError naming the settings given beside `resume` (a resumed run continues as it was
     configured: its config.yaml decides); values equal to the command line's defaults are none."""
-    defaults = command_line.defaults()
+    defaults = overrides.defaults()
     given = []
     for key, value in values.items():
         if key == "compilation_cache":
@@ -473,7 +475,7 @@ def request(values: dict[str, Any]) -> Request:
         cfg, run_dir = run_config(values), None
         paths.check_folder(out_dir, "out_dir")
     if cfg.agent_spec.imitates:
-        expert.describe(cfg.env, cfg.expert)  # a missing or foreign expert
+        experts.describe(cfg.env, cfg.expert)  # a missing or foreign expert
     # seed_layout refuses a Warp run it cannot place; then sizes that cannot fit, before the seeds' keys are drawn
     memory.check_run(cfg, seed_layout(cfg).per_device)
     return Request(cfg, run_dir, out_dir, name, longer=steps is not None)
@@ -544,10 +546,10 @@ def checked_main() -> int:
     --help: the registries' choices, then Hydra's page of the settings."""
     if {"-h", "--help"} & set(sys.argv[1:]):
         print(f"{__doc__.strip()}\n\n{choices.text()}\n")
-    command_line.check_overrides(sys.argv[1:])
-    if command_line.asks_only_for_warp(sys.argv[1:]):
+    overrides.check_overrides(sys.argv[1:])
+    if overrides.asks_only_for_warp(sys.argv[1:]):
         xla_flags.drop_determinism()  # nothing under MuJoCo Warp repeats bit for bit; they only cost speed
-    command_line.check_sweep(sys.argv[1:], request)
+    overrides.check_sweep(sys.argv[1:], request)
     _hydra_main()  # exits itself with a run's non-zero status
     return 0
 

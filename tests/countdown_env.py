@@ -16,7 +16,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from hintsjax import envs
-from hintsjax.env_defaults import ENV_DEFAULTS
+from hintsjax.settings.env_defaults import ENV_DEFAULTS
 from hintsjax.envs.core import Env, Step
 
 NAME = "countdown"

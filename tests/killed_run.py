@@ -20,7 +20,8 @@ import signal
 import sys
 from pathlib import Path
 
-from hintsjax import checkpoint, run
+from hintsjax.system import checkpoint
+from hintsjax import run
 
 
 def main() -> None:

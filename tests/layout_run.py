@@ -17,7 +17,7 @@ import jax
 
 import linear_env  # noqa: F401  (registers the test env "linear")
 from hintsjax import run
-from hintsjax.config import run_config, save_run_config
+from hintsjax.settings.config import run_config, save_run_config
 
 TINY_PPO = {"total_env_steps": 320, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}
 

@@ -14,9 +14,11 @@ import numpy as np
 import pytest
 import yaml
 
-from hintsjax import checkpoint, command_line, run
-from hintsjax.algorithms import make_trainer
-from hintsjax.errors import UsageError
+from hintsjax.system import checkpoint
+from hintsjax.cli import overrides
+from hintsjax import run
+from hintsjax.algorithms.registry import make_trainer
+from hintsjax.system.errors import UsageError
 from hintsjax.evaluate import main as evaluate_main
 
 TINY = [
@@ -70,7 +72,7 @@ def test_names_and_folders_are_strings_whatever_yaml_makes_of_them():
     assert run.places({"name": 2024, "out_dir": 123, "resume": 42}) == ("42", "123", "2024")
     assert run.places({"name": True}) == (None, "runs", "true")
     assert run.places({}) == (None, "runs", None)
-    from hintsjax.config import run_config
+    from hintsjax.settings.config import run_config
 
     assert run_config({"env": "pendulum", "eval_variants": "swingto"}).eval_variants == ("swingto",)
     assert run_config({"env": "pendulum", "ppo": {"hidden": [64]}}).ppo.hidden == (64,)
@@ -189,24 +191,25 @@ def test_ctrl_c_saves_the_due_checkpoint_says_how_to_go_on_and_resumes_bit_for_b
 
 
 def test_a_sweep_is_expanded_in_hydras_order_with_every_value_checked_first():
-    jobs = command_line.sweep_jobs(["-m", "seeds=1,2", "scheme=lc,fc", "ppo.num_envs=4", "hydra/launcher=basic"])
+    jobs = overrides.sweep_jobs(["-m", "seeds=1,2", "scheme=lc,fc", "ppo.num_envs=4", "hydra/launcher=basic"])
     assert [label for label, _ in jobs] == ["seeds=1 scheme=lc", "seeds=1 scheme=fc", "seeds=2 scheme=lc", "seeds=2 scheme=fc"]
     values = jobs[3][1]
     assert values["seeds"] == 2 and values["scheme"] == "fc" and values["ppo"]["num_envs"] == 4
-    assert values["env"] == command_line.defaults()["env"] and values["ppo"]["epochs"] == command_line.defaults()["ppo"]["epochs"]
-    assert command_line.sweep_jobs(["seeds=1"]) == []  # not a sweep
+    assert values["env"] == overrides.defaults()["env"] and values["ppo"]["epochs"] == overrides.defaults()["ppo"]["epochs"]
+    assert overrides.sweep_jobs(["seeds=1"]) == []  # not a sweep
     seen = []
-    command_line.check_sweep(["-m", "seed=0,1"], lambda v: seen.append(v["seed"]))
+    overrides.check_sweep(["-m", "seed=0,1"], lambda v: seen.append(v["seed"]))
     assert seen == [0, 1]
     with pytest.raises(UsageError, match="sweep job 'seed=1': no"):
-        command_line.check_sweep(["-m", "seed=0,1"], lambda v: (_ for _ in ()).throw(UsageError("no")) if v["seed"] else None)
+        overrides.check_sweep(["-m", "seed=0,1"], lambda v: (_ for _ in ()).throw(UsageError("no")) if v["seed"] else None)
 
 
 def test_a_bug_is_one_line_saying_so_with_its_traceback_kept(monkeypatch, tmp_path, capsys):
     """Anything but bad input that escapes a command is a bug in hintsjax: one line saying so and
     where its traceback went (the run folder, for a run), exit 1; with HINTSJAX_DEBUG set, Python's
     own traceback instead. argparse's usage errors are one line too."""
-    from hintsjax import evaluate, errors
+    from hintsjax import evaluate
+    from hintsjax.system import errors
 
     monkeypatch.delenv(errors.DEBUG)
 
@@ -280,7 +283,7 @@ def test_a_saved_config_reads_back_as_trained_whatever_todays_env_defaults(tmp_p
     # without the stop (null in its config.yaml) must read back without it, not with today's default.
     from dataclasses import replace
 
-    from hintsjax.config import load_run_config, run_config, save_run_config
+    from hintsjax.settings.config import load_run_config, run_config, save_run_config
 
     assert run_config({"env": "ant", "agent": "hints"}).ppo.target_kl == 0.05
     assert run_config({"env": "ant", "agent": "expert_ppo"}).ppo.target_kl is None
@@ -402,7 +405,7 @@ def test_a_checkpoint_saved_on_another_device_restores_here(finished_run, tmp_pa
     script = (  # a second CPU device stands in for a device this process lacks
         "import sys, jax\n"
         "from hintsjax import checkpoint, run\n"
-        "from hintsjax.algorithms import make_trainer\n"
+        "from hintsjax.algorithms.registry import make_trainer\n"
         f"src, dest = {str(finished_run)!r}, {str(copy)!r}\n"
         "state, update = checkpoint.restore_latest(src, make_trainer(run.load_run_config(src)).abstract_state())\n"
         "checkpoint.save(dest, jax.device_put(state, jax.devices()[1]), update)\n"
@@ -532,9 +535,9 @@ def test_seeds_sharded_over_two_devices_give_the_single_device_result(finished_r
 
 
 def test_a_launcher_whose_plugin_is_missing_is_one_line(monkeypatch):
-    monkeypatch.setitem(command_line.LAUNCHERS, "submitit_slurm", "hydra_plugins.no_such_launcher")
+    monkeypatch.setitem(overrides.LAUNCHERS, "submitit_slurm", "hydra_plugins.no_such_launcher")
     with pytest.raises(UsageError, match=r"hydra/launcher=submitit_slurm needs hydra-submitit-launcher: pip install -e '\.\[cluster\]'"):
-        command_line.check_overrides(["-m", "hydra/launcher=submitit_slurm", "scheme=lc,fc"])
+        overrides.check_overrides(["-m", "hydra/launcher=submitit_slurm", "scheme=lc,fc"])
 
 
 def test_a_sweep_runs_through_hydras_submitit_launcher(tmp_path):
@@ -635,7 +638,7 @@ def test_each_env_carries_its_training_defaults_beside_it(name):
     """An env's defaults live in its module (`TRAINING`, the registry's `training`);
     ENV_DEFAULTS is built from them, with the references' per-agent layers."""
     from hintsjax import envs
-    from hintsjax.env_defaults import ENV_DEFAULTS
+    from hintsjax.settings.env_defaults import ENV_DEFAULTS
 
     training = envs.REGISTRY[name].training
     assert training["hint"] in envs.hint_names(name)

@@ -1,4 +1,4 @@
-"""A run's seeds over several devices (hintsjax/devices.py), on CPU devices that XLA splits
+"""A run's seeds over several devices (hintsjax/system/devices.py), on CPU devices that XLA splits
 the host into: any seed count spreads (the padding is dropped from every result), the numbers
 match one device's to float32 rounding, and a checkpoint written on 4 devices resumes on 1.
 One run over two processes (JAX's multi-controller runtime, CPU collectives through gloo)
@@ -18,10 +18,11 @@ import numpy as np
 import pytest
 
 import linear_env  # noqa: F401  (registers the test env "linear")
-from hintsjax import checkpoint, run
-from hintsjax.algorithms import make_trainer
-from hintsjax.config import load_run_config
-from hintsjax.devices import SeedLayout
+from hintsjax.system import checkpoint
+from hintsjax import run
+from hintsjax.algorithms.registry import make_trainer
+from hintsjax.settings.config import load_run_config
+from hintsjax.system.devices import SeedLayout
 
 HERE = Path(__file__).parent
 
@@ -123,8 +124,8 @@ def test_physics_warp_stays_on_one_device_and_in_one_process(monkeypatch):
     world), so a Warp run keeps to this process's first device, and several processes are refused."""
     import jax
 
-    from hintsjax.config import run_config
-    from hintsjax.errors import UsageError
+    from hintsjax.settings.config import run_config
+    from hintsjax.system.errors import UsageError
 
     cfg = run_config({"env": "ant", "physics": "warp"})
     assert run.seed_layout(cfg).devices == tuple(jax.local_devices()[:1])
@@ -142,7 +143,7 @@ def test_under_warp_the_evaluation_compiles_before_training_not_beside_it(monkey
     while the compile runs (which waits until training has started)."""
     import threading
 
-    from hintsjax.config import run_config
+    from hintsjax.settings.config import run_config
 
     assert run.evaluation_compiles_first(run_config({"env": "ant", "physics": "warp"}))
     assert not run.evaluation_compiles_first(run_config({"env": "ant", "physics": "jax"}))

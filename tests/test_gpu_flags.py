@@ -71,7 +71,7 @@ def test_deterministic_ops_drop_for_warp_only_where_the_user_left_them_and_jax_h
 
 
 def test_a_command_asks_only_for_warp_when_every_job_does(tmp_path):
-    from hintsjax.command_line import asks_only_for_warp
+    from hintsjax.cli.overrides import asks_only_for_warp
 
     warp_run = tmp_path / "warp_run"
     warp_run.mkdir()

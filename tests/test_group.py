@@ -1,4 +1,4 @@
-"""Configurations trained in one group (hintsjax.group) give what each gives trained alone.
+"""Configurations trained in one group (hintsjax.algorithms.group) give what each gives trained alone.
 
 Agreement is to float32 rounding, not bit for bit: vmapped over the group, XLA computes the
 networks' matrix products and convolutions as batched ones and may sum in another order, and
@@ -17,10 +17,12 @@ import pytest
 
 import cue_env  # noqa: F401  (registers the test env "cue" and its hints cue [1] and cue_pair [2])
 import linear_env  # noqa: F401  (registers the test env "linear")
-from hintsjax import checkpoint, group, ppo, run
-from hintsjax.algorithms import make_trainer
-from hintsjax.config import run_config, save_run_config
-from hintsjax.errors import UsageError
+from hintsjax.system import checkpoint
+from hintsjax.algorithms import group, ppo
+from hintsjax import run
+from hintsjax.algorithms.registry import make_trainer
+from hintsjax.settings.config import run_config, save_run_config
+from hintsjax.system.errors import UsageError
 
 UPDATES = 3
 TINY_PPO = {"total_env_steps": 3 * 64, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 2}
@@ -169,7 +171,7 @@ def test_train_group_writes_each_members_folder_as_its_own_run(tmp_path, capsys)
 def test_one_program_evaluates_every_member_as_its_own_run_would(hint_group):
     """The group's evaluation (its env, each member's hint picked, padded weights in place) gives
     each member's returns as evaluating the member's own params with its own env does."""
-    from hintsjax.evaluate import evaluate_group, evaluate_variants
+    from hintsjax.evaluation.evaluator import evaluate_group, evaluate_variants
 
     g, together, _ = hint_group
     evaluations, _ = evaluate_group(g, together)

@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 
 import cue_env  # registers the "cue" env, its hint and its defaults (tests/ is on pytest's path: its rootdir conftest)
-from hintsjax import config, ppo
-from hintsjax.errors import UsageError
+from hintsjax.settings import config
+from hintsjax.algorithms import ppo
+from hintsjax.system.errors import UsageError
 
 # -- learning -----------------------------------------------------------------------------------
 

@@ -8,10 +8,12 @@ import jax.numpy as jnp
 import numpy as np
 
 import linear_env  # registers the "linear" env (tests/ is on pytest's path: its rootdir conftest)
-from hintsjax import config, dagger, normalization
-from hintsjax.agents import AGENTS
-from hintsjax.networks import ActorCritic
-from hintsjax.ppo import make_optimizer, make_ppo
+from hintsjax.settings import config
+from hintsjax.algorithms import dagger
+from hintsjax.models import normalization
+from hintsjax.models.agents import AGENTS
+from hintsjax.models.networks import ActorCritic
+from hintsjax.algorithms.ppo import make_optimizer, make_ppo
 
 LINEAR = dict(env="linear", seeds=1, ppo=dict(num_envs=8, batch_size=128, minibatch_size=64, epochs=2,
                                                total_env_steps=2 * 128, normalize_state=True))

@@ -14,9 +14,10 @@ import orbax.checkpoint as ocp
 import pytest
 
 import linear_env  # noqa: F401  (registers the test env "linear")
-from hintsjax import checkpoint, compilation_cache, run
-from hintsjax.algorithms import make_trainer
-from hintsjax.config import run_config
+from hintsjax.system import checkpoint, compilation_cache
+from hintsjax import run
+from hintsjax.algorithms.registry import make_trainer
+from hintsjax.settings.config import run_config
 
 TINY_PPO = {"total_env_steps": 320, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}
 

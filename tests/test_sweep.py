@@ -172,7 +172,7 @@ def test_car_findings_decide_o3_by_the_interval_of_the_difference_in_hairpin_pro
 
 def test_locomotion_report_states_the_settings_each_row_was_trained_with(tmp_path):
     import locomotion
-    from hintsjax import config
+    from hintsjax.settings import config
 
     labels = ["ppo_rgb", "hints-fc-speed", "ppo_state"]
     assert locomotion.settings_lines(tmp_path, "ant", labels) == [  # none run yet: today's defaults
@@ -243,8 +243,8 @@ def test_a_table_report_runs_end_to_end(script, tmp_path, monkeypatch):
 def test_an_archived_run_reads_as_the_run_did(tmp_path, monkeypatch):
     """archive_runs keeps what the tables need; with the run folder gone, the readers fall back
     to the archive and give the same cells (the curve averaged into CURVE_POINTS bins)."""
-    from hintsjax import config
-    from hintsjax.runlog import CURVE_POINTS, bin_means, read_curves
+    from hintsjax.settings import config
+    from hintsjax.training.runlog import CURVE_POINTS, bin_means, read_curves
 
     runs, archive = tmp_path / "locomotion", tmp_path / "archive"
     monkeypatch.setattr(report, "ARCHIVE", archive)
@@ -439,7 +439,7 @@ def test_car_learning_report_sets_each_variant_beside_the_defaults(tmp_path, mon
     import math
 
     import car_learning
-    from hintsjax import config
+    from hintsjax.settings import config
 
     monkeypatch.setattr(report, "ARCHIVE", tmp_path / "archive")
     runs = tmp_path / "car_learning"
@@ -555,7 +555,7 @@ def test_the_playground_side_by_side_gives_hintsjax_brax_s_settings_and_the_repo
     pytest.importorskip("mujoco_playground", reason="the Playground adapter needs the playground extra")
     import playground
 
-    from hintsjax.config import run_config
+    from hintsjax.settings.config import run_config
 
     values = playground.hintsjax_values(playground.brax_settings(smoke=False), seeds=5, steps=60_000_000, smoke=False)
     cfg = run_config(values)

@@ -13,12 +13,14 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from hintsjax import checkpoint, envs, run
-from hintsjax.algorithms import make_trainer
-from hintsjax.config import RunConfig, run_config, save_run_config
-from hintsjax.evaluate import eval_keys
-from hintsjax.ppo import make_network
-from hintsjax.video import Rollout, compose_frame, hint_labels, main, policy_action, rollout, step_keys
+from hintsjax.system import checkpoint
+from hintsjax import envs, run
+from hintsjax.algorithms.registry import make_trainer
+from hintsjax.settings.config import RunConfig, run_config, save_run_config
+from hintsjax.evaluation.evaluator import eval_keys
+from hintsjax.algorithms.ppo import make_network
+from hintsjax.evaluation.recording import Rollout, compose_frame, hint_labels, policy_action, rollout, step_keys
+from hintsjax.video import main
 
 STEPS = 20
 TINY_HINTS = {

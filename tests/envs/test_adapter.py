@@ -162,7 +162,7 @@ def test_a_hint_file_loads_and_its_hints_jit(cartpole):
 
 
 def test_an_adapted_env_takes_its_defaults_from_the_table_or_the_fallback():
-    from hintsjax.config import run_config
+    from hintsjax.settings.config import run_config
     from hintsjax.envs import playground
 
     cfg = run_config({"env": CARTPOLE})

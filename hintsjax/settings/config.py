@@ -2,7 +2,7 @@
 
 Choices (env, agent, scheme, hint, variants) are validated against the registries here, so a
 bad name fails before anything is built or written, with a one-line message that lists the
-valid choices. A config value of `None` means "the env's default" (hintsjax.env_defaults).
+valid choices. A config value of `None` means "the env's default" (hintsjax.settings.env_defaults).
 """
 
 from __future__ import annotations
@@ -17,13 +17,13 @@ import jax.numpy as jnp
 import yaml
 
 from hintsjax import envs
-from hintsjax.agents import AGENTS, EXPERT_AGENT, AgentSpec
-from hintsjax.algorithm_settings import DaggerConfig, GailConfig, PPOConfig
-from hintsjax.conditioning import SCHEMES
-from hintsjax.env_defaults import ENV_DEFAULTS
+from hintsjax.models.agents import AGENTS, EXPERT_AGENT, AgentSpec
+from hintsjax.settings.algorithm_settings import DaggerConfig, GailConfig, PPOConfig
+from hintsjax.models.conditioning import SCHEMES
+from hintsjax.settings.env_defaults import ENV_DEFAULTS
 from hintsjax.envs.errors import ChoiceError, choose
-from hintsjax.errors import UsageError, require_positive
-from hintsjax.hint_sources import PROGRAMMATIC, check_matches, hinted_env, hinted_params
+from hintsjax.system.errors import UsageError, require_positive
+from hintsjax.settings.hint_sources import PROGRAMMATIC, check_matches, hinted_env, hinted_params
 
 
 CONFIG_YAML = "config.yaml"  # a run folder's resolved config

@@ -22,7 +22,7 @@ from typing import Any, Callable
 import jax
 
 from hintsjax import envs
-from hintsjax.errors import UsageError
+from hintsjax.system.errors import UsageError
 
 def sized(n: float) -> str:
     """Bytes as the largest unit that keeps the number at least 1 (binary units)."""
