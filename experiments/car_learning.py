@@ -66,9 +66,10 @@ def train(runs: Path, names: list[str], seeds: int, smoke: bool) -> None:
     that differ only in numbers (the reward scale: hintsjax.group's Hyper) train as one group, in
     one program (<runs>/car_racing/_groups/<names>); the policy heads each need their own."""
     from hintsjax.system import checkpoint
-    from hintsjax import evaluate, run
-    from hintsjax.settings.config import run_config, save_run_config
+    from hintsjax.settings.layers import run_config, save_run_config
     from hintsjax.algorithms.group import plan
+    from hintsjax.training import pipeline
+    from hintsjax import evaluate, run
 
     cfgs = [run_config(variant_settings(n, seeds, smoke)) for n in names]
     for members in plan(cfgs):  # a group with one member finished (cut while writing results) resumes whole
@@ -86,7 +87,7 @@ def train(runs: Path, names: list[str], seeds: int, smoke: bool) -> None:
         for i in members:
             (runs / ENV / names[i]).mkdir(parents=True, exist_ok=True)
             save_run_config(runs / ENV / names[i], cfgs[i])
-        run.train_group([cfgs[i] for i in members], folder, [runs / ENV / n for n in group],
+        pipeline.train_group([cfgs[i] for i in members], folder, [runs / ENV / n for n in group],
                         resume=checkpoint.latest_update(folder) is not None)
     for name in names:
         folder = runs / ENV / name

@@ -96,7 +96,7 @@ def protocol(runs: Path, env: str) -> str:
 
 
 def report(runs: Path, force: bool = False) -> None:
-    from hintsjax.settings.config import run_config
+    from hintsjax.settings.layers import run_config
 
     lines = [
         "# Car Racing: the paper's Table 3 (CR Standard and CR Hairpin rows), reproduced", "",
@@ -157,7 +157,7 @@ def learners_report(runs: Path, names: list[str], path: Path) -> None:
     [95 % CI] of the per-seed mean returns, P(row > PPO-RGB) and the progress; O1 and O3; learning
     curves with bootstrap bands. Written as the section of `path` that GENERATED opens
     (report.write_section): the plan and the locomotion section stay. `names` is the car alone."""
-    from hintsjax.settings.config import run_config
+    from hintsjax.settings.layers import run_config
 
     env = ENVS[0]
     labels = [*BASELINES, *(hints_run("mc", h) for h in HINTS[env])]

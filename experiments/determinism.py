@@ -15,7 +15,7 @@ import os
 import jax
 import numpy as np
 
-from hintsjax.settings.config import run_config
+from hintsjax.settings.layers import run_config
 from hintsjax.algorithms.registry import make_trainer
 
 

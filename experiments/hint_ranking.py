@@ -168,7 +168,7 @@ def report(runs: Path, env_list: list[str], out: Path) -> None:
 
 
 def _table_env_steps(env: str, hints: int) -> int:
-    from hintsjax.settings.config import run_config
+    from hintsjax.settings.layers import run_config
 
     return TABLE_SEEDS[env] * hints * run_config({"env": env, "agent": "hints"}).ppo.total_env_steps
 

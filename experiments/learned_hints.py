@@ -46,8 +46,8 @@ def generator_folder(runs: Path, env: str, hint: str, frames: int) -> Path:
 
 
 def train_generator(runs: Path, env: str, hint: str, frames: int, seeds: int) -> Path:
-    from hintsjax import generator
     from hintsjax.hints import generators
+    from hintsjax import generator
 
     folder = generator_folder(runs, env, hint, frames)
     if not (folder / generators.GENERATOR_JSON).is_file():

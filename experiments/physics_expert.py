@@ -32,8 +32,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from hintsjax import envs
-from hintsjax.reproduce import stats
 from hintsjax.algorithms.experts import load
+from hintsjax.reproduce import stats
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "results" / "physics_expert.json"

@@ -66,7 +66,7 @@ def main() -> None:
     import jax
 
     from hintsjax.system import compilation_cache
-    from hintsjax.settings.config import run_config
+    from hintsjax.settings.layers import run_config
     from bench import bench_train
 
     rows = []

@@ -16,9 +16,9 @@ import jax
 import numpy as np
 
 from hintsjax import envs
-from hintsjax.algorithms.registry import make_trainer
-from hintsjax.settings.config import run_config
 from hintsjax.settings.env_defaults import ENV_DEFAULTS
+from hintsjax.settings.layers import run_config
+from hintsjax.algorithms.registry import make_trainer
 from hintsjax.evaluation.evaluator import eval_keys, make_task_evaluator
 
 

@@ -18,12 +18,13 @@ from pathlib import Path
 
 
 from hintsjax.system import checkpoint, memory
-from hintsjax.cli import choices
-from hintsjax.algorithms.registry import make_trainer
-from hintsjax.settings.config import env_params, load_run_config
 from hintsjax.system.devices import SeedLayout
 from hintsjax.system.errors import ArgumentParser, UsageError, command
+from hintsjax.settings.config import env_params
 from hintsjax.settings.hint_sources import PROGRAMMATIC
+from hintsjax.settings.layers import load_run_config
+from hintsjax.cli import choices
+from hintsjax.algorithms.registry import make_trainer
 from hintsjax.evaluation.evaluator import evaluate_variants, metrics_text
 
 

@@ -12,8 +12,8 @@ from __future__ import annotations
 import sys
 
 
-from hintsjax.cli.arguments import parse_key_values
 from hintsjax.system.errors import command
+from hintsjax.cli.arguments import parse_key_values
 from hintsjax.hints.generators import GeneratorConfig, train_folder
 
 

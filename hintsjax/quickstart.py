@@ -21,12 +21,13 @@ from pathlib import Path
 import jax
 
 from hintsjax.system import checkpoint, compilation_cache, paths
-from hintsjax import run
-from hintsjax.evaluation import recording
-from hintsjax.algorithms.registry import make_trainer
-from hintsjax.settings.config import RunConfig, run_config, save_run_config
-from hintsjax.evaluation.evaluator import eval_keys, evaluate_params
 from hintsjax.system.errors import ArgumentParser, command
+from hintsjax.settings.config import RunConfig
+from hintsjax.settings.layers import run_config, save_run_config
+from hintsjax.algorithms.registry import make_trainer
+from hintsjax.evaluation import recording
+from hintsjax.evaluation.evaluator import eval_keys, evaluate_params
+from hintsjax.training import outputs, pipeline, runlog
 
 SETTINGS = {"env": "pendulum", "agent": "hints", "hint": "composite", "scheme": "fc", "seeds": 1, "eval_episodes": 20,
             "checkpoint_every": 10}
@@ -68,9 +69,9 @@ def main(argv: list[str] | None = None) -> int:
     t = time.perf_counter()
     cfg = run_config({**SETTINGS, "ppo": {"total_env_steps": 1024 * args.updates}})
     compilation_cache.enable(compilation_cache.folder(True))
-    run_dir = run.new_run_dir(str(args.out_dir), f"quickstart-{time.strftime('%Y%m%d-%H%M%S')}", cfg)
+    run_dir = outputs.new_run_dir(str(args.out_dir), f"quickstart-{time.strftime('%Y%m%d-%H%M%S')}", cfg)
     save_run_config(run_dir, cfg)
-    trained = run.train(cfg, run_dir)["evaluations"][0]
+    trained = pipeline.train(cfg, run_dir)["evaluations"][0]
     baseline = random_policy(cfg, cfg.variant)
     (run_dir / BASELINE_JSON).write_text(json.dumps(baseline, indent=1))
     gif = swing_up_gif(cfg, run_dir)
@@ -79,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{trained['mean']:8.1f} +- {trained['std']:.1f}\n"
           f"  random policy (the agent before training, sampling its actions): "
           f"{baseline['mean']:8.1f} +- {baseline['std']:.1f}\n"
-          f"run folder:     {run_dir}\nlearning curve: {run_dir / run.CURVE_PNG}\none episode:    {gif}")
+          f"run folder:     {run_dir}\nlearning curve: {run_dir / runlog.CURVE_PNG}\none episode:    {gif}")
     return 0
 
 

@@ -21,10 +21,10 @@ import jax
 import numpy as np
 import yaml
 
-from hintsjax.cli.arguments import parse_key_values
 from hintsjax.system.errors import command
+from hintsjax.cli.arguments import parse_key_values
 from hintsjax.training.runlog import fresh_folder
-from hintsjax.hints.ranking import SCORES, RankConfig, rank_hints, ranking
+from hintsjax.hints.ranking import RankConfig, SCORES, rank_hints, ranking
 
 
 def write_folder(folder: Path, cfg: RankConfig, result: dict[str, Any]) -> list[list[str]]:

@@ -15,12 +15,13 @@ from pathlib import Path
 
 import jax
 
-from hintsjax.system import checkpoint, memory, paths
-from hintsjax.cli import choices
 from hintsjax import envs
-from hintsjax.algorithms.registry import make_trainer
-from hintsjax.settings.config import env_params, load_run_config
+from hintsjax.system import checkpoint, memory, paths
 from hintsjax.system.errors import ArgumentParser, UsageError, command
+from hintsjax.settings.config import env_params
+from hintsjax.settings.layers import load_run_config
+from hintsjax.cli import choices
+from hintsjax.algorithms.registry import make_trainer
 from hintsjax.evaluation.evaluator import eval_keys
 from hintsjax.evaluation.recording import MAX_STEPS, compose_frames, frame_shape, hint_labels, rollout, write_gif
 

@@ -22,6 +22,7 @@ from pathlib import Path
 
 from hintsjax.system import checkpoint
 from hintsjax import run
+from hintsjax.training import loop, pipeline
 
 
 def main() -> None:
@@ -38,21 +39,21 @@ def main() -> None:
             os.kill(os.getpid(), signal.SIGKILL)
 
     if mode == "interrupt":
-        real_check, checks = run.check_physics, []
+        real_check, checks = loop.check_physics, []
 
-        def check_then_interrupt(*args):  # run.advance's report calls it once a chunk's metrics are logged
+        def check_then_interrupt(*args):  # loop.advance's report calls it once a chunk's metrics are logged
             real_check(*args)
             checks.append(1)
             if len(checks) == 1:
                 os.kill(os.getpid(), signal.SIGINT)  # as Ctrl-C: KeyboardInterrupt in the main thread
 
-        run.check_physics = check_then_interrupt
+        loop.check_physics = check_then_interrupt
         sys.exit(run.main_from_values(json.loads(sys.argv[2])))
     checkpoint.save = save_then_die
     if mode == "group":
         from test_group import killed_group
 
-        run.train_group(*killed_group(Path(sys.argv[2])), progress=False)
+        pipeline.train_group(*killed_group(Path(sys.argv[2])), progress=False)
     else:
         run.main_from_values(json.loads(sys.argv[2]))
     sys.exit("the run ended without being killed")

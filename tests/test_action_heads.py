@@ -11,12 +11,12 @@ import pytest
 from flax import struct
 
 from hintsjax import envs
-from hintsjax.models.agents import AGENTS
-from hintsjax.algorithms.registry import make_trainer
-from hintsjax.settings.config import run_config
-from hintsjax.settings.env_defaults import ENV_DEFAULTS
 from hintsjax.envs.core import Env, Step
-from hintsjax.models.networks import SIGMOID_MIN_STD, ActorCritic
+from hintsjax.models.agents import AGENTS
+from hintsjax.models.networks import ActorCritic, SIGMOID_MIN_STD
+from hintsjax.settings.env_defaults import ENV_DEFAULTS
+from hintsjax.settings.layers import run_config
+from hintsjax.algorithms.registry import make_trainer
 
 
 @struct.dataclass

@@ -13,12 +13,13 @@ from __future__ import annotations
 import pytest
 from test_cli import SHIPPED_ENVS
 
-from hintsjax.cli import overrides
-from hintsjax import run
-from hintsjax.models.agents import AGENTS
-from hintsjax.settings.config import SECTIONS, RunConfig, run_config, to_dict
-from hintsjax.settings.env_defaults import ENV_DEFAULTS
 from hintsjax.system.errors import UsageError
+from hintsjax.models.agents import AGENTS
+from hintsjax.settings.config import RunConfig, SECTIONS
+from hintsjax.settings.env_defaults import ENV_DEFAULTS
+from hintsjax.settings.layers import run_config, to_dict
+from hintsjax.cli import overrides
+from hintsjax.training import request
 
 RUN_ONLY = {"out_dir", "name", "resume", "compilation_cache"}  # the command's own keys, not a RunConfig's
 
@@ -81,12 +82,12 @@ def test_no_env_sets_a_key_that_config_yaml_gives_a_value(env):
 
 @pytest.mark.parametrize("env", SHIPPED_ENVS)
 def test_the_command_line_resolves_every_agent_as_run_config_does(env):
-    """What `run.request` makes of Hydra's values for a new run (its own keys taken out first; the
+    """What `request.request` makes of Hydra's values for a new run (its own keys taken out first; the
     packaged expert it then looks for is not there for every env, e.g. ant_fast)."""
     for agent in AGENTS:
         values = {**overrides.defaults(), "env": env, "agent": agent}
         values.pop("compilation_cache")
-        run.places(values)
+        request.places(values)
         assert run_config(values) == run_config({"env": env, "agent": agent}), agent
 
 
@@ -96,8 +97,8 @@ def test_every_setting_can_be_given_on_the_command_line():
     for key, value in schema_defaults().items():
         text = "null" if value is None else str(value).lower() if isinstance(value, bool) else str(value).replace(" ", "")
         overrides.check_overrides([f"{key}={text}"])
-    asked = run.request({**overrides.defaults(), "ppo": {**overrides.defaults()["ppo"], "starts_per_rollout": True}})
+    asked = request.request({**overrides.defaults(), "ppo": {**overrides.defaults()["ppo"], "starts_per_rollout": True}})
     assert asked.cfg.ppo.starts_per_rollout and not run_config({}).ppo.starts_per_rollout
     with pytest.raises(UsageError, match="starts_per_rollout must be bool, got 2"):
-        run.request({**overrides.defaults(), "ppo": {"starts_per_rollout": 2}})
+        request.request({**overrides.defaults(), "ppo": {"starts_per_rollout": 2}})
 

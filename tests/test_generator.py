@@ -16,12 +16,12 @@ import pytest
 
 import cue_env  # noqa: F401  (registers the test env "cue")
 import dot_env  # noqa: F401  (registers the test env "dot": the hint is the dot's position in the picture)
-from hintsjax import envs, evaluate, generator, run
-from hintsjax.hints import generators
-from hintsjax.settings import hint_sources
-from hintsjax.algorithms import ppo
-from hintsjax.settings.config import run_config
 from hintsjax.system.errors import UsageError
+from hintsjax.settings import hint_sources
+from hintsjax.settings.layers import run_config
+from hintsjax.algorithms import ppo
+from hintsjax.hints import generators
+from hintsjax import envs, evaluate, generator, run
 
 TINY = dict(env="dot", hint="position", num_envs=4, steps=16, held_out_envs=2, epochs=2, minibatch_size=16, hidden=16)
 TINY_PPO = {"total_env_steps": 2 * 64, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}

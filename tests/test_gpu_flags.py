@@ -46,7 +46,7 @@ def test_no_autotune_folder_of_ours_with_the_cache_off_or_a_folder_named(xla_fla
 DROP = """
 import os, sys
 import hintsjax
-from hintsjax import xla_flags
+from hintsjax.system import xla_flags
 if sys.argv[1] == "started":
     import jax
     jax.devices()

@@ -15,11 +15,10 @@ import optax
 import pytest
 
 import linear_env  # registers the "linear" env (tests/ is on pytest's path: its rootdir conftest)
-from hintsjax.settings import config
-from hintsjax.algorithms import dagger, gail
-from hintsjax.algorithms import experts
-from hintsjax.settings.algorithm_settings import GAIL_REWARDS
 from hintsjax.system.errors import UsageError
+from hintsjax.settings import layers
+from hintsjax.settings.algorithm_settings import GAIL_REWARDS
+from hintsjax.algorithms import dagger, experts, gail
 from hintsjax.algorithms.registry import make_trainer
 
 # 24 rounds of 128 steps (8 envs x 16) and 64 student steps per round on minibatches of 64.
@@ -33,7 +32,7 @@ GAIL = dict(env="linear", agent="gail", seeds=1,
 
 def trained(values: dict):
     """Train 2 seeds vmapped, and seed 1 alone: (trainer, batched state, batched metrics, seed 1's state)."""
-    cfg = config.run_config({**values, "seeds": 2})
+    cfg = layers.run_config({**values, "seeds": 2})
     trainer = make_trainer(cfg, expert=linear_env.EXPERT)
     keys = cfg.seed_keys()
     state, metrics = jax.jit(jax.vmap(trainer.train))(keys)
@@ -99,7 +98,7 @@ def test_dataset_ring_buffer_overwrites_the_oldest_rows():
 
 
 def test_gail_discriminator_separates_expert_from_random_pairs():
-    cfg = config.run_config(GAIL)
+    cfg = layers.run_config(GAIL)
     disc = gail.make_discriminator(cfg.gail)
     k_init, k_s, k_test = jax.random.split(jax.random.key(0), 3)
 
@@ -170,16 +169,16 @@ def test_gail_trains_ppo_on_the_discriminator_reward(gail_run):
 
 @pytest.fixture(scope="module", params=[False, True], ids=["raw-state", "normalized-state"])
 def expert_run(tmp_path_factory, request):
-    from hintsjax import run
+    from hintsjax.training import pipeline
 
     values = dict(env="linear", agent="expert_ppo", seeds=2, eval_episodes=4, checkpoint_every=2,
                   ppo=dict(num_envs=8, batch_size=128, minibatch_size=64, epochs=2, total_env_steps=2 * 128,
                            normalize_state=request.param))
     run_dir = tmp_path_factory.mktemp("runs") / "expert-linear"
     run_dir.mkdir()
-    cfg = config.run_config(values)
-    config.save_run_config(run_dir, cfg)
-    run.train(cfg, run_dir, progress=False)
+    cfg = layers.run_config(values)
+    layers.save_run_config(run_dir, cfg)
+    pipeline.train(cfg, run_dir, progress=False)
     return cfg, run_dir
 
 
@@ -292,7 +291,7 @@ def pendulum_expert_returns(total_env_steps: int, seeds: int = 3) -> list[float]
     steps it dipped to -186, -419, -179 with it)."""
     from hintsjax.evaluation.evaluator import evaluate_params
 
-    cfg = config.run_config(dict(env="pendulum", agent="expert_ppo", seeds=seeds,
+    cfg = layers.run_config(dict(env="pendulum", agent="expert_ppo", seeds=seeds,
                                  ppo=dict(total_env_steps=total_env_steps, ent_coef=0.0)))
     state, _ = jax.jit(jax.vmap(make_trainer(cfg).train))(cfg.seed_keys())
     return evaluate_params(cfg, state.params, None, 20, False)["seed_means"]

@@ -9,8 +9,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import cue_env  # noqa: F401  (registers the test env "cue": hints cue (the right action) and distractor (noise))
-from hintsjax import envs, rank
 from hintsjax.hints import ranking
+from hintsjax import envs, rank
 
 TINY = ["env=cue", "hints=distractor,cue", "seeds=2", "info_envs=64", "info_steps=8", "info_held_out_envs=32",
         "info_epochs=3", "info_minibatch_size=64", "info_lr=1e-3", "probe_fraction=0.05"]

@@ -22,9 +22,9 @@ import optax
 from flax import struct
 
 from hintsjax import envs
-from hintsjax.algorithms import experts
 from hintsjax.models import normalization
 from hintsjax.settings.config import RunConfig
+from hintsjax.algorithms import experts
 from hintsjax.algorithms.ppo import Hyper, RunnerState, make_network, start_runner
 from hintsjax.algorithms.trainer import Trainer, episode_metrics
 

@@ -23,12 +23,13 @@ import orbax.checkpoint as ocp
 from flax import struct
 
 from hintsjax.system import checkpoint, paths
-from hintsjax.models import normalization
-from hintsjax.algorithms import ppo
 from hintsjax.system.checkpoint import on_this_device, require_same_arrays
-from hintsjax.settings.config import RunConfig, load_run_config, to_dict
 from hintsjax.system.errors import UsageError
+from hintsjax.models import normalization
 from hintsjax.models.networks import MLP
+from hintsjax.settings.config import RunConfig
+from hintsjax.settings.layers import load_run_config, to_dict
+from hintsjax.algorithms import ppo
 
 EXPERTS_DIR = Path(__file__).resolve().parents[1] / "experts"  # the packaged experts, one folder per env
 EXPERT_JSON = "expert.json"

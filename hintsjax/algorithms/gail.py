@@ -22,11 +22,11 @@ import jax.numpy as jnp
 import optax
 from flax import struct
 
-from hintsjax.algorithms import experts
-from hintsjax.settings.algorithm_settings import GailConfig
-from hintsjax.settings.config import RunConfig
 from hintsjax.models.networks import MLP
 from hintsjax.models.normalization import normalize
+from hintsjax.settings.algorithm_settings import GailConfig
+from hintsjax.settings.config import RunConfig
+from hintsjax.algorithms import experts
 from hintsjax.algorithms.ppo import RunnerState, make_ppo
 from hintsjax.algorithms.trainer import Trainer
 

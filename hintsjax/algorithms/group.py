@@ -21,10 +21,10 @@ import jax
 import jax.numpy as jnp
 
 from hintsjax import envs
-from hintsjax.algorithms import ppo
-from hintsjax.settings.config import RunConfig
 from hintsjax.system.errors import UsageError
+from hintsjax.settings.config import RunConfig
 from hintsjax.settings.hint_sources import PROGRAMMATIC
+from hintsjax.algorithms import ppo
 from hintsjax.algorithms.ppo import Hyper, RunnerState
 from hintsjax.algorithms.trainer import Trainer, program_identity
 

@@ -20,8 +20,8 @@ from flax import struct
 
 from hintsjax import envs
 from hintsjax.models import normalization
-from hintsjax.settings.config import RunConfig
 from hintsjax.models.networks import ActorCritic, lr_labels
+from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms.trainer import Trainer, episode_metrics, program_identity
 
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
-from hintsjax.algorithms import dagger, gail, ppo
 from hintsjax.settings.config import RunConfig
+from hintsjax.algorithms import dagger, gail, ppo
 from hintsjax.algorithms.trainer import Trainer
 
 ALGORITHMS: dict[str, Callable[..., Trainer]] = {

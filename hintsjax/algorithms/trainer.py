@@ -18,8 +18,8 @@ from typing import Any, Callable
 import jax
 import jax.numpy as jnp
 
-from hintsjax.settings.config import RunConfig
 from hintsjax.envs import WARP
+from hintsjax.settings.config import RunConfig
 from hintsjax.settings.hint_sources import PROGRAMMATIC
 
 

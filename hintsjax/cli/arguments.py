@@ -7,8 +7,8 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, TypeVar
 
-from hintsjax.cli import choices
 from hintsjax.system.errors import UsageError
+from hintsjax.cli import choices
 
 T = TypeVar("T")
 

@@ -17,10 +17,10 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from hintsjax.system import program_cache
 from hintsjax import envs
-from hintsjax.settings.config import RunConfig
+from hintsjax.system import program_cache
 from hintsjax.system.devices import SeedLayout
+from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms.group import cell_state
 from hintsjax.algorithms.ppo import Hyper, gaussian_sample, make_network, pick_hint
 from hintsjax.algorithms.trainer import program_identity

@@ -40,12 +40,12 @@ import yaml
 from flax import struct
 
 from hintsjax import envs
-from hintsjax.algorithms import experts
-from hintsjax.hints import rollouts
 from hintsjax.envs.errors import ChoiceError, choose
 from hintsjax.system.errors import UsageError, require_positive, require_range
-from hintsjax.settings.hint_sources import GENERATOR_JSON, PARAMS, Generator, GeneratorParams, stored
+from hintsjax.settings.hint_sources import GENERATOR_JSON, Generator, GeneratorParams, PARAMS, stored
+from hintsjax.algorithms import experts
 from hintsjax.training.runlog import fresh_folder
+from hintsjax.hints import rollouts
 
 POLICIES = {"random": "N(0, 1) actions", "expert": "the packaged expert in part of the envs"}
 

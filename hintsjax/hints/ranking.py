@@ -38,14 +38,14 @@ import optax
 from flax import struct
 
 from hintsjax import envs
-from hintsjax.algorithms import experts
-from hintsjax.hints import rollouts
-from hintsjax.models.conditioning import SCHEMES
-from hintsjax.settings.config import run_config
 from hintsjax.envs.errors import ChoiceError, choose
 from hintsjax.system.errors import UsageError, require_positive, require_range
+from hintsjax.models.conditioning import SCHEMES
+from hintsjax.models.networks import Encoder, MLP, scale_pixels
+from hintsjax.settings.layers import run_config
+from hintsjax.algorithms import experts
 from hintsjax.algorithms.group import make_group, make_group_trainer
-from hintsjax.models.networks import MLP, Encoder, scale_pixels
+from hintsjax.hints import rollouts
 
 SCORES = {"information": "the return's R^2 gained by the hint over one picture",
           "probe": "area under a short training run's learning curve"}

@@ -8,9 +8,9 @@ import jax
 import jax.numpy as jnp
 import flax.linen as nn
 
-from hintsjax.models.agents import AgentSpec
 from hintsjax.models import normalization
-from hintsjax.models.conditioning import SCHEMES, HintEmbedding
+from hintsjax.models.agents import AgentSpec
+from hintsjax.models.conditioning import HintEmbedding, SCHEMES
 from hintsjax.models.normalization import StateNorm
 
 

@@ -213,7 +213,7 @@ def kl_cell(runs: Path, env: str, label: str, above: float = KL_ABOVE) -> str:
 def trained_config(runs: Path, env: str, label: str):
     """The RunConfig a finished run was trained with (its config.yaml), or None when not run:
     a report states the settings its rows were trained with, not today's defaults."""
-    from hintsjax.settings.config import CONFIG_YAML, load_run_config
+    from hintsjax.settings.layers import CONFIG_YAML, load_run_config
 
     folder = run_folder(runs, env, label)
     return load_run_config(folder) if (folder / "eval.json").exists() and (folder / CONFIG_YAML).exists() else None
@@ -228,7 +228,7 @@ def trained_ppo(runs: Path, env: str, label: str):
 def references_note(runs: Path, env: str, references: tuple[str, ...]) -> str:
     """The references' budgets (as trained, else today's defaults) and the expert that dagger
     and gail learnt from (the packaged one)."""
-    from hintsjax.settings.config import run_config
+    from hintsjax.settings.layers import run_config
     from hintsjax.algorithms.experts import EXPERT_JSON, EXPERTS_DIR
 
     cfg = {a: trained_config(runs, env, a) or run_config({"env": env, "agent": a}) for a in references}
@@ -299,7 +299,7 @@ def archive_run(runs: Path, env: str, label: str) -> Path:
     ARCHIVE/<runs' name>/env/label (see the module's docstring); returns that folder."""
     import numpy as np
 
-    from hintsjax.settings.config import CONFIG_YAML
+    from hintsjax.settings.layers import CONFIG_YAML
     from hintsjax.training.runlog import bin_means, read_curves
 
     src, dest = runs / env / label, ARCHIVE / runs.name / env / label

@@ -30,9 +30,8 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from hintsjax.reproduce.report import ARCHIVE, archive_runs, load
-
 from hintsjax.models.agents import EXPERT_AGENT
+from hintsjax.reproduce.report import ARCHIVE, archive_runs, load
 
 # A sweep's runs save at most once a minute: fast runs finish 50 updates in seconds, and a big
 # run's checkpoint (every env's MJX state) can reach a GB; an interruption loses at most a minute.
@@ -88,9 +87,9 @@ def train_one(runs: Path, run_ids: list[str], seeds: int, smoke: bool, experts: 
     import jax
 
     from hintsjax.system import checkpoint
+    from hintsjax.settings.layers import run_config, save_run_config
     from hintsjax.algorithms import experts
-    from hintsjax import run
-    from hintsjax.settings.config import run_config, save_run_config
+    from hintsjax.training import compilation, loop, pipeline
 
     cfgs = []
     for run_id in run_ids:
@@ -104,17 +103,17 @@ def train_one(runs: Path, run_ids: list[str], seeds: int, smoke: bool, experts: 
     # An interrupted run (killed by a time limit) goes on from its newest checkpoint; its
     # wall-clock counts the kept work of earlier calls, not what was lost after their last checkpoint.
     resume = checkpoint.latest_update(folder) is not None
-    before, t = run.seconds_trained(folder) if resume else 0.0, time.time()
+    before, t = loop.seconds_trained(folder) if resume else 0.0, time.time()
     if resume:
         print(f"resuming {', '.join(run_ids)} from update {checkpoint.latest_update(folder)}", flush=True)
     if len(run_ids) == 1:
-        results = [run.train(cfgs[0], folder, resume=resume, progress=False)]
+        results = [pipeline.train(cfgs[0], folder, resume=resume, progress=False)]
     else:
         folder.mkdir(parents=True, exist_ok=True)
         (folder / "group.json").write_text(json.dumps({"runs": run_ids, "seeds": seeds}))
         try:
-            results = run.train_group(cfgs, folder, [runs / r for r in run_ids], resume=resume, progress=False)
-        except run.GroupTooBig as e:
+            results = pipeline.train_group(cfgs, folder, [runs / r for r in run_ids], resume=resume, progress=False)
+        except compilation.GroupTooBig as e:
             half = len(run_ids) // 2
             print(f"{e}: splitting the group into {half} and {len(run_ids) - half} runs", flush=True)
             for part in (run_ids[:half], run_ids[half:]):
@@ -133,7 +132,7 @@ def plan_jobs(run_ids: list[str], seeds: int, smoke: bool, group_size: int = 0, 
     """The runs partitioned into groups that train together, each cut into parts of at most
     `group_size` runs (0: no limit; 1: every run its own job). Smaller groups suit calls with a
     time limit: each part is a job that finishes on its own."""
-    from hintsjax.settings.config import run_config
+    from hintsjax.settings.layers import run_config
     from hintsjax.algorithms.group import plan
 
     cfgs = [run_config(run_values(*r.split("/"), seeds, smoke, settings=settings)) for r in run_ids]
@@ -182,7 +181,7 @@ def prerequisite(run_id: str) -> str | None:
 
 def budget(run_id: str) -> float:
     """Rough relative cost of a run, to start the longest first."""
-    from hintsjax.settings.config import run_config
+    from hintsjax.settings.layers import run_config
 
     env, label = run_id.split("/")
     cfg = run_config(run_values(env, label, 1))
@@ -322,8 +321,8 @@ def parsed_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -
 def check_settings(parser: argparse.ArgumentParser, settings: dict) -> dict:
     """`settings`, or exit 2 in one line on one that RunConfig refuses (this starts JAX's backend:
     resolving the physics asks it for the platform)."""
-    from hintsjax.settings.config import run_config
     from hintsjax.system.errors import UsageError
+    from hintsjax.settings.layers import run_config
 
     try:
         run_config({"env": "pendulum", **settings})

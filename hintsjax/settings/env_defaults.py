@@ -1,7 +1,7 @@
 """Each env's training defaults as RunConfig layers (`ENV_DEFAULTS`), read from the `TRAINING`
 beside each env (envs/<env>.py, the registry's `training`), where the paper's budgets, Table 5's
 actor rates and the reasons for each deviation are written. A config value of `None` means "the
-env's default" (hintsjax.settings.config.run_config stacks the layers)."""
+env's default" (hintsjax.settings.layers.run_config stacks the layers)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Where an agent's hint comes from: the simulator's state (programmatic), or a learned generator.
 
-A generator (trained by `python -m hintsjax.generator`, hintsjax/generator.py) is a small network
+A generator (trained by `python -m hintsjax.generator`, hintsjax/hints/generators.py) is a small network
 that reads the hint off the last `frames` pictures. Its folder holds generator.json and the
 seed-batched params as an orbax checkpoint; `load` reads one seed of it. `hinted_env` and
 `hinted_params` give the env an agent acts in for a hint source: the programmatic env, or
@@ -26,10 +26,10 @@ import orbax.checkpoint as ocp
 from flax import struct
 
 from hintsjax import envs
-from hintsjax.system.checkpoint import on_this_device, require_same_arrays
 from hintsjax.envs.core import Env, Step
+from hintsjax.system.checkpoint import on_this_device, require_same_arrays
 from hintsjax.system.errors import UsageError
-from hintsjax.models.networks import MLP, Encoder, scale_pixels
+from hintsjax.models.networks import Encoder, MLP, scale_pixels
 
 PROGRAMMATIC = "programmatic"  # the hint source that computes hints from the simulator's state
 GENERATOR_JSON = "generator.json"

@@ -11,7 +11,7 @@ must be held at once:
 - a video: its frames, upscaled, on the host.
 
 The programs hold more (activations, copies, the physics), so a size under a bound may still not
-fit; XLA's memory analysis of a compiled group speaks for that (run.check_fits).
+fit; XLA's memory analysis of a compiled group speaks for that (training.compilation.check_fits).
 """
 
 from __future__ import annotations
