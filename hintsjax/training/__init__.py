@@ -4,8 +4,8 @@
 - `compilation`: a trainer's programs compiled for the seeds' layout, and whether they fit;
 - `loop`: start (fresh or from a checkpoint) and advance in chunks, with checkpoints;
 - `guards`: the non-finite check on every chunk, MJX-Warp's buffer check;
-- `results`: the run folder, eval.json and the learning curve;
-- `runs`: `train` (one run) and `train_group` (configurations trained as one program);
+- `outputs`: the run folder, eval.json and the learning curve;
+- `pipeline`: `train` (one run) and `train_group` (configurations trained as one program);
 - `runlog`: metrics.csv, TensorBoard and learning-curve plots.
 
 It may import envs/, system, models, settings, cli, algorithms and evaluation.
