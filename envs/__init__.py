@@ -32,7 +32,7 @@ from hintsjax.envs.physics import AUTO, DEFAULT_CAPACITY, JAX, WARP, PhysicsUnav
 @dataclass(frozen=True)
 class EnvEntry:
     """A registered env: its class, its named params variants (the first is the default), its
-    training defaults (`TRAINING` beside the env; hintsjax/env_defaults.py reads them) and what
+    training defaults (`TRAINING` beside the env; hintsjax/settings/env_defaults.py reads them) and what
     its constructor takes besides the hint and the observation (an adapted env's task)."""
 
     cls: type[Env]

@@ -175,7 +175,7 @@ def full_state(state: AcrobotState, params: AcrobotParams) -> jax.Array:
     return observation(state)
 
 
-# Training defaults (hintsjax/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
+# Training defaults (hintsjax/settings/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
 # PPO settings of this env's agents, `learners`: PPO settings for every agent but the references,
 # `references`: the expert's budget and PPO settings (expert_ppo and gail), dagger's steps, gail's reward.
 # 700 episodes of at most 500 steps (the paper's 700 episodes, counted at their length).

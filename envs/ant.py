@@ -116,7 +116,7 @@ class AntFast(Ant):
 share_hints(FAST_NAME, NAME)
 
 
-# Training defaults (hintsjax/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
+# Training defaults (hintsjax/settings/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
 # PPO settings of this env's agents, `learners`: PPO settings for every agent but the references,
 # `references`: the expert's budget and PPO settings (expert_ppo and gail), dagger's steps, gail's reward.
 # Ant steps 256 envs per seed (rollouts of 4 steps per 1024-transition batch): each of its

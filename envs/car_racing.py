@@ -685,7 +685,7 @@ def full_state(state: CarRacingState, params: CarRacingParams) -> jax.Array:
 register_composite(NAME, "composite", ("on_track", "curvature"))
 
 
-# Training defaults (hintsjax/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
+# Training defaults (hintsjax/settings/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
 # PPO settings of this env's agents, `learners`: PPO settings for every agent but the references,
 # `references`: the expert's budget and PPO settings (expert_ppo and gail), dagger's steps, gail's reward.
 # 1000 episodes of 1000 steps (SPEC section 5); trained on the standard track, deployed on

@@ -71,7 +71,7 @@ def full_state(state: LocomotionState, params) -> jax.Array:
     return state.obs
 
 
-# Training defaults (hintsjax/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
+# Training defaults (hintsjax/settings/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
 # PPO settings of this env's agents, `learners`: PPO settings for every agent but the references,
 # `references`: the expert's budget and PPO settings (expert_ppo and gail), dagger's steps, gail's reward.
 # Locomotion (SPEC section 5): 1k, 5k and 10k episodes, counted at their full 1000 steps

@@ -91,7 +91,7 @@ def full_state(state: LocomotionState, params) -> jax.Array:
     return state.obs
 
 
-# Training defaults (hintsjax/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
+# Training defaults (hintsjax/settings/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
 # PPO settings of this env's agents, `learners`: PPO settings for every agent but the references,
 # `references`: the expert's budget and PPO settings (expert_ppo and gail), dagger's steps, gail's reward.
 # Humanoid's learners take the ant's KL early stop and its 256 envs per seed (rollouts of 4

@@ -200,7 +200,7 @@ def full_state(state: IDPState, params: IDPParams) -> jax.Array:
     return observation(state)
 
 
-# Training defaults (hintsjax/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
+# Training defaults (hintsjax/settings/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
 # PPO settings of this env's agents, `learners`: PPO settings for every agent but the references,
 # `references`: the expert's budget and PPO settings (expert_ppo and gail), dagger's steps, gail's reward.
 # Early IDP episodes last ~10 steps, so an episode count would be a tiny budget: we count

@@ -204,7 +204,7 @@ def full_state(state: PendulumState, params: PendulumParams) -> jax.Array:
 register_composite(NAME, "composite", ("angular_velocity", "goal_distance"))
 
 
-# Training defaults (hintsjax/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
+# Training defaults (hintsjax/settings/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
 # PPO settings of this env's agents, `learners`: PPO settings for every agent but the references,
 # `references`: the expert's budget and PPO settings (expert_ppo and gail), dagger's steps, gail's reward.
 # The expert's (and GAIL's) PPO is tuned for the state pendulum. With 16 envs x 64 steps a

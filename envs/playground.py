@@ -29,7 +29,7 @@ SOURCE = "playground"
 @dataclass(frozen=True)
 class TaskDefaults:
     """A task's defaults: the camera of its default variant, its default hint and the PPO
-    settings of its agents (RunConfig's `ppo` section; hintsjax/env_defaults.py reads them)."""
+    settings of its agents (RunConfig's `ppo` section; hintsjax/settings/env_defaults.py reads them)."""
 
     camera: str = TRACK
     hint: str = "reward"

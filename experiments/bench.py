@@ -12,7 +12,7 @@ Measures, in one process on whatever device JAX sees:
   ceiling  the encoder + heads' own update rate: samples/s of one forward+backward+Adam step
            of the hints/fc network at batch 8192 (nothing else in the graph)
   train    end-to-end training (rollout, GAE, epochs of minibatch updates), seed-vmapped, timed
-           through run.train, the function the command line runs (compile apart), beside the same
+           through pipeline.train, the function the command line runs (compile apart), beside the same
            updates as one bare jitted scan: env steps/s, and gradient samples/s = env steps/s x
            epochs, as a fraction of the ceiling (1.0 would mean the GPU did nothing but full-batch
            updates); and the milliseconds of one update's rollout, learning and env steps alone
@@ -34,10 +34,11 @@ import mujoco
 import numpy as np
 import optax
 
-from hintsjax import compilation_cache, envs
-from hintsjax.config import run_config
-from hintsjax.env_defaults import ENV_DEFAULTS
-from hintsjax.ppo import Hyper, gaussian_log_prob, make_network, make_optimizer, make_trainer
+from hintsjax import envs
+from hintsjax.system import compilation_cache
+from hintsjax.settings.env_defaults import ENV_DEFAULTS
+from hintsjax.settings.layers import run_config
+from hintsjax.algorithms.ppo import Hyper, gaussian_log_prob, make_network, make_optimizer, make_trainer
 
 
 def best_time(fn, *args, repeats: int = 3) -> float:
@@ -148,21 +149,21 @@ def bench_ceiling(batch: int) -> dict:
 
 def bench_train(name: str, seeds: int, updates: int, overrides: dict, agent: str = "hints", physics: str = envs.AUTO) -> dict:
     """Training rate of the env's default cell (hints/fc with its default hint), two ways:
-    `env_steps_per_s` through run.train, the function `python -m hintsjax.run` calls (chunks,
+    `env_steps_per_s` through pipeline.train, the function `python -m hintsjax.run` calls (chunks,
     checkpoints, logs; compile apart), and `scan_env_steps_per_s`, the same compiled chunks called
     back to back with nothing else on the host (no logs, no checkpoints), best of two; and the
     seconds of one update's parts."""
     import tempfile
 
-    from hintsjax import run
+    from hintsjax.training import compilation, pipeline
 
     values = {"env": name, "agent": agent, "scheme": "fc", "seeds": seeds, "checkpoint_every": min(10, updates),
               "physics": physics, "ppo": overrides}
     cfg = run_config(values)
     cfg = run_config({**values, "ppo": {**overrides, "total_env_steps": updates * cfg.ppo.batch_size}})
     with tempfile.TemporaryDirectory() as folder:
-        results = run.train(cfg, Path(folder), progress=False)
-    compiled = run.compile_training(make_trainer(cfg), cfg.seed_keys(), cfg.checkpoint_every)
+        results = pipeline.train(cfg, Path(folder), progress=False)
+    compiled = compilation.compile_training(make_trainer(cfg), cfg.seed_keys(), cfg.checkpoint_every)
     state = compiled.init(cfg.seed_keys())
 
     def back_to_back(state):
@@ -190,7 +191,7 @@ def update_parts(cfg, state) -> dict:
     the policy's actions), the learning (GAE and the epochs of minibatch steps), and the env steps
     alone without their pictures (physics, reward and hint under random actions, as `bench_env`
     times them)."""
-    from hintsjax.ppo import make_ppo
+    from hintsjax.algorithms.ppo import make_ppo
 
     parts = make_ppo(cfg)
     key = jax.random.split(jax.random.key(1), cfg.seeds)
@@ -277,7 +278,7 @@ def main() -> None:
             r["fraction_of_ceiling"] = r["grad_samples_per_s"] / ceiling
             results["train"].append(r)
             print(f"train   {name:>9} {seeds:>3} seeds {r['ppo']}: {r['env_steps_per_s']:,.0f} env steps/s "
-                  f"through run.train (bare scan {r['scan_env_steps_per_s']:,.0f}), "
+                  f"through pipeline.train (bare scan {r['scan_env_steps_per_s']:,.0f}), "
                   f"{r['grad_samples_per_s']:,.0f} grad samples/s = {r['fraction_of_ceiling']:.0%} of ceiling; "
                   f"compile {r['compile_s']['train']:.1f} s; one update: "
                   + ", ".join(f"{k} {1e3 * v:.1f} ms" for k, v in r["update_parts_s"].items()), flush=True)

@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from hintsjax.networks import MLP, PatchConv
+from hintsjax.models.networks import MLP, PatchConv
 
 
 class Net(nn.Module):

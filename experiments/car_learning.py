@@ -65,9 +65,11 @@ def train(runs: Path, names: list[str], seeds: int, smoke: bool) -> None:
     """Train and evaluate each variant not finished yet (both evaluations); resumable. Variants
     that differ only in numbers (the reward scale: hintsjax.group's Hyper) train as one group, in
     one program (<runs>/car_racing/_groups/<names>); the policy heads each need their own."""
-    from hintsjax import checkpoint, evaluate, run
-    from hintsjax.config import run_config, save_run_config
-    from hintsjax.group import plan
+    from hintsjax.system import checkpoint
+    from hintsjax.settings.layers import run_config, save_run_config
+    from hintsjax.algorithms.group import plan
+    from hintsjax.training import pipeline
+    from hintsjax import evaluate, run
 
     cfgs = [run_config(variant_settings(n, seeds, smoke)) for n in names]
     for members in plan(cfgs):  # a group with one member finished (cut while writing results) resumes whole
@@ -85,7 +87,7 @@ def train(runs: Path, names: list[str], seeds: int, smoke: bool) -> None:
         for i in members:
             (runs / ENV / names[i]).mkdir(parents=True, exist_ok=True)
             save_run_config(runs / ENV / names[i], cfgs[i])
-        run.train_group([cfgs[i] for i in members], folder, [runs / ENV / n for n in group],
+        pipeline.train_group([cfgs[i] for i in members], folder, [runs / ENV / n for n in group],
                         resume=checkpoint.latest_update(folder) is not None)
     for name in names:
         folder = runs / ENV / name
@@ -127,7 +129,7 @@ def evaluation_of(folder: Path, track: int, stochastic: bool) -> dict | None:
 
 
 def report(runs: Path, out: Path) -> None:
-    from hintsjax import stats
+    from hintsjax.reproduce import stats
 
     names = [n for n in VARIANTS if load(runs, ENV, n) is not None]
     for name in names:  # the archive keeps what the report reads, the stochastic evaluations too

@@ -65,7 +65,7 @@ def findings(runs: Path, env: str) -> str:
     """The paper's claim for these rows (O3), as numbers: composite hints lift the car's hairpin
     progress above vision only (46% -> 78% in the paper); decided when the 95% bootstrap interval
     of the difference in mean progress over seeds excludes 0."""
-    from hintsjax import stats
+    from hintsjax.reproduce import stats
 
     rgb = hairpin_progress(load(runs, env, "ppo_rgb"))
     composite = hairpin_progress(load(runs, env, hints_run("mc", "composite")))
@@ -96,7 +96,7 @@ def protocol(runs: Path, env: str) -> str:
 
 
 def report(runs: Path, force: bool = False) -> None:
-    from hintsjax.config import run_config
+    from hintsjax.settings.layers import run_config
 
     lines = [
         "# Car Racing: the paper's Table 3 (CR Standard and CR Hairpin rows), reproduced", "",
@@ -135,7 +135,7 @@ def report(runs: Path, force: bool = False) -> None:
 def ordering_lines(runs: Path, env: str) -> list[str]:
     """O1 on the standard tracks (the best hint by IQM over PPO-RGB) and O3 on the hairpin ones
     (the composite over PPO-RGB), as probabilities of improvement of the per-seed mean returns."""
-    from hintsjax import stats
+    from hintsjax.reproduce import stats
 
     rgb = load(runs, env, "ppo_rgb")
     hints = {hints_run("mc", h): load(runs, env, hints_run("mc", h)) for h in HINTS[env]}
@@ -157,7 +157,7 @@ def learners_report(runs: Path, names: list[str], path: Path) -> None:
     [95 % CI] of the per-seed mean returns, P(row > PPO-RGB) and the progress; O1 and O3; learning
     curves with bootstrap bands. Written as the section of `path` that GENERATED opens
     (report.write_section): the plan and the locomotion section stay. `names` is the car alone."""
-    from hintsjax.config import run_config
+    from hintsjax.settings.layers import run_config
 
     env = ENVS[0]
     labels = [*BASELINES, *(hints_run("mc", h) for h in HINTS[env])]

@@ -20,10 +20,11 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from hintsjax import checkpoint, run
-from hintsjax.algorithms import make_trainer
-from hintsjax.config import run_config
-from hintsjax.env_defaults import ENV_DEFAULTS
+from hintsjax.system import checkpoint
+from hintsjax.settings.env_defaults import ENV_DEFAULTS
+from hintsjax.settings.layers import run_config
+from hintsjax.algorithms.registry import make_trainer
+from hintsjax.training import compilation
 
 
 def main() -> None:
@@ -33,7 +34,7 @@ def main() -> None:
     args = parser.parse_args()
     cfg = run_config({"env": args.env, "agent": "hints", "scheme": "fc", "hint": ENV_DEFAULTS[args.env]["hint"]})
     keys = cfg.seed_keys()
-    compiled = run.compile_training(make_trainer(cfg), keys, cfg.checkpoint_every)
+    compiled = compilation.compile_training(make_trainer(cfg), keys, cfg.checkpoint_every)
     n = np.int32(compiled.chunk)
     state, _ = jax.block_until_ready(compiled.run_chunk(compiled.init(keys), n))
     t = time.perf_counter()

@@ -187,7 +187,7 @@ def scheme_findings(runs: Path, env: str) -> str:
 
 
 def report(runs: Path, force: bool = False) -> None:
-    from hintsjax.runlog import plot_curves, read_curves
+    from hintsjax.training.runlog import plot_curves, read_curves
 
     RESULTS.mkdir(exist_ok=True)
     head = [
@@ -299,7 +299,7 @@ def learners_report(runs: Path, envs: list[str], path: Path) -> None:
 def scheme_orderings(runs: Path, env: str) -> str:
     """Per hint column of Table 4, the best scheme by IQM against each other scheme (of those
     trained), as probabilities of improvement over seeds."""
-    from hintsjax import stats
+    from hintsjax.reproduce import stats
 
     lines = []
     for h in TABLE4_HINTS[env]:

@@ -5,7 +5,7 @@
 Each variant runs in its own process (XLA_FLAGS are read at start-up) with its own empty
 compilation cache; with `--warm` a second process then compiles again from the cache the first
 filled, as a second run of `python -m hintsjax.run` would. A process compiles the cell's init and
-chunk programs through `run.compile_training` (what the command runs, the traced-program cache
+chunk programs through `compilation.compile_training` (what the command runs, the traced-program cache
 included), splits the seconds by JAX's monitoring events (tracing, lowering to MLIR, XLA's
 backend compile, reading the persistent cache), then runs one chunk of `--updates` updates and
 digests the params: equal digests mean a flag left the program's numbers alone.
@@ -37,10 +37,11 @@ def one(args: argparse.Namespace) -> dict:
     import jax
     import numpy as np
 
-    from hintsjax import compilation_cache, run
-    from hintsjax.algorithms import make_trainer
-    from hintsjax.config import run_config
-    from hintsjax.env_defaults import ENV_DEFAULTS
+    from hintsjax.system import compilation_cache
+    from hintsjax.settings.env_defaults import ENV_DEFAULTS
+    from hintsjax.settings.layers import run_config
+    from hintsjax.algorithms.registry import make_trainer
+    from hintsjax.training import compilation
 
     seconds: dict[str, float] = defaultdict(float)
     jax.monitoring.register_event_duration_secs_listener(lambda event, s, **_: seconds.__setitem__(event, seconds[event] + s))
@@ -49,7 +50,7 @@ def one(args: argparse.Namespace) -> dict:
                       "checkpoint_every": args.updates})
     keys = cfg.seed_keys()
     t = time.perf_counter()
-    compiled = run.compile_training(make_trainer(cfg), keys, args.updates)
+    compiled = compilation.compile_training(make_trainer(cfg), keys, args.updates)
     total = time.perf_counter() - t
     state = compiled.init(keys)
     state, _ = jax.block_until_ready(compiled.run_chunk(state, np.int32(args.updates)))

@@ -15,8 +15,8 @@ import os
 import jax
 import numpy as np
 
-from hintsjax.config import run_config
-from hintsjax.algorithms import make_trainer
+from hintsjax.settings.layers import run_config
+from hintsjax.algorithms.registry import make_trainer
 
 
 def main() -> None:

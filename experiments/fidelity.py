@@ -49,8 +49,10 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
-from hintsjax import envs, stats, xla_flags
-from hintsjax.expert import load
+from hintsjax import envs
+from hintsjax.system import xla_flags
+from hintsjax.algorithms.experts import load
+from hintsjax.reproduce import stats
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "results" / "fidelity.json"
@@ -224,16 +226,16 @@ def cost_row(name: str, setting: str, physics: str, updates: int, seeds: int = 5
     that `python -m hintsjax.run` compiles (chunks of 10 updates), called back to back after a
     warm-up chunk, nothing else on the host (experiments/bench.py's `scan_env_steps_per_s`;
     the command delivers 81-96 % of it, docs/throughput.md)."""
-    from hintsjax import run
-    from hintsjax.algorithms import make_trainer
-    from hintsjax.config import run_config
+    from hintsjax.settings.layers import run_config
+    from hintsjax.algorithms.registry import make_trainer
+    from hintsjax.training import compilation
 
     entry = envs.REGISTRY[name]
     envs.REGISTRY[name] = dataclasses.replace(entry, cls=env_class(name, setting))
     try:
         cfg = run_config({"env": name, "agent": "hints", "scheme": "fc", "seeds": seeds, "physics": physics})
         start = time.perf_counter()
-        compiled = run.compile_training(make_trainer(cfg), cfg.seed_keys(), 10)
+        compiled = compilation.compile_training(make_trainer(cfg), cfg.seed_keys(), 10)
         state = compiled.init(cfg.seed_keys())
         state, _ = jax.block_until_ready(compiled.run_chunk(state, np.int32(compiled.chunk)))  # warm-up
         compile_s = time.perf_counter() - start

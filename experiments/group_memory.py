@@ -3,8 +3,8 @@
     python experiments/group_memory.py [--envs pendulum,idp] [--sizes 1x20,2x20,4x20] [--out FILE]
 
 For each env and each K x S (K hint configurations of Table 2, S seeds) it compiles the group's
-training chunk (`run.compile_training`, what the sweeps run) without running it and reads XLA's
-memory analysis: arguments + outputs + temporaries, the figure `run.check_fits` compares with
+training chunk (`compilation.compile_training`, what the sweeps run) without running it and reads XLA's
+memory analysis: arguments + outputs + temporaries, the figure `loop.check_fits` compares with
 90 % of the device's memory. The need grows linearly in K x S (the rows show it); the last line
 per env extrapolates the number of runs that fit.
 """
@@ -17,9 +17,9 @@ from pathlib import Path
 
 import jax
 
-from hintsjax import run
-from hintsjax.config import run_config
-from hintsjax.group import make_group, make_group_trainer
+from hintsjax.settings.layers import run_config
+from hintsjax.algorithms.group import make_group, make_group_trainer
+from hintsjax.training import compilation
 
 from classic_control import TABLE2_HINTS  # experiments/, beside this script
 
@@ -30,7 +30,7 @@ def need_bytes(env: str, configs: int, seeds: int) -> int:
     cfgs = [run_config({"env": env, "agent": "hints", "scheme": "fc", "hint": HINTS[env][k % len(HINTS[env])],
                         "seeds": seeds}) for k in range(configs)]
     group = make_group(cfgs)
-    compiled = run.compile_training(make_group_trainer(group), group.cfgs[0].seed_keys(), 10)
+    compiled = compilation.compile_training(make_group_trainer(group), group.cfgs[0].seed_keys(), 10)
     a = compiled.run_chunk.memory_analysis()
     return a.temp_size_in_bytes + a.argument_size_in_bytes + a.output_size_in_bytes
 

@@ -88,7 +88,7 @@ def rho_interval(score: np.ndarray, rows: list[np.ndarray], rng: np.random.Gener
     """rho between the score's means over seeds ([S, K]) and the rows' IQMs, with a 95% bootstrap
     interval (the score's seeds and the rows' seeds resampled; rows of one number, a table's means,
     stay as they are: the interval then says how far the score's own seeds move rho)."""
-    from hintsjax.stats import iqm
+    from hintsjax.reproduce.stats import iqm
 
     point = spearman(score.mean(axis=0), [iqm(r) for r in rows])
     draws = []
@@ -104,7 +104,7 @@ def rho_interval(score: np.ndarray, rows: list[np.ndarray], rng: np.random.Gener
 
 
 def report(runs: Path, env_list: list[str], out: Path) -> None:
-    from hintsjax import stats
+    from hintsjax.reproduce import stats
 
     rng = np.random.default_rng(0)
     lines = ["# Which hint is worth giving: cheap scores against the full tables", "",
@@ -168,7 +168,7 @@ def report(runs: Path, env_list: list[str], out: Path) -> None:
 
 
 def _table_env_steps(env: str, hints: int) -> int:
-    from hintsjax.config import run_config
+    from hintsjax.settings.layers import run_config
 
     return TABLE_SEEDS[env] * hints * run_config({"env": env, "agent": "hints"}).ppo.total_env_steps
 

@@ -46,10 +46,11 @@ def generator_folder(runs: Path, env: str, hint: str, frames: int) -> Path:
 
 
 def train_generator(runs: Path, env: str, hint: str, frames: int, seeds: int) -> Path:
+    from hintsjax.hints import generators
     from hintsjax import generator
 
     folder = generator_folder(runs, env, hint, frames)
-    if not (folder / generator.GENERATOR_JSON).is_file():
+    if not (folder / generators.GENERATOR_JSON).is_file():
         if folder.exists():  # an interrupted one: train it again
             import shutil
 
@@ -113,7 +114,7 @@ def seed_means(path: Path) -> np.ndarray:
 
 
 def report(runs: Path, cases: list[tuple[str, str]], frames: int, out: Path) -> None:
-    from hintsjax import stats
+    from hintsjax.reproduce import stats
 
     lines = ["# Hints without ground truth at deploy: agents that see a learned generator's hints", "",
              "Written by `python experiments/learned_hints.py --report` from the runs of "

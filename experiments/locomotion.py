@@ -119,7 +119,7 @@ def settings_lines(runs: Path, env: str, labels: list[str],
     """The PPO settings the rows were trained with (each run's config.yaml), grouped when they
     differ; rows not yet run are listed at today's defaults (config.ENV_DEFAULTS), as are kept
     rows (the previous report listed them so)."""
-    from hintsjax.config import run_config
+    from hintsjax.settings.layers import run_config
 
     default, kept = run_config({"env": env}).ppo, kept or {}
     groups: dict[str, list[str]] = {}
@@ -135,7 +135,7 @@ def settings_lines(runs: Path, env: str, labels: list[str],
 
 
 def report(runs: Path, force: bool = False) -> None:
-    from hintsjax.config import run_config
+    from hintsjax.settings.layers import run_config
 
     kept = kept_rows(RESULTS / REPORT)
     lines = [
@@ -182,7 +182,7 @@ def report(runs: Path, force: bool = False) -> None:
 # Ant and Humanoid"); O5, a specific hint beats the full state given as a hint.
 def ordering_lines(runs: Path, env: str) -> list[str]:
     """O1, O4 and (where the env has the `state` hint) O5 as probabilities of improvement."""
-    from hintsjax import stats
+    from hintsjax.reproduce import stats
 
     run = lambda label: load(runs, env, label)  # noqa: E731
     hints = {h: run(hints_run("fc", h)) for h in HINTS[env]}
@@ -206,7 +206,7 @@ def learners_report(runs: Path, names: list[str], path: Path) -> None:
     table, issue 46): per row mean ± std, IQM [95 % CI] and P(row > PPO-RGB); the orderings O1,
     O4 and O5; learning curves with bootstrap bands. Written as the section of `path` that
     GENERATED opens (report.write_section): the plan above it and the car's section stay."""
-    from hintsjax.config import run_config
+    from hintsjax.settings.layers import run_config
 
     about = {k: v for k, v in read_about(ARCHIVE / runs.name).items() if k in (*ENVS, "references")}
     lines = [f"Made by `python experiments/locomotion.py --learners-report experiments/results/{path.name} "

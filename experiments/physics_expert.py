@@ -31,8 +31,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from hintsjax import envs, stats
-from hintsjax.expert import load
+from hintsjax import envs
+from hintsjax.algorithms.experts import load
+from hintsjax.reproduce import stats
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "results" / "physics_expert.json"

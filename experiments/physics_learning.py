@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hintsjax import stats
+from hintsjax.reproduce import stats
 
 HERE = Path(__file__).resolve().parent
 RUNS = HERE / "results" / "runs" / "physics_compare"

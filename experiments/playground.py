@@ -103,8 +103,8 @@ def hintsjax_values(brax: dict, seeds: int, steps: int, smoke: bool) -> dict:
 
 
 def train_hintsjax(runs: Path, brax: dict, seeds: int, steps: int, smoke: bool) -> SideResult:
-    from hintsjax import run
-    from hintsjax.config import run_config, to_dict
+    from hintsjax.settings.layers import run_config, to_dict
+    from hintsjax.training import pipeline
 
     cfg = run_config(hintsjax_values(brax, seeds, steps, smoke))
     folder = runs / "versus_brax" / "hintsjax"
@@ -114,7 +114,7 @@ def train_hintsjax(runs: Path, brax: dict, seeds: int, steps: int, smoke: bool) 
         shutil.rmtree(folder)
     folder.mkdir(parents=True)
     t = time.time()
-    result = run.train(cfg, folder, progress=False)
+    result = pipeline.train(cfg, folder, progress=False)
     seconds = time.time() - t
     evaluation = result["evaluations"][0]
     return SideResult("hintsjax ppo_state", list(evaluation["seed_means"]), seconds,
@@ -194,7 +194,7 @@ def versus_brax(runs: Path, seeds: int, steps: int | None, smoke: bool) -> None:
 
 
 def versus_lines(runs: Path) -> list[str]:
-    from hintsjax import stats
+    from hintsjax.reproduce import stats
 
     path = runs / VERSUS_JSON
     lines = ["## hintsjax's ppo_state beside Brax's PPO (item 6)", ""]

@@ -4,7 +4,7 @@
                                          [--variants base,nodet,...] [--out DIR]
 
 For each variant (a fresh process, since XLA_FLAGS are read at start-up) it compiles the cell's
-chunk program (`run.compile_training`, what `python -m hintsjax.run` runs), times `--updates`
+chunk program (`compilation.compile_training`, what `python -m hintsjax.run` runs), times `--updates`
 updates back to back (best of 3), then records one chunk under `jax.profiler.trace` and sums the
 GPU kernels' time by name: the device's busy fraction (the union of kernel intervals over the
 chunk's wall time) says whether the chunk is bound by the GPU's work or by launching it.
@@ -97,9 +97,9 @@ def one(args: argparse.Namespace) -> dict:
     import jax
     import numpy as np
 
-    from hintsjax import run
-    from hintsjax.algorithms import make_trainer
-    from hintsjax.config import run_config
+    from hintsjax.settings.layers import run_config
+    from hintsjax.algorithms.registry import make_trainer
+    from hintsjax.training import compilation
 
     unroll_scans(VARIANTS[args.variant][1])
     for flag in os.environ.get("XLA_FLAGS", "").split():  # XLA wants the autotune folder made
@@ -108,7 +108,7 @@ def one(args: argparse.Namespace) -> dict:
     cfg = run_config({"env": args.env, "agent": "hints", "scheme": "fc", "seeds": args.seeds,
                       "checkpoint_every": args.updates})
     keys = cfg.seed_keys()
-    compiled = run.compile_training(make_trainer(cfg), keys, args.updates)
+    compiled = compilation.compile_training(make_trainer(cfg), keys, args.updates)
     state = compiled.init(keys)
     n = np.int32(args.updates)
     state, _ = jax.block_until_ready(compiled.run_chunk(state, n))

@@ -65,8 +65,8 @@ def main() -> None:
         parser.exit(2, "error: --updates must be at least 1\n")
     import jax
 
-    from hintsjax import compilation_cache
-    from hintsjax.config import run_config
+    from hintsjax.system import compilation_cache
+    from hintsjax.settings.layers import run_config
     from bench import bench_train
 
     rows = []

@@ -16,7 +16,7 @@ ceiling, measured in this process (experiments/bench.py's `ceiling`). `--alone` 
 in its own program (as before groups) for comparison; `--keep` keeps the runs folder.
 
 `--cpu-updates N` instead times N updates of the table's biggest group (HINTS-FC with every hint,
-5 seeds) through run.train_group on the CPU, compiles apart, and reports its env steps/s beside
+5 seeds) through pipeline.train_group on the CPU, compiles apart, and reports its env steps/s beside
 the authors' PyTorch implementation's 45 env steps/s (SPEC.md: 2 CPU cores, its own settings).
 """
 
@@ -65,7 +65,7 @@ def table(env: str, seeds: int, alone: bool, workers: int, runs: Path, sweep_arg
     wall = time.perf_counter() - t
     results = [json.loads((runs / env / label / "eval.json").read_text()) for label in labels]
     env_steps = sum(r["env_steps"] * seeds for r in results)
-    from hintsjax.config import run_config
+    from hintsjax.settings.layers import run_config
 
     epochs = run_config({"env": env, "agent": "hints"}).ppo.epochs
     groups = {tuple(r.get("group", [r["label"]])) for r in results}
@@ -82,8 +82,8 @@ def table(env: str, seeds: int, alone: bool, workers: int, runs: Path, sweep_arg
 
 def cpu_rate(env: str, seeds: int, updates: int) -> dict:
     """Env steps/s of `updates` updates of the table's HINTS-FC group on this machine's CPU."""
-    from hintsjax import run
-    from hintsjax.config import run_config, save_run_config
+    from hintsjax.settings.layers import run_config, save_run_config
+    from hintsjax.training import pipeline
     from hintsjax.reproduce.sweep import run_values
 
     labels = [label for label in learner_rows(env) if label.startswith("hints-")]
@@ -96,7 +96,7 @@ def cpu_rate(env: str, seeds: int, updates: int) -> dict:
         for d, c in zip(dirs, cfgs):
             d.mkdir()
             save_run_config(d, c)
-        results = run.train_group(cfgs, Path(folder) / "group", dirs, progress=False)
+        results = pipeline.train_group(cfgs, Path(folder) / "group", dirs, progress=False)
     rate = results[0]["train_env_steps_per_s"] * len(cfgs)  # per member x members
     return {"env": env, "rows": labels, "seeds": seeds, "updates": updates, "platform": "cpu",
             "device": f"{os.cpu_count()} CPU cores", "env_steps_per_s": round(rate, 1),

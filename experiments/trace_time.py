@@ -16,10 +16,10 @@ import jax
 import numpy as np
 
 from hintsjax import envs
-from hintsjax.algorithms import make_trainer
-from hintsjax.config import run_config
-from hintsjax.env_defaults import ENV_DEFAULTS
-from hintsjax.evaluate import eval_keys, make_task_evaluator
+from hintsjax.settings.env_defaults import ENV_DEFAULTS
+from hintsjax.settings.layers import run_config
+from hintsjax.algorithms.registry import make_trainer
+from hintsjax.evaluation.evaluator import eval_keys, make_task_evaluator
 
 
 def trace_seconds(env: str, physics: str = envs.AUTO) -> tuple[float, float]:

@@ -5,9 +5,9 @@
 Run under `XLA_FLAGS=--xla_gpu_deterministic_ops=false` (hintsjax then adds its persisted
 autotune folder beside $HINTSJAX_COMPILATION_CACHE: give each trial an empty one). It trains the
 env's HINTS-FC cell (its default hint) with physics=warp for `--updates` updates through
-`run.main_from_values`, the command's own path, with `run.check_warp_run`'s refusal of this flag
+`run.main_from_values`, the command's own path, with `loop.check_warp_run`'s refusal of this flag
 set lifted, and the evaluation program compiled beside training (as before this script) or first
-(`run.evaluation_compiles_first`, what the command does now). It prints one JSON row: the exit
+(`pipeline.evaluation_compiles_first`, what the command does now). It prints one JSON row: the exit
 status, the training rate and compile seconds from eval.json, and the tail of what went wrong.
 """
 
@@ -32,11 +32,12 @@ def main() -> None:
     import jax
 
     import hintsjax
+    from hintsjax.settings.layers import run_config
+    from hintsjax.training import loop, pipeline
     from hintsjax import run
-    from hintsjax.config import run_config
 
-    run.check_warp_run = lambda: None  # the refusal under test
-    run.evaluation_compiles_first = lambda cfg: args.eval_compile == "first"
+    loop.check_warp_run = lambda: None  # the refusal under test
+    pipeline.evaluation_compiles_first = lambda cfg: args.eval_compile == "first"
     steps = args.updates * run_config({"env": args.env, "physics": "warp"}).ppo.batch_size
     with tempfile.TemporaryDirectory() as out:
         values = {"env": args.env, "agent": "hints", "scheme": "fc", "physics": "warp", "checkpoint_every": 50,

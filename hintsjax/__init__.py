@@ -13,16 +13,16 @@ if not (_here / "envs").is_dir() and (_here.parent / "envs" / "__init__.py").is_
 
 # XLA's flags, before anything starts JAX's backend: deterministic GPU ops (same seed, same
 # result), their autotuning persisted when the user turns them off, no deadlock on a CPU
-# (hintsjax/xla_flags.py).
-from hintsjax import xla_flags as _xla_flags  # noqa: E402  (after the envs path above)
+# (hintsjax/system/xla_flags.py).
+from hintsjax.system import xla_flags as _xla_flags  # noqa: E402  (after the envs path above)
 
 _xla_flags.set_defaults()
 deterministic_gpu_ops = _xla_flags.deterministic_gpu_ops
 
 
-# One run over several processes or hosts (hintsjax/devices.py): each process must join the
+# One run over several processes or hosts (hintsjax/system/devices.py): each process must join the
 # others before anything starts JAX's backend, as importing some of the package's modules does.
 if int(_os.environ.get("JAX_NUM_PROCESSES", "1") or 1) > 1 or int(_os.environ.get("SLURM_STEP_NUM_TASKS", "1") or 1) > 1:
-    from hintsjax.devices import join_processes as _join_processes
+    from hintsjax.system.devices import join_processes as _join_processes
 
     _join_processes()

@@ -3,7 +3,7 @@ subcommand per command module, each run exactly as `python -m hintsjax.<command>
 
 Each command takes the arguments its kind expects, and `--help` lists them:
   run                      Hydra's `key=value` overrides of conf/config.yaml (`-m` sweeps a comma list)
-  generator, rank          `key=value` settings of their own dataclass (hintsjax.arguments)
+  generator, rank          `key=value` settings of their own dataclass (hintsjax.cli.arguments)
   evaluate, video, expert, quickstart   a run folder and `--flags` (argparse), as tools on folders take
 """
 
@@ -14,7 +14,7 @@ import sys
 from dataclasses import dataclass
 
 from hintsjax.envs.errors import ChoiceError, choose
-from hintsjax.errors import UsageError, command
+from hintsjax.system.errors import UsageError, command
 
 PROG = "hintsjax"
 

@@ -20,11 +20,14 @@ from pathlib import Path
 
 import jax
 
-from hintsjax import checkpoint, compilation_cache, paths, run, video
-from hintsjax.algorithms import make_trainer
-from hintsjax.config import RunConfig, run_config, save_run_config
-from hintsjax.evaluate import eval_keys, evaluate_params
-from hintsjax.errors import ArgumentParser, command
+from hintsjax.system import checkpoint, compilation_cache, paths
+from hintsjax.system.errors import ArgumentParser, command
+from hintsjax.settings.config import RunConfig
+from hintsjax.settings.layers import run_config, save_run_config
+from hintsjax.algorithms.registry import make_trainer
+from hintsjax.evaluation import recording
+from hintsjax.evaluation.evaluator import eval_keys, evaluate_params
+from hintsjax.training import outputs, pipeline, runlog
 
 SETTINGS = {"env": "pendulum", "agent": "hints", "hint": "composite", "scheme": "fc", "seeds": 1, "eval_episodes": 20,
             "checkpoint_every": 10}
@@ -44,12 +47,12 @@ def swing_up_gif(cfg: RunConfig, run_dir: Path, candidates: int = 8) -> Path:
     state, _ = checkpoint.restore_latest(run_dir, make_trainer(cfg).abstract_state())
     params = jax.tree.map(lambda x: x[0], state.params)
     env = cfg.make_env()
-    steps = min(env.max_steps, video.MAX_STEPS)
+    steps = min(env.max_steps, recording.MAX_STEPS)
     key = eval_keys(cfg)[0]
-    episodes = [video.rollout(cfg, params, cfg.variant, steps, jax.random.fold_in(key, i)) for i in range(candidates)]
+    episodes = [recording.rollout(cfg, params, cfg.variant, steps, jax.random.fold_in(key, i)) for i in range(candidates)]
     episode = min(episodes, key=lambda e: float(e.rewards[0])).cut()
     out = run_dir / "swing-up.gif"
-    video.write_gif(video.compose_frames(episode, video.hint_labels(env.hint), 4, env.max_steps), out, 25)
+    recording.write_gif(recording.compose_frames(episode, recording.hint_labels(env.hint), 4, env.max_steps), out, 25)
     print(f"{out}: {int(episode.valid.sum())} frames, return {float(episode.rewards.sum()):.2f}")
     return out
 
@@ -66,9 +69,9 @@ def main(argv: list[str] | None = None) -> int:
     t = time.perf_counter()
     cfg = run_config({**SETTINGS, "ppo": {"total_env_steps": 1024 * args.updates}})
     compilation_cache.enable(compilation_cache.folder(True))
-    run_dir = run.new_run_dir(str(args.out_dir), f"quickstart-{time.strftime('%Y%m%d-%H%M%S')}", cfg)
+    run_dir = outputs.new_run_dir(str(args.out_dir), f"quickstart-{time.strftime('%Y%m%d-%H%M%S')}", cfg)
     save_run_config(run_dir, cfg)
-    trained = run.train(cfg, run_dir)["evaluations"][0]
+    trained = pipeline.train(cfg, run_dir)["evaluations"][0]
     baseline = random_policy(cfg, cfg.variant)
     (run_dir / BASELINE_JSON).write_text(json.dumps(baseline, indent=1))
     gif = swing_up_gif(cfg, run_dir)
@@ -77,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{trained['mean']:8.1f} +- {trained['std']:.1f}\n"
           f"  random policy (the agent before training, sampling its actions): "
           f"{baseline['mean']:8.1f} +- {baseline['std']:.1f}\n"
-          f"run folder:     {run_dir}\nlearning curve: {run_dir / run.CURVE_PNG}\none episode:    {gif}")
+          f"run folder:     {run_dir}\nlearning curve: {run_dir / runlog.CURVE_PNG}\none episode:    {gif}")
     return 0
 
 

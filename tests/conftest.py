@@ -1,6 +1,6 @@
 """Settings for the whole test suite.
 
-The traced-program cache (hintsjax/program_cache.py) is off: several tests replace a function at
+The traced-program cache (hintsjax/system/program_cache.py) is off: several tests replace a function at
 run time (a poisoned trainer, a patched env metric), which no key of that cache can see, and a
 test must never run a program traced for another test. tests/test_program_cache.py turns it on
 in folders of its own. Subprocesses that the tests start inherit the setting.
@@ -11,7 +11,7 @@ one-line report (tests/test_cli.py turns it off to test that report).
 
 import os
 
-from hintsjax import errors, program_cache
+from hintsjax.system import errors, program_cache
 
 os.environ[program_cache.ENV_VAR] = "off"
 os.environ[errors.DEBUG] = "1"

@@ -16,8 +16,8 @@ import jax.numpy as jnp
 from flax import struct
 
 from hintsjax import envs
-from hintsjax.env_defaults import ENV_DEFAULTS
 from hintsjax.envs.core import Env, Step
+from hintsjax.settings.env_defaults import ENV_DEFAULTS
 
 NAME = "countdown"
 MAX_LENGTH = 15

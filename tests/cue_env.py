@@ -9,7 +9,7 @@ blind to the hint can do is the constant action a = 0, whose expected return is 
 that reads the hint can reach 0.
 
 Importing this module registers the env (`envs.REGISTRY["cue"]`), its hint and its defaults
-(`hintsjax.env_defaults.ENV_DEFAULTS["cue"]`), so `run_config({"env": "cue", ...})` works.
+(`hintsjax.settings.env_defaults.ENV_DEFAULTS["cue"]`), so `run_config({"env": "cue", ...})` works.
 """
 
 from __future__ import annotations
@@ -19,9 +19,9 @@ import jax.numpy as jnp
 from flax import struct
 
 from hintsjax import envs
-from hintsjax.env_defaults import ENV_DEFAULTS
 from hintsjax.envs.core import Env, Step
 from hintsjax.envs.hints import register_hint
+from hintsjax.settings.env_defaults import ENV_DEFAULTS
 
 NAME = "cue"
 GREY = 128

@@ -16,9 +16,9 @@ import jax.numpy as jnp
 from flax import struct
 
 from hintsjax import envs
-from hintsjax.env_defaults import ENV_DEFAULTS
 from hintsjax.envs.core import Env, Step
 from hintsjax.envs.hints import register_hint
+from hintsjax.settings.env_defaults import ENV_DEFAULTS
 
 NAME = "dot"
 

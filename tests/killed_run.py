@@ -20,7 +20,9 @@ import signal
 import sys
 from pathlib import Path
 
-from hintsjax import checkpoint, run
+from hintsjax.system import checkpoint
+from hintsjax import run
+from hintsjax.training import loop, pipeline
 
 
 def main() -> None:
@@ -37,9 +39,9 @@ def main() -> None:
             os.kill(os.getpid(), signal.SIGKILL)
 
     if mode == "interrupt":
-        real_check, checks = run.check_physics, []
+        real_check, checks = loop.check_physics, []
 
-        def check_then_interrupt(*args):  # run.advance's report calls it once a chunk's metrics are logged
+        def check_then_interrupt(*args):  # loop.advance's report calls it once a chunk's metrics are logged
             real_check(*args)
             checks.append(1)
             if len(checks) == 1:
@@ -48,13 +50,13 @@ def main() -> None:
                 # past this report (or inside orbax's asyncio loop, which takes SIGINT for itself)
                 signal.raise_signal(signal.SIGINT)
 
-        run.check_physics = check_then_interrupt
+        loop.check_physics = check_then_interrupt
         sys.exit(run.main_from_values(json.loads(sys.argv[2])))
     checkpoint.save = save_then_die
     if mode == "group":
         from test_group import killed_group
 
-        run.train_group(*killed_group(Path(sys.argv[2])), progress=False)
+        pipeline.train_group(*killed_group(Path(sys.argv[2])), progress=False)
     else:
         run.main_from_values(json.loads(sys.argv[2]))
     sys.exit("the run ended without being killed")

@@ -16,8 +16,8 @@ from pathlib import Path
 import jax
 
 import linear_env  # noqa: F401  (registers the test env "linear")
-from hintsjax import run
-from hintsjax.config import run_config, save_run_config
+from hintsjax.settings.layers import run_config, save_run_config
+from hintsjax.training import pipeline
 
 TINY_PPO = {"total_env_steps": 320, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}
 
@@ -32,13 +32,13 @@ def main() -> None:
     cfg = run_config(values("ppo_state"))
     (out / "alone").mkdir(parents=True)
     save_run_config(out / "alone", cfg)
-    alone = run.train(cfg, out / "alone", progress=False)
+    alone = pipeline.train(cfg, out / "alone", progress=False)
     cfgs = [run_config(values(agent)) for agent in ("ppo_state", "ppo_noisy_state")]
     dirs = [out / "group" / c.label for c in cfgs]
     for d, c in zip(dirs, cfgs):
         d.mkdir(parents=True)
         save_run_config(d, c)
-    group = run.train_group(cfgs, out / "group" / "_group", dirs, progress=False)
+    group = pipeline.train_group(cfgs, out / "group" / "_group", dirs, progress=False)
     print(json.dumps({"devices": len(jax.devices()), "alone": alone["evaluations"][0]["seed_means"],
                       "group": [r["evaluations"][0]["seed_means"] for r in group]}))
 

@@ -1,5 +1,5 @@
 """One process of a tiny run, for tests/test_devices.py: alone, or one of several processes
-that JAX's multi-controller runtime joins into one run (hintsjax.devices.join_processes).
+that JAX's multi-controller runtime joins into one run (hintsjax.system.devices.join_processes).
 
     JAX_NUM_PROCESSES=2 JAX_PROCESS_ID=0 JAX_COORDINATOR_ADDRESS=localhost:1234 \\
         XLA_FLAGS=--xla_force_host_platform_device_count=2 python tests/process_run.py <out_dir> [--resume]

@@ -14,9 +14,13 @@ import numpy as np
 import pytest
 import yaml
 
-from hintsjax import checkpoint, command_line, run
-from hintsjax.algorithms import make_trainer
-from hintsjax.errors import UsageError
+from hintsjax.system import checkpoint, errors
+from hintsjax.system.errors import UsageError
+from hintsjax.settings import layers
+from hintsjax.cli import overrides
+from hintsjax.algorithms.registry import make_trainer
+from hintsjax.training import loop, pipeline, request
+from hintsjax import run
 from hintsjax.evaluate import main as evaluate_main
 
 TINY = [
@@ -67,10 +71,10 @@ BAD_SETTINGS = BAD["run_settings"]
 def test_names_and_folders_are_strings_whatever_yaml_makes_of_them():
     """`name=2024`, `name=true`, `out_dir=123`, `resume=42` as Hydra parses them (int, bool) are
     folder names; one variant alone is a list of one."""
-    assert run.places({"name": 2024, "out_dir": 123, "resume": 42}) == ("42", "123", "2024")
-    assert run.places({"name": True}) == (None, "runs", "true")
-    assert run.places({}) == (None, "runs", None)
-    from hintsjax.config import run_config
+    assert request.places({"name": 2024, "out_dir": 123, "resume": 42}) == ("42", "123", "2024")
+    assert request.places({"name": True}) == (None, "runs", "true")
+    assert request.places({}) == (None, "runs", None)
+    from hintsjax.settings.layers import run_config
 
     assert run_config({"env": "pendulum", "eval_variants": "swingto"}).eval_variants == ("swingto",)
     assert run_config({"env": "pendulum", "ppo": {"hidden": [64]}}).ppo.hidden == (64,)
@@ -134,7 +138,7 @@ def finished_run(tmp_path_factory) -> Path:
 
 def state_arrays(run_dir: Path) -> list[np.ndarray]:
     """Every array of a run's newest checkpoint (params, optimiser state, env state, key, update)."""
-    state, _ = checkpoint.restore_latest(run_dir, make_trainer(run.load_run_config(run_dir)).abstract_state())
+    state, _ = checkpoint.restore_latest(run_dir, make_trainer(layers.load_run_config(run_dir)).abstract_state())
     return [np.asarray(jax.random.key_data(x) if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key) else x)
             for x in jax.tree.leaves(state)]
 
@@ -176,7 +180,7 @@ def test_ctrl_c_saves_the_due_checkpoint_says_how_to_go_on_and_resumes_bit_for_b
     out = subprocess.run([sys.executable, str(Path(__file__).parent / "killed_run.py"), "interrupt", json.dumps(values)],
                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
     folder = tmp_path / "interrupted"
-    assert out.returncode == run.INTERRUPTED == 130, out.stderr[-2000:]
+    assert out.returncode == errors.INTERRUPTED == 130, out.stderr[-2000:]
     assert "Traceback" not in out.stderr + out.stdout
     assert out.stderr.strip().splitlines()[-1] == (f"interrupted; checkpoint at update 2; "
                                                    f"go on with: python -m hintsjax.run resume={folder}")
@@ -189,24 +193,25 @@ def test_ctrl_c_saves_the_due_checkpoint_says_how_to_go_on_and_resumes_bit_for_b
 
 
 def test_a_sweep_is_expanded_in_hydras_order_with_every_value_checked_first():
-    jobs = command_line.sweep_jobs(["-m", "seeds=1,2", "scheme=lc,fc", "ppo.num_envs=4", "hydra/launcher=basic"])
+    jobs = overrides.sweep_jobs(["-m", "seeds=1,2", "scheme=lc,fc", "ppo.num_envs=4", "hydra/launcher=basic"])
     assert [label for label, _ in jobs] == ["seeds=1 scheme=lc", "seeds=1 scheme=fc", "seeds=2 scheme=lc", "seeds=2 scheme=fc"]
     values = jobs[3][1]
     assert values["seeds"] == 2 and values["scheme"] == "fc" and values["ppo"]["num_envs"] == 4
-    assert values["env"] == command_line.defaults()["env"] and values["ppo"]["epochs"] == command_line.defaults()["ppo"]["epochs"]
-    assert command_line.sweep_jobs(["seeds=1"]) == []  # not a sweep
+    assert values["env"] == overrides.defaults()["env"] and values["ppo"]["epochs"] == overrides.defaults()["ppo"]["epochs"]
+    assert overrides.sweep_jobs(["seeds=1"]) == []  # not a sweep
     seen = []
-    command_line.check_sweep(["-m", "seed=0,1"], lambda v: seen.append(v["seed"]))
+    overrides.check_sweep(["-m", "seed=0,1"], lambda v: seen.append(v["seed"]))
     assert seen == [0, 1]
     with pytest.raises(UsageError, match="sweep job 'seed=1': no"):
-        command_line.check_sweep(["-m", "seed=0,1"], lambda v: (_ for _ in ()).throw(UsageError("no")) if v["seed"] else None)
+        overrides.check_sweep(["-m", "seed=0,1"], lambda v: (_ for _ in ()).throw(UsageError("no")) if v["seed"] else None)
 
 
 def test_a_bug_is_one_line_saying_so_with_its_traceback_kept(monkeypatch, tmp_path, capsys):
     """Anything but bad input that escapes a command is a bug in hintsjax: one line saying so and
     where its traceback went (the run folder, for a run), exit 1; with HINTSJAX_DEBUG set, Python's
     own traceback instead. argparse's usage errors are one line too."""
-    from hintsjax import evaluate, errors
+    from hintsjax.system import errors
+    from hintsjax import evaluate
 
     monkeypatch.delenv(errors.DEBUG)
 
@@ -280,7 +285,7 @@ def test_a_saved_config_reads_back_as_trained_whatever_todays_env_defaults(tmp_p
     # without the stop (null in its config.yaml) must read back without it, not with today's default.
     from dataclasses import replace
 
-    from hintsjax.config import load_run_config, run_config, save_run_config
+    from hintsjax.settings.layers import load_run_config, run_config, save_run_config
 
     assert run_config({"env": "ant", "agent": "hints"}).ppo.target_kl == 0.05
     assert run_config({"env": "ant", "agent": "expert_ppo"}).ppo.target_kl is None
@@ -299,7 +304,7 @@ def test_checkpoint_seconds_spaces_the_checkpoints_and_keeps_the_last(tmp_path, 
     monkeypatch.setattr(checkpoint, "save", lambda run_dir, state, update: (saved.append(update), real_save(run_dir, state, update)))
     assert run.main_from_values(tiny_values(out_dir=str(tmp_path), name="spaced", checkpoint_seconds=1e9)) == 0
     assert saved == [4]
-    assert json.loads((tmp_path / "spaced" / run.SECONDS_JSON).read_text())["update"] == 4
+    assert json.loads((tmp_path / "spaced" / loop.SECONDS_JSON).read_text())["update"] == 4
     assert len((tmp_path / "spaced" / "metrics.csv").read_text().strip().splitlines()) == 1 + 4 * 2
     assert run.main_from_values(tiny_values(out_dir=str(tmp_path), name="bad", checkpoint_seconds=-1)) == 2
     assert not (tmp_path / "bad").exists()
@@ -314,13 +319,13 @@ def test_interrupted_then_resumed_run_ends_where_the_uninterrupted_one_ends(fini
         raise KeyboardInterrupt  # the process dies right after its first checkpoint
 
     monkeypatch.setattr(checkpoint, "save", save_then_crash)
-    assert run.main_from_values(dict(values)) == run.INTERRUPTED  # the interrupt is one line and exit 130
+    assert run.main_from_values(dict(values)) == errors.INTERRUPTED  # the interrupt is one line and exit 130
     monkeypatch.setattr(checkpoint, "save", real_save)
     interrupted = tmp_path / "interrupted"
     assert checkpoint.latest_update(interrupted) == 2
 
     assert run.main_from_values({"resume": str(interrupted)}) == 0
-    cfg = run.load_run_config(interrupted)
+    cfg = layers.load_run_config(interrupted)
     resumed, step = checkpoint.restore_latest(interrupted, make_trainer(cfg).abstract_state())
     full, full_step = checkpoint.restore_latest(finished_run, make_trainer(cfg).abstract_state())
     assert step == full_step == 4
@@ -401,17 +406,18 @@ def test_a_checkpoint_saved_on_another_device_restores_here(finished_run, tmp_pa
     shutil.rmtree(copy / "checkpoints")
     script = (  # a second CPU device stands in for a device this process lacks
         "import sys, jax\n"
-        "from hintsjax import checkpoint, run\n"
-        "from hintsjax.algorithms import make_trainer\n"
+        "from hintsjax.system import checkpoint\n"
+        "from hintsjax.settings import layers\n"
+        "from hintsjax.algorithms.registry import make_trainer\n"
         f"src, dest = {str(finished_run)!r}, {str(copy)!r}\n"
-        "state, update = checkpoint.restore_latest(src, make_trainer(run.load_run_config(src)).abstract_state())\n"
+        "state, update = checkpoint.restore_latest(src, make_trainer(layers.load_run_config(src)).abstract_state())\n"
         "checkpoint.save(dest, jax.device_put(state, jax.devices()[1]), update)\n"
     )
     env = {**os.environ, "JAX_PLATFORMS": "cpu", "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
     out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     assert len(jax.devices()) == 1
-    cfg = run.load_run_config(finished_run)
+    cfg = layers.load_run_config(finished_run)
     moved, update = checkpoint.restore_latest(copy, make_trainer(cfg).abstract_state())
     original, _ = checkpoint.restore_latest(finished_run, make_trainer(cfg).abstract_state())
     assert update == 4
@@ -431,7 +437,7 @@ def test_mismatched_checkpoint_is_refused(finished_run, tmp_path):
     before = sorted(p.name for p in copy.rglob("*"))
     # Refused from the stored shapes, before any array is read.
     with pytest.raises(UsageError, match=r"does not match its config.yaml: its \d+ arrays differ in shape"):
-        checkpoint.restore_latest(copy, make_trainer(run.load_run_config(copy)).abstract_state())
+        checkpoint.restore_latest(copy, make_trainer(layers.load_run_config(copy)).abstract_state())
     assert sorted(p.name for p in copy.rglob("*")) == before  # nothing written or removed
 
 
@@ -469,7 +475,7 @@ def test_a_garbage_metrics_file_is_one_line_and_kept(garbage, finished_run, tmp_
     (copy / "eval.json").unlink()
     (copy / "metrics.csv").write_bytes(garbage)
     with pytest.raises(UsageError, match="metrics.csv is not a metrics file of this run"):
-        run.train(run.load_run_config(copy), copy, resume=True, progress=False)
+        pipeline.train(layers.load_run_config(copy), copy, resume=True, progress=False)
     assert (copy / "metrics.csv").read_bytes() == garbage
 
 
@@ -478,7 +484,7 @@ def test_a_config_that_is_not_utf8_is_one_line(finished_run, tmp_path):
     shutil.copytree(finished_run, copy)
     (copy / "config.yaml").write_bytes((copy / "config.yaml").read_bytes() + b"# \xe9t\xe9\n")
     with pytest.raises(UsageError, match="cannot read .*config.yaml: UnicodeDecodeError"):
-        run.load_run_config(copy)
+        layers.load_run_config(copy)
 
 
 def test_a_resumed_run_trains_longer_to_the_longer_runs_end_bit_for_bit(finished_run, tmp_path):
@@ -493,7 +499,7 @@ def test_a_resumed_run_trains_longer_to_the_longer_runs_end_bit_for_bit(finished
         "error: a resumed run can train longer, not shorter: ppo.total_env_steps must be at least 128 (its budget), got 64"]
     longer = cli(f"resume={short}", "ppo.total_env_steps=256", cwd=tmp_path)
     assert longer.returncode == 0, longer.stderr[-2000:]
-    assert run.load_run_config(short) == run.load_run_config(finished_run)
+    assert layers.load_run_config(short) == layers.load_run_config(finished_run)
     for a, b in zip(state_arrays(short), state_arrays(finished_run), strict=True):
         np.testing.assert_array_equal(a, b)
     assert logged_returns(short) == logged_returns(finished_run)
@@ -515,7 +521,7 @@ def test_a_config_that_lacks_a_setting_is_not_resumed(cut, finished_run, tmp_pat
     assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1, out.stderr
     assert "lacks " + (cut if cut != "gail" else "gail.") in out.stderr
     assert sorted(p.relative_to(copy) for p in copy.rglob("*")) == before
-    assert run.load_run_config(copy).env == "pendulum"  # reports still read it
+    assert layers.load_run_config(copy).env == "pendulum"  # reports still read it
 
 
 def test_seeds_sharded_over_two_devices_give_the_single_device_result(finished_run, tmp_path):
@@ -532,9 +538,9 @@ def test_seeds_sharded_over_two_devices_give_the_single_device_result(finished_r
 
 
 def test_a_launcher_whose_plugin_is_missing_is_one_line(monkeypatch):
-    monkeypatch.setitem(command_line.LAUNCHERS, "submitit_slurm", "hydra_plugins.no_such_launcher")
+    monkeypatch.setitem(overrides.LAUNCHERS, "submitit_slurm", "hydra_plugins.no_such_launcher")
     with pytest.raises(UsageError, match=r"hydra/launcher=submitit_slurm needs hydra-submitit-launcher: pip install -e '\.\[cluster\]'"):
-        command_line.check_overrides(["-m", "hydra/launcher=submitit_slurm", "scheme=lc,fc"])
+        overrides.check_overrides(["-m", "hydra/launcher=submitit_slurm", "scheme=lc,fc"])
 
 
 def test_a_sweep_runs_through_hydras_submitit_launcher(tmp_path):
@@ -594,7 +600,7 @@ def test_a_built_wheel_runs_from_the_checkout_root_and_from_elsewhere(where, tmp
 
 def test_a_built_wheels_experts_restore_and_hold_only_what_a_restore_reads(tmp_path_factory):
     """The wheel's package data holds every packaged expert, which restores from the installed copy,
-    and none of orbax's notes of the machine that wrote it (hintsjax/expert.py MACHINE_FILES)."""
+    and none of orbax's notes of the machine that wrote it (hintsjax/algorithms/experts.py MACHINE_FILES)."""
     target = wheel_install(tmp_path_factory)
     installed = target / "hintsjax" / "experts"
     assert sorted(p.name for p in installed.iterdir() if (p / "expert.json").is_file()) == sorted(
@@ -602,7 +608,7 @@ def test_a_built_wheels_experts_restore_and_hold_only_what_a_restore_reads(tmp_p
     assert [p for p in installed.rglob("*") if p.name in ("commit_success.txt", "_sharding")] == []
     entry_points = "".join(p.read_text() for p in target.glob("hintsjax-*.dist-info/entry_points.txt"))
     assert "[console_scripts]\nhintsjax = hintsjax.console:main" in entry_points
-    script = ("import hintsjax.expert as x, jax; assert x.__file__.startswith(%r), x.__file__\n"
+    script = ("import hintsjax.algorithms.experts as x, jax; assert x.__file__.startswith(%r), x.__file__\n"
               "for env in x.packaged(): assert jax.numpy.isfinite(x.load(env).log_std).all(), env\n"
               "print(len(x.packaged()))" % str(target))
     out = subprocess.run([sys.executable, "-c", script], cwd=tmp_path_factory.mktemp("elsewhere"),
@@ -635,7 +641,7 @@ def test_each_env_carries_its_training_defaults_beside_it(name):
     """An env's defaults live in its module (`TRAINING`, the registry's `training`);
     ENV_DEFAULTS is built from them, with the references' per-agent layers."""
     from hintsjax import envs
-    from hintsjax.env_defaults import ENV_DEFAULTS
+    from hintsjax.settings.env_defaults import ENV_DEFAULTS
 
     training = envs.REGISTRY[name].training
     assert training["hint"] in envs.hint_names(name)

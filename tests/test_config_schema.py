@@ -2,8 +2,8 @@
 fields (RunConfig and its sections), each with no default of its own or the dataclass's, so every
 setting can be given on the command line and the command line resolves what `run_config` does.
 
-Which default wins, later winning: the dataclass's (hintsjax/config.py, hintsjax/algorithm_settings.py),
-the env's (`TRAINING` beside it, envs/<env>.py, read into hintsjax.env_defaults.ENV_DEFAULTS), the
+Which default wins, later winning: the dataclass's (hintsjax/settings/config.py, hintsjax/settings/algorithm_settings.py),
+the env's (`TRAINING` beside it, envs/<env>.py, read into hintsjax.settings.env_defaults.ENV_DEFAULTS), the
 env's for the agent (its `learners` and `references`), then the command line. config.yaml's null
 gives no value, so the layers below decide: ppo.num_envs is 16 (PPOConfig) unless the env sets
 its own (256 for ant's learners, 1024 for its references)."""
@@ -13,11 +13,13 @@ from __future__ import annotations
 import pytest
 from test_cli import SHIPPED_ENVS
 
-from hintsjax import command_line, run
-from hintsjax.agents import AGENTS
-from hintsjax.config import SECTIONS, RunConfig, run_config, to_dict
-from hintsjax.env_defaults import ENV_DEFAULTS
-from hintsjax.errors import UsageError
+from hintsjax.system.errors import UsageError
+from hintsjax.models.agents import AGENTS
+from hintsjax.settings.config import RunConfig, SECTIONS
+from hintsjax.settings.env_defaults import ENV_DEFAULTS
+from hintsjax.settings.layers import run_config, to_dict
+from hintsjax.cli import overrides
+from hintsjax.training import request
 
 RUN_ONLY = {"out_dir", "name", "resume", "compilation_cache"}  # the command's own keys, not a RunConfig's
 
@@ -32,7 +34,7 @@ def schema_defaults() -> dict[str, object]:
 
 def yaml_values() -> dict[str, object]:
     """config.yaml's keys (section.key for a section's) and their values."""
-    conf = command_line.defaults()
+    conf = overrides.defaults()
     flat = {k: v for k, v in conf.items() if not isinstance(v, dict)}
     flat.update({f"{name}.{k}": v for name, section in conf.items() if isinstance(section, dict) for k, v in section.items()})
     return flat
@@ -52,7 +54,7 @@ def test_config_yaml_holds_every_setting_with_no_default_or_the_dataclasses():
     schema = schema_defaults()
     assert {"ppo.starts_per_rollout", "ppo.num_envs", "gail.grad_penalty", "warp_capacity"} <= set(schema)
     assert mismatches(schema, yaml_values()) == []
-    assert set(command_line.config_keys()) - set(RUN_ONLY) - set(SECTIONS) == set(schema)
+    assert set(overrides.config_keys()) - set(RUN_ONLY) - set(SECTIONS) == set(schema)
 
 
 def test_a_drifted_config_yaml_is_caught():
@@ -80,12 +82,12 @@ def test_no_env_sets_a_key_that_config_yaml_gives_a_value(env):
 
 @pytest.mark.parametrize("env", SHIPPED_ENVS)
 def test_the_command_line_resolves_every_agent_as_run_config_does(env):
-    """What `run.request` makes of Hydra's values for a new run (its own keys taken out first; the
+    """What `request.request` makes of Hydra's values for a new run (its own keys taken out first; the
     packaged expert it then looks for is not there for every env, e.g. ant_fast)."""
     for agent in AGENTS:
-        values = {**command_line.defaults(), "env": env, "agent": agent}
+        values = {**overrides.defaults(), "env": env, "agent": agent}
         values.pop("compilation_cache")
-        run.places(values)
+        request.places(values)
         assert run_config(values) == run_config({"env": env, "agent": agent}), agent
 
 
@@ -94,9 +96,9 @@ def test_every_setting_can_be_given_on_the_command_line():
     for ppo.starts_per_rollout reaches the run's config (it was once refused as unknown)."""
     for key, value in schema_defaults().items():
         text = "null" if value is None else str(value).lower() if isinstance(value, bool) else str(value).replace(" ", "")
-        command_line.check_overrides([f"{key}={text}"])
-    asked = run.request({**command_line.defaults(), "ppo": {**command_line.defaults()["ppo"], "starts_per_rollout": True}})
+        overrides.check_overrides([f"{key}={text}"])
+    asked = request.request({**overrides.defaults(), "ppo": {**overrides.defaults()["ppo"], "starts_per_rollout": True}})
     assert asked.cfg.ppo.starts_per_rollout and not run_config({}).ppo.starts_per_rollout
     with pytest.raises(UsageError, match="starts_per_rollout must be bool, got 2"):
-        run.request({**command_line.defaults(), "ppo": {"starts_per_rollout": 2}})
+        request.request({**overrides.defaults(), "ppo": {"starts_per_rollout": 2}})
 

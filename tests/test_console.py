@@ -12,10 +12,11 @@ from pathlib import Path
 import pytest
 from test_cli import SHIPPED_ENVS
 
-from hintsjax import choices, console, envs
-from hintsjax.agents import AGENTS
-from hintsjax.conditioning import SCHEMES
-from hintsjax.env_defaults import ENV_DEFAULTS
+from hintsjax.models.agents import AGENTS
+from hintsjax.models.conditioning import SCHEMES
+from hintsjax.settings.env_defaults import ENV_DEFAULTS
+from hintsjax.cli import choices
+from hintsjax import console, envs
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -1,4 +1,4 @@
-"""No deadlock on a CPU (hintsjax/xla_flags.py).
+"""No deadlock on a CPU (hintsjax/system/xla_flags.py).
 
 jaxlib's batched LAPACK kernels split their batch over XLA's CPU thread pool and wait for the
 pieces; when XLA's concurrency-optimised schedule runs two of them side by side on a 2-core

@@ -1,4 +1,4 @@
-"""A run's seeds over several devices (hintsjax/devices.py), on CPU devices that XLA splits
+"""A run's seeds over several devices (hintsjax/system/devices.py), on CPU devices that XLA splits
 the host into: any seed count spreads (the padding is dropped from every result), the numbers
 match one device's to float32 rounding, and a checkpoint written on 4 devices resumes on 1.
 One run over two processes (JAX's multi-controller runtime, CPU collectives through gloo)
@@ -18,10 +18,12 @@ import numpy as np
 import pytest
 
 import linear_env  # noqa: F401  (registers the test env "linear")
-from hintsjax import checkpoint, run
-from hintsjax.algorithms import make_trainer
-from hintsjax.config import load_run_config
-from hintsjax.devices import SeedLayout
+from hintsjax.system import checkpoint
+from hintsjax.system.devices import SeedLayout
+from hintsjax.settings.layers import load_run_config
+from hintsjax.algorithms.registry import make_trainer
+from hintsjax.training import loop, pipeline
+from hintsjax import run
 
 HERE = Path(__file__).parent
 
@@ -123,15 +125,15 @@ def test_physics_warp_stays_on_one_device_and_in_one_process(monkeypatch):
     world), so a Warp run keeps to this process's first device, and several processes are refused."""
     import jax
 
-    from hintsjax.config import run_config
-    from hintsjax.errors import UsageError
+    from hintsjax.system.errors import UsageError
+    from hintsjax.settings.layers import run_config
 
     cfg = run_config({"env": "ant", "physics": "warp"})
-    assert run.seed_layout(cfg).devices == tuple(jax.local_devices()[:1])
-    assert run.seed_layout(run_config({"env": "ant", "physics": "jax"})).devices == tuple(jax.devices())
+    assert loop.seed_layout(cfg).devices == tuple(jax.local_devices()[:1])
+    assert loop.seed_layout(run_config({"env": "ant", "physics": "jax"})).devices == tuple(jax.devices())
     monkeypatch.setattr(jax, "process_count", lambda: 2)
     with pytest.raises(UsageError, match="physics=warp runs in one process"):
-        run.seed_layout(cfg)
+        loop.seed_layout(cfg)
 
 
 def test_under_warp_the_evaluation_compiles_before_training_not_beside_it(monkeypatch, tmp_path):
@@ -142,11 +144,11 @@ def test_under_warp_the_evaluation_compiles_before_training_not_beside_it(monkey
     while the compile runs (which waits until training has started)."""
     import threading
 
-    from hintsjax.config import run_config
+    from hintsjax.settings.layers import run_config
 
-    assert run.evaluation_compiles_first(run_config({"env": "ant", "physics": "warp"}))
-    assert not run.evaluation_compiles_first(run_config({"env": "ant", "physics": "jax"}))
-    compile_evaluator, advance = run.compile_evaluator, run.advance
+    assert pipeline.evaluation_compiles_first(run_config({"env": "ant", "physics": "warp"}))
+    assert not pipeline.evaluation_compiles_first(run_config({"env": "ant", "physics": "jax"}))
+    compile_evaluator, advance = pipeline.compile_evaluator, pipeline.advance
     for first in (True, False):
         events, training = [], threading.Event()
 
@@ -162,9 +164,9 @@ def test_under_warp_the_evaluation_compiles_before_training_not_beside_it(monkey
             training.set()
             return advance(*args, **kwargs)
 
-        monkeypatch.setattr(run, "compile_evaluator", compiled)
-        monkeypatch.setattr(run, "advance", advanced)
-        monkeypatch.setattr(run, "evaluation_compiles_first", lambda cfg: first)
+        monkeypatch.setattr(pipeline, "compile_evaluator", compiled)
+        monkeypatch.setattr(pipeline, "advance", advanced)
+        monkeypatch.setattr(pipeline, "evaluation_compiles_first", lambda cfg: first)
         values = {"env": "linear", "agent": "ppo_state", "seeds": 2, "eval_episodes": 2, "checkpoint_every": 2,
                   "ppo": {"total_env_steps": 128, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1},
                   "out_dir": str(tmp_path), "name": f"first-{first}"}

@@ -33,10 +33,10 @@ def test_every_envs_resolved_configuration_matches_the_snapshot():
     """The resolved config of every shipped env x agent, as `python -m hintsjax.run env=E agent=A`
     resolves it, equals the stored snapshot (tests/data/resolved_configs.json). A deliberate change
     of defaults regenerates it (`python tests/test_docs.py`) and says so in its commit."""
-    from hintsjax import config
+    from hintsjax.settings import layers
 
     snapshot = json.loads(SNAPSHOT.read_text())
-    resolved = {key: config.to_dict(config.run_config(dict(zip(("env", "agent"), key.split("/"))))) for key in snapshot}
+    resolved = {key: layers.to_dict(layers.run_config(dict(zip(("env", "agent"), key.split("/"))))) for key in snapshot}
     assert json.loads(json.dumps(resolved, sort_keys=True)) == snapshot
 
 
@@ -44,10 +44,10 @@ def write_snapshot() -> None:
     """Regenerate the snapshot: `python tests/test_docs.py` (after a deliberate change of defaults)."""
     from test_cli import SHIPPED_ENVS
 
-    from hintsjax import config
-    from hintsjax.agents import AGENTS
+    from hintsjax.models.agents import AGENTS
+    from hintsjax.settings import layers
 
-    resolved = {f"{e}/{a}": config.to_dict(config.run_config({"env": e, "agent": a})) for e in SHIPPED_ENVS for a in AGENTS}
+    resolved = {f"{e}/{a}": layers.to_dict(layers.run_config({"env": e, "agent": a})) for e in SHIPPED_ENVS for a in AGENTS}
     SNAPSHOT.write_text(json.dumps(resolved, indent=1, sort_keys=True) + "\n")
 
 

@@ -6,10 +6,10 @@ import jax
 import numpy as np
 
 import countdown_env  # registers the "countdown" env (tests/ is on pytest's path: its rootdir conftest)
-from hintsjax.config import run_config
 from hintsjax.envs.core import Env
-from hintsjax.evaluate import eval_keys, make_evaluator, summarize
-from hintsjax.ppo import make_network
+from hintsjax.settings.layers import run_config
+from hintsjax.algorithms.ppo import make_network
+from hintsjax.evaluation.evaluator import eval_keys, make_evaluator, summarize
 
 # summarize's keys for an env without metrics (what eval.json held before env metrics existed)
 PLAIN_KEYS = ["mean", "std", "seed_means", "seed_std", "seeds", "episodes_per_seed", "mean_length", "returns"]

@@ -1,4 +1,4 @@
-"""The learned hint generator (hintsjax.generator, read by hintsjax.hint_sources): it learns a hint that the picture determines,
+"""The learned hint generator (hintsjax.generator, read by hintsjax.settings.hint_sources): it learns a hint that the picture determines,
 its training is the same vmapped as looped, the env that carries its pictures keeps the task's
 dynamics, and an agent given `hint_source` sees the generator's hint and nothing else."""
 
@@ -16,9 +16,12 @@ import pytest
 
 import cue_env  # noqa: F401  (registers the test env "cue")
 import dot_env  # noqa: F401  (registers the test env "dot": the hint is the dot's position in the picture)
-from hintsjax import envs, evaluate, generator, hint_sources, ppo, run
-from hintsjax.config import run_config
-from hintsjax.errors import UsageError
+from hintsjax.system.errors import UsageError
+from hintsjax.settings import hint_sources
+from hintsjax.settings.layers import run_config
+from hintsjax.algorithms import ppo
+from hintsjax.hints import generators
+from hintsjax import envs, evaluate, generator, run
 
 TINY = dict(env="dot", hint="position", num_envs=4, steps=16, held_out_envs=2, epochs=2, minibatch_size=16, hidden=16)
 TINY_PPO = {"total_env_steps": 2 * 64, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}
@@ -26,18 +29,18 @@ CONSTANT = 7.0  # the crafted generator's output: the dot's true position is in 
 
 
 def test_generator_reads_the_dot_position_from_one_picture():
-    cfg = generator.GeneratorConfig(env="dot", hint="position", frames=1, num_envs=16, steps=32, held_out_envs=8,
+    cfg = generators.GeneratorConfig(env="dot", hint="position", frames=1, num_envs=16, steps=32, held_out_envs=8,
                                     epochs=15, minibatch_size=64, lr=1e-3, hidden=64).validate()
-    _, metrics = jax.jit(generator.make_train(cfg))(jax.random.key(0))
+    _, metrics = jax.jit(generators.make_train(cfg))(jax.random.key(0))
     assert float(metrics.heldout_r2[0]) > 0.99
     assert float(metrics.loss[-1]) < float(metrics.loss[0]) / 10
 
 
 def test_training_vmapped_over_seeds_equals_a_loop():
-    cfg = generator.GeneratorConfig(frames=2, **TINY).validate()
-    train = jax.jit(generator.make_train(cfg))
+    cfg = generators.GeneratorConfig(frames=2, **TINY).validate()
+    train = jax.jit(generators.make_train(cfg))
     keys = jnp.stack([jax.random.key(i) for i in range(2)])
-    batched = jax.jit(jax.vmap(generator.make_train(cfg)))(keys)
+    batched = jax.jit(jax.vmap(generators.make_train(cfg)))(keys)
     for i in range(2):
         alone = train(keys[i])
         for a, b in zip(jax.tree.leaves(alone), jax.tree.leaves(jax.tree.map(lambda x: x[i], batched)), strict=True):
@@ -48,8 +51,8 @@ def test_training_vmapped_over_seeds_equals_a_loop():
 def test_stacked_pictures_repeat_an_episodes_first():
     # one env, 5 steps; an episode starts at step 0 and another at step 3; picture t is filled with t
     frames = jnp.broadcast_to(jnp.arange(5, dtype=jnp.uint8)[:, None, None, None, None], (5, 1, 2, 2, 3))
-    data = generator.Rollouts(frames, jnp.array([[0], [1], [2], [0], [1]], jnp.int32), jnp.zeros((5, 1, 1)))
-    stacks = generator.stack_frames(data, jnp.arange(5), jnp.zeros(5, jnp.int32), 3)[..., 0, 0, 0]
+    data = generators.Rollouts(frames, jnp.array([[0], [1], [2], [0], [1]], jnp.int32), jnp.zeros((5, 1, 1)))
+    stacks = generators.stack_frames(data, jnp.arange(5), jnp.zeros(5, jnp.int32), 3)[..., 0, 0, 0]
     assert stacks.tolist() == [[0, 0, 0], [0, 0, 1], [0, 1, 2], [3, 3, 3], [3, 3, 4]]
 
 
@@ -86,12 +89,12 @@ def tiny_generator(tmp_path_factory) -> Path:
 def constant_generator(tiny_generator, tmp_path_factory) -> Path:
     """The tiny generator with its network's weights zeroed and its mean set: it says CONSTANT."""
     folder = tmp_path_factory.mktemp("constant")
-    cfg = generator.GeneratorConfig(frames=2, seeds=1, **TINY)
+    cfg = generators.GeneratorConfig(frames=2, seeds=1, **TINY)
     _, params = hint_sources.load(tiny_generator)
     params = jax.tree.map(lambda x: x[None], params.replace(net=jax.tree.map(jnp.zeros_like, params.net),
                                                            mean=jnp.full((1,), CONSTANT)))
     blank = jnp.zeros((1, 1))
-    generator.write_folder(folder, cfg, params, generator.GeneratorMetrics(blank, *[jnp.zeros((1, 1))] * 4), {})
+    generators.write_folder(folder, cfg, params, generators.GeneratorMetrics(blank, *[jnp.zeros((1, 1))] * 4), {})
     return folder
 
 

@@ -46,7 +46,7 @@ def test_no_autotune_folder_of_ours_with_the_cache_off_or_a_folder_named(xla_fla
 DROP = """
 import os, sys
 import hintsjax
-from hintsjax import xla_flags
+from hintsjax.system import xla_flags
 if sys.argv[1] == "started":
     import jax
     jax.devices()
@@ -71,7 +71,7 @@ def test_deterministic_ops_drop_for_warp_only_where_the_user_left_them_and_jax_h
 
 
 def test_a_command_asks_only_for_warp_when_every_job_does(tmp_path):
-    from hintsjax.command_line import asks_only_for_warp
+    from hintsjax.cli.overrides import asks_only_for_warp
 
     warp_run = tmp_path / "warp_run"
     warp_run.mkdir()

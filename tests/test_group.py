@@ -1,4 +1,4 @@
-"""Configurations trained in one group (hintsjax.group) give what each gives trained alone.
+"""Configurations trained in one group (hintsjax.algorithms.group) give what each gives trained alone.
 
 Agreement is to float32 rounding, not bit for bit: vmapped over the group, XLA computes the
 networks' matrix products and convolutions as batched ones and may sum in another order, and
@@ -17,10 +17,12 @@ import pytest
 
 import cue_env  # noqa: F401  (registers the test env "cue" and its hints cue [1] and cue_pair [2])
 import linear_env  # noqa: F401  (registers the test env "linear")
-from hintsjax import checkpoint, group, ppo, run
-from hintsjax.algorithms import make_trainer
-from hintsjax.config import run_config, save_run_config
-from hintsjax.errors import UsageError
+from hintsjax.system import checkpoint
+from hintsjax.system.errors import UsageError
+from hintsjax.settings.layers import run_config, save_run_config
+from hintsjax.algorithms import group, ppo
+from hintsjax.algorithms.registry import make_trainer
+from hintsjax.training import outputs, pipeline
 
 UPDATES = 3
 TINY_PPO = {"total_env_steps": 3 * 64, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 2}
@@ -154,22 +156,22 @@ def test_train_group_writes_each_members_folder_as_its_own_run(tmp_path, capsys)
     for d, c in zip(dirs, cfgs):
         d.mkdir()
         save_run_config(d, c)
-    results = run.train_group(cfgs, tmp_path / "group", dirs, progress=False)
+    results = pipeline.train_group(cfgs, tmp_path / "group", dirs, progress=False)
     for d, c, r in zip(dirs, cfgs, results):
-        saved = json.loads((d / run.EVAL_JSON).read_text())
+        saved = json.loads((d / outputs.EVAL_JSON).read_text())
         assert saved["label"] == c.label and saved["group"] == [x.label for x in cfgs] and saved == r
         rows = (d / "metrics.csv").read_text().splitlines()
         assert len(rows) == 1 + UPDATES * SEEDS
         state, update = checkpoint.restore_latest(d, make_trainer(c).abstract_state())
         assert update == UPDATES and state.obs["hint"].shape[-1] == ppo.hint_width(c)
-    again = run.train_group(cfgs, tmp_path / "group", dirs, resume=True, progress=False)
+    again = pipeline.train_group(cfgs, tmp_path / "group", dirs, resume=True, progress=False)
     assert [r["evaluations"] for r in again] == [r["evaluations"] for r in results]
 
 
 def test_one_program_evaluates_every_member_as_its_own_run_would(hint_group):
     """The group's evaluation (its env, each member's hint picked, padded weights in place) gives
     each member's returns as evaluating the member's own params with its own env does."""
-    from hintsjax.evaluate import evaluate_group, evaluate_variants
+    from hintsjax.evaluation.evaluator import evaluate_group, evaluate_variants
 
     g, together, _ = hint_group
     evaluations, _ = evaluate_group(g, together)
@@ -181,7 +183,7 @@ def test_one_program_evaluates_every_member_as_its_own_run_would(hint_group):
 
 def killed_group(folder: Path) -> tuple[list, Path, list[Path]]:
     """A group of two cue-env configurations with its members' folders under `folder`:
-    run.train_group's (configs, group folder, member folders)."""
+    pipeline.train_group's (configs, group folder, member folders)."""
     cfgs = [cue_cfg(h) for h in ("cue", "cue_pair")]
     dirs = [folder / c.label for c in cfgs]
     for d, c in zip(dirs, cfgs):
@@ -202,9 +204,9 @@ def test_a_group_killed_with_sigkill_resumes_to_the_uninterrupted_end_bit_for_bi
     assert killed.returncode == -9, killed.stderr[-2000:]
     cfgs, group_dir, dirs = killed_group(tmp_path / "killed")
     assert checkpoint.latest_update(group_dir) == 2
-    run.train_group(cfgs, group_dir, dirs, resume=True, progress=False)
+    pipeline.train_group(cfgs, group_dir, dirs, resume=True, progress=False)
     _, whole_dir, whole_dirs = killed_group(tmp_path / "whole")
-    run.train_group(cfgs, whole_dir, whole_dirs, progress=False)
+    pipeline.train_group(cfgs, whole_dir, whole_dirs, progress=False)
     for cfg, d, w in zip(cfgs, dirs, whole_dirs):
         abstract = make_trainer(cfg).abstract_state()
         for a, b in zip(arrays(checkpoint.restore_latest(d, abstract)[0]), arrays(checkpoint.restore_latest(w, abstract)[0]), strict=True):

@@ -15,10 +15,11 @@ import optax
 import pytest
 
 import linear_env  # registers the "linear" env (tests/ is on pytest's path: its rootdir conftest)
-from hintsjax import config, dagger, expert, gail
-from hintsjax.algorithm_settings import GAIL_REWARDS
-from hintsjax.errors import UsageError
-from hintsjax.algorithms import make_trainer
+from hintsjax.system.errors import UsageError
+from hintsjax.settings import layers
+from hintsjax.settings.algorithm_settings import GAIL_REWARDS
+from hintsjax.algorithms import dagger, experts, gail
+from hintsjax.algorithms.registry import make_trainer
 
 # 24 rounds of 128 steps (8 envs x 16) and 64 student steps per round on minibatches of 64.
 DAGGER = dict(env="linear", agent="dagger", seeds=1,
@@ -31,7 +32,7 @@ GAIL = dict(env="linear", agent="gail", seeds=1,
 
 def trained(values: dict):
     """Train 2 seeds vmapped, and seed 1 alone: (trainer, batched state, batched metrics, seed 1's state)."""
-    cfg = config.run_config({**values, "seeds": 2})
+    cfg = layers.run_config({**values, "seeds": 2})
     trainer = make_trainer(cfg, expert=linear_env.EXPERT)
     keys = cfg.seed_keys()
     state, metrics = jax.jit(jax.vmap(trainer.train))(keys)
@@ -97,7 +98,7 @@ def test_dataset_ring_buffer_overwrites_the_oldest_rows():
 
 
 def test_gail_discriminator_separates_expert_from_random_pairs():
-    cfg = config.run_config(GAIL)
+    cfg = layers.run_config(GAIL)
     disc = gail.make_discriminator(cfg.gail)
     k_init, k_s, k_test = jax.random.split(jax.random.key(0), 3)
 
@@ -168,30 +169,30 @@ def test_gail_trains_ppo_on_the_discriminator_reward(gail_run):
 
 @pytest.fixture(scope="module", params=[False, True], ids=["raw-state", "normalized-state"])
 def expert_run(tmp_path_factory, request):
-    from hintsjax import run
+    from hintsjax.training import pipeline
 
     values = dict(env="linear", agent="expert_ppo", seeds=2, eval_episodes=4, checkpoint_every=2,
                   ppo=dict(num_envs=8, batch_size=128, minibatch_size=64, epochs=2, total_env_steps=2 * 128,
                            normalize_state=request.param))
     run_dir = tmp_path_factory.mktemp("runs") / "expert-linear"
     run_dir.mkdir()
-    cfg = config.run_config(values)
-    config.save_run_config(run_dir, cfg)
-    run.train(cfg, run_dir, progress=False)
+    cfg = layers.run_config(values)
+    layers.save_run_config(run_dir, cfg)
+    pipeline.train(cfg, run_dir, progress=False)
     return cfg, run_dir
 
 
 def test_export_keeps_the_best_seed_and_load_acts_like_it(expert_run, tmp_path):
-    from hintsjax import checkpoint
+    from hintsjax.system import checkpoint
 
     cfg, run_dir = expert_run
-    out = expert.export(run_dir, tmp_path / "expert")
-    meta = json.loads((out / expert.EXPERT_JSON).read_text())
+    out = experts.export(run_dir, tmp_path / "expert")
+    meta = json.loads((out / experts.EXPERT_JSON).read_text())
     seed_means = json.loads((run_dir / "eval.json").read_text())["evaluations"][0]["seed_means"]
     assert meta["seed_index"] == int(np.argmax(seed_means)) and meta["env"] == "linear"
-    assert (out / expert.POLICY / "_METADATA").is_file()  # what orbax wrote is there but its notes of this machine
-    assert not [name for name in expert.MACHINE_FILES if (out / expert.POLICY / name).exists()]
-    loaded = expert.load("linear", out)
+    assert (out / experts.POLICY / "_METADATA").is_file()  # what orbax wrote is there but its notes of this machine
+    assert not [name for name in experts.MACHINE_FILES if (out / experts.POLICY / name).exists()]
+    loaded = experts.load("linear", out)
     assert meta["normalize_state"] == cfg.ppo.normalize_state == (loaded.state_norm is not None)
     state, _ = checkpoint.restore_latest(run_dir, make_trainer(cfg).abstract_state())
     best = jax.tree.map(lambda x: x[meta["seed_index"]], state.params)
@@ -205,54 +206,54 @@ def test_an_expert_is_replaced_only_when_asked(expert_run, tmp_path):
     """An expert folder that exists (the packaged one, by default) is not overwritten by an export
     unless --force says so: the first export's files stay as they were."""
     _, run_dir = expert_run
-    out = expert.export(run_dir, tmp_path / "expert")
+    out = experts.export(run_dir, tmp_path / "expert")
     before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
     with pytest.raises(UsageError, match="holds an expert already .*--force to replace it"):
-        expert.export(run_dir, out)
+        experts.export(run_dir, out)
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
-    assert expert.export(run_dir, out, force=True) == out and expert.load("linear", out) is not None
+    assert experts.export(run_dir, out, force=True) == out and experts.load("linear", out) is not None
 
 
 def test_expert_errors_name_the_problem(expert_run, tmp_path):
     _, run_dir = expert_run
-    out = expert.export(run_dir, tmp_path / "expert")
+    out = experts.export(run_dir, tmp_path / "expert")
     with pytest.raises(UsageError, match="is for linear, not pendulum"):
-        expert.load("pendulum", out)
+        experts.load("pendulum", out)
     with pytest.raises(UsageError, match="no expert for linear at .*packaged: .*pendulum"):
-        expert.load("linear", tmp_path / "nowhere")
-    meta = json.loads((out / expert.EXPERT_JSON).read_text())
-    (out / expert.EXPERT_JSON).write_text(json.dumps({**meta, "hidden": [8, 8]}))  # the policy is wider
+        experts.load("linear", tmp_path / "nowhere")
+    meta = json.loads((out / experts.EXPERT_JSON).read_text())
+    (out / experts.EXPERT_JSON).write_text(json.dumps({**meta, "hidden": [8, 8]}))  # the policy is wider
     with pytest.raises(UsageError, match=r"does not match expert.json: its \d+ arrays differ in shape"):
-        expert.load("linear", out)  # refused from the stored shapes, before any array is read
-    (out / expert.EXPERT_JSON).write_text(json.dumps(meta))
-    for f in (out / expert.POLICY).rglob("*"):
+        experts.load("linear", out)  # refused from the stored shapes, before any array is read
+    (out / experts.EXPERT_JSON).write_text(json.dumps(meta))
+    for f in (out / experts.POLICY).rglob("*"):
         if f.is_file():
             f.write_bytes(b"garbage")
     with pytest.raises(UsageError, match="corrupt"):
-        expert.load("linear", out)
+        experts.load("linear", out)
 
 
 PACKAGED = ["acrobot", "ant", "car_racing", "halfcheetah", "humanoid", "idp", "pendulum"]
 
 
 def test_the_packaged_experts_are_the_listed_ones():
-    assert expert.packaged() == PACKAGED
+    assert experts.packaged() == PACKAGED
 
 
 def test_the_packaged_experts_ship_nothing_of_the_machine_that_wrote_them():
     """No packaged expert holds orbax's notes of where it was written (commit_success.txt named the
     author's folder) or on what device; `test_packaged_experts_load_and_act` restores them without."""
-    shipped = [p for p in expert.EXPERTS_DIR.rglob("*") if p.is_file()]
+    shipped = [p for p in experts.EXPERTS_DIR.rglob("*") if p.is_file()]
     assert len(shipped) > 10 * len(PACKAGED)
-    assert [str(p) for p in shipped if p.name in expert.MACHINE_FILES] == []
+    assert [str(p) for p in shipped if p.name in experts.MACHINE_FILES] == []
 
 
 @pytest.mark.parametrize("env", PACKAGED)
 def test_packaged_experts_load_and_act(env):
     from hintsjax import envs
 
-    e = expert.load(env)
-    meta = expert.describe(env)[1]
+    e = experts.load(env)
+    meta = experts.describe(env)[1]
     sim = envs.make(env, observe=("state",))
     assert meta["env"] == env and meta["state_size"] == sim.state_size and meta["action_size"] == sim.action_size
     action = e.mean(jax.random.normal(jax.random.key(0), (4, sim.state_size)))
@@ -277,9 +278,9 @@ def test_packaged_experts_still_perform(env):
     """An expert trained on the GPU keeps its level on this code's env (the demonstrations GAIL
     learns from), so a change to an env's dynamics or reward that strands its expert fails here."""
     from hintsjax import envs
-    from hintsjax.gail import demonstrate
+    from hintsjax.algorithms.gail import demonstrate
 
-    sim, policy = envs.make(env, observe=("state",)), expert.load(env)
+    sim, policy = envs.make(env, observe=("state",)), experts.load(env)
     demos = jax.jit(lambda k: demonstrate(sim, sim.default_params(), policy, k, 4))(jax.random.key(0))
     assert float(demos.episode_return.mean()) > PACKAGED_FLOORS[env], demos.episode_return
 
@@ -288,9 +289,9 @@ def pendulum_expert_returns(total_env_steps: int, seeds: int = 3) -> list[float]
     """Per-seed mean return (20 deterministic episodes) of expert_ppo's settings on the state
     pendulum, without the entropy bonus that the expert's full 1 M-step run keeps (at 102,400
     steps it dipped to -186, -419, -179 with it)."""
-    from hintsjax.evaluate import evaluate_params
+    from hintsjax.evaluation.evaluator import evaluate_params
 
-    cfg = config.run_config(dict(env="pendulum", agent="expert_ppo", seeds=seeds,
+    cfg = layers.run_config(dict(env="pendulum", agent="expert_ppo", seeds=seeds,
                                  ppo=dict(total_env_steps=total_env_steps, ent_coef=0.0)))
     state, _ = jax.jit(jax.vmap(make_trainer(cfg).train))(cfg.seed_keys())
     return evaluate_params(cfg, state.params, None, 20, False)["seed_means"]
@@ -298,7 +299,7 @@ def pendulum_expert_returns(total_env_steps: int, seeds: int = 3) -> list[float]
 
 @pytest.mark.slow
 def test_expert_ppo_learns_the_state_pendulum():
-    """expert_ppo's tuned settings (hintsjax.env_defaults.ENV_DEFAULTS["pendulum"]) at the hint agents' pendulum
+    """expert_ppo's tuned settings (hintsjax.settings.env_defaults.ENV_DEFAULTS["pendulum"]) at the hint agents' pendulum
     budget (200 K steps) swing the rod up and hold it, far from a random policy's -1200 (measured:
     seeds -157, -179, -151). The expert itself trains 1 M steps."""
     returns = pendulum_expert_returns(200_000)

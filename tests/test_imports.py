@@ -1,6 +1,8 @@
 """Imports run one way: the import graph of hintsjax/ and envs/ (envs/ is hintsjax.envs), read from
 the source with imports inside functions counted, has no circle, and envs/ imports nothing of the
-learner. The graph's own functions are checked on small made-up packages, one with a circle."""
+learner. Between the sub-packages too: each imports only the ones below it in LAYERS (the order
+docs/design.md draws), so their graph has no circle either. The graph's own functions are checked
+on small made-up packages, one with a circle."""
 
 from __future__ import annotations
 
@@ -9,6 +11,13 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = {"hintsjax": ROOT / "hintsjax", "hintsjax.envs": ROOT / "envs"}  # pyproject.toml's package-dir
+
+# The sub-packages, lowest first: a module may import the modules of its own sub-package and of
+# those before it here, never of one after it. "hintsjax" stands for the package's own modules:
+# its __init__ and the commands (hintsjax/<command>.py, run as python -m hintsjax.<command>).
+LAYERS = ("hintsjax.envs", "hintsjax.system", "hintsjax.models", "hintsjax.settings", "hintsjax.cli",
+          "hintsjax.algorithms", "hintsjax.evaluation", "hintsjax.training", "hintsjax.hints", "hintsjax",
+          "hintsjax.reproduce")
 
 
 def modules(packages: dict[str, Path]) -> dict[str, Path]:
@@ -58,6 +67,26 @@ def import_graph(packages: dict[str, Path]) -> dict[str, set[str]]:
     return graph
 
 
+def layer_of(module: str, layers: tuple[str, ...]) -> str:
+    """The entry of `layers` that `module` is, or is inside of (the longest that matches)."""
+    return max((p for p in layers if module == p or module.startswith(p + ".")), key=len)
+
+
+def package_graph(graph: dict[str, set[str]], layers: tuple[str, ...]) -> dict[str, set[str]]:
+    """The module graph folded onto `layers`: layer -> the other layers its modules import."""
+    folded: dict[str, set[str]] = {layer: set() for layer in layers}
+    for module, imported in graph.items():
+        folded[layer_of(module, layers)] |= {layer_of(m, layers) for m in imported} - {layer_of(module, layers)}
+    return folded
+
+
+def upward(graph: dict[str, set[str]], layers: tuple[str, ...]) -> list[str]:
+    """The imports of a module from a layer after its own in `layers`, as 'module -> module'."""
+    rank = {layer: i for i, layer in enumerate(layers)}
+    return sorted(f"{m} -> {t}" for m, imported in graph.items() for t in imported
+                  if rank[layer_of(t, layers)] > rank[layer_of(m, layers)])
+
+
 def circles(graph: dict[str, set[str]]) -> list[list[str]]:
     """The groups of modules that import each other in a circle (strongly connected components of
     more than one module, or a module that imports itself), each sorted."""
@@ -99,6 +128,15 @@ def test_no_module_of_hintsjax_or_envs_is_in_an_import_circle():
     assert len(graph) > 40 and graph["hintsjax.run"]  # the whole package was read
     found = circles(graph)
     assert not found, "import circles: " + "; ".join(" <-> ".join(c) for c in found)
+
+
+def test_the_sub_packages_import_only_those_below_them():
+    graph = import_graph(PACKAGES)
+    folders = {f"hintsjax.{p.parent.name}" for p in (ROOT / "hintsjax").glob("*/__init__.py")}
+    assert folders | {"hintsjax.envs", "hintsjax"} == set(LAYERS), "a sub-package missing from LAYERS, or gone"
+    wrong = upward(graph, LAYERS)
+    assert not wrong, "imports of a sub-package above the importer's: " + "; ".join(wrong)
+    assert not circles(package_graph(graph, LAYERS))
 
 
 def test_envs_import_nothing_of_the_learner():
@@ -152,3 +190,23 @@ def test_a_folder_mapped_to_a_subpackage_is_read_once_under_its_own_name(tmp_pat
     graph = import_graph({"outer": tmp_path / "outer", "outer.inner": tmp_path / "inner"})
     assert graph["outer.top"] == {"outer.inner.core"} and graph["outer.inner.core"] == {"outer.top"}
     assert circles(graph) == [["outer.inner.core", "outer.top"]]
+
+
+def test_a_circle_between_sub_packages_is_found_where_no_module_circle_is(tmp_path):
+    packages = _package(tmp_path, {
+        "__init__.py": "",
+        "low/__init__.py": "",
+        "low/a.py": "",
+        "low/b.py": "def late():\n    from pkg.high import c\n",
+        "high/__init__.py": "",
+        "high/c.py": "",
+        "high/d.py": "from pkg.low import a\n",
+        "tool.py": "from pkg.high import d\n",
+    })
+    graph = import_graph(packages)
+    layers = ("pkg.low", "pkg.high", "pkg")
+    assert circles(graph) == []
+    assert package_graph(graph, layers) == {"pkg.low": {"pkg.high"}, "pkg.high": {"pkg.low"}, "pkg": {"pkg.high"}}
+    assert circles(package_graph(graph, layers)) == [["pkg.high", "pkg.low"]]
+    assert upward(graph, layers) == ["pkg.low.b -> pkg.high.c"]
+    assert layer_of("pkg.tool", layers) == "pkg" and layer_of("pkg.high", layers) == "pkg.high"

@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 
 import cue_env  # registers the "cue" env, its hint and its defaults (tests/ is on pytest's path: its rootdir conftest)
-from hintsjax import config, ppo
-from hintsjax.errors import UsageError
+from hintsjax.system.errors import UsageError
+from hintsjax.settings import layers
+from hintsjax.algorithms import ppo
 
 # -- learning -----------------------------------------------------------------------------------
 
@@ -30,7 +31,7 @@ LAST = 3  # updates averaged for the final return
 
 
 def learn(agent: str, scheme: str = "fc", seed: int = 0):
-    cfg = config.run_config(dict(env="cue", agent=agent, scheme=scheme, seeds=1, ppo=LEARN_PPO))
+    cfg = layers.run_config(dict(env="cue", agent=agent, scheme=scheme, seeds=1, ppo=LEARN_PPO))
     trainer = ppo.make_trainer(cfg)
     state, metrics = jax.jit(trainer.train)(jax.random.key(seed))
     return trainer, state, jax.tree.map(np.asarray, metrics)
@@ -104,7 +105,7 @@ RTOL, ATOL = 1e-5, 1e-6  # vmapped vs single runs: measured max abs diff ~1e-7 (
 
 
 def small_trainer(**ppo_overrides):
-    cfg = config.run_config(dict(env="cue", agent="hints_blind", seeds=2, ppo={**SMALL_PPO, **ppo_overrides}))
+    cfg = layers.run_config(dict(env="cue", agent="hints_blind", seeds=2, ppo={**SMALL_PPO, **ppo_overrides}))
     return ppo.make_trainer(cfg)
 
 
@@ -203,7 +204,7 @@ def test_starts_per_rollout_draw_one_start_per_env_and_rollout(per_rollout):
     """Cue episodes last one step, so every step starts a new one. With `starts_per_rollout`
     every env starts them all from the one start drawn for the rollout (its cue is constant over
     the rollout); without, each step draws its own (cues vary within an env)."""
-    cfg = config.run_config(dict(env="cue", agent="hints_blind", seeds=1, ppo={
+    cfg = layers.run_config(dict(env="cue", agent="hints_blind", seeds=1, ppo={
         **SMALL_PPO, "num_envs": 16, "batch_size": 128, "minibatch_size": 64, "starts_per_rollout": per_rollout}))
     parts = ppo.make_ppo(cfg)
     state = jax.jit(parts.init)(jax.random.key(0))
@@ -230,7 +231,7 @@ def test_target_kl_stops_an_update_after_the_first_minibatch_whose_kl_exceeds_it
     step) stops the update: one Adam step, 3 of 4 minibatches skipped. A huge target steps every
     minibatch and gives exactly the parameters of no early stop (target_kl None)."""
     def make(target_kl):
-        return ppo.make_ppo(config.run_config(dict(env="cue", agent="hints_blind", seeds=1,
+        return ppo.make_ppo(layers.run_config(dict(env="cue", agent="hints_blind", seeds=1,
                                                    ppo={**SMALL_PPO, "target_kl": target_kl})))
 
     off = make(None)
@@ -252,4 +253,4 @@ def test_target_kl_stops_an_update_after_the_first_minibatch_whose_kl_exceeds_it
 
 def test_target_kl_must_be_positive():
     with pytest.raises(UsageError, match="target_kl"):
-        config.run_config(dict(env="cue", agent="hints_blind", ppo={**SMALL_PPO, "target_kl": 0.0}))
+        layers.run_config(dict(env="cue", agent="hints_blind", ppo={**SMALL_PPO, "target_kl": 0.0}))

@@ -8,9 +8,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from hintsjax.agents import AGENTS
-from hintsjax.conditioning import SCHEMES
-from hintsjax.networks import ActorCritic, Encoder, PatchConv, image_patches, lr_labels, scale_pixels
+from hintsjax.models.agents import AGENTS
+from hintsjax.models.conditioning import SCHEMES
+from hintsjax.models.networks import ActorCritic, Encoder, PatchConv, image_patches, lr_labels, scale_pixels
 
 
 @pytest.mark.parametrize("size,channels,kernel,stride", [(64, 3, 8, 4), (15, 32, 4, 2), (6, 64, 3, 1), (36, 5, 8, 4)])

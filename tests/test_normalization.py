@@ -8,10 +8,12 @@ import jax.numpy as jnp
 import numpy as np
 
 import linear_env  # registers the "linear" env (tests/ is on pytest's path: its rootdir conftest)
-from hintsjax import config, dagger, normalization
-from hintsjax.agents import AGENTS
-from hintsjax.networks import ActorCritic
-from hintsjax.ppo import make_optimizer, make_ppo
+from hintsjax.models import normalization
+from hintsjax.models.agents import AGENTS
+from hintsjax.models.networks import ActorCritic
+from hintsjax.settings import layers
+from hintsjax.algorithms import dagger
+from hintsjax.algorithms.ppo import make_optimizer, make_ppo
 
 LINEAR = dict(env="linear", seeds=1, ppo=dict(num_envs=8, batch_size=128, minibatch_size=64, epochs=2,
                                                total_env_steps=2 * 128, normalize_state=True))
@@ -47,7 +49,7 @@ def test_the_network_reads_the_state_through_its_statistics():
 
 
 def test_ppo_merges_each_rollout_after_learning_and_never_trains_the_statistics():
-    cfg = config.run_config({**LINEAR, "agent": "ppo_state"})
+    cfg = layers.run_config({**LINEAR, "agent": "ppo_state"})
     ppo = make_ppo(cfg)
     state = ppo.init(jax.random.key(0))
     before = stats_of(state.params)
@@ -65,7 +67,7 @@ def test_ppo_merges_each_rollout_after_learning_and_never_trains_the_statistics(
 
 
 def test_dagger_merges_the_visited_states():
-    cfg = config.run_config({**LINEAR, "agent": "dagger", "dagger": dict(grad_steps=4, buffer_size=256)})
+    cfg = layers.run_config({**LINEAR, "agent": "dagger", "dagger": dict(grad_steps=4, buffer_size=256)})
     trainer = dagger.make_trainer(cfg, expert=linear_env.EXPERT)
     state = trainer.init(jax.random.key(0))
     after, _ = jax.jit(trainer.update)(state)

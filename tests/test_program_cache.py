@@ -1,4 +1,4 @@
-"""The traced-program cache (hintsjax/program_cache.py): a program loaded from it computes what
+"""The traced-program cache (hintsjax/system/program_cache.py): a program loaded from it computes what
 the program traced afresh computes, bit for bit; a second process loads the run's programs
 instead of tracing them; a changed source, an undescribable program, a registered hint without
 a source file and a corrupt entry are never served from it."""
@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 
 import linear_env  # noqa: F401  (registers the test env "linear")
-from hintsjax import program_cache
-from hintsjax.algorithms import make_trainer
-from hintsjax.config import run_config
 from hintsjax.envs import hints as hints_module
+from hintsjax.system import program_cache
+from hintsjax.settings.layers import run_config
+from hintsjax.algorithms.registry import make_trainer
 
 TINY_PPO = {"total_env_steps": 320, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}
 
@@ -48,7 +48,7 @@ def _chunk(trainer):
 
 def _run(lowered_init, lowered_chunk, keys):
     """init, then one chunk of 2 of its 3 updates, from the two lowered programs; the state is
-    placed as the chunk expects, as a resumed run's restored state is (run.start)."""
+    placed as the chunk expects, as a resumed run's restored state is (loop.start)."""
     state = lowered_init.compile()(keys)
     chunk = lowered_chunk.compile()
     return chunk(jax.device_put(state, chunk.input_shardings[0][0]), np.int32(2))
@@ -97,7 +97,7 @@ def test_a_registered_hint_without_a_source_file_turns_the_cache_off(monkeypatch
 
 
 def test_imitation_and_learned_hint_runs_are_not_described(trainer):
-    from hintsjax.trainer import program_identity
+    from hintsjax.algorithms.trainer import program_identity
 
     cfg = trainer.cfg
     assert program_identity(cfg) is not None

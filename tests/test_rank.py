@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import cue_env  # noqa: F401  (registers the test env "cue": hints cue (the right action) and distractor (noise))
+from hintsjax.hints import ranking
 from hintsjax import envs, rank
 
 TINY = ["env=cue", "hints=distractor,cue", "seeds=2", "info_envs=64", "info_steps=8", "info_held_out_envs=32",
@@ -41,7 +42,7 @@ def test_the_layout_holds_each_part_once():
 def test_discounted_returns_by_hand():
     reward = jnp.array([[1.0], [2.0], [3.0], [4.0]])
     done = jnp.array([[False], [True], [False], [False]])  # an episode ends after step 1
-    ret = rank.discounted_returns(reward, done, 0.5)[:, 0]
+    ret = ranking.discounted_returns(reward, done, 0.5)[:, 0]
     np.testing.assert_allclose(ret, [1 + 0.5 * 2, 2, 3 + 0.5 * 4, 4])
 
 
@@ -49,14 +50,14 @@ def test_learning_curve_area_by_hand():
     nan = np.nan
     returns = np.array([[[1.0, nan], [3.0, 2.0]], [[nan, 4.0], [5.0, 6.0]]])  # [S=2, U=2, K=2]
     step = np.array([[[0.1, 0.2], [0.3, 0.4]], [[0.5, 0.6], [0.7, 0.8]]])
-    area, measure = rank.learning_curve_area({"episode_return": returns, "step_reward": step})
+    area, measure = ranking.learning_curve_area({"episode_return": returns, "step_reward": step})
     assert measure == "episode_return"
     np.testing.assert_allclose(area, [[2.0, 2.0], [5.0, 5.0]])  # the updates where episodes ended
     returns[1, :, 0] = nan  # seed 1's first candidate saw no episode end: every run by its reward per step
-    area, measure = rank.learning_curve_area({"episode_return": returns, "step_reward": step})
+    area, measure = ranking.learning_curve_area({"episode_return": returns, "step_reward": step})
     assert measure == "step_reward"
     np.testing.assert_allclose(area, [[0.2, 0.3], [0.6, 0.7]])
 
 
 def test_ranking_by_mean():
-    assert rank.ranking(np.array([[0.1, 0.5, 0.3], [0.1, 0.7, 0.1]])) == [3, 1, 2]
+    assert ranking.ranking(np.array([[0.1, 0.5, 0.3], [0.1, 0.7, 0.1]])) == [3, 1, 2]

@@ -14,9 +14,12 @@ import orbax.checkpoint as ocp
 import pytest
 
 import linear_env  # noqa: F401  (registers the test env "linear")
-from hintsjax import checkpoint, compilation_cache, run
-from hintsjax.algorithms import make_trainer
-from hintsjax.config import run_config
+from hintsjax.system import checkpoint, compilation_cache
+from hintsjax.settings import layers
+from hintsjax.settings.layers import run_config
+from hintsjax.algorithms.registry import make_trainer
+from hintsjax.training import guards, loop, outputs, pipeline
+from hintsjax import run
 
 TINY_PPO = {"total_env_steps": 320, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}
 
@@ -64,7 +67,7 @@ def test_a_cache_folder_that_cannot_be_made_turns_the_cache_off_with_one_line(tm
 
 CACHED = """
 import sys, jax, jax.numpy as jnp
-from hintsjax import compilation_cache
+from hintsjax.system import compilation_cache
 compilation_cache.enable(sys.argv[1], min_compile_seconds=0)
 f = jax.jit(lambda x: jnp.cumsum(jnp.sin(x) * 3.0) @ jnp.cos(x))
 print(float(f(jnp.arange(64.0))))
@@ -109,8 +112,8 @@ def test_a_failed_background_write_stops_the_run_with_one_line_and_keeps_the_las
     assert errors[0].startswith("error: could not write checkpoint") and "Traceback" not in err
     monkeypatch.setattr(ocp.CheckpointManager, "save", real_save)
     assert checkpoint.latest_update(tmp_path / "r") == calls[0]
-    assert not (tmp_path / "r" / run.EVAL_JSON).exists()
-    assert json.loads((tmp_path / "r" / run.SECONDS_JSON).read_text())["update"] == calls[0]
+    assert not (tmp_path / "r" / outputs.EVAL_JSON).exists()
+    assert json.loads((tmp_path / "r" / loop.SECONDS_JSON).read_text())["update"] == calls[0]
 
 
 def test_a_run_resumed_at_its_last_update_only_evaluates(tmp_path):
@@ -119,11 +122,11 @@ def test_a_run_resumed_at_its_last_update_only_evaluates(tmp_path):
               "ppo": TINY_PPO, "out_dir": str(tmp_path), "name": "r"}
     assert run.main_from_values(values) == 0
     folder = tmp_path / "r"
-    first = json.loads((folder / run.EVAL_JSON).read_text())
-    (folder / run.EVAL_JSON).unlink()
+    first = json.loads((folder / outputs.EVAL_JSON).read_text())
+    (folder / outputs.EVAL_JSON).unlink()
     rows = (folder / "metrics.csv").read_text()
     assert run.main_from_values({"resume": str(folder)}) == 0
-    again = json.loads((folder / run.EVAL_JSON).read_text())
+    again = json.loads((folder / outputs.EVAL_JSON).read_text())
     assert again["evaluations"] == first["evaluations"] and (folder / "metrics.csv").read_text() == rows
     assert first["chunks_env_steps_per_s"] > 0 and again["chunks_env_steps_per_s"] is None  # 3 chunks; none
     assert checkpoint.latest_update(folder) == 5
@@ -133,11 +136,11 @@ def test_chunks_rate_runs_from_training_start_to_the_last_chunks_metrics():
     """6 updates of 100 env steps, the last chunk's metrics on the host at 3.0 s (its checkpoint
     written after, at 9.0 s): 200 steps/s; a resumed call from update 2 trained 4 of them; no
     chunk, no rate."""
-    training = run.Training(compiled=None, state=None, done=6, first=0, before=0.0, seconds=9.0,
+    training = loop.Training(compiled=None, state=None, done=6, first=0, before=0.0, seconds=9.0,
                             arrivals=((1.0, 2), (2.5, 4), (3.0, 6)))
-    assert run.chunks_rate(training, 100) == pytest.approx(200.0)
-    assert run.chunks_rate(dataclasses.replace(training, first=2), 100) == pytest.approx(400 / 3)
-    assert run.chunks_rate(dataclasses.replace(training, arrivals=()), 100) is None
+    assert loop.chunks_rate(training, 100) == pytest.approx(200.0)
+    assert loop.chunks_rate(dataclasses.replace(training, first=2), 100) == pytest.approx(400 / 3)
+    assert loop.chunks_rate(dataclasses.replace(training, arrivals=()), 100) is None
 
 
 def nonfinite_values(tmp_path, **ppo) -> dict:
@@ -152,7 +155,7 @@ def test_a_run_that_goes_non_finite_stops_keeps_its_last_good_checkpoint_and_say
     update 3 or later is saved and nothing is evaluated; nonfinite.json says what and where."""
     import jax.numpy as jnp
 
-    real = run.make_trainer
+    real = pipeline.make_trainer
 
     def poisoned(cfg):
         trainer = real(cfg)
@@ -164,16 +167,16 @@ def test_a_run_that_goes_non_finite_stops_keeps_its_last_good_checkpoint_and_say
 
         return dataclasses.replace(trainer, update=update)
 
-    monkeypatch.setattr(run, "make_trainer", poisoned)
+    monkeypatch.setattr(pipeline, "make_trainer", poisoned)
     assert run.main_from_values(nonfinite_values(tmp_path)) == 1
     err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]  # the rest: the progress bar
     assert len(err) == 1 and err[0].startswith("error: ") and "not finite after update 4" in err[0], err
     assert "last good checkpoint: update 2" in err[0] and "Traceback" not in err[0]
     folder = tmp_path / "nan"
-    record = json.loads((folder / run.NONFINITE_JSON).read_text())
+    record = json.loads((folder / guards.NONFINITE_JSON).read_text())
     assert record == {"update": 4, "quantity": "policy_loss", "seeds": [0, 1], "last_good_checkpoint": 2}
-    assert checkpoint.latest_update(folder) == 2 and not (folder / run.EVAL_JSON).exists()
-    cfg = run.load_run_config(folder)
+    assert checkpoint.latest_update(folder) == 2 and not (folder / outputs.EVAL_JSON).exists()
+    cfg = layers.load_run_config(folder)
     state, _ = checkpoint.restore_latest(folder, make_trainer(cfg).abstract_state())
     assert all(np.isfinite(np.asarray(x)).all() for x in jax.tree.leaves(state.params))
 
@@ -183,13 +186,13 @@ def test_a_checkpoint_of_non_finite_params_is_never_written(tmp_path):
     the losses said (one seed's NaN names that seed)."""
     cfg = run_config({"env": "linear", "agent": "ppo_state", "seeds": 2, "ppo": TINY_PPO})
     state = jax.jit(jax.vmap(make_trainer(cfg).init))(cfg.seed_keys())
-    assert np.asarray(run.finite_seeds(state.params)).tolist() == [True, True]
+    assert np.asarray(guards.finite_seeds(state.params)).tolist() == [True, True]
     poisoned = jax.tree.map(lambda x: x.at[1].set(np.inf), state.params)
-    assert np.asarray(run.finite_seeds(poisoned)).tolist() == [True, False]
-    found = run.first_nonfinite({"policy_loss": np.array([[0.1, 0.2], [0.3, np.nan]]),
+    assert np.asarray(guards.finite_seeds(poisoned)).tolist() == [True, False]
+    found = guards.first_nonfinite({"policy_loss": np.array([[0.1, 0.2], [0.3, np.nan]]),
                                  "episode_return": np.full((2, 2), np.nan)}, after=6)
     assert found == {"update": 8, "quantity": "policy_loss", "seeds": [1]}
-    group = run.first_nonfinite({"value_loss": np.array([[[0.1, 0.1, np.inf]], [[0.2, 0.2, 0.2]]])}, after=0)
+    group = guards.first_nonfinite({"value_loss": np.array([[[0.1, 0.1, np.inf]], [[0.2, 0.2, 0.2]]])}, after=0)
     assert group == {"update": 1, "quantity": "value_loss", "seeds": [0], "members": [2]}
 
 

@@ -7,7 +7,7 @@ import csv
 
 import numpy as np
 
-from hintsjax.runlog import METRICS_CSV, RunLog, bin_means, mean_confidence_band
+from hintsjax.training.runlog import METRICS_CSV, RunLog, bin_means, mean_confidence_band
 
 
 def test_a_resumed_run_gains_the_columns_of_metrics_added_since_it_began(tmp_path):

@@ -1,4 +1,4 @@
-"""The result tables' statistics (hintsjax.stats): IQM, stratified percentile bootstrap intervals,
+"""The result tables' statistics (hintsjax.reproduce.stats): IQM, stratified percentile bootstrap intervals,
 probability of improvement and the text the tables print, checked against hand-worked values and
 against scipy."""
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from hintsjax import stats
-from hintsjax.stats import Interval
+from hintsjax.reproduce import stats
+from hintsjax.reproduce.stats import Interval
 
 
 def scipy_iqm(a, axis=-1):

@@ -178,7 +178,7 @@ def test_car_findings_decide_o3_by_the_interval_of_the_difference_in_hairpin_pro
 
 def test_locomotion_report_states_the_settings_each_row_was_trained_with(tmp_path):
     import locomotion
-    from hintsjax import config
+    from hintsjax.settings import layers
 
     labels = ["ppo_rgb", "hints-fc-speed", "ppo_state"]
     assert locomotion.settings_lines(tmp_path, "ant", labels) == [  # none run yet: today's defaults
@@ -187,7 +187,7 @@ def test_locomotion_report_states_the_settings_each_row_was_trained_with(tmp_pat
     for label, values in (("ppo_rgb", {"agent": "ppo_rgb"}),
                           ("hints-fc-speed", {"ppo": {"encoder_lr": 1e-3, "epochs": 8, "target_kl": 0.1}})):
         write_run(tmp_path, "ant", label, [evaluation(1.0, 0.0, [1.0])])
-        config.save_run_config(tmp_path / "ant" / label, config.run_config({"env": "ant", **values}))
+        layers.save_run_config(tmp_path / "ant" / label, layers.run_config({"env": "ant", **values}))
     assert locomotion.settings_lines(tmp_path, "ant", labels) == [
         "PPO, as each row was trained:", "",
         "- ppo_rgb: 256 envs per seed, batches of 1024, 4 epochs of minibatches of 256, learning rates "
@@ -249,8 +249,8 @@ def test_a_table_report_runs_end_to_end(script, tmp_path, monkeypatch):
 def test_an_archived_run_reads_as_the_run_did(tmp_path, monkeypatch):
     """archive_runs keeps what the tables need; with the run folder gone, the readers fall back
     to the archive and give the same cells (the curve averaged into CURVE_POINTS bins)."""
-    from hintsjax import config
-    from hintsjax.runlog import CURVE_POINTS, bin_means, read_curves
+    from hintsjax.settings import layers
+    from hintsjax.training.runlog import CURVE_POINTS, bin_means, read_curves
 
     runs, archive = tmp_path / "locomotion", tmp_path / "archive"
     monkeypatch.setattr(report, "ARCHIVE", archive)
@@ -258,7 +258,7 @@ def test_an_archived_run_reads_as_the_run_did(tmp_path, monkeypatch):
     rng = __import__("numpy").random.default_rng(0)
     returns = [[nan] * 5 + list(rng.normal(100 * s, 10, 595)) for s in range(2)]  # 600 updates, 2 seeds
     write_run(runs, "ant", "ppo_rgb", [evaluation(7.0, 1.0, [6.0, 8.0])], returns)
-    config.save_run_config(runs / "ant" / "ppo_rgb", config.run_config({"env": "ant", "agent": "ppo_rgb"}))
+    layers.save_run_config(runs / "ant" / "ppo_rgb", layers.run_config({"env": "ant", "agent": "ppo_rgb"}))
     rows = list(csv.DictReader((runs / "ant" / "ppo_rgb" / "metrics.csv").open()))
     for i, row in enumerate(rows):
         row["approx_kl"] = 0.9 if i % 4 == 0 else 0.01  # a quarter of the updates blew up
@@ -277,7 +277,7 @@ def test_an_archived_run_reads_as_the_run_did(tmp_path, monkeypatch):
     shutil.rmtree(runs)
     assert [f(runs, "ant", "ppo_rgb") for f in (lambda *a: report.cell(report.load(*a)), report.training_cell, report.kl_cell)] == before
     assert report.run_folder(runs, "ant", "ppo_rgb") == archive / "locomotion" / "ant" / "ppo_rgb"
-    assert report.trained_ppo(runs, "ant", "ppo_rgb") == config.run_config({"env": "ant", "agent": "ppo_rgb"}).ppo
+    assert report.trained_ppo(runs, "ant", "ppo_rgb") == layers.run_config({"env": "ant", "agent": "ppo_rgb"}).ppo
     steps, values = read_curves(report.metrics_path(runs, "ant", "ppo_rgb"))
     assert len(steps) == CURVE_POINTS and steps[-1] == 1024 * 600  # bins of 2 or 3 updates
     np.testing.assert_array_equal(steps, binned[0])
@@ -407,7 +407,7 @@ def test_a_group_trains_into_each_runs_folder_and_splits_when_too_big(tmp_path, 
     """A sweep's group job writes each run's eval.json (with the group and the sweep's fields)
     and keeps its checkpoints in the group's folder; a group that does not fit is split in halves."""
     import cue_env  # noqa: F401  (tests/cue_env.py: the "cue" env and its hints)
-    from hintsjax import run
+    from hintsjax.training import compilation, loop
 
     ids = ["cue/hints-fc-cue", "cue/hints-fc-cue_pair"]
     sweep.train_one(tmp_path, ids, seeds=2, smoke=True, experts=None)
@@ -429,9 +429,9 @@ def test_a_group_trains_into_each_runs_folder_and_splits_when_too_big(tmp_path, 
     assert again["evaluations"] == first["evaluations"] and again["train_env_steps_per_s"] == 0  # no update retrained
 
     def too_big(compiled, what):
-        raise run.GroupTooBig(f"{what} needs 99 GiB")
+        raise compilation.GroupTooBig(f"{what} needs 99 GiB")
 
-    monkeypatch.setattr(run, "check_fits", too_big)
+    monkeypatch.setattr(loop, "check_fits", too_big)
     sweep.train_one(tmp_path / "split", ids, seeds=2, smoke=True, experts=None)
     for run_id in ids:
         assert "group" not in json.loads((tmp_path / "split" / run_id / "eval.json").read_text())
@@ -445,7 +445,7 @@ def test_car_learning_report_sets_each_variant_beside_the_defaults(tmp_path, mon
     import math
 
     import car_learning
-    from hintsjax import config
+    from hintsjax.settings import layers
 
     monkeypatch.setattr(report, "ARCHIVE", tmp_path / "archive")
     runs = tmp_path / "car_learning"
@@ -454,7 +454,7 @@ def test_car_learning_report_sets_each_variant_beside_the_defaults(tmp_path, mon
         means = [base, base + 10, base + 20, base + 30]
         write_run(runs, "car_racing", name, [evaluation(base, 5.0, means, seeds=4, episodes_per_seed=50)] * 2,
                   returns=[[base] * 20] * 4)
-        config.save_run_config(runs / "car_racing" / name, config.run_config({"env": "car_racing", "agent": "ppo_rgb"}))
+        layers.save_run_config(runs / "car_racing" / name, layers.run_config({"env": "car_racing", "agent": "ppo_rgb"}))
         rows = list(csv.DictReader((runs / "car_racing" / name / "metrics.csv").open()))
         with (runs / "car_racing" / name / "metrics.csv").open("w", newline="") as f:
             writer = csv.DictWriter(f, [*rows[0], "entropy"])
@@ -561,7 +561,7 @@ def test_the_playground_side_by_side_gives_hintsjax_brax_s_settings_and_the_repo
     pytest.importorskip("mujoco_playground", reason="the Playground adapter needs the playground extra")
     import playground
 
-    from hintsjax.config import run_config
+    from hintsjax.settings.layers import run_config
 
     values = playground.hintsjax_values(playground.brax_settings(smoke=False), seeds=5, steps=60_000_000, smoke=False)
     cfg = run_config(values)

@@ -13,12 +13,16 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from hintsjax import checkpoint, envs, run
-from hintsjax.algorithms import make_trainer
-from hintsjax.config import RunConfig, run_config, save_run_config
-from hintsjax.evaluate import eval_keys
-from hintsjax.ppo import make_network
-from hintsjax.video import Rollout, compose_frame, hint_labels, main, policy_action, rollout, step_keys
+from hintsjax import envs
+from hintsjax.system import checkpoint
+from hintsjax.settings.config import RunConfig
+from hintsjax.settings.layers import run_config, save_run_config
+from hintsjax.algorithms.ppo import make_network
+from hintsjax.algorithms.registry import make_trainer
+from hintsjax.evaluation.evaluator import eval_keys
+from hintsjax.evaluation.recording import Rollout, compose_frame, hint_labels, policy_action, rollout, step_keys
+from hintsjax.training import pipeline
+from hintsjax.video import main
 
 STEPS = 20
 TINY_HINTS = {
@@ -42,7 +46,7 @@ class TinyRun:
 def tiny_run(tmp_path_factory) -> TinyRun:
     """A run folder as training leaves it (config.yaml, a checkpoint at update 4) for a tiny
     pendulum hints run, with random params of the network's shapes and a zeroed rest of the
-    runner state; building it costs no compile. Training it with run.train takes ~100 s on 2
+    runner state; building it costs no compile. Training it with pipeline.train takes ~100 s on 2
     CPU cores, mostly compiling (the slow test below does)."""
     path = tmp_path_factory.mktemp("video") / "hints"
     path.mkdir()
@@ -167,10 +171,10 @@ def test_bad_input_fails_in_one_line_and_writes_nothing(tiny_run, tmp_path, caps
 
 @pytest.mark.slow
 def test_video_of_a_trained_run(tmp_path):
-    """End to end on a run that run.train wrote (slow: ~100 s on 2 CPU cores, mostly compiling)."""
+    """End to end on a run that pipeline.train wrote (slow: ~100 s on 2 CPU cores, mostly compiling)."""
     cfg = run_config(TINY_HINTS)
     save_run_config(tmp_path, cfg)
-    run.train(cfg, tmp_path, progress=False)
+    pipeline.train(cfg, tmp_path, progress=False)
     out = tmp_path / "v.gif"
     assert main([str(tmp_path), "--variant", "swingto", "--steps", str(STEPS), "--scale", "2", "--out", str(out)]) == 0
     with Image.open(out) as gif:

@@ -2,7 +2,7 @@
 
 - `sweep`: train a table's runs (grouped, several worker processes, resumable, over GPUs) and
   the command line every table script shares (`table_main`);
-- `report`: read finished runs into table cells, statistics (hintsjax.stats) and curves, and keep
+- `report`: read finished runs into table cells, statistics (hintsjax.reproduce.stats) and curves, and keep
   the committed archive of what the tables need (experiments/results/runs);
 - `flag_variants`: one measurement per XLA flag variant, each in a fresh process.
 

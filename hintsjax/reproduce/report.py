@@ -57,7 +57,7 @@ def cell(result: dict | None, variant: int = 0) -> str:
 def iqm_cell(result: dict | None, variant: int = 0) -> str:
     """'IQM [low, high]' of one evaluation's per-seed mean returns with a 95% bootstrap CI over
     seeds (hintsjax.stats), or '-' when not run."""
-    from hintsjax import stats
+    from hintsjax.reproduce import stats
 
     return "-" if result is None else stats.iqm_cell(seed_means(result, variant))
 
@@ -65,7 +65,7 @@ def iqm_cell(result: dict | None, variant: int = 0) -> str:
 def ordering(name_x: str, x: dict | None, name_y: str, y: dict | None, variant: int = 0) -> str | None:
     """'P(x > y) = p [low, high]: decided|undecided' over the two runs' per-seed mean returns (95%
     bootstrap CI; decided when it excludes 0.5), or None when either was not run."""
-    from hintsjax import stats
+    from hintsjax.reproduce import stats
 
     if x is None or y is None:
         return None
@@ -83,21 +83,21 @@ def interval_text(ci) -> str:
 
 def verdict(interval) -> str:
     """An interval of P(X > Y) -> 'decided for' (above 0.5), 'decided against' (below) or 'undecided'."""
-    from hintsjax import stats
+    from hintsjax.reproduce import stats
 
     return {1: "decided for", -1: "decided against", 0: "undecided"}[stats.direction(interval)]
 
 
 def poi_cell(x: dict | None, y: dict | None, variant: int = 0) -> str:
     """'P [low, high]' of P(x > y) over seeds, or '-'."""
-    from hintsjax import stats
+    from hintsjax.reproduce import stats
 
     return "-" if x is None or y is None else interval_text(stats.poi_ci(seed_means(x, variant), seed_means(y, variant)))
 
 
 def ordering_line(tag: str, name_x: str, x: dict, name_y: str, y: dict, variant: int = 0) -> str:
     """'- O1 (...): P(x > y) = p [low, high]: decided for' over the two runs' per-seed mean returns."""
-    from hintsjax import stats
+    from hintsjax.reproduce import stats
 
     ci = stats.poi_ci(seed_means(x, variant), seed_means(y, variant))
     return f"- {tag}: P({name_x} > {name_y}) = {interval_text(ci)}: {verdict(ci)}"
@@ -160,7 +160,7 @@ def training_seed_means(folder: Path, last: float = 0.1) -> list[float] | None:
     last `last` of a run's updates; None when not run or no episode ended."""
     import numpy as np
 
-    from hintsjax.runlog import read_curves
+    from hintsjax.training.runlog import read_curves
 
     if (kept := summary(folder)) is not None:
         return kept["training_return_seed_means"]
@@ -213,7 +213,7 @@ def kl_cell(runs: Path, env: str, label: str, above: float = KL_ABOVE) -> str:
 def trained_config(runs: Path, env: str, label: str):
     """The RunConfig a finished run was trained with (its config.yaml), or None when not run:
     a report states the settings its rows were trained with, not today's defaults."""
-    from hintsjax.config import CONFIG_YAML, load_run_config
+    from hintsjax.settings.layers import CONFIG_YAML, load_run_config
 
     folder = run_folder(runs, env, label)
     return load_run_config(folder) if (folder / "eval.json").exists() and (folder / CONFIG_YAML).exists() else None
@@ -230,8 +230,8 @@ def references_note(runs: Path, env: str, references: tuple[str, ...]) -> str:
     and gail learnt from: the best seed of the runs' own expert_ppo, which their sweep exported
     before they began (so an archived report does not change when the packaged expert is
     replaced), else the packaged expert."""
-    from hintsjax.config import run_config
-    from hintsjax.expert import EXPERT_JSON, EXPERTS_DIR
+    from hintsjax.settings.layers import run_config
+    from hintsjax.algorithms.experts import EXPERT_JSON, EXPERTS_DIR
 
     cfg = {a: trained_config(runs, env, a) or run_config({"env": env, "agent": a}) for a in references}
     expert = cfg["expert_ppo"].ppo
@@ -306,8 +306,8 @@ def archive_run(runs: Path, env: str, label: str) -> Path:
     ARCHIVE/<runs' name>/env/label (see the module's docstring); returns that folder."""
     import numpy as np
 
-    from hintsjax.config import CONFIG_YAML
-    from hintsjax.runlog import bin_means, read_curves
+    from hintsjax.settings.layers import CONFIG_YAML
+    from hintsjax.training.runlog import bin_means, read_curves
 
     src, dest = runs / env / label, ARCHIVE / runs.name / env / label
     dest.mkdir(parents=True, exist_ok=True)
@@ -350,7 +350,7 @@ def curve_lines(runs: Path, env: str, labels: list[str], out: Path, title: str, 
     report's markdown lines for it ([] when none has started). While some rows are `kept` (runs
     that predate the archive, with no curve to draw), `out` is their figure and stays; the other
     runs' curves go to a sibling figure, `out`'s name + ARCHIVED_SUFFIX."""
-    from hintsjax.runlog import plot_curves, read_curves
+    from hintsjax.training.runlog import plot_curves, read_curves
 
     paths = {label: metrics_path(runs, env, label) for label in labels}
     curves = {label: read_curves(path) for label, path in paths.items() if path is not None}

@@ -3,7 +3,7 @@
 A run is named `env/label`, where the label is `RunConfig.label` (an agent's name, or
 hints-<scheme>-<hint>); its folder runs/<sweep>/env/label holds config.yaml, metrics.csv,
 checkpoints and, once finished, eval.json. `sweep` groups the unfinished runs of a list that
-share a network's shapes (hintsjax.group: e.g. HINTS-FC with every hint, or PPO-x with
+share a network's shapes (hintsjax.algorithms.group: e.g. HINTS-FC with every hint, or PPO-x with
 PPO-x+N(0,1)) and trains each group, all its runs and seeds in one compiled program,
 `workers` processes at a time, each a call of this module with `--one` and the group's runs:
 
@@ -30,9 +30,8 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+from hintsjax.models.agents import EXPERT_AGENT
 from hintsjax.reproduce.report import ARCHIVE, archive_runs, load
-
-from hintsjax.agents import EXPERT_AGENT
 
 # A sweep's runs save at most once a minute: fast runs finish 50 updates in seconds, and a big
 # run's checkpoint (every env's MJX state) can reach a GB; an interruption loses at most a minute.
@@ -56,7 +55,7 @@ def run_values(env: str, label: str, seeds: int, smoke: bool = False, experts: P
                settings: dict | None = None) -> dict:
     """Config values of a run label (the inverse of RunConfig.label); `settings` (top-level keys
     given with --set, e.g. physics or the first seed) apply to every run of the sweep."""
-    from hintsjax.agents import AGENTS
+    from hintsjax.models.agents import AGENTS
 
     values = {"env": env, "seeds": seeds, "checkpoint_every": 50, "checkpoint_seconds": CHECKPOINT_SECONDS,
               **(SMOKE if smoke else {}), **(settings or {})}
@@ -87,8 +86,10 @@ def train_one(runs: Path, run_ids: list[str], seeds: int, smoke: bool, experts: 
     runs/env/label; export an expert's. A group that does not fit in memory is split in halves."""
     import jax
 
-    from hintsjax import checkpoint, expert, run
-    from hintsjax.config import run_config, save_run_config
+    from hintsjax.system import checkpoint
+    from hintsjax.settings.layers import run_config, save_run_config
+    from hintsjax.algorithms import experts
+    from hintsjax.training import compilation, loop, pipeline
 
     cfgs = []
     for run_id in run_ids:
@@ -102,17 +103,17 @@ def train_one(runs: Path, run_ids: list[str], seeds: int, smoke: bool, experts: 
     # An interrupted run (killed by a time limit) goes on from its newest checkpoint; its
     # wall-clock counts the kept work of earlier calls, not what was lost after their last checkpoint.
     resume = checkpoint.latest_update(folder) is not None
-    before, t = run.seconds_trained(folder) if resume else 0.0, time.time()
+    before, t = loop.seconds_trained(folder) if resume else 0.0, time.time()
     if resume:
         print(f"resuming {', '.join(run_ids)} from update {checkpoint.latest_update(folder)}", flush=True)
     if len(run_ids) == 1:
-        results = [run.train(cfgs[0], folder, resume=resume, progress=False)]
+        results = [pipeline.train(cfgs[0], folder, resume=resume, progress=False)]
     else:
         folder.mkdir(parents=True, exist_ok=True)
         (folder / "group.json").write_text(json.dumps({"runs": run_ids, "seeds": seeds}))
         try:
-            results = run.train_group(cfgs, folder, [runs / r for r in run_ids], resume=resume, progress=False)
-        except run.GroupTooBig as e:
+            results = pipeline.train_group(cfgs, folder, [runs / r for r in run_ids], resume=resume, progress=False)
+        except compilation.GroupTooBig as e:
             half = len(run_ids) // 2
             print(f"{e}: splitting the group into {half} and {len(run_ids) - half} runs", flush=True)
             for part in (run_ids[:half], run_ids[half:]):
@@ -123,7 +124,7 @@ def train_one(runs: Path, run_ids: list[str], seeds: int, smoke: bool, experts: 
         (runs / run_id / "eval.json").write_text(json.dumps({**result, **extra}, indent=1))
     for run_id in run_ids:
         if run_id.split("/")[1] == EXPERT_RUN:
-            exported = expert.export(runs / run_id, None if experts is None else experts / run_id.split("/")[0], force=True)
+            exported = experts.export(runs / run_id, None if experts is None else experts / run_id.split("/")[0], force=True)
             print(f"exported the expert to {exported}", flush=True)
 
 
@@ -131,8 +132,8 @@ def plan_jobs(run_ids: list[str], seeds: int, smoke: bool, group_size: int = 0, 
     """The runs partitioned into groups that train together, each cut into parts of at most
     `group_size` runs (0: no limit; 1: every run its own job). Smaller groups suit calls with a
     time limit: each part is a job that finishes on its own."""
-    from hintsjax.config import run_config
-    from hintsjax.group import plan
+    from hintsjax.settings.layers import run_config
+    from hintsjax.algorithms.group import plan
 
     cfgs = [run_config(run_values(*r.split("/"), seeds, smoke, settings=settings)) for r in run_ids]
     size = group_size or len(run_ids)
@@ -145,7 +146,7 @@ def begun_groups(runs: Path, run_ids: list[str], seeds: int) -> list[list[str]]:
     training is kept: planned afresh, its unfinished runs would form a new group (another digest,
     no checkpoint) and train from the start. Its other members must be in `run_ids` or finished
     (they are evaluated and written again, with the same numbers)."""
-    from hintsjax import checkpoint
+    from hintsjax.system import checkpoint
 
     finished = lambda r: (runs / r / "eval.json").exists()  # noqa: E731
     jobs: list[list[str]] = []
@@ -172,7 +173,7 @@ def todo_jobs(runs: Path, run_ids: list[str], seeds: int, smoke: bool, group_siz
 
 def prerequisite(run_id: str) -> str | None:
     """The run that must finish before this one starts: an env's expert, for its dagger and gail."""
-    from hintsjax.agents import AGENTS
+    from hintsjax.models.agents import AGENTS
 
     env, label = run_id.split("/")
     return f"{env}/{EXPERT_RUN}" if label in AGENTS and AGENTS[label].imitates else None
@@ -180,7 +181,7 @@ def prerequisite(run_id: str) -> str | None:
 
 def budget(run_id: str) -> float:
     """Rough relative cost of a run, to start the longest first."""
-    from hintsjax.config import run_config
+    from hintsjax.settings.layers import run_config
 
     env, label = run_id.split("/")
     cfg = run_config(run_values(env, label, 1))
@@ -320,8 +321,8 @@ def parsed_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -
 def check_settings(parser: argparse.ArgumentParser, settings: dict) -> dict:
     """`settings`, or exit 2 in one line on one that RunConfig refuses (this starts JAX's backend:
     resolving the physics asks it for the platform)."""
-    from hintsjax.config import run_config
-    from hintsjax.errors import UsageError
+    from hintsjax.system.errors import UsageError
+    from hintsjax.settings.layers import run_config
 
     try:
         run_config({"env": "pendulum", **settings})
@@ -401,7 +402,7 @@ def worker_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -
     before the check starts JAX's backend."""
     settings = parsed_settings(parser, args)
     if settings.get("physics") == "warp":
-        from hintsjax import xla_flags
+        from hintsjax.system import xla_flags
 
         xla_flags.drop_determinism()
     return check_settings(parser, settings)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from hintsjax import envs
-from hintsjax.envs.acrobot import HALF_EXTENT, Acrobot, AcrobotState, link_ends, tip_height
+from hintsjax.envs.acrobot import Acrobot, AcrobotState, HALF_EXTENT, link_ends, tip_height
 
 S = AcrobotState.at
 KEY = jax.random.key(0)

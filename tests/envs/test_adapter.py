@@ -162,8 +162,8 @@ def test_a_hint_file_loads_and_its_hints_jit(cartpole):
 
 
 def test_an_adapted_env_takes_its_defaults_from_the_table_or_the_fallback():
-    from hintsjax.config import run_config
     from hintsjax.envs import playground
+    from hintsjax.settings.layers import run_config
 
     cfg = run_config({"env": CARTPOLE})
     assert cfg.hint == "pole_angle" and cfg.ppo.total_env_steps == playground.PIXEL_PPO["total_env_steps"]

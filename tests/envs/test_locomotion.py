@@ -61,7 +61,7 @@ def test_halfcheetah_parity(cheetah):
 
 @pytest.fixture(scope="module")
 def cheetah_expert():
-    from hintsjax.expert import load
+    from hintsjax.algorithms.experts import load
 
     return jax.jit(load("halfcheetah").mean)
 
@@ -121,8 +121,8 @@ def test_ant_with_euler_against_ant_v5_as_shipped():
 def test_ant_fast_is_the_ant_with_cheaper_physics():
     """ant_fast: Euler, 2 Newton iterations, floor contacts for the torso and lower legs only
     (9, against the ant's 25), the ant's hints, and next starts drawn once per rollout."""
-    from hintsjax.config import run_config
     from hintsjax.envs.physics import capacities
+    from hintsjax.settings.layers import run_config
 
     fast, ant = envs.make("ant_fast", "speed"), envs.make("ant", "speed")
     assert fast.mj_model.opt.integrator == mujoco.mjtIntegrator.mjINT_EULER and fast.mj_model.opt.iterations == 2

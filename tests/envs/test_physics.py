@@ -13,10 +13,10 @@ import pytest
 
 from gym_parity import KEY, Compiled, parity  # tests/envs/gym_parity.py
 from hintsjax import envs
-from hintsjax.config import run_config
 from hintsjax.envs import physics
 from hintsjax.envs.ant import Ant
-from hintsjax.errors import UsageError
+from hintsjax.system.errors import UsageError
+from hintsjax.settings.layers import run_config
 
 warp_lang = pytest.mark.skipif(not physics.warp_installed(), reason="warp-lang not installed (pip install -e '.[gpu]')")
 

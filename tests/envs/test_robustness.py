@@ -4,7 +4,7 @@ AutoReset keeps starting episodes. Slow (`make test-slow`): 10^6 steps per env.
 Actions of +-1e6 are clipped by each env to its range (the pendulum's torque to +-2, MJX envs'
 controls to their ctrlrange, the car's steering, gas and brake to theirs). A NaN action is not
 sanitised: it makes that env's state NaN, as Gymnasium's envs do; in training the non-finite guard
-(hintsjax/run.py) stops the run at the first non-finite loss, before any such state is saved.
+(hintsjax/training/guards.py) stops the run at the first non-finite loss, before any such state is saved.
 """
 
 from __future__ import annotations

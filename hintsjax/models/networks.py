@@ -8,10 +8,10 @@ import jax
 import jax.numpy as jnp
 import flax.linen as nn
 
-from hintsjax.agents import AgentSpec
-from hintsjax import normalization
-from hintsjax.conditioning import SCHEMES, HintEmbedding
-from hintsjax.normalization import StateNorm
+from hintsjax.models import normalization
+from hintsjax.models.agents import AgentSpec
+from hintsjax.models.conditioning import HintEmbedding, SCHEMES
+from hintsjax.models.normalization import StateNorm
 
 
 def he_init(gain: float = 1.0) -> nn.initializers.Initializer:
@@ -104,7 +104,7 @@ class ActorCritic(nn.Module):
     envs.SquashedActions).
     Top-level parameter names ("encoder", "conditioning", "actor", "log_std", "critic") are the
     optimiser's learning-rate groups. With `normalize_state` the state passes through the running
-    normaliser first (hintsjax.normalization; its statistics are the "obs_stats" collection).
+    normaliser first (hintsjax.models.normalization; its statistics are the "obs_stats" collection).
     """
 
     agent: AgentSpec

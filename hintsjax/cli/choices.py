@@ -4,9 +4,9 @@ with its hints and variants), the agents and the conditioning schemes, from thei
 from __future__ import annotations
 
 from hintsjax import envs
-from hintsjax.agents import AGENTS
-from hintsjax.conditioning import SCHEMES
-from hintsjax.env_defaults import ENV_DEFAULTS
+from hintsjax.models.agents import AGENTS
+from hintsjax.models.conditioning import SCHEMES
+from hintsjax.settings.env_defaults import ENV_DEFAULTS
 
 
 def env_lines(name: str) -> list[str]:

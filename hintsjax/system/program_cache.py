@@ -41,7 +41,6 @@ import numpy as np
 from jax import export
 from jax.api_util import shaped_abstractify
 
-import hintsjax
 from hintsjax import envs
 from hintsjax.envs import hints
 
@@ -50,6 +49,7 @@ FOLDER = "traced"
 LIBRARIES = ("jax", "jaxlib", "flax", "optax", "chex", "numpy", "mujoco", "mujoco-mjx", "orbax-checkpoint", "brax", "playground")
 NUMERIC_SETTINGS = ("jax_enable_x64", "jax_default_matmul_precision", "jax_default_prng_impl", "jax_threefry_partitionable")
 _OFF = ("off", "0", "false", "no", "none")
+PACKAGE = Path(__file__).resolve().parents[1]  # the hintsjax folder, wherever it is installed
 
 
 def folder() -> Path | None:
@@ -86,7 +86,7 @@ def sources_digest() -> str | None:
     if any(_source_file(obj) is None for obj in registered):
         return None
     files = set()
-    for package in (Path(hintsjax.__file__).parent, Path(envs.__file__).parent):
+    for package in (PACKAGE, Path(envs.__file__).parent):
         files.update(p.resolve() for p in package.rglob("*.py"))
         files.update(p.resolve() for p in package.glob("assets/*"))
     roots = _library_roots()

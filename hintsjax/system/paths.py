@@ -7,7 +7,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from hintsjax.errors import UsageError
+from hintsjax.system.errors import UsageError
 
 
 def _nearest_existing(path: Path) -> Path:

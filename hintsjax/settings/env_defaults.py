@@ -1,14 +1,14 @@
 """Each env's training defaults as RunConfig layers (`ENV_DEFAULTS`), read from the `TRAINING`
 beside each env (envs/<env>.py, the registry's `training`), where the paper's budgets, Table 5's
 actor rates and the reasons for each deviation are written. A config value of `None` means "the
-env's default" (hintsjax.config.run_config stacks the layers)."""
+env's default" (hintsjax.settings.layers.run_config stacks the layers)."""
 
 from __future__ import annotations
 
 from typing import Any
 
 from hintsjax import envs
-from hintsjax.agents import AGENTS
+from hintsjax.models.agents import AGENTS
 
 
 # "agents" holds per-agent overrides on top of an env's defaults, for the converged references
@@ -63,5 +63,5 @@ class EnvDefaults(dict):
         return envs.REGISTRY.keys()
 
 
-# Per env, defaults over the dataclasses' (hintsjax.algorithm_settings, hintsjax.config.RunConfig).
+# Per env, defaults over the dataclasses' (hintsjax.settings.algorithm_settings, hintsjax.settings.config.RunConfig).
 ENV_DEFAULTS: EnvDefaults = EnvDefaults({name: _env_defaults(entry.training) for name, entry in envs.REGISTRY.items()})

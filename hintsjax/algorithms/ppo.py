@@ -1,6 +1,6 @@
 """PPO as one jittable `train(key)`: rollout, GAE, clipped-surrogate loss and updates.
 
-`make_trainer(cfg)` returns PPO's `Trainer` (hintsjax.trainer); `make_ppo(cfg)` its pieces
+`make_trainer(cfg)` returns PPO's `Trainer` (hintsjax.algorithms.trainer); `make_ppo(cfg)` its pieces
 (init, rollout, learn), which GAIL reuses with the discriminator's reward.
 
 Episodes carry `terminated` and `truncated` separately: GAE bootstraps a truncated episode from
@@ -18,10 +18,11 @@ import numpy as np
 import optax
 from flax import struct
 
-from hintsjax import envs, normalization
-from hintsjax.config import RunConfig
-from hintsjax.networks import ActorCritic, lr_labels
-from hintsjax.trainer import Trainer, episode_metrics, program_identity
+from hintsjax import envs
+from hintsjax.models import normalization
+from hintsjax.models.networks import ActorCritic, lr_labels
+from hintsjax.settings.config import RunConfig
+from hintsjax.algorithms.trainer import Trainer, episode_metrics, program_identity
 
 
 @struct.dataclass
@@ -43,7 +44,7 @@ class Transition:
 class Hyper:
     """A configuration's numbers, as arrays in its runner state rather than constants in the
     trace: configurations that differ only in these (and in their hint) train in one compiled
-    program, vmapped over a group of them (hintsjax.group), as rejax vmaps over its configs.
+    program, vmapped over a group of them (hintsjax.algorithms.group), as rejax vmaps over its configs.
 
     `hint_take` and `hint_keep` pick the agent's hint out of the env's: an env built for a group
     computes every member's hint parts side by side (width U), and a member sees those at
@@ -275,7 +276,7 @@ class PPO:
 def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
     """PPO's pieces for a validated RunConfig. Every number a table varies is read from the
     state's `Hyper`, so the pieces serve any configuration of the same shapes; `hint` is the
-    env's hint (default: cfg's; a group's env computes every member's, see hintsjax.group)."""
+    env's hint (default: cfg's; a group's env computes every member's, see hintsjax.algorithms.group)."""
     ppo = cfg.ppo
     env = envs.AutoReset(cfg.make_env(hint=hint))
     env_params = cfg.task_params(cfg.variant)

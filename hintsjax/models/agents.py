@@ -1,5 +1,5 @@
 """The agents of the paper's Table 1 as registry entries: which inputs each one sees and which
-algorithm trains it (hintsjax.algorithms: "ppo", "dagger" or "gail")."""
+algorithm trains it (hintsjax.algorithms.registry: "ppo", "dagger" or "gail")."""
 
 from __future__ import annotations
 

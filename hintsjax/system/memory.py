@@ -11,7 +11,7 @@ must be held at once:
 - a video: its frames, upscaled, on the host.
 
 The programs hold more (activations, copies, the physics), so a size under a bound may still not
-fit; XLA's memory analysis of a compiled group speaks for that (run.check_fits).
+fit; XLA's memory analysis of a compiled group speaks for that (training.compilation.check_fits).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from typing import Any, Callable
 import jax
 
 from hintsjax import envs
-from hintsjax.errors import UsageError
+from hintsjax.system.errors import UsageError
 
 def sized(n: float) -> str:
     """Bytes as the largest unit that keeps the number at least 1 (binary units)."""

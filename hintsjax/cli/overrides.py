@@ -21,7 +21,7 @@ from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import OverrideParseException
 
-from hintsjax.errors import UsageError
+from hintsjax.system.errors import UsageError
 
 # Hydra's own flags that take the next argument as their value.
 HYDRA_VALUE_FLAGS = {"--config-name", "-cn", "--config-path", "-cp", "--config-dir", "-cd", "--cfg", "-c",
@@ -36,7 +36,7 @@ GRAMMAR = "https://hydra.cc/docs/advanced/override_grammar/basic"
 
 def defaults() -> dict[str, Any]:
     """conf/config.yaml's values, what Hydra hands over for every key the command line left alone."""
-    conf = yaml.safe_load((Path(__file__).parent / "conf" / "config.yaml").read_text())
+    conf = yaml.safe_load((Path(__file__).parents[1] / "conf" / "config.yaml").read_text())
     return {k: v for k, v in conf.items() if k not in ("defaults", "hydra")}  # not Hydra's own sections
 
 

@@ -21,10 +21,12 @@ import jax.numpy as jnp
 import optax
 from flax import struct
 
-from hintsjax import envs, expert as experts, normalization
-from hintsjax.config import RunConfig
-from hintsjax.ppo import Hyper, RunnerState, make_network, start_runner
-from hintsjax.trainer import Trainer, episode_metrics
+from hintsjax import envs
+from hintsjax.models import normalization
+from hintsjax.settings.config import RunConfig
+from hintsjax.algorithms import experts
+from hintsjax.algorithms.ppo import Hyper, RunnerState, make_network, start_runner
+from hintsjax.algorithms.trainer import Trainer, episode_metrics
 
 
 @struct.dataclass

@@ -18,9 +18,9 @@ from typing import Any, Callable
 import jax
 import jax.numpy as jnp
 
-from hintsjax.config import RunConfig
 from hintsjax.envs import WARP
-from hintsjax.hint_sources import PROGRAMMATIC
+from hintsjax.settings.config import RunConfig
+from hintsjax.settings.hint_sources import PROGRAMMATIC
 
 
 @dataclass(frozen=True)
@@ -33,7 +33,7 @@ class Trainer:
     init: Callable[[jax.Array], Any]
     update: Callable[[Any], tuple[Any, dict[str, jax.Array]]]
     # What the programs depend on besides code and their arguments' shapes (`program_identity`),
-    # the key of the traced-program cache (hintsjax/program_cache.py); None: never cached
+    # the key of the traced-program cache (hintsjax/system/program_cache.py); None: never cached
     identity: str | None = None
 
     def run(self, state: Any, num_updates: int) -> tuple[Any, dict[str, jax.Array]]:
@@ -61,7 +61,7 @@ class Trainer:
 
     def abstract_state(self) -> Any:
         """The shapes and types of the run's seed-batched state ([S, ...] for cfg's seeds), computed
-        without any arrays: what a checkpoint of the run restores into (hintsjax.checkpoint)."""
+        without any arrays: what a checkpoint of the run restores into (hintsjax.system.checkpoint)."""
         return jax.eval_shape(jax.vmap(self.init), jax.random.split(jax.random.key(0), self.cfg.seeds))
 
 

@@ -18,7 +18,7 @@ from pathlib import Path
 import jax
 import orbax.checkpoint as ocp
 
-from hintsjax.errors import UsageError
+from hintsjax.system.errors import UsageError
 
 CHECKPOINTS = "checkpoints"
 
@@ -87,7 +87,7 @@ def require_same_arrays(stored, expected, source: str) -> None:
 def on_this_device(abstract):
     """`abstract`'s shapes and types placed on this process's first device: what to restore
     into, wherever the arrays were saved (a GPU's checkpoint records devices a CPU lacks; each
-    process of a run over several reads the whole state, hintsjax/devices.py spreads it)."""
+    process of a run over several reads the whole state, hintsjax/system/devices.py spreads it)."""
     here = jax.sharding.SingleDeviceSharding(jax.local_devices()[0])
     return jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=here), abstract)
 

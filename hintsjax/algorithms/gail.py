@@ -22,13 +22,13 @@ import jax.numpy as jnp
 import optax
 from flax import struct
 
-from hintsjax import expert as experts
-from hintsjax.algorithm_settings import GailConfig
-from hintsjax.config import RunConfig
-from hintsjax.networks import MLP
-from hintsjax.normalization import normalize
-from hintsjax.ppo import RunnerState, make_ppo
-from hintsjax.trainer import Trainer
+from hintsjax.models.networks import MLP
+from hintsjax.models.normalization import normalize
+from hintsjax.settings.algorithm_settings import GailConfig
+from hintsjax.settings.config import RunConfig
+from hintsjax.algorithms import experts
+from hintsjax.algorithms.ppo import RunnerState, make_ppo
+from hintsjax.algorithms.trainer import Trainer
 
 
 @struct.dataclass

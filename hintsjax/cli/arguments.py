@@ -1,14 +1,14 @@
 """`key=value` command-line arguments into a settings dataclass (the tools beside the run command:
 hintsjax.generator, hintsjax.rank), checked against its fields' types in one line each; `--help`
-lists the settings with their defaults and the registries' choices (hintsjax.choices)."""
+lists the settings with their defaults and the registries' choices (hintsjax.cli.choices)."""
 
 from __future__ import annotations
 
 import dataclasses
 from typing import Any, TypeVar
 
-from hintsjax import choices
-from hintsjax.errors import UsageError
+from hintsjax.system.errors import UsageError
+from hintsjax.cli import choices
 
 T = TypeVar("T")
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hintsjax.errors import UsageError
+from hintsjax.system.errors import UsageError
 
 METRICS_CSV = "metrics.csv"
 CURVE_PNG = "learning_curve.png"

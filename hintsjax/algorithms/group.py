@@ -20,12 +20,13 @@ from typing import Any, Sequence
 import jax
 import jax.numpy as jnp
 
-from hintsjax import envs, ppo
-from hintsjax.config import RunConfig
-from hintsjax.errors import UsageError
-from hintsjax.hint_sources import PROGRAMMATIC
-from hintsjax.ppo import Hyper, RunnerState
-from hintsjax.trainer import Trainer, program_identity
+from hintsjax import envs
+from hintsjax.system.errors import UsageError
+from hintsjax.settings.config import RunConfig
+from hintsjax.settings.hint_sources import PROGRAMMATIC
+from hintsjax.algorithms import ppo
+from hintsjax.algorithms.ppo import Hyper, RunnerState
+from hintsjax.algorithms.trainer import Trainer, program_identity
 
 # The PPO settings that fix the shapes of a run's arrays or the structure of its program: the
 # members of a group agree on these; every other PPO number is a Hyper leaf and may differ.
@@ -136,7 +137,7 @@ def make_group_trainer(group: Group) -> Trainer:
 def cell_state(group: Group, state: RunnerState, k: int) -> RunnerState:
     """Member k's seed-batched state ([S, ...]) as its own run holds it: params and optimiser state
     cut to its hint width, its hint alone in the observation and its own Hyper; what a run folder's
-    checkpoint of that configuration holds (hintsjax.checkpoint.restore_latest reads it)."""
+    checkpoint of that configuration holds (hintsjax.system.checkpoint.restore_latest reads it)."""
     cfg = group.cfgs[k]
     seeds = jax.tree.leaves(state)[0].shape[0]
     own = ppo.make_trainer(cfg)

@@ -1,12 +1,12 @@
-"""The training algorithms by name: an agent's `algorithm` (hintsjax.agents) picks its trainer."""
+"""The training algorithms by name: an agent's `algorithm` (hintsjax.models.agents) picks its trainer."""
 
 from __future__ import annotations
 
 from typing import Any, Callable
 
-from hintsjax import dagger, gail, ppo
-from hintsjax.config import RunConfig
-from hintsjax.trainer import Trainer
+from hintsjax.settings.config import RunConfig
+from hintsjax.algorithms import dagger, gail, ppo
+from hintsjax.algorithms.trainer import Trainer
 
 ALGORITHMS: dict[str, Callable[..., Trainer]] = {
     "ppo": ppo.make_trainer,

@@ -1,13 +1,13 @@
 """Where an agent's hint comes from: the simulator's state (programmatic), or a learned generator.
 
-A generator (trained by `python -m hintsjax.generator`, hintsjax/generator.py) is a small network
+A generator (trained by `python -m hintsjax.generator`, hintsjax/hints/generators.py) is a small network
 that reads the hint off the last `frames` pictures. Its folder holds generator.json and the
 seed-batched params as an orbax checkpoint; `load` reads one seed of it. `hinted_env` and
 `hinted_params` give the env an agent acts in for a hint source: the programmatic env, or
 `GeneratedHintEnv`, which keeps the last pictures in its state and the generator's params in its
 params, so it is as pure and jittable as the env it wraps.
 
-This sits below the settings (hintsjax/config.py builds its envs through it) and above envs/ and
+This sits below the settings (hintsjax/settings/config.py builds its envs through it) and above envs/ and
 the networks; it imports nothing that trains.
 """
 
@@ -26,10 +26,10 @@ import orbax.checkpoint as ocp
 from flax import struct
 
 from hintsjax import envs
-from hintsjax.checkpoint import on_this_device, require_same_arrays
 from hintsjax.envs.core import Env, Step
-from hintsjax.errors import UsageError
-from hintsjax.networks import MLP, Encoder, scale_pixels
+from hintsjax.system.checkpoint import on_this_device, require_same_arrays
+from hintsjax.system.errors import UsageError
+from hintsjax.models.networks import Encoder, MLP, scale_pixels
 
 PROGRAMMATIC = "programmatic"  # the hint source that computes hints from the simulator's state
 GENERATOR_JSON = "generator.json"

@@ -1,13 +1,13 @@
 """Each training algorithm's settings: PPO's, DAgger's and GAIL's, the `ppo`, `dagger` and `gail`
-sections of a RunConfig (hintsjax.config). Per-env values over these defaults live beside each
-env (hintsjax.env_defaults)."""
+sections of a RunConfig (hintsjax.settings.config). Per-env values over these defaults live beside each
+env (hintsjax.settings.env_defaults)."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
-from hintsjax.errors import UsageError, require_positive, require_range
+from hintsjax.system.errors import UsageError, require_positive, require_range
 
 
 # The policy's action distribution (`ppo.action_head`; the car's learning measurements, issue 26):
@@ -47,7 +47,7 @@ class PPOConfig:
     # KL from the rollout policy exceeds 1.5 x target_kl, that minibatch and the rest of the
     # update's epochs take no step. None: off (Table 5 has none).
     target_kl: float | None = None
-    # State agents: normalise the state by its running mean and std (hintsjax.normalization).
+    # State agents: normalise the state by its running mean and std (hintsjax.models.normalization).
     normalize_state: bool = False
     action_head: str = "gaussian"  # one of ACTION_HEADS
 

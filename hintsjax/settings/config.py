@@ -1,0 +1,159 @@
+"""One run's configuration: the schema (RunConfig and its sections) and its validation.
+
+Choices (env, agent, scheme, hint, variants) are validated against the registries here, so a
+bad name fails before anything is built or written, with a one-line message that lists the
+valid choices. A config value of `None` means "the env's default" (hintsjax.settings.env_defaults);
+the layers that resolve it, and a run folder's config.yaml, are hintsjax.settings.layers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+from hintsjax import envs
+from hintsjax.envs.errors import ChoiceError, choose
+from hintsjax.system.errors import UsageError, require_positive
+from hintsjax.models.agents import AGENTS, AgentSpec, EXPERT_AGENT
+from hintsjax.models.conditioning import SCHEMES
+from hintsjax.settings.algorithm_settings import DaggerConfig, GailConfig, PPOConfig
+from hintsjax.settings.env_defaults import ENV_DEFAULTS
+from hintsjax.settings.hint_sources import PROGRAMMATIC, check_matches, hinted_env, hinted_params
+
+
+def env_params(env: str, variant: str | None) -> Any:
+    """The params of `env`'s `variant` (None: its default); UsageError naming the valid variants."""
+    try:
+        return envs.make_params(env, variant)
+    except ChoiceError as e:
+        raise UsageError(str(e)) from None
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """One training run: what to train, on what, for how many seeds, and how to evaluate it."""
+
+    env: str = "pendulum"
+    agent: str = "hints"
+    scheme: str = "fc"
+    hint: str = "composite"
+    variant: str | None = None  # training variant of the env (None: its default)
+    seeds: int = 5
+    seed: int = 0  # seed i of the run is PRNGKey(seed + i)
+    eval_episodes: int = 50
+    eval_variants: tuple[str, ...] = ()  # deploy variants evaluated after training
+    stochastic_eval: bool = False
+    checkpoint_every: int = 10  # updates between progress reports and checkpoints
+    checkpoint_seconds: float = 30.0  # at least this long between checkpoints (0: after every report)
+    expert: str | None = None  # dagger/gail: an exported expert folder (None: the env's packaged one)
+    hints_from: str | None = None  # a Python file or module whose register_hint calls add hints (docs/playground.md)
+    hint_source: str = "programmatic"  # where training's hint comes from: programmatic, or a generator folder
+    eval_hint_source: str | None = None  # the same at deploy (None: as hint_source)
+    # What steps an MJX env: auto (resolved when the config is built: Warp on an NVIDIA GPU with
+    # warp-lang, else JAX), jax (bit-reproducible) or warp (envs/physics.py)
+    physics: str = "auto"
+    warp_capacity: float = 2.0  # MJX-Warp's contact and constraint buffers: this many times the model's most per world
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    dagger: DaggerConfig = field(default_factory=DaggerConfig)
+    gail: GailConfig = field(default_factory=GailConfig)
+
+    @property
+    def agent_spec(self) -> AgentSpec:
+        return AGENTS[self.agent]
+
+    @property
+    def effective_hint(self) -> str:
+        """The hint the env computes: none for agents without one, `state` for HINTS-x."""
+        return self.agent_spec.hint_for(self.hint)
+
+    @property
+    def label(self) -> str:
+        """Short name for tables: agent[-scheme][-hint]."""
+        return self.agent_spec.label(self.agent, self.scheme, self.hint)
+
+    def seed_keys(self) -> jax.Array:
+        """[S] PRNG keys of the run's seeds: seed i is key(seed + i)."""
+        return jnp.stack([jax.random.key(self.seed + i) for i in range(self.seeds)])
+
+    def hint_source_for(self, deploy: bool) -> str:
+        """The hint source of training, or of deployment (evaluation, videos) with `deploy`."""
+        return (self.eval_hint_source or self.hint_source) if deploy else self.hint_source
+
+    def make_env(self, observe: tuple[str, ...] | None = None, hint: str | None = None, deploy: bool = False) -> envs.Env:
+        """The env the agent acts in (its hint `hint`, default its own, from the hint source of
+        training or of deployment); its params are `task_params`'."""
+        observe = self.agent_spec.observe if observe is None else observe
+        env = hinted_env(self.env, self.effective_hint if hint is None else hint, observe, self.hint_source_for(deploy),
+                         physics=self.physics, warp_capacity=self.warp_capacity)
+        return envs.SquashedActions(env) if self.ppo.action_head == "tanh" else env
+
+    def task_params(self, variant: str | None, deploy: bool = False) -> Any:
+        """The params of `make_env(deploy=deploy)`'s env on `variant` (None: the training variant's default)."""
+        return hinted_params(self.env, env_params(self.env, variant), self.agent_spec.observe, self.hint_source_for(deploy))
+
+    def validate(self) -> "RunConfig":
+        try:
+            choose("env", self.env, envs.REGISTRY)
+            choose("agent", self.agent, AGENTS)
+            if self.agent_spec.pixels:
+                envs.check_drawable(self.env)
+            choose("scheme", self.scheme, SCHEMES)
+            if self.hint not in (RunConfig.hint, ENV_DEFAULTS.get(self.env, {}).get("hint")):
+                envs.make_hint(self.env, self.hint)  # a hint asked for is named right, even where the agent sees none
+            hint = envs.make_hint(self.env, self.effective_hint)
+            envs.resolve_physics(self.env, self.physics)
+        except (ChoiceError, envs.PhysicsUnavailable) as e:
+            raise UsageError(str(e)) from None
+        names = [part.name for part in hint.parts]
+        twice = sorted({name for name in names if names.count(name) > 1})
+        if twice:
+            raise UsageError(f"hint '{self.hint}' gives {', '.join(twice)} more than once; name each hint once")
+        if self.agent_spec.hint and not names:
+            raise UsageError(f"agent={self.agent} sees a hint, so hint=none leaves it nothing; valid for {self.env}: "
+                             f"{', '.join(envs.hint_names(self.env))} (or agent=ppo_rgb, which sees none)")
+        if self.hints_from is not None:
+            self._check_hint_widths(hint)
+        if not 1 <= self.warp_capacity < float("inf"):
+            raise UsageError(f"warp_capacity must be a number of at least 1, got {self.warp_capacity}")
+        for v in (self.variant, *self.eval_variants):
+            env_params(self.env, v)
+        self._check_hint_sources()
+        require_positive(self, ("seeds", "eval_episodes", "checkpoint_every"))
+        if not self.checkpoint_seconds >= 0:  # NaN too
+            raise UsageError(f"checkpoint_seconds must be 0 or more, got {self.checkpoint_seconds}")
+        for section in SECTIONS:
+            getattr(self, section).validate()
+        if self.ppo.action_head != "gaussian" and (self.agent_spec.imitates or self.agent == EXPERT_AGENT):
+            raise UsageError(f"ppo.action_head={self.ppo.action_head} is for PPO's learners; {self.agent} keeps the "
+                             "gaussian head (an expert's policy drives dagger and gail as a Gaussian's mean)")
+        if self.agent_spec.algorithm == "dagger" and self.dagger.buffer_size < self.ppo.batch_size:
+            raise UsageError(f"dagger.buffer_size ({self.dagger.buffer_size}) must hold one round, ppo.batch_size ({self.ppo.batch_size})")
+        return self
+
+    def _check_hint_widths(self, hint: envs.Hint) -> None:
+        """UsageError naming a hint (of a hint file) that returns another width than it registered."""
+        env = envs.make(self.env, envs.NO_HINT, ("state",))
+        params = env_params(self.env, self.variant)
+        state = jax.eval_shape(env.initial_state, jax.random.key(0), params)
+        try:
+            envs.check_hint_shapes(hint, state, params)
+        except envs.HintFileError as e:
+            raise UsageError(f"hints_from={self.hints_from}: {e}") from None
+
+    def _check_hint_sources(self) -> None:
+        for name in ("hint_source", "eval_hint_source"):
+            source = getattr(self, name)
+            if source in (None, PROGRAMMATIC):
+                continue
+            if not self.agent_spec.hint:
+                raise UsageError(f"{name} applies to agents that see a hint "
+                                 f"({', '.join(a for a, s in AGENTS.items() if s.hint)}), not {self.agent}")
+            check_matches(source, self.env, self.effective_hint)
+
+
+SECTIONS = {"ppo": PPOConfig, "dagger": DaggerConfig, "gail": GailConfig}  # RunConfig's nested settings
+
+

@@ -1,0 +1,105 @@
+"""Training from a config to a finished run folder: `train` for one run (all its seeds), and
+`train_group` for configurations trained as one program (hintsjax.algorithms.group), each member
+then getting the folder its own run would have written."""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+
+from hintsjax.envs import physics
+from hintsjax.system import checkpoint, devices
+from hintsjax.settings.config import RunConfig
+from hintsjax.algorithms.group import cell_state, make_group, make_group_trainer
+from hintsjax.algorithms.registry import make_trainer
+from hintsjax.evaluation.evaluator import compile_evaluator, evaluate_group, evaluate_variants
+from hintsjax.training.guards import check_physics
+from hintsjax.training.loop import advance, start
+from hintsjax.training.outputs import finish
+from hintsjax.training.runlog import RunLog
+
+
+def evaluation_compiles_first(cfg: RunConfig) -> bool:
+    """Whether the evaluation program compiles before training rather than beside it: under
+    physics=warp. MuJoCo Warp captures CUDA graphs and launches its kernels from a Python
+    callback, so a compile in another thread slows every physics call (the ant's first 100
+    updates: 40.4 K env steps/s beside, 56.4 K first) and, with deterministic ops off (XLA's
+    autotuner then runs kernels on the GPU while it compiles), broke the capture: a segfault, and
+    earlier "Warp CUDA error 904", in 3 of 4 runs beside, none of 3 first
+    (experiments/results/warp_det_off_h100.json)."""
+    return cfg.physics == physics.WARP
+
+
+class Unlogged:
+    """What a process other than the main one logs: nothing (process 0 writes metrics.csv and tb/)."""
+
+    def write(self, metrics: dict[str, np.ndarray], after: int) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def run_log(run_dir: Path, resume_update: int) -> RunLog | Unlogged:
+    return RunLog(run_dir, resume_update=resume_update) if devices.is_main() else Unlogged()
+
+
+def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = True) -> dict[str, Any]:
+    """Train all seeds (in chunks, with checkpoints: see `advance`), evaluate, plot; returns eval results."""
+    training = start(make_trainer(cfg), cfg, run_dir, resume, cfg.label)
+    log = run_log(run_dir, training.done)
+    variants = (cfg.variant, *cfg.eval_variants)
+    shapes = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=x.sharding), training.state.params)
+    # The evaluation program compiles on the host while the device trains (it needs only the
+    # params' shapes), so its compile adds nothing to the wall-clock of a run that trains longer;
+    # under physics=warp it compiles first (`evaluation_compiles_first`).
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        evaluator = pool.submit(compile_evaluator, cfg, shapes, variants[0], cfg.eval_episodes, cfg.stochastic_eval,
+                                layout=training.compiled.layout)
+        if evaluation_compiles_first(cfg):
+            evaluator.result()
+        try:
+            training = advance(training, cfg, run_dir, log.write, progress, cfg.label)
+        finally:
+            log.close()
+        compiled = evaluator.result()
+    evaluations, eval_compile = evaluate_variants(cfg, training.state.params, variants, cfg.eval_episodes,
+                                                  cfg.stochastic_eval, compiled, training.compiled.layout)
+    check_physics(cfg, cfg.label)
+    return finish(cfg, run_dir, training, evaluations, eval_compile)
+
+
+def train_group(group_cfgs: list[RunConfig], group_dir: Path, cell_dirs: list[Path], resume: bool = False,
+                progress: bool = True) -> list[dict[str, Any]]:
+    """Train configurations that share a network's shapes together (hintsjax.algorithms.group), all seeds of
+    all of them in one compiled program; checkpoints of the group go to group_dir. Each member
+    then gets what its own run would have written in its folder (cell_dirs, each holding its
+    config.yaml): metrics.csv, its final state as a checkpoint, eval.json, learning_curve.png.
+    GroupTooBig if the group's program would not fit on the device (before anything is written)."""
+    group = make_group(group_cfgs)
+    cfg = group.cfgs[0]
+    label = f"group of {len(group.cfgs)} ({', '.join(c.label for c in group.cfgs)})"
+    training = start(make_group_trainer(group), cfg, group_dir, resume, label, check_memory=len(group.cfgs) > 1)
+    logs = [run_log(d, training.done) for d in cell_dirs]
+
+    def write(metrics: dict[str, np.ndarray], after: int) -> None:  # [S, n, K]: one log per member
+        for k, log in enumerate(logs):
+            log.write({name: v[..., k] for name, v in metrics.items()}, after)
+
+    try:
+        training = advance(training, cfg, group_dir, write, progress, label)
+    finally:
+        for log in logs:
+            log.close()
+    for k, cell_dir in enumerate(cell_dirs):
+        if checkpoint.latest_update(cell_dir) != training.done:
+            checkpoint.save(cell_dir, cell_state(group, training.compiled.layout.crop(training.state), k), training.done)
+    evaluations, eval_compile = evaluate_group(group, training.state, training.compiled.layout)
+    rate = (training.done - training.first) * cfg.ppo.batch_size * cfg.seeds * len(group.cfgs) / max(training.seconds, 1e-9)
+    extra = {"group": [c.label for c in group.cfgs], "group_dir": str(group_dir), "group_env_steps_per_s": rate}
+    return [finish(member, cell_dir, training, member_evaluations, eval_compile, extra)
+            for member, cell_dir, member_evaluations in zip(group.cfgs, cell_dirs, evaluations)]
