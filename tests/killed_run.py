@@ -39,19 +39,27 @@ def main() -> None:
             os.kill(os.getpid(), signal.SIGKILL)
 
     if mode == "interrupt":
+        # Python raises KeyboardInterrupt on SIGINT only if the signal was not ignored when it
+        # started (a test runner's child may inherit SIG_IGN; a terminal's never does), and a
+        # library may take the handler over: set Python's own, and check it is still there
+        signal.signal(signal.SIGINT, signal.default_int_handler)
         real_check, checks = loop.check_physics, []
 
         def check_then_interrupt(*args):  # loop.advance's report calls it once a chunk's metrics are logged
             real_check(*args)
             checks.append(1)
             if len(checks) == 1:
-                # As Ctrl-C, but sent to this (the main) thread: os.kill's process-wide signal may land
-                # in any of XLA's threads and be handled later, under load after the run has gone on
-                # past this report (or inside orbax's asyncio loop, which takes SIGINT for itself)
+                handler = signal.getsignal(signal.SIGINT)
+                if handler is not signal.default_int_handler:
+                    sys.exit(f"SIGINT's handler at the first report is {handler!r}, not Python's own")
+                # As Ctrl-C, but raised in this (the main) thread, so it takes effect here and now
                 signal.raise_signal(signal.SIGINT)
 
         loop.check_physics = check_then_interrupt
-        sys.exit(run.main_from_values(json.loads(sys.argv[2])))
+        status = run.main_from_values(json.loads(sys.argv[2]))
+        if status == 0:
+            sys.exit(f"the run ended without being interrupted (the hook ran {len(checks)} time(s))")
+        sys.exit(status)
     checkpoint.save = save_then_die
     if mode == "group":
         from test_group import killed_group
