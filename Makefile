@@ -31,8 +31,7 @@ run: setup
 	$(BIN)/python -m hintsjax.quickstart
 
 # Two processes, one test file each at a time (module fixtures stay shared): compiling is
-# single-threaded, so this takes 15 to 30 minutes on 2 cores (1670 s, 2026-11-26; before the locomotion and car
-# tests it was 8.5 against 10.5 minutes in one process).
+# single-threaded, so two processes use 2 cores (the time: README.md, "Reliability").
 test: setup
 	$(BIN)/python -m pytest -q -n 2 --dist loadfile
 

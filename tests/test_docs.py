@@ -53,3 +53,12 @@ def write_snapshot() -> None:
 
 if __name__ == "__main__":
     write_snapshot()
+
+
+def test_the_design_names_every_module_and_script():
+    """docs/design.md's file list keeps up with the code: every module of hintsjax/ and envs/ and
+    every script of experiments/ is named there (by its file name)."""
+    design = (ROOT / "docs" / "design.md").read_text()
+    files = [*(ROOT / "hintsjax").rglob("*.py"), *(ROOT / "envs").glob("*.py"), *(ROOT / "experiments").glob("*.py")]
+    missing = sorted(str(f.relative_to(ROOT)) for f in files if f.name != "__init__.py" and f.name not in design)
+    assert not missing, f"docs/design.md does not name {missing}"
