@@ -206,6 +206,16 @@ def test_a_sweep_is_expanded_in_hydras_order_with_every_value_checked_first():
         overrides.check_sweep(["-m", "seed=0,1"], lambda v: (_ for _ in ()).throw(UsageError("no")) if v["seed"] else None)
 
 
+def test_help_into_a_closed_pipe_stops_quietly_with_the_shells_status(tmp_path):
+    """`python -m hintsjax.run --help | head -1`: once the reader has gone, the command stops with
+    nothing on stderr and exit 141 (128 + SIGPIPE, as a shell's commands do), not as a bug."""
+    proc = subprocess.Popen([sys.executable, "-m", "hintsjax.run", "--help"], cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()  # the reader goes before the first line arrives
+    stderr = proc.communicate(timeout=300)[1].decode()
+    assert proc.returncode == errors.CLOSED_PIPE == 141 and stderr == "", stderr[-2000:]
+
+
 def test_a_bug_is_one_line_saying_so_with_its_traceback_kept(monkeypatch, tmp_path, capsys):
     """Anything but bad input that escapes a command is a bug in hintsjax: one line saying so and
     where its traceback went (the run folder, for a run), exit 1; with HINTSJAX_DEBUG set, Python's

@@ -1,7 +1,8 @@
 """Bad input from the user: its error type, its one-line report, and the check most settings
 share; and the boundary every command's entry point keeps (`command`): bad input is one line
-and exit 2, Ctrl-C one line and exit 130, and anything else is a bug in hintsjax, reported in
-one line that says so and where its traceback was written, exit 1."""
+and exit 2, Ctrl-C one line and exit 130, output to a reader that went away (`| head`) silence
+and exit 141, and anything else is a bug in hintsjax, reported in one line that says so and
+where its traceback was written, exit 1."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 INTERRUPTED = 130  # the exit status of a command stopped by Ctrl-C (128 + SIGINT), as a shell's
+CLOSED_PIPE = 141  # the exit status of a command whose reader closed its output (128 + SIGPIPE), as a shell's
 BUG = 1
 DEBUG = "HINTSJAX_DEBUG"  # set (to anything but 0): a bug's traceback on stderr, as Python prints it
 
@@ -76,18 +78,24 @@ def report_bug(error: BaseException, folder: Path | None = None) -> int:
 
 def command(main: Callable[..., int]) -> Callable[..., int]:
     """A command's entry point (returning its exit status) behind the boundary: UsageError one
-    line, exit 2; Ctrl-C one line, exit 130; any other exception `report_bug` (with HINTSJAX_DEBUG
-    set, Python's own traceback instead)."""
+    line, exit 2; Ctrl-C one line, exit 130; output whose reader has gone, nothing more, exit 141;
+    any other exception `report_bug` (with HINTSJAX_DEBUG set, Python's own traceback instead)."""
 
     @functools.wraps(main)
     def guarded(*args: Any, **kwargs: Any) -> int:
         try:
-            return main(*args, **kwargs)
+            try:
+                return main(*args, **kwargs)
+            finally:
+                sys.stdout.flush()  # a closed pipe shows here, in the boundary, not at the interpreter's exit
         except UsageError as e:
             return fail(e)
         except KeyboardInterrupt:
             print("interrupted", file=sys.stderr)
             return INTERRUPTED
+        except BrokenPipeError:  # `... --help | head`: the reader has what it wanted
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nor fail flushing at exit
+            return CLOSED_PIPE
         except Exception as e:  # noqa: BLE001  the boundary: whatever escapes is a bug
             return report_bug(e)
 
