@@ -70,6 +70,12 @@ def packaged() -> list[str]:
     return sorted(p.name for p in EXPERTS_DIR.iterdir() if (p / EXPERT_JSON).is_file()) if EXPERTS_DIR.is_dir() else []
 
 
+def best_seed(evaluation: dict) -> int:
+    """The seed an export keeps: the highest mean return of an eval.json evaluation."""
+    means = evaluation["seed_means"]
+    return max(range(len(means)), key=means.__getitem__)
+
+
 def export(run_dir: Path, out_dir: Path | None = None, force: bool = False) -> Path:
     """Export the best seed of a finished state-based run as an expert folder; returns its path.
     An expert that is there already (a packaged one, by default) is replaced only with `force`."""
@@ -85,7 +91,7 @@ def export(run_dir: Path, out_dir: Path | None = None, force: bool = False) -> P
         raise UsageError(f"{out} holds an expert already ({cfg.env}'s{' packaged' if out.parent == EXPERTS_DIR.absolute() else ''} "
                          f"one); give --out another folder, or --force to replace it")
     evaluation = json.loads(eval_json.read_text())["evaluations"][0]
-    best = max(range(len(evaluation["seed_means"])), key=lambda i: evaluation["seed_means"][i])
+    best = best_seed(evaluation)
     state, update = checkpoint.restore_latest(run_dir, ppo.make_trainer(cfg).abstract_state())
     params = jax.tree.map(lambda x: x[best], state.params["params"])
     policy = {"actor": params["actor"], "log_std": params["log_std"]}

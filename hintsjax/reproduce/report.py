@@ -231,15 +231,15 @@ def references_note(runs: Path, env: str, references: tuple[str, ...]) -> str:
     before they began (so an archived report does not change when the packaged expert is
     replaced), else the packaged expert."""
     from hintsjax.settings.layers import run_config
-    from hintsjax.algorithms.experts import EXPERT_JSON, EXPERTS_DIR
+    from hintsjax.algorithms.experts import EXPERT_JSON, EXPERTS_DIR, best_seed
 
     cfg = {a: trained_config(runs, env, a) or run_config({"env": env, "agent": a}) for a in references}
     expert = cfg["expert_ppo"].ppo
     source = "its best seed"
-    if (result := load(runs, env, "expert_ppo")) is not None:  # the one its sweep exported (expert.export's choice)
-        means = result["evaluations"][0]["seed_means"]
-        best = max(range(len(means)), key=means.__getitem__)
-        source += f" (seed {best}, {means[best]:.0f} over {result['evaluations'][0]['episodes_per_seed']} episodes)"
+    if (result := load(runs, env, "expert_ppo")) is not None:  # the one its sweep exported
+        evaluation = result["evaluations"][0]
+        best = best_seed(evaluation)
+        source += f" (seed {best}, {evaluation['seed_means'][best]:.0f} over {evaluation['episodes_per_seed']} episodes)"
     elif (meta := EXPERTS_DIR / env / EXPERT_JSON).exists():  # not trained here: the packaged expert
         m = json.loads(meta.read_text())
         source += f" (seed {m['seed_index']}, {m['seed_eval_mean']:.0f} over {m['episodes_per_seed']} episodes; hintsjax/experts/{env})"
