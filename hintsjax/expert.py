@@ -8,18 +8,21 @@ The export and the loading are hintsjax/algorithms/experts.py.
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from pathlib import Path
 
 
 from hintsjax.system.errors import ArgumentParser, command
+from hintsjax.cli import choices
 from hintsjax.algorithms.experts import EXPERT_JSON, export
 
 
 @command
 def main(argv: list[str] | None = None) -> int:
-    parser = ArgumentParser(prog="python -m hintsjax.expert", description=__doc__.splitlines()[0])
+    parser = ArgumentParser(prog="python -m hintsjax.expert", description=__doc__.splitlines()[0],
+                            epilog=choices.text(), formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("run", type=Path, help="a finished run folder of agent=expert_ppo")
     parser.add_argument("--out", type=Path, default=None, help="expert folder (default: hintsjax/experts/<env>)")
     parser.add_argument("--force", action="store_true", help="replace the expert in that folder (a packaged one, by default)")

@@ -13,6 +13,7 @@ beside the picture, and prints where the run folder, learning curve and GIF are.
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 import time
@@ -22,6 +23,7 @@ import jax
 
 from hintsjax.system import checkpoint, compilation_cache, paths
 from hintsjax.system.errors import ArgumentParser, command
+from hintsjax.cli import choices
 from hintsjax.settings.config import RunConfig
 from hintsjax.settings.layers import run_config, save_run_config
 from hintsjax.algorithms.registry import make_trainer
@@ -59,7 +61,8 @@ def swing_up_gif(cfg: RunConfig, run_dir: Path, candidates: int = 8) -> Path:
 
 @command
 def main(argv: list[str] | None = None) -> int:
-    parser = ArgumentParser(prog="python -m hintsjax.quickstart", description=__doc__.splitlines()[0])
+    parser = ArgumentParser(prog="python -m hintsjax.quickstart", description=__doc__.splitlines()[0],
+                            epilog="After it, python -m hintsjax.run trains any of these:\n\n" + choices.text(), formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--updates", type=int, default=50, help="updates of 1024 env steps (default: 50)")
     parser.add_argument("--out-dir", type=Path, default=Path("runs"), help="where the run folder goes (default: runs)")
     args = parser.parse_args(argv)

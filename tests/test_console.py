@@ -80,7 +80,7 @@ def test_run_help_lists_the_choices_then_hydras_settings_both_ways():
     assert page.index("Choices") < page.index("== Config ==") and "starts_per_rollout: null" in page
 
 
-@pytest.mark.parametrize("name", ["generator", "rank", "evaluate", "video"])
+@pytest.mark.parametrize("name", ["generator", "rank", "evaluate", "video", "expert", "quickstart"])
 def test_each_tools_help_lists_its_settings_and_the_choices(name):
     out = command(name, "--help")
     assert out.returncode == 0 and out.stdout.startswith(f"usage: python -m hintsjax.{name}"), out.stderr[-500:]
