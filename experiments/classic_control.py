@@ -13,7 +13,7 @@ Table 4: HINTS with each scheme (fc, lc, ac, mc) times the table's hint columns.
 Every configuration is trained at the env's default budget (config.ENV_DEFAULTS) with --seeds
 seeds (default 20), then evaluated on 50 episodes per seed; its folder under --runs holds
 config.yaml, metrics.csv and eval.json. Runs that share a network's shapes train as one group,
-all their seeds in one compiled program (hintsjax/group.py; e.g. HINTS-FC with every hint), and
+all their seeds in one compiled program (hintsjax/algorithms/group.py; e.g. HINTS-FC with every hint), and
 `--alone` trains each in its own. Finished folders are skipped and groups resume from their
 checkpoints, so an interrupted sweep resumes where it stopped. `--workers N` trains N groups at
 once in separate processes (each gets 1/N of the GPU's memory, and a group that does not fit is
@@ -164,7 +164,7 @@ def orderings(runs: Path, env: str, best: str) -> str:
     if not lines:
         return ""
     return ("\n\nOrderings as probabilities of improvement over the per-seed mean returns, with 95% bootstrap "
-            "intervals (hintsjax/stats.py); decided where the interval excludes 0.5:\n\n" + "\n".join(lines))
+            "intervals (hintsjax/reproduce/stats.py); decided where the interval excludes 0.5:\n\n" + "\n".join(lines))
 
 
 def paper_mean(value: str) -> float:
@@ -194,14 +194,14 @@ def report(runs: Path, force: bool = False) -> None:
         "Each cell: mean ± std of the episode return over all 5 training seeds x 50 evaluation episodes",
         "(deterministic policy); in brackets the std of the 5 per-seed means, which is the honest",
         "error bar for comparing agents. Budgets (env steps per seed): pendulum 200 K (1000 episodes),",
-        "acrobot 350 K (700 episodes of 500 steps), idp 200 K (see hintsjax/config.py ENV_DEFAULTS).",
+        "acrobot 350 K (700 episodes of 500 steps), idp 200 K (see TRAINING in envs/<env>.py).",
         "The paper's cells are mean ± std over n=50; where the paper has no cell, '-'; where we have",
         "not run a configuration yet, '-'. Per-run wall-clock (one H100) includes compilation and",
         "evaluation, with 3 to 10 runs sharing the GPU (time-sliced) in the sweeps of 2026-11-22 05:30-08:25,",
         "so it overstates a run's cost alone; the pendulum rows trained before then (all but torque and",
         "ppo_noisy_state) ran one at a time. '(CPU)': trained on a 2-core CPU when the GPU time was spent.",
         "The last column is the interquartile mean of the per-seed mean returns with a 95% percentile",
-        "bootstrap interval over seeds (hintsjax/stats.py, as rliable computes it); with 5 seeds the IQM",
+        "bootstrap interval over seeds (hintsjax/reproduce/stats.py, as rliable computes it); with 5 seeds the IQM",
         "is the mean of the middle 3 and the interval is wide.",
         "",
     ]
@@ -225,7 +225,7 @@ def report(runs: Path, force: bool = False) -> None:
               "(it includes runs that the 10-minute limit of a GPU call interrupted and a later call retrained; "
               "the (CPU) rows' sweeps are not in it).",
               "",
-              "The references (hintsjax/config.py ENV_DEFAULTS 'agents'): expert_ppo is PPO on the state for",
+              "The references (TRAINING['references'] in envs/<env>.py): expert_ppo is PPO on the state for",
               "1 M env steps per seed; its best seed (by its 50-episode evaluation) is the env's packaged expert",
               "(hintsjax/experts/<env>/expert.json). dagger (100 K env steps, rounds of 1024, beta 0.5^i) and",
               "gail (1 M env steps, 16 expert episodes) learn from that expert. GAIL's reward is the log odds",
@@ -265,9 +265,9 @@ def learners_report(runs: Path, envs: list[str], path: Path) -> None:
     seed count, with IQM [95% CI] and the orderings as probabilities of improvement."""
     lines = [f"# Classic control at more seeds: the learner rows of Tables 2 and 4 ({runs})", "",
              "Cells: mean ± std over all seeds x 50 evaluation episodes (in brackets the std of the per-seed means),",
-             "then the IQM of the per-seed means with a 95% stratified bootstrap interval (hintsjax/stats.py).",
+             "then the IQM of the per-seed means with a 95% stratified bootstrap interval (hintsjax/reproduce/stats.py).",
              "Wall-clock: the whole group's (compiles and evaluation included); the runs of a group train in one",
-             "program (hintsjax/group.py) and share it. Command and hardware: experiments/results/table_in_one_call.json.",
+             "program (hintsjax/algorithms/group.py) and share it. Command and hardware: experiments/results/table_in_one_call.json.",
              f"Recorded sweep wall-clock in {runs}/sweeps.jsonl: Table 2 {sweep_seconds(runs, 2):.0f} s, Table 4 "
              f"{sweep_seconds(runs, 4):.0f} s (a sweep stopped by a time limit and resumed counts its resumed call only).", ""]
     for env in envs:

@@ -120,7 +120,7 @@ def report(runs: Path, cases: list[tuple[str, str]], frames: int, out: Path) -> 
              "Written by `python experiments/learned_hints.py --report` from the runs of "
              "`python experiments/learned_hints.py --cases ... --seeds ...` (commands and hardware below). "
              "Returns: the mean over each seed's 50 deterministic episodes, then mean ± std over seeds, "
-             "IQM with its 95% bootstrap interval (hintsjax/stats.py), and P(row > PPO-RGB), the probability "
+             "IQM with its 95% bootstrap interval (hintsjax/reproduce/stats.py), and P(row > PPO-RGB), the probability "
              "that a seed of the row beats a seed of PPO-RGB, with its 95% interval (decided where it excludes 0.5).", ""]
     about = read_about(runs)
     shared = set(about.pop(SHARED_KEY, []))  # folders whose seconds are not a cost: the GPU ran other training too

@@ -62,3 +62,17 @@ def test_the_design_names_every_module_and_script():
     files = [*(ROOT / "hintsjax").rglob("*.py"), *(ROOT / "envs").glob("*.py"), *(ROOT / "experiments").glob("*.py")]
     missing = sorted(str(f.relative_to(ROOT)) for f in files if f.name != "__init__.py" and f.name not in design)
     assert not missing, f"docs/design.md does not name {missing}"
+
+
+PATH_NAMED = re.compile(r"(?<![\w/.-])((?:hintsjax|envs|experiments|tests|benchmarks)/[\w/]+\.py)\b")
+NAMING = [*DOCUMENTS, ROOT / "CONTRIBUTING.md", *sorted((ROOT / "experiments" / "results").glob("*.md")),
+          *sorted(p for folder in ("hintsjax", "envs", "experiments", "tests") for p in (ROOT / folder).rglob("*.py"))]
+
+
+def test_every_source_path_a_text_names_exists():
+    """A module or script named by its path in the docs, the results' reports or the code (whose
+    strings write those reports) exists: a move renames it everywhere. The results' JSON records
+    are left as written: each names the commit it measured."""
+    missing = {f"{p.relative_to(ROOT)}: {name}" for p in NAMING for name in PATH_NAMED.findall(p.read_text())
+               if not (ROOT / name).exists()}
+    assert not missing, sorted(missing)

@@ -105,7 +105,7 @@ def ordering_line(tag: str, name_x: str, x: dict, name_y: str, y: dict, variant:
 
 ORDERINGS_ABOUT = (
     "Orderings: probabilities of improvement P(X > Y) over the per-seed mean returns with 95 % bootstrap intervals "
-    "(hintsjax/stats.py). Decided for: the interval lies above 0.5; decided against: below 0.5; undecided: it "
+    "(hintsjax/reproduce/stats.py). Decided for: the interval lies above 0.5; decided against: below 0.5; undecided: it "
     "contains 0.5. The best hint is the hint row with the highest IQM, chosen on the same seeds, which favours "
     "it a little.")
 
