@@ -17,7 +17,6 @@ from flax import struct
 
 from hintsjax import envs
 from hintsjax.envs.core import Env, Step
-from hintsjax.settings.env_defaults import ENV_DEFAULTS
 
 NAME = "countdown"
 MAX_LENGTH = 15
@@ -55,5 +54,4 @@ class CountdownEnv(Env):
         return {"steps_left": (state.length - state.t).astype(jnp.float32)}
 
 
-envs.REGISTRY[NAME] = envs.EnvEntry(CountdownEnv, {"default": ()})
-ENV_DEFAULTS[NAME] = dict(hint="none")
+envs.REGISTRY[NAME] = envs.EnvEntry(CountdownEnv, {"default": ()}, training=dict(hint="none"))

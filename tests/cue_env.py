@@ -8,8 +8,8 @@ noise: a number drawn uniformly in [-1, 1] at reset, independent of c, for tests
 blind to the hint can do is the constant action a = 0, whose expected return is -1; an agent
 that reads the hint can reach 0.
 
-Importing this module registers the env (`envs.REGISTRY["cue"]`), its hint and its defaults
-(`hintsjax.settings.env_defaults.ENV_DEFAULTS["cue"]`), so `run_config({"env": "cue", ...})` works.
+Importing this module registers the env with its defaults in one call (`envs.REGISTRY["cue"]`)
+and its hint, so `run_config({"env": "cue", ...})` works.
 """
 
 from __future__ import annotations
@@ -21,7 +21,6 @@ from flax import struct
 from hintsjax import envs
 from hintsjax.envs.core import Env, Step
 from hintsjax.envs.hints import register_hint
-from hintsjax.settings.env_defaults import ENV_DEFAULTS
 
 NAME = "cue"
 GREY = 128
@@ -82,5 +81,4 @@ def distractor(state: CueState, params: CueParams) -> jax.Array:
     return state.distractor[None]
 
 
-envs.REGISTRY[NAME] = envs.EnvEntry(CueEnv, {"default": CueParams()})
-ENV_DEFAULTS[NAME] = dict(hint="cue", ppo=dict(actor_lr=1e-3))
+envs.REGISTRY[NAME] = envs.EnvEntry(CueEnv, {"default": CueParams()}, training=dict(hint="cue", ppo=dict(actor_lr=1e-3)))

@@ -18,7 +18,6 @@ from flax import struct
 from hintsjax import envs
 from hintsjax.envs.core import Env, Step
 from hintsjax.envs.hints import register_hint
-from hintsjax.settings.env_defaults import ENV_DEFAULTS
 
 NAME = "dot"
 
@@ -66,5 +65,4 @@ def position(state: DotState, params: DotParams) -> jax.Array:
     return state.position[None]
 
 
-envs.REGISTRY[NAME] = envs.EnvEntry(DotEnv, {"default": DotParams()})
-ENV_DEFAULTS[NAME] = dict(hint="position", ppo=dict(actor_lr=1e-3))
+envs.REGISTRY[NAME] = envs.EnvEntry(DotEnv, {"default": DotParams()}, training=dict(hint="position", ppo=dict(actor_lr=1e-3)))

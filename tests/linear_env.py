@@ -17,7 +17,6 @@ from flax import struct
 
 from hintsjax import envs
 from hintsjax.envs.core import Env, Step
-from hintsjax.settings.env_defaults import ENV_DEFAULTS
 
 NAME = "linear"
 GAINS = (-1.0, 0.5)
@@ -76,5 +75,5 @@ class LinearExpert:
 
 EXPERT = LinearExpert(jnp.asarray(GAINS, jnp.float32), jnp.asarray([-2.0], jnp.float32))
 
-envs.REGISTRY[NAME] = envs.EnvEntry(LinearEnv, {"default": LinearParams(), "terminating": LinearParams(0.3)})
-ENV_DEFAULTS[NAME] = dict(ppo=dict(hidden=(32, 32)))
+envs.REGISTRY[NAME] = envs.EnvEntry(LinearEnv, {"default": LinearParams(), "terminating": LinearParams(0.3)},
+                                    training=dict(ppo=dict(hidden=(32, 32))))

@@ -11,6 +11,7 @@ exits with the run's status.
 
 from __future__ import annotations
 
+import faulthandler
 import sys
 from pathlib import Path
 
@@ -20,7 +21,11 @@ from hintsjax import run
 TINY_PPO = {"total_env_steps": 320, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}
 
 
+HUNG_SECONDS = 300  # far beyond a run's 10-60 s: print every thread's stack to the log and exit
+
+
 def main() -> int:
+    faulthandler.dump_traceback_later(HUNG_SECONDS, exit=True)  # a hang shows where it waits
     out = Path(sys.argv[1])
     if sys.argv[2:] == ["--resume"]:
         return run.main_from_values({"resume": str(out / "run"), "compilation_cache": False})

@@ -14,7 +14,6 @@ from hintsjax import envs
 from hintsjax.envs.core import Env, Step
 from hintsjax.models.agents import AGENTS
 from hintsjax.models.networks import ActorCritic, SIGMOID_MIN_STD
-from hintsjax.settings.env_defaults import ENV_DEFAULTS
 from hintsjax.settings.layers import run_config
 from hintsjax.algorithms.registry import make_trainer
 
@@ -52,8 +51,8 @@ class EdgeEnv(Env):
         return jnp.ones(2, jnp.float32)
 
 
-envs.REGISTRY["edge"] = envs.EnvEntry(EdgeEnv, {"default": ()})
-ENV_DEFAULTS["edge"] = dict(ppo=dict(hidden=(16, 16), num_envs=16, batch_size=64, minibatch_size=32, epochs=4))
+envs.REGISTRY["edge"] = envs.EnvEntry(EdgeEnv, {"default": ()},
+                                      training=dict(ppo=dict(hidden=(16, 16), num_envs=16, batch_size=64, minibatch_size=32, epochs=4)))
 
 
 @pytest.mark.parametrize("name", ["pendulum", "acrobot", "car_racing"])

@@ -660,3 +660,23 @@ def test_each_env_carries_its_training_defaults_beside_it(name):
     expert = training["references"]["expert_steps"]
     assert defaults["agents"]["expert_ppo"]["ppo"]["total_env_steps"] == expert
     assert set(defaults["agents"]) >= {"expert_ppo", "dagger", "gail"}
+
+
+def test_an_env_registered_at_run_time_takes_one_call():
+    """One registry entry (class, variants, training defaults) is all a new env needs: its
+    defaults reach the resolved config without a second write (ENV_DEFAULTS reads the entry)."""
+    from hintsjax import envs
+    from hintsjax.settings.layers import run_config
+
+    entry = envs.REGISTRY["pendulum"]
+    envs.REGISTRY["pendulum_copy"] = envs.EnvEntry(entry.cls, entry.variants,
+                                                   training=dict(ppo=dict(hidden=(8, 8)), learners=dict(epochs=3),
+                                                                 references=dict(expert_steps=1234)))
+    try:
+        cfg = run_config({"env": "pendulum_copy", "agent": "ppo_rgb"})
+        assert (cfg.ppo.hidden, cfg.ppo.epochs) == ((8, 8), 3)
+        assert run_config({"env": "pendulum_copy", "agent": "expert_ppo"}).ppo.total_env_steps == 1234
+    finally:
+        dict.pop(envs.REGISTRY, "pendulum_copy")
+        from hintsjax.settings.env_defaults import ENV_DEFAULTS
+        dict.pop(ENV_DEFAULTS, "pendulum_copy", None)
