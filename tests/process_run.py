@@ -11,6 +11,7 @@ exits with the run's status.
 
 from __future__ import annotations
 
+import datetime
 import faulthandler
 import sys
 from pathlib import Path
@@ -21,7 +22,8 @@ from hintsjax import run
 TINY_PPO = {"total_env_steps": 320, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}
 
 
-HUNG_SECONDS = 300  # far beyond a run's 10-60 s: print every thread's stack to the log and exit
+HUNG_SECONDS = 300  # far beyond a run's 10-80 s: print every thread's stack to the log and exit
+HUNG_MARK = f"Timeout ({datetime.timedelta(seconds=HUNG_SECONDS)})!"  # how faulthandler's dump after HUNG_SECONDS begins
 
 
 def main() -> int:

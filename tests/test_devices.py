@@ -12,12 +12,14 @@ import shutil
 import socket
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import linear_env  # noqa: F401  (registers the test env "linear")
+from process_run import HUNG_MARK, HUNG_SECONDS
 from hintsjax.system import checkpoint
 from hintsjax.system.devices import SeedLayout
 from hintsjax.settings.layers import load_run_config
@@ -82,8 +84,14 @@ def test_a_checkpoint_written_on_four_devices_resumes_on_one(runs, tmp_path):
     np.testing.assert_allclose(resumed["evaluations"][0]["seed_means"], four["alone"], rtol=1e-4)
 
 
-def _processes(folder: Path, count: int, devices_each: int, *args: str) -> None:
-    """tests/process_run.py in `count` processes joined into one run, each with `devices_each` CPU devices."""
+def _processes(folder: Path, count: int, devices_each: int, *args: str, tries: int = 2) -> None:
+    """tests/process_run.py in `count` processes joined into one run, each with `devices_each` CPU devices.
+
+    A run that hangs (each process dumps its stacks and exits after process_run.HUNG_SECONDS) is
+    started once more, on a fresh coordinator port, and the hang is reported as a warning with
+    the stacks: CI once saw the two-process resume hang past 600 s (2026-11-27) where hundreds of
+    runs here did not, so its cause is in the stacks the next one prints. Wrong results, a crash
+    or a second hang fail."""
     with socket.socket() as s:
         s.bind(("localhost", 0))
         port = s.getsockname()[1]
@@ -91,7 +99,7 @@ def _processes(folder: Path, count: int, devices_each: int, *args: str) -> None:
             "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])}
     if count > 1:
         base.update(JAX_NUM_PROCESSES=str(count), JAX_COORDINATOR_ADDRESS=f"localhost:{port}")
-    logs = [folder.parent / f"{folder.name}-process{i}{''.join(args)}.log" for i in range(count)]
+    logs = [folder.parent / f"{folder.name}-process{i}{''.join(args)}-try{tries}.log" for i in range(count)]
     procs = []
     for i, log in enumerate(logs):
         with log.open("w") as out:  # a file, not a pipe: a process blocked on a full pipe would stall the others
@@ -99,11 +107,16 @@ def _processes(folder: Path, count: int, devices_each: int, *args: str) -> None:
                                           env={**base, "JAX_PROCESS_ID": str(i)}, stdout=out, stderr=subprocess.STDOUT))
     for proc in procs:
         try:
-            proc.wait(timeout=400)  # a hung process dumps its stacks to its log and exits after 300 s (process_run.py)
+            proc.wait(timeout=HUNG_SECONDS + 100)
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
-    assert all(p.returncode == 0 for p in procs), "\n".join(log.read_text()[-6000:] for log in logs)
+    texts = [log.read_text() for log in logs]
+    if tries > 1 and any(p.returncode != 0 for p in procs) and any(HUNG_MARK in t for t in texts):
+        warnings.warn(f"a {count}-process run hung and was started again; its stacks:\n" +
+                      "\n".join(t[-6000:] for t in texts))
+        return _processes(folder, count, devices_each, *args, tries=tries - 1)
+    assert all(p.returncode == 0 for p in procs), "\n".join(t[-6000:] for t in texts)
 
 
 def test_one_run_over_two_processes_equals_one_process_and_resumes(tmp_path):
