@@ -4,7 +4,7 @@
 
 For each variant: samples/s of forward+backward+Adam for the pixel encoder plus a 256-256 head,
 once at one batch and once vmapped over `--seeds` weight copies (the seed-vmapped training case)
-with the same total batch. Informs the choice of `hintsjax.networks.PatchConv`.
+with the same total batch. Informs the choice of `hintsjax.models.networks.PatchConv`.
 """
 
 from __future__ import annotations

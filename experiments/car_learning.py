@@ -63,7 +63,7 @@ def variant_settings(name: str, seeds: int, smoke: bool) -> dict:
 
 def train(runs: Path, names: list[str], seeds: int, smoke: bool) -> None:
     """Train and evaluate each variant not finished yet (both evaluations); resumable. Variants
-    that differ only in numbers (the reward scale: hintsjax.group's Hyper) train as one group, in
+    that differ only in numbers (the reward scale: hintsjax.algorithms.group's Hyper) train as one group, in
     one program (<runs>/car_racing/_groups/<names>); the policy heads each need their own."""
     from hintsjax.system import checkpoint
     from hintsjax.settings.layers import run_config, save_run_config

@@ -4,7 +4,7 @@
 
 Reads `<env>-jax` and `<env>-warp` run folders (eval.json, the same command but `physics`) and
 writes experiments/results/physics_learning.md: per env, each physics' IQM over seeds with its
-95 % bootstrap CI, P(warp > jax) and the difference of means with their CIs (hintsjax.stats),
+95 % bootstrap CI, P(warp > jax) and the difference of means with their CIs (hintsjax.reproduce.stats),
 the training rate and compile seconds, and whether the difference is decided.
 """
 

@@ -9,7 +9,7 @@ Item 5: on CartpoleSwingup, CheetahRun, WalkerWalk and ReacherEasy (adapted by e
 seen as 64x64 renders from each task's table camera, envs/playground.py), PPO-RGB and HINTS-FC
 with one natural hint each (the table's), 5 seeds vmapped in one call, at the table's budget (1 M
 env steps), 50 evaluation episodes per seed; the report gives each row's IQM [95 % CI] over seeds
-and P(HINTS > PPO-RGB) (hintsjax.stats). Finished folders are skipped (hintsjax/reproduce/sweep.py).
+and P(HINTS > PPO-RGB) (hintsjax.reproduce.stats). Finished folders are skipped (hintsjax/reproduce/sweep.py).
 
 Item 6: CartpoleSwingup from its state vector, one process on one device, the same env-step
 budget and seeds: hintsjax's `ppo_state` (its seeds vmapped in one program) with Playground's
@@ -220,7 +220,7 @@ def report(runs: Path, force: bool = False, out: Path | None = None) -> None:
         "Commands: `python experiments/playground.py` (item 5), `python experiments/playground.py --versus-brax`",
         f"(item 6), then `python experiments/playground.py --report`. Hardware: {hardware or 'see each wall-clock cell'}.", "",
         "Each cell: IQM of the 5 training seeds' mean returns (50 deterministic evaluation episodes each), with",
-        "its 95% stratified-bootstrap CI (hintsjax.stats); P(HINTS > PPO-RGB) over the seeds' mean returns.",
+        "its 95% stratified-bootstrap CI (hintsjax.reproduce.stats); P(HINTS > PPO-RGB) over the seeds' mean returns.",
         "The tasks are Playground's, adapted by envs/adapter.py and seen as 64x64 renders (envs/render3d.py)",
         "from each task's camera (envs/playground.py DEFAULTS); '-': not run yet.", "",
         "## PPO-RGB and HINTS-FC (item 5)", "",

@@ -69,10 +69,33 @@ NAMING = [*DOCUMENTS, ROOT / "CONTRIBUTING.md", *sorted((ROOT / "experiments" / 
           *sorted(p for folder in ("hintsjax", "envs", "experiments", "tests") for p in (ROOT / folder).rglob("*.py"))]
 
 
+MODULE_NAMED = re.compile(r"\bhintsjax(?:\.\w+)+")
+
+
+def names_something(dotted: str) -> bool:
+    """Whether a dotted `hintsjax.<...>` names a module, or a name a module or package defines
+    (read from the source, not imported): each package step must be a module, a sub-package or a
+    name bound in the package's __init__.py; past a module file the rest is its attribute.
+    hintsjax.envs is the envs/ folder (pyproject's package-dir)."""
+    parts = dotted.split(".")[1:]
+    folder, parts = (ROOT / "envs", parts[1:]) if parts[0] == "envs" else (ROOT / "hintsjax", parts)
+    for part in parts:
+        if (folder / part).is_dir() and (folder / part / "__init__.py").exists():
+            folder = folder / part
+        elif (folder / f"{part}.py").exists():
+            return True
+        else:
+            source = (folder / "__init__.py").read_text()
+            return re.search(rf"^(?:def |class ){part}\b|^{part} *[:=]|^(?:from \S+ )?import .*\b{part}\b", source, re.M) is not None
+    return True
+
+
 def test_every_source_path_a_text_names_exists():
-    """A module or script named by its path in the docs, the results' reports or the code (whose
-    strings write those reports) exists: a move renames it everywhere. The results' JSON records
-    are left as written: each names the commit it measured."""
+    """A module or script named by its path (or a module by its dotted name) in the docs, the
+    results' reports or the code (whose strings write those reports) exists: a move renames it
+    everywhere. The results' JSON records are left as written: each names the commit it measured."""
     missing = {f"{p.relative_to(ROOT)}: {name}" for p in NAMING for name in PATH_NAMED.findall(p.read_text())
                if not (ROOT / name).exists()}
+    missing |= {f"{p.relative_to(ROOT)}: {name}" for p in NAMING for name in MODULE_NAMED.findall(p.read_text())
+                if not names_something(name)}
     assert not missing, sorted(missing)

@@ -56,7 +56,7 @@ def cell(result: dict | None, variant: int = 0) -> str:
 
 def iqm_cell(result: dict | None, variant: int = 0) -> str:
     """'IQM [low, high]' of one evaluation's per-seed mean returns with a 95% bootstrap CI over
-    seeds (hintsjax.stats), or '-' when not run."""
+    seeds (hintsjax.reproduce.stats), or '-' when not run."""
     from hintsjax.reproduce import stats
 
     return "-" if result is None else stats.iqm_cell(seed_means(result, variant))
