@@ -29,8 +29,9 @@ import os
 from pathlib import Path
 from typing import Callable
 
-from hintsjax.reproduce.report import (archive_runs, cell, iqm_cell, load, markdown_table, mean_of, metrics_path, ordering,
-                    refuse_lost_cells, sweep_seconds, wall_clock, write_report)
+from hintsjax.reproduce.archive import archive_runs, sweep_seconds
+from hintsjax.reproduce.markdown import markdown_table, refuse_lost_cells, write_report
+from hintsjax.reproduce.report import cell, iqm_cell, load, mean_of, metrics_path, ordering, wall_clock
 from hintsjax.reproduce.sweep import add_arguments, chosen_envs, chosen_runs, chosen_settings, hints_run, sweep
 
 RESULTS = Path(__file__).resolve().parent / "results"

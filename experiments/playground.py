@@ -32,7 +32,9 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from hintsjax.reproduce.report import archive_runs, footer, iqm_cell, load, markdown_table, ordering, sweep_hardware, wall_clock, write_report
+from hintsjax.reproduce.archive import archive_runs
+from hintsjax.reproduce.markdown import markdown_table, write_report
+from hintsjax.reproduce.report import footer, iqm_cell, load, ordering, sweep_hardware, wall_clock
 from hintsjax.reproduce.sweep import add_arguments, chosen_envs, chosen_runs, chosen_settings, hints_run, sweep
 
 RESULTS = Path(__file__).resolve().parent / "results"

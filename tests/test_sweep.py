@@ -1,5 +1,6 @@
-"""The sweeps (hintsjax/reproduce/sweep.py) and their tables and archive (hintsjax/reproduce/report.py), and the
-table scripts of experiments/ (on pytest's path: pyproject's pythonpath), on hand-written run folders."""
+"""The sweeps (hintsjax/reproduce/sweep.py), the tables and reports (hintsjax/reproduce/report.py,
+hintsjax/reproduce/markdown.py) and the archive (hintsjax/reproduce/archive.py), and the table scripts of
+experiments/ (on pytest's path: pyproject's pythonpath), on hand-written run folders."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hintsjax.reproduce import report, sweep
+from hintsjax.reproduce import archive, markdown, report, sweep
 
 
 def write_run(runs: Path, env: str, label: str, evaluations: list[dict] | None = None, returns=None,
@@ -74,7 +75,7 @@ def test_sweep_records_give_the_gpu_seconds_and_hardware(tmp_path):
     ]
     (tmp_path / "sweeps.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
     ids = ["halfcheetah/ppo_rgb", "halfcheetah/ppo_state"]
-    assert report.sweep_seconds(tmp_path, "3-locomotion") == pytest.approx(600.0)
+    assert archive.sweep_seconds(tmp_path, "3-locomotion") == pytest.approx(600.0)
     assert report.sweep_hardware(tmp_path, "3-locomotion", ids) == "NVIDIA H200; 6 runs at once over 2 GPUs"
     assert report.sweep_hardware(tmp_path, "3-car", ids) == "NVIDIA H200; 4 runs at once on one GPU"
     assert report.footer(tmp_path, "3-locomotion", ids).endswith("600 s (NVIDIA H200; 6 runs at once over 2 GPUs).")
@@ -90,7 +91,7 @@ def test_sweep_records_give_the_gpu_seconds_and_hardware(tmp_path):
     side_by_side = [{"table": "3-locomotion", "workers": 1, "seconds": s, "finished": f"2026-11-22 {end}", "gpus": ["0"]}
                     for s, end in ((1200.0, "10:20:00"), (1500.0, "10:30:00"), (600.0, "11:10:00"))]
     (tmp_path / "sweeps.jsonl").write_text("".join(json.dumps(r) + "\n" for r in side_by_side))
-    assert report.sweep_seconds(tmp_path, "3-locomotion") == pytest.approx(2400.0)
+    assert archive.sweep_seconds(tmp_path, "3-locomotion") == pytest.approx(2400.0)
 
 
 @pytest.mark.parametrize("flags, expected", [
@@ -252,8 +253,8 @@ def test_an_archived_run_reads_as_the_run_did(tmp_path, monkeypatch):
     from hintsjax.settings import layers
     from hintsjax.training.runlog import CURVE_POINTS, bin_means, read_curves
 
-    runs, archive = tmp_path / "locomotion", tmp_path / "archive"
-    monkeypatch.setattr(report, "ARCHIVE", archive)
+    runs, kept = tmp_path / "locomotion", tmp_path / "archive"
+    monkeypatch.setattr(archive, "ARCHIVE", kept)
     nan = float("nan")
     rng = __import__("numpy").random.default_rng(0)
     returns = [[nan] * 5 + list(rng.normal(100 * s, 10, 595)) for s in range(2)]  # 600 updates, 2 seeds
@@ -271,18 +272,18 @@ def test_an_archived_run_reads_as_the_run_did(tmp_path, monkeypatch):
     assert before[2] == "25.0%"
     binned = bin_means(*read_curves(runs / "ant" / "ppo_rgb" / "metrics.csv"))
 
-    assert report.archive_runs(runs, ["ant/ppo_rgb", "ant/ppo_state"]) == ["ant/ppo_rgb"]  # ppo_state never ran
+    assert archive.archive_runs(runs, ["ant/ppo_rgb", "ant/ppo_state"]) == ["ant/ppo_rgb"]  # ppo_state never ran
     import shutil
 
     shutil.rmtree(runs)
     assert [f(runs, "ant", "ppo_rgb") for f in (lambda *a: report.cell(report.load(*a)), report.training_cell, report.kl_cell)] == before
-    assert report.run_folder(runs, "ant", "ppo_rgb") == archive / "locomotion" / "ant" / "ppo_rgb"
+    assert archive.run_folder(runs, "ant", "ppo_rgb") == kept / "locomotion" / "ant" / "ppo_rgb"
     assert report.trained_ppo(runs, "ant", "ppo_rgb") == layers.run_config({"env": "ant", "agent": "ppo_rgb"}).ppo
     steps, values = read_curves(report.metrics_path(runs, "ant", "ppo_rgb"))
     assert len(steps) == CURVE_POINTS and steps[-1] == 1024 * 600  # bins of 2 or 3 updates
     np.testing.assert_array_equal(steps, binned[0])
     np.testing.assert_allclose(values, binned[1], rtol=1e-5)  # written to 6 digits
-    assert report.sweep_seconds(runs, "3-locomotion") == pytest.approx(60.0)  # the records came along
+    assert archive.sweep_seconds(runs, "3-locomotion") == pytest.approx(60.0)  # the records came along
     assert report.cell(report.load(runs, "ant", "ppo_state")) == "-"
 
 
@@ -292,7 +293,7 @@ def test_a_report_keeps_the_rows_of_runs_it_cannot_read(tmp_path, monkeypatch):
     import locomotion
 
     monkeypatch.setattr(locomotion, "RESULTS", tmp_path / "results")
-    monkeypatch.setattr(report, "ARCHIVE", tmp_path / "archive")
+    monkeypatch.setattr(archive, "ARCHIVE", tmp_path / "archive")
     (tmp_path / "results").mkdir()
     (tmp_path / "results" / locomotion.REPORT).write_text("\n".join([
         "## ant (5 M env steps per seed)", "",
@@ -305,11 +306,11 @@ def test_a_report_keeps_the_rows_of_runs_it_cannot_read(tmp_path, monkeypatch):
     write_run(tmp_path / "runs", "ant", "hints-fc-speed", [evaluation(2000.0, 1.0, [2000.0])])
     locomotion.report(tmp_path / "runs", force=True)  # ppo_state's stand-in run has no metrics.csv to fill its cells
     text = (tmp_path / "results" / locomotion.REPORT).read_text()
-    assert f"| ppo_rgb {report.KEPT} | 1081.5 ± 175.9 (170.2) | 1015.49 ± 3.3 | 1049.8 ± 88.7 | 0.0% | 915 |" in text
+    assert f"| ppo_rgb {markdown.KEPT} | 1081.5 ± 175.9 (170.2) | 1015.49 ± 3.3 | 1049.8 ± 88.7 | 0.0% | 915 |" in text
     assert "| ppo_state | 5.0 ± 1.0 (0.0) |" in text and "3764.1" not in text
-    assert f"| hints-fc-speed {report.KEPT}" not in text and f"| dagger {report.KEPT}" not in text
+    assert f"| hints-fc-speed {markdown.KEPT}" not in text and f"| dagger {markdown.KEPT}" not in text
     assert "PPO-RGB 1081.5" in text  # the kept row's mean counts in the findings
-    assert f"Rows marked {report.KEPT} are kept from the previous report" in text
+    assert f"Rows marked {markdown.KEPT} are kept from the previous report" in text
 
 
 def test_a_report_that_would_blank_committed_cells_is_refused(tmp_path, capsys):
@@ -322,21 +323,21 @@ def test_a_report_that_would_blank_committed_cells_is_refused(tmp_path, capsys):
     path.write_text("\n".join(committed) + "\n")
     blanked = [line.replace("-468.3 ± 483.7 (365.8)", "-") for line in committed]
     with pytest.raises(SystemExit) as exit_info:
-        report.write_report(path, blanked)
+        markdown.write_report(path, blanked)
     assert exit_info.value.code == 2
     assert "pendulum/fc (ours)" in capsys.readouterr().err
     assert path.read_text() == "\n".join(committed) + "\n"
     refilled = [line.replace("-691.3 ± 516.1 (336.6)", "-650.0 ± 500.0 (300.0)") for line in committed]
-    report.write_report(path, refilled)  # a changed cell is no loss
+    markdown.write_report(path, refilled)  # a changed cell is no loss
     assert "-650.0 ± 500.0" in path.read_text()
-    report.write_report(path, blanked, force=True)
+    markdown.write_report(path, blanked, force=True)
     assert "-468.3" not in path.read_text()
 
 
 def test_curves_beside_kept_rows_go_to_their_own_figure(tmp_path, monkeypatch):
     """While some rows are kept (no curves to draw), their committed figure stays as it was and
     the newer runs' curves get a sibling figure; with no kept rows the figure is redrawn."""
-    monkeypatch.setattr(report, "ARCHIVE", tmp_path / "archive")
+    monkeypatch.setattr(archive, "ARCHIVE", tmp_path / "archive")
     runs, out = tmp_path / "runs", tmp_path / "curves_ant.png"
     write_run(runs, "ant", "ppo_state", [evaluation(5.0, 1.0, [5.0])], [[1.0, 2.0, 3.0]])
     out.write_bytes(b"the kept runs' figure")
@@ -447,7 +448,7 @@ def test_car_learning_report_sets_each_variant_beside_the_defaults(tmp_path, mon
     import car_learning
     from hintsjax.settings import layers
 
-    monkeypatch.setattr(report, "ARCHIVE", tmp_path / "archive")
+    monkeypatch.setattr(archive, "ARCHIVE", tmp_path / "archive")
     runs = tmp_path / "car_learning"
     entropy = 3 * (math.log(0.5) + 0.5 * (1 + math.log(2 * math.pi)))
     for name, base in (("gaussian", 100.0), ("tanh", 400.0)):
@@ -586,7 +587,7 @@ def test_locomotion_learners_report_gives_each_ordering_its_verdict(tmp_path, mo
     the plan above the marker is kept, and a row not trained reads '-'."""
     import locomotion
 
-    monkeypatch.setattr(report, "ARCHIVE", tmp_path / "archive")
+    monkeypatch.setattr(archive, "ARCHIVE", tmp_path / "archive")
     monkeypatch.setattr(locomotion, "ARCHIVE", tmp_path / "archive")
     monkeypatch.setattr(locomotion, "RESULTS", tmp_path)
     runs = tmp_path / "runs" / "t20"
@@ -618,7 +619,7 @@ def test_car_learners_report_gives_o1_and_o3_their_verdicts_beside_the_locomotio
     import car_racing
     import locomotion
 
-    for module in (report, car_racing, locomotion):
+    for module in (archive, car_racing, locomotion):
         monkeypatch.setattr(module, "ARCHIVE", tmp_path / "archive")
     for module in (car_racing, locomotion):
         monkeypatch.setattr(module, "RESULTS", tmp_path)
@@ -662,7 +663,7 @@ def test_archive_flag_archives_the_finished_runs_and_nothing_else(tmp_path, monk
     eval.json, config and binned curve go to the archive; the unfinished run and no report do."""
     import locomotion
 
-    monkeypatch.setattr(report, "ARCHIVE", tmp_path / "archive")
+    monkeypatch.setattr(archive, "ARCHIVE", tmp_path / "archive")
     monkeypatch.setattr(sweep, "ARCHIVE", tmp_path / "archive")
     runs = tmp_path / "runs" / "t20"
     write_run(runs, "ant", "ppo_rgb", [evaluation(5.0, 1.0, [4.0, 6.0])], returns=[[1.0, 2.0, 3.0], [2.0, 3.0, 4.0]])

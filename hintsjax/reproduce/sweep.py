@@ -31,7 +31,8 @@ from pathlib import Path
 from typing import Any, Callable
 
 from hintsjax.models.agents import EXPERT_AGENT
-from hintsjax.reproduce.report import ARCHIVE, archive_runs, load
+from hintsjax.reproduce.archive import ARCHIVE, archive_runs
+from hintsjax.reproduce.report import load
 
 # A sweep's runs save at most once a minute: fast runs finish 50 updates in seconds, and a big
 # run's checkpoint (every env's MJX state) can reach a GB; an interruption loses at most a minute.
