@@ -23,7 +23,8 @@ from hintsjax.reproduce.archive import ARCHIVE, about_lines, read_about, sweep_s
 from hintsjax.reproduce.markdown import generated_marker, markdown_table, write_report, write_section
 from hintsjax.reproduce.report import (ORDERINGS_ABOUT, cell, curve_lines, footer, iqm_cell, load, metric_cell, ordering_line,
                     poi_cell, ppo_text, references_note, seed_means, trained_ppo, training_cell, wall_clock)
-from hintsjax.reproduce.sweep import hints_run, table_main
+from hintsjax.reproduce.sweep import hints_run
+from hintsjax.reproduce.table_script import TableScript, table_main
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("car_racing",)
@@ -213,8 +214,11 @@ def references_lines(runs: Path, env: str) -> list[str]:
 GENERATED = generated_marker("car_racing.py")
 
 
+SCRIPT = TableScript(__doc__.splitlines()[0], DEFAULT_RUNS, ENVS, {TABLE: run_ids}, report, learners_report)
+
+
 def main() -> None:
-    table_main(__doc__.splitlines()[0], DEFAULT_RUNS, ENVS, TABLE, run_ids, report, learners_report)
+    table_main(SCRIPT)
 
 
 if __name__ == "__main__":

@@ -21,7 +21,8 @@ from hintsjax.reproduce.markdown import (KEPT, apart_text, cell_stats, generated
                     write_section)
 from hintsjax.reproduce.report import (ORDERINGS_ABOUT, cell, curve_lines, footer, iqm_cell, kl_cell, load, metrics_path,
                     ordering_line, poi_cell, ppo_text, references_note, seed_means, trained_ppo, training_cell, wall_clock)
-from hintsjax.reproduce.sweep import hints_run, table_main
+from hintsjax.reproduce.sweep import hints_run
+from hintsjax.reproduce.table_script import TableScript, table_main
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("halfcheetah", "ant", "humanoid")
@@ -239,8 +240,11 @@ def learners_report(runs: Path, names: list[str], path: Path) -> None:
 GENERATED = generated_marker("locomotion.py")
 
 
+SCRIPT = TableScript(__doc__.splitlines()[0], DEFAULT_RUNS, ENVS, {TABLE: run_ids}, report, learners_report)
+
+
 def main() -> None:
-    table_main(__doc__.splitlines()[0], DEFAULT_RUNS, ENVS, TABLE, run_ids, report, learners_report)
+    table_main(SCRIPT)
 
 
 if __name__ == "__main__":

@@ -1,4 +1,5 @@
-"""The sweeps (hintsjax/reproduce/sweep.py), the tables and reports (hintsjax/reproduce/report.py,
+"""The sweeps (hintsjax/reproduce/sweep.py, their --set: hintsjax/reproduce/sweep_settings.py), the table scripts'
+command line (hintsjax/reproduce/table_script.py), the tables and reports (hintsjax/reproduce/report.py,
 hintsjax/reproduce/markdown.py) and the archive (hintsjax/reproduce/archive.py), and the table scripts of
 experiments/ (on pytest's path: pyproject's pythonpath), on hand-written run folders."""
 
@@ -12,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hintsjax.reproduce import archive, markdown, report, sweep
+from hintsjax.reproduce import archive, markdown, report, sweep, sweep_settings, table_script
 
 
 def write_run(runs: Path, env: str, label: str, evaluations: list[dict] | None = None, returns=None,
@@ -221,12 +222,12 @@ def test_only_picks_labels_and_names_the_valid_ones(capsys):
     import argparse
 
     parser = argparse.ArgumentParser()
-    sweep.add_arguments(parser, "runs/x", ("ant", "halfcheetah"))
+    table_script.add_arguments(parser, "runs/x", ("ant", "halfcheetah"))
     ids = ["ant/ppo_rgb", "ant/hints-fc-speed", "halfcheetah/ppo_rgb"]
-    assert sweep.chosen_runs(parser, parser.parse_args([]), ids) == ids
-    assert sweep.chosen_runs(parser, parser.parse_args(["--only", "ppo_rgb"]), ids) == ["ant/ppo_rgb", "halfcheetah/ppo_rgb"]
+    assert table_script.chosen_runs(parser, parser.parse_args([]), ids) == ids
+    assert table_script.chosen_runs(parser, parser.parse_args(["--only", "ppo_rgb"]), ids) == ["ant/ppo_rgb", "halfcheetah/ppo_rgb"]
     with pytest.raises(SystemExit) as e:
-        sweep.chosen_runs(parser, parser.parse_args(["--only", "ppo_rgb,nope"]), ids)
+        table_script.chosen_runs(parser, parser.parse_args(["--only", "ppo_rgb,nope"]), ids)
     assert e.value.code == 2
     assert capsys.readouterr().err == "error: unknown run label ['nope']; valid choices: ppo_rgb, hints-fc-speed\n"
 
@@ -376,18 +377,40 @@ def test_classic_report_gives_iqm_cells_and_orderings_as_probabilities_of_improv
     assert f"| {row} |" in table and "IQM of seed means [95% CI]" in table
 
 
+def test_a_later_table_leaves_out_the_finished_runs_an_earlier_one_trains(tmp_path, monkeypatch, capsys):
+    """classic_control.py's --table 4 (table_script.table_main): its fc row is Table 2's runs, so a
+    finished one is left out of Table 4's sweep while an unfinished one trains; Table 2 keeps its
+    own; without --table, one line and exit 2."""
+    import classic_control
+
+    monkeypatch.setenv("JAX_PLATFORMS", "cpu")  # main() sets it for the parent; restored after the test
+    calls = []
+    monkeypatch.setattr(table_script, "sweep", lambda runs, ids, workers, seeds, table, *rest: calls.append((ids, table)))
+    write_run(tmp_path, "pendulum", "hints-fc-composite", [evaluation(1.0, 0.0, [1.0])])
+    argv = ["classic_control.py", "--runs", str(tmp_path), "--envs", "pendulum", "--only"]
+    for table, only in ((4, "hints-fc-composite,hints-fc-state,hints-lc-composite"), (2, "hints-fc-composite,hints-fc-state")):
+        monkeypatch.setattr(sys, "argv", [*argv, only, "--table", str(table)])
+        classic_control.main()
+    assert calls == [(["pendulum/hints-fc-state", "pendulum/hints-lc-composite"], 4),
+                     (["pendulum/hints-fc-composite", "pendulum/hints-fc-state"], 2)]
+    monkeypatch.setattr(sys, "argv", argv[:-1])
+    with pytest.raises(SystemExit) as e:
+        classic_control.main()
+    assert e.value.code == 2 and capsys.readouterr().err == "error: give --table 2, --table 4 or --report\n"
+
+
 def test_seeds_below_one_get_one_line(capsys):
     import argparse
 
     parser = argparse.ArgumentParser()
-    sweep.add_arguments(parser, "runs/x", ("pendulum",), seeds=20)
+    table_script.add_arguments(parser, "runs/x", ("pendulum",), seeds=20)
     assert parser.parse_args([]).seeds == 20
     with pytest.raises(SystemExit) as e:
-        sweep.chosen_envs(parser, parser.parse_args(["--seeds", "0"]), ("pendulum",))
+        table_script.chosen_envs(parser, parser.parse_args(["--seeds", "0"]), ("pendulum",))
     assert e.value.code == 2 and capsys.readouterr().err == "error: --seeds must be at least 1, got 0\n"
     assert parser.parse_args(["--alone"]).group_size == 1 and parser.parse_args([]).group_size == 0
     with pytest.raises(SystemExit) as e:
-        sweep.chosen_envs(parser, parser.parse_args(["--group-size", "-1"]), ("pendulum",))
+        table_script.chosen_envs(parser, parser.parse_args(["--group-size", "-1"]), ("pendulum",))
     assert e.value.code == 2 and capsys.readouterr().err.startswith("error: --group-size must be at least 1")
 
 
@@ -515,8 +538,8 @@ def test_set_gives_every_run_of_a_sweep_a_setting_and_bad_ones_are_one_line(tmp_
 
     def parsed(*items: str) -> dict:
         parser = argparse.ArgumentParser()
-        sweep.add_settings(parser)
-        return sweep.chosen_settings(parser, parser.parse_args([f"--set={item}" for item in items]))
+        sweep_settings.add_settings(parser)
+        return sweep_settings.chosen_settings(parser, parser.parse_args([f"--set={item}" for item in items]))
 
     assert parsed("physics=warp", "seed=10") == {"physics": "warp", "seed": 10}
     assert sweep.run_values("ant", "ppo_rgb", 2, settings={"physics": "warp", "seed": 10})["physics"] == "warp"
@@ -532,10 +555,10 @@ def test_set_gives_every_run_of_a_sweep_a_setting_and_bad_ones_are_one_line(tmp_
 
 WORKER_SETTINGS = """
 import argparse, os, sys
-from hintsjax.reproduce import sweep
+from hintsjax.reproduce import sweep_settings
 parser = argparse.ArgumentParser()
-sweep.add_settings(parser)
-settings = sweep.worker_settings(parser, parser.parse_args(sys.argv[1:]))
+sweep_settings.add_settings(parser)
+settings = sweep_settings.worker_settings(parser, parser.parse_args(sys.argv[1:]))
 from jax._src import xla_bridge
 print(xla_bridge.backends_are_initialized(), "--xla_gpu_deterministic_ops=false" in os.environ["XLA_FLAGS"].split())
 """
@@ -664,7 +687,7 @@ def test_archive_flag_archives_the_finished_runs_and_nothing_else(tmp_path, monk
     import locomotion
 
     monkeypatch.setattr(archive, "ARCHIVE", tmp_path / "archive")
-    monkeypatch.setattr(sweep, "ARCHIVE", tmp_path / "archive")
+    monkeypatch.setattr(table_script, "ARCHIVE", tmp_path / "archive")
     runs = tmp_path / "runs" / "t20"
     write_run(runs, "ant", "ppo_rgb", [evaluation(5.0, 1.0, [4.0, 6.0])], returns=[[1.0, 2.0, 3.0], [2.0, 3.0, 4.0]])
     (runs / "ant" / "ppo_rgb" / "config.yaml").write_text("env: ant\n")
