@@ -38,7 +38,8 @@ from hintsjax import envs
 from hintsjax.system import compilation_cache
 from hintsjax.settings.env_defaults import ENV_DEFAULTS
 from hintsjax.settings.layers import run_config
-from hintsjax.algorithms.ppo import Hyper, gaussian_log_prob, make_network, make_optimizer, make_trainer
+from hintsjax.algorithms.ppo import Hyper, make_network, make_optimizer, make_trainer
+from hintsjax.algorithms.ppo_math import gaussian_log_prob
 
 
 def best_time(fn, *args, repeats: int = 3) -> float:

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from hintsjax.reproduce.report import markdown_table
+from hintsjax.reproduce.markdown import markdown_table
 
 RESULTS = Path(__file__).resolve().parent / "results"
 LOOKAHEAD = 5  # centre points (about 3.5 u each) ahead of the nearest

@@ -25,8 +25,10 @@ import shutil
 from pathlib import Path
 
 import numpy as np
-from hintsjax.reproduce.report import (ARCHIVE, SUMMARY_JSON, about_lines, archive_run, iqm_cell, load, markdown_table, metric_cell, ordering,
-                    read_about, run_folder, training_cell, training_seed_means)
+from hintsjax.reproduce.archive import (ARCHIVE, SUMMARY_JSON, about_lines, archive_run, read_about, run_folder,
+                    training_seed_means)
+from hintsjax.reproduce.markdown import markdown_table
+from hintsjax.reproduce.report import iqm_cell, load, metric_cell, ordering, training_cell
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENV, AGENT = "car_racing", "ppo_rgb"

@@ -19,10 +19,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from hintsjax.reproduce.report import (ARCHIVE, ORDERINGS_ABOUT, about_lines, cell, curve_lines, footer, generated_marker, iqm_cell, load,
-                    markdown_table, metric_cell, ordering_line, poi_cell, ppo_text, read_about, references_note,
-                    seed_means, sweep_seconds, trained_ppo, training_cell, wall_clock, write_report, write_section)
-from hintsjax.reproduce.sweep import hints_run, table_main
+from hintsjax.reproduce.archive import ARCHIVE, about_lines, read_about, sweep_seconds
+from hintsjax.reproduce.markdown import generated_marker, markdown_table, write_report, write_section
+from hintsjax.reproduce.report import (ORDERINGS_ABOUT, cell, curve_lines, footer, iqm_cell, load, metric_cell, ordering_line,
+                    poi_cell, ppo_text, references_note, seed_means, trained_ppo, training_cell, wall_clock)
+from hintsjax.reproduce.sweep import hints_run
+from hintsjax.reproduce.table_script import TableScript, table_main
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("car_racing",)
@@ -156,7 +158,7 @@ def learners_report(runs: Path, names: list[str], path: Path) -> None:
     folder at any seed count (the 20-seed table, issue 46): per row and track variant the IQM
     [95 % CI] of the per-seed mean returns, P(row > PPO-RGB) and the progress; O1 and O3; learning
     curves with bootstrap bands. Written as the section of `path` that GENERATED opens
-    (report.write_section): the plan and the locomotion section stay. `names` is the car alone."""
+    (markdown.write_section): the plan and the locomotion section stay. `names` is the car alone."""
     from hintsjax.settings.layers import run_config
 
     env = ENVS[0]
@@ -212,8 +214,11 @@ def references_lines(runs: Path, env: str) -> list[str]:
 GENERATED = generated_marker("car_racing.py")
 
 
+SCRIPT = TableScript(__doc__.splitlines()[0], DEFAULT_RUNS, ENVS, {TABLE: run_ids}, report, learners_report)
+
+
 def main() -> None:
-    table_main(__doc__.splitlines()[0], DEFAULT_RUNS, ENVS, TABLE, run_ids, report, learners_report)
+    table_main(SCRIPT)
 
 
 if __name__ == "__main__":

@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from hintsjax.reproduce.report import markdown_table
+from hintsjax.reproduce.markdown import markdown_table
 
 RESULTS = Path(__file__).resolve().parent / "results"
 FPS, STRAIGHT, TURN, MEASURE = 50, 200, 150, 50

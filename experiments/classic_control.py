@@ -24,14 +24,15 @@ experiments/results/classic_table{2,4}.md and classic_curves_<env>.png (the 5-se
 
 from __future__ import annotations
 
-import argparse
-import os
+from functools import partial
 from pathlib import Path
 from typing import Callable
 
-from hintsjax.reproduce.report import (archive_runs, cell, iqm_cell, load, markdown_table, mean_of, metrics_path, ordering,
-                    refuse_lost_cells, sweep_seconds, wall_clock, write_report)
-from hintsjax.reproduce.sweep import add_arguments, chosen_envs, chosen_runs, chosen_settings, hints_run, sweep
+from hintsjax.reproduce.archive import sweep_seconds
+from hintsjax.reproduce.markdown import markdown_table, refuse_lost_cells, write_report
+from hintsjax.reproduce.report import cell, iqm_cell, load, mean_of, metrics_path, ordering, wall_clock
+from hintsjax.reproduce.sweep import hints_run
+from hintsjax.reproduce.table_script import TableScript, table_main
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("pendulum", "acrobot", "idp")
@@ -310,29 +311,19 @@ def scheme_orderings(runs: Path, env: str) -> str:
     return "Best scheme per hint column (by IQM) against the others, P(best > other) [95% CI]:\n\n" + "\n".join(lines)
 
 
+def run_ids(table: int, names: list[str]) -> list[str]:
+    """The runs `env/label` a table needs for the envs `names`."""
+    return [f"{env}/{label}" for env in names for label in table_runs(table, env)]
+
+
+# --table 2 or 4 picks the table to train (Table 4's fc row is Table 2's runs: once finished, its sweep leaves
+# them out); no --archive, and --learners-report reads --runs as they are.
+SCRIPT = TableScript(__doc__.splitlines()[0], "runs/classic", ENVS, {t: partial(run_ids, t) for t in (2, 4)}, report,
+                     learners_report, seeds=20, archive=False)
+
+
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--table", type=int, choices=(2, 4), help="train the runs of this table")
-    add_arguments(parser, "runs/classic", ENVS, seeds=20)
-    parser.add_argument("--learners-report", type=Path, default=None, metavar="FILE",
-                        help="write the learner rows of --envs from --runs (any seed count) with IQM and orderings")
-    args = parser.parse_args()
-    os.environ["JAX_PLATFORMS"] = "cpu"  # the parent only reads configs; workers get the devices
-    if args.learners_report:
-        learners_report(args.runs, chosen_envs(parser, args, ENVS), args.learners_report)
-        return
-    if args.report:
-        archive_runs(args.runs, [f"{env}/{label}" for env in ENVS for table in (2, 4) for label in table_runs(table, env)])
-        report(args.runs, args.force)
-        return
-    if args.table is None:
-        parser.exit(2, "error: give --table 2, --table 4 or --report\n")
-    names = chosen_envs(parser, args, ENVS)
-    run_ids = chosen_runs(parser, args, [f"{env}/{label}" for env in names for label in table_runs(args.table, env)])
-    if args.table == 4:  # the fc row is Table 2's
-        run_ids = [r for r in run_ids if "-fc-" not in r or not (args.runs / r / "eval.json").exists()]
-    sweep(args.runs, run_ids, args.workers, args.seeds, args.table, args.smoke, args.launch_until, args.experts, args.gpus,
-          args.group_size, chosen_settings(parser, args))
+    table_main(SCRIPT)
 
 
 if __name__ == "__main__":

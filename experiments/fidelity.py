@@ -337,7 +337,7 @@ def gym_episodes(name: str, expert, qpos0: np.ndarray, qvel0: np.ndarray, max_st
 
 def report(path: Path) -> None:
     """experiments/results/fidelity.md: the JSON's rows as tables, one section per measure."""
-    from hintsjax.reproduce.report import markdown_table
+    from hintsjax.reproduce.markdown import markdown_table
 
     rows = json.loads(path.read_text())["rows"]
     by = lambda measure: [r for r in rows if r["measure"] == measure]  # noqa: E731

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 from classic_control import TABLE2_HINTS
 from locomotion import HINTS as LOCOMOTION_HINTS
-from hintsjax.reproduce.report import markdown_table
+from hintsjax.reproduce.markdown import markdown_table
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ARCHIVE = RESULTS / "runs" / "classic20"

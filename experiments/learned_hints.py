@@ -23,7 +23,8 @@ import json
 from pathlib import Path
 
 import numpy as np
-from hintsjax.reproduce.report import about_lines, markdown_table, read_about
+from hintsjax.reproduce.archive import about_lines, read_about
+from hintsjax.reproduce.markdown import markdown_table
 
 RESULTS = Path(__file__).resolve().parent / "results"
 CASES = "pendulum:composite,pendulum:angular_velocity,acrobot:composite,idp:composite,halfcheetah:velocity"

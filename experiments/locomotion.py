@@ -16,11 +16,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from hintsjax.reproduce.report import (ARCHIVE, KEPT, ORDERINGS_ABOUT, about_lines, apart_text, cell, cell_stats, curve_lines, footer,
-                    generated_marker, iqm_cell, kept_rows, kl_cell, load, markdown_table, metrics_path, ordering_line,
-                    poi_cell, ppo_text, read_about, references_note, seed_means, sweep_seconds, trained_ppo,
-                    training_cell, wall_clock, write_report, write_section)
-from hintsjax.reproduce.sweep import hints_run, table_main
+from hintsjax.reproduce.archive import ARCHIVE, about_lines, read_about, sweep_seconds
+from hintsjax.reproduce.markdown import (KEPT, apart_text, cell_stats, generated_marker, kept_rows, markdown_table, write_report,
+                    write_section)
+from hintsjax.reproduce.report import (ORDERINGS_ABOUT, cell, curve_lines, footer, iqm_cell, kl_cell, load, metrics_path,
+                    ordering_line, poi_cell, ppo_text, references_note, seed_means, trained_ppo, training_cell, wall_clock)
+from hintsjax.reproduce.sweep import hints_run
+from hintsjax.reproduce.table_script import TableScript, table_main
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENVS = ("halfcheetah", "ant", "humanoid")
@@ -205,7 +207,7 @@ def learners_report(runs: Path, names: list[str], path: Path) -> None:
     """The learner rows of Table 3 for `names` from a runs folder at any seed count (the 20-seed
     table, issue 46): per row mean ± std, IQM [95 % CI] and P(row > PPO-RGB); the orderings O1,
     O4 and O5; learning curves with bootstrap bands. Written as the section of `path` that
-    GENERATED opens (report.write_section): the plan above it and the car's section stay."""
+    GENERATED opens (markdown.write_section): the plan above it and the car's section stay."""
     from hintsjax.settings.layers import run_config
 
     about = {k: v for k, v in read_about(ARCHIVE / runs.name).items() if k in (*ENVS, "references")}
@@ -238,8 +240,11 @@ def learners_report(runs: Path, names: list[str], path: Path) -> None:
 GENERATED = generated_marker("locomotion.py")
 
 
+SCRIPT = TableScript(__doc__.splitlines()[0], DEFAULT_RUNS, ENVS, {TABLE: run_ids}, report, learners_report)
+
+
 def main() -> None:
-    table_main(__doc__.splitlines()[0], DEFAULT_RUNS, ENVS, TABLE, run_ids, report, learners_report)
+    table_main(SCRIPT)
 
 
 if __name__ == "__main__":

@@ -32,8 +32,10 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from hintsjax.reproduce.report import archive_runs, footer, iqm_cell, load, markdown_table, ordering, sweep_hardware, wall_clock, write_report
-from hintsjax.reproduce.sweep import add_arguments, chosen_envs, chosen_runs, chosen_settings, hints_run, sweep
+from hintsjax.reproduce.markdown import markdown_table, write_report
+from hintsjax.reproduce.report import footer, iqm_cell, load, ordering, sweep_hardware, wall_clock
+from hintsjax.reproduce.sweep import hints_run
+from hintsjax.reproduce.table_script import TableScript, chosen_envs, table_main
 
 RESULTS = Path(__file__).resolve().parent / "results"
 REPORT = "playground.md"  # under RESULTS
@@ -236,27 +238,32 @@ def report(runs: Path, force: bool = False, out: Path | None = None) -> None:
     write_report(out or RESULTS / REPORT, lines, force)
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    add_arguments(parser, DEFAULT_RUNS, ENVS)
+def extra_arguments(parser: argparse.ArgumentParser) -> None:
+    """--versus-brax and its --steps."""
     parser.add_argument("--versus-brax", action="store_true", help="item 6: hintsjax's ppo_state beside Brax's PPO")
     parser.add_argument("--steps", type=int, default=None, help="--versus-brax: env steps per seed (default Playground's)")
-    args = parser.parse_args()
+
+
+def extra_mode(parser: argparse.ArgumentParser, args: argparse.Namespace) -> bool:
+    """--versus-brax (item 6, on the device), or --smoke --report: the plumbing only, no archive, the
+    report beside the runs. False for the other calls (the sweep of item 5, its report)."""
     if args.versus_brax:
         chosen_envs(parser, args, ENVS)  # checks --seeds
         versus_brax(args.runs, args.seeds, args.steps, args.smoke)
-        return
-    os.environ["JAX_PLATFORMS"] = "cpu"  # the parent only reads configs; workers get the devices
-    if args.report:
-        if args.smoke:  # the plumbing only: no archive, the report beside the runs
-            report(args.runs, True, args.runs / REPORT)
-            return
-        archive_runs(args.runs, run_ids(list(ENVS)))
-        report(args.runs, args.force)
-        return
-    ids = chosen_runs(parser, args, run_ids(chosen_envs(parser, args, ENVS)))
-    sweep(args.runs, ids, args.workers, args.seeds, TABLE, args.smoke, args.launch_until, args.experts, args.gpus,
-          args.group_size, chosen_settings(parser, args))
+        return True
+    if args.report and args.smoke:
+        os.environ["JAX_PLATFORMS"] = "cpu"  # as table_main's reports: the parent only reads
+        report(args.runs, True, args.runs / REPORT)
+        return True
+    return False
+
+
+SCRIPT = TableScript(__doc__.splitlines()[0], DEFAULT_RUNS, ENVS, {TABLE: run_ids}, report, archive=False,
+                     extra_arguments=extra_arguments, extra_mode=extra_mode)
+
+
+def main() -> None:
+    table_main(SCRIPT)
 
 
 if __name__ == "__main__":

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from hintsjax.algorithms.ppo import clipped_surrogate_loss, gae, gaussian_entropy, gaussian_log_prob
+from hintsjax.algorithms.ppo_math import clipped_surrogate_loss, gae, gaussian_entropy, gaussian_log_prob
 
 GAMMA, LAM = 0.5, 0.5  # gamma * lam = 0.25
 

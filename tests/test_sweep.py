@@ -1,5 +1,7 @@
-"""The sweeps (hintsjax/reproduce/sweep.py) and their tables and archive (hintsjax/reproduce/report.py), and the
-table scripts of experiments/ (on pytest's path: pyproject's pythonpath), on hand-written run folders."""
+"""The sweeps (hintsjax/reproduce/sweep.py, their --set: hintsjax/reproduce/sweep_settings.py), the table scripts'
+command line (hintsjax/reproduce/table_script.py), the tables and reports (hintsjax/reproduce/report.py,
+hintsjax/reproduce/markdown.py) and the archive (hintsjax/reproduce/archive.py), and the table scripts of
+experiments/ (on pytest's path: pyproject's pythonpath), on hand-written run folders."""
 
 from __future__ import annotations
 
@@ -11,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hintsjax.reproduce import report, sweep
+from hintsjax.reproduce import archive, markdown, report, sweep, sweep_settings, table_script
 
 
 def write_run(runs: Path, env: str, label: str, evaluations: list[dict] | None = None, returns=None,
@@ -74,7 +76,7 @@ def test_sweep_records_give_the_gpu_seconds_and_hardware(tmp_path):
     ]
     (tmp_path / "sweeps.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
     ids = ["halfcheetah/ppo_rgb", "halfcheetah/ppo_state"]
-    assert report.sweep_seconds(tmp_path, "3-locomotion") == pytest.approx(600.0)
+    assert archive.sweep_seconds(tmp_path, "3-locomotion") == pytest.approx(600.0)
     assert report.sweep_hardware(tmp_path, "3-locomotion", ids) == "NVIDIA H200; 6 runs at once over 2 GPUs"
     assert report.sweep_hardware(tmp_path, "3-car", ids) == "NVIDIA H200; 4 runs at once on one GPU"
     assert report.footer(tmp_path, "3-locomotion", ids).endswith("600 s (NVIDIA H200; 6 runs at once over 2 GPUs).")
@@ -90,7 +92,7 @@ def test_sweep_records_give_the_gpu_seconds_and_hardware(tmp_path):
     side_by_side = [{"table": "3-locomotion", "workers": 1, "seconds": s, "finished": f"2026-11-22 {end}", "gpus": ["0"]}
                     for s, end in ((1200.0, "10:20:00"), (1500.0, "10:30:00"), (600.0, "11:10:00"))]
     (tmp_path / "sweeps.jsonl").write_text("".join(json.dumps(r) + "\n" for r in side_by_side))
-    assert report.sweep_seconds(tmp_path, "3-locomotion") == pytest.approx(2400.0)
+    assert archive.sweep_seconds(tmp_path, "3-locomotion") == pytest.approx(2400.0)
 
 
 @pytest.mark.parametrize("flags, expected", [
@@ -220,12 +222,12 @@ def test_only_picks_labels_and_names_the_valid_ones(capsys):
     import argparse
 
     parser = argparse.ArgumentParser()
-    sweep.add_arguments(parser, "runs/x", ("ant", "halfcheetah"))
+    table_script.add_arguments(parser, "runs/x", ("ant", "halfcheetah"))
     ids = ["ant/ppo_rgb", "ant/hints-fc-speed", "halfcheetah/ppo_rgb"]
-    assert sweep.chosen_runs(parser, parser.parse_args([]), ids) == ids
-    assert sweep.chosen_runs(parser, parser.parse_args(["--only", "ppo_rgb"]), ids) == ["ant/ppo_rgb", "halfcheetah/ppo_rgb"]
+    assert table_script.chosen_runs(parser, parser.parse_args([]), ids) == ids
+    assert table_script.chosen_runs(parser, parser.parse_args(["--only", "ppo_rgb"]), ids) == ["ant/ppo_rgb", "halfcheetah/ppo_rgb"]
     with pytest.raises(SystemExit) as e:
-        sweep.chosen_runs(parser, parser.parse_args(["--only", "ppo_rgb,nope"]), ids)
+        table_script.chosen_runs(parser, parser.parse_args(["--only", "ppo_rgb,nope"]), ids)
     assert e.value.code == 2
     assert capsys.readouterr().err == "error: unknown run label ['nope']; valid choices: ppo_rgb, hints-fc-speed\n"
 
@@ -252,8 +254,8 @@ def test_an_archived_run_reads_as_the_run_did(tmp_path, monkeypatch):
     from hintsjax.settings import layers
     from hintsjax.training.runlog import CURVE_POINTS, bin_means, read_curves
 
-    runs, archive = tmp_path / "locomotion", tmp_path / "archive"
-    monkeypatch.setattr(report, "ARCHIVE", archive)
+    runs, kept = tmp_path / "locomotion", tmp_path / "archive"
+    monkeypatch.setattr(archive, "ARCHIVE", kept)
     nan = float("nan")
     rng = __import__("numpy").random.default_rng(0)
     returns = [[nan] * 5 + list(rng.normal(100 * s, 10, 595)) for s in range(2)]  # 600 updates, 2 seeds
@@ -271,18 +273,18 @@ def test_an_archived_run_reads_as_the_run_did(tmp_path, monkeypatch):
     assert before[2] == "25.0%"
     binned = bin_means(*read_curves(runs / "ant" / "ppo_rgb" / "metrics.csv"))
 
-    assert report.archive_runs(runs, ["ant/ppo_rgb", "ant/ppo_state"]) == ["ant/ppo_rgb"]  # ppo_state never ran
+    assert archive.archive_runs(runs, ["ant/ppo_rgb", "ant/ppo_state"]) == ["ant/ppo_rgb"]  # ppo_state never ran
     import shutil
 
     shutil.rmtree(runs)
     assert [f(runs, "ant", "ppo_rgb") for f in (lambda *a: report.cell(report.load(*a)), report.training_cell, report.kl_cell)] == before
-    assert report.run_folder(runs, "ant", "ppo_rgb") == archive / "locomotion" / "ant" / "ppo_rgb"
+    assert archive.run_folder(runs, "ant", "ppo_rgb") == kept / "locomotion" / "ant" / "ppo_rgb"
     assert report.trained_ppo(runs, "ant", "ppo_rgb") == layers.run_config({"env": "ant", "agent": "ppo_rgb"}).ppo
     steps, values = read_curves(report.metrics_path(runs, "ant", "ppo_rgb"))
     assert len(steps) == CURVE_POINTS and steps[-1] == 1024 * 600  # bins of 2 or 3 updates
     np.testing.assert_array_equal(steps, binned[0])
     np.testing.assert_allclose(values, binned[1], rtol=1e-5)  # written to 6 digits
-    assert report.sweep_seconds(runs, "3-locomotion") == pytest.approx(60.0)  # the records came along
+    assert archive.sweep_seconds(runs, "3-locomotion") == pytest.approx(60.0)  # the records came along
     assert report.cell(report.load(runs, "ant", "ppo_state")) == "-"
 
 
@@ -292,7 +294,7 @@ def test_a_report_keeps_the_rows_of_runs_it_cannot_read(tmp_path, monkeypatch):
     import locomotion
 
     monkeypatch.setattr(locomotion, "RESULTS", tmp_path / "results")
-    monkeypatch.setattr(report, "ARCHIVE", tmp_path / "archive")
+    monkeypatch.setattr(archive, "ARCHIVE", tmp_path / "archive")
     (tmp_path / "results").mkdir()
     (tmp_path / "results" / locomotion.REPORT).write_text("\n".join([
         "## ant (5 M env steps per seed)", "",
@@ -305,11 +307,11 @@ def test_a_report_keeps_the_rows_of_runs_it_cannot_read(tmp_path, monkeypatch):
     write_run(tmp_path / "runs", "ant", "hints-fc-speed", [evaluation(2000.0, 1.0, [2000.0])])
     locomotion.report(tmp_path / "runs", force=True)  # ppo_state's stand-in run has no metrics.csv to fill its cells
     text = (tmp_path / "results" / locomotion.REPORT).read_text()
-    assert f"| ppo_rgb {report.KEPT} | 1081.5 ± 175.9 (170.2) | 1015.49 ± 3.3 | 1049.8 ± 88.7 | 0.0% | 915 |" in text
+    assert f"| ppo_rgb {markdown.KEPT} | 1081.5 ± 175.9 (170.2) | 1015.49 ± 3.3 | 1049.8 ± 88.7 | 0.0% | 915 |" in text
     assert "| ppo_state | 5.0 ± 1.0 (0.0) |" in text and "3764.1" not in text
-    assert f"| hints-fc-speed {report.KEPT}" not in text and f"| dagger {report.KEPT}" not in text
+    assert f"| hints-fc-speed {markdown.KEPT}" not in text and f"| dagger {markdown.KEPT}" not in text
     assert "PPO-RGB 1081.5" in text  # the kept row's mean counts in the findings
-    assert f"Rows marked {report.KEPT} are kept from the previous report" in text
+    assert f"Rows marked {markdown.KEPT} are kept from the previous report" in text
 
 
 def test_a_report_that_would_blank_committed_cells_is_refused(tmp_path, capsys):
@@ -322,21 +324,21 @@ def test_a_report_that_would_blank_committed_cells_is_refused(tmp_path, capsys):
     path.write_text("\n".join(committed) + "\n")
     blanked = [line.replace("-468.3 ± 483.7 (365.8)", "-") for line in committed]
     with pytest.raises(SystemExit) as exit_info:
-        report.write_report(path, blanked)
+        markdown.write_report(path, blanked)
     assert exit_info.value.code == 2
     assert "pendulum/fc (ours)" in capsys.readouterr().err
     assert path.read_text() == "\n".join(committed) + "\n"
     refilled = [line.replace("-691.3 ± 516.1 (336.6)", "-650.0 ± 500.0 (300.0)") for line in committed]
-    report.write_report(path, refilled)  # a changed cell is no loss
+    markdown.write_report(path, refilled)  # a changed cell is no loss
     assert "-650.0 ± 500.0" in path.read_text()
-    report.write_report(path, blanked, force=True)
+    markdown.write_report(path, blanked, force=True)
     assert "-468.3" not in path.read_text()
 
 
 def test_curves_beside_kept_rows_go_to_their_own_figure(tmp_path, monkeypatch):
     """While some rows are kept (no curves to draw), their committed figure stays as it was and
     the newer runs' curves get a sibling figure; with no kept rows the figure is redrawn."""
-    monkeypatch.setattr(report, "ARCHIVE", tmp_path / "archive")
+    monkeypatch.setattr(archive, "ARCHIVE", tmp_path / "archive")
     runs, out = tmp_path / "runs", tmp_path / "curves_ant.png"
     write_run(runs, "ant", "ppo_state", [evaluation(5.0, 1.0, [5.0])], [[1.0, 2.0, 3.0]])
     out.write_bytes(b"the kept runs' figure")
@@ -375,18 +377,40 @@ def test_classic_report_gives_iqm_cells_and_orderings_as_probabilities_of_improv
     assert f"| {row} |" in table and "IQM of seed means [95% CI]" in table
 
 
+def test_a_later_table_leaves_out_the_finished_runs_an_earlier_one_trains(tmp_path, monkeypatch, capsys):
+    """classic_control.py's --table 4 (table_script.table_main): its fc row is Table 2's runs, so a
+    finished one is left out of Table 4's sweep while an unfinished one trains; Table 2 keeps its
+    own; without --table, one line and exit 2."""
+    import classic_control
+
+    monkeypatch.setenv("JAX_PLATFORMS", "cpu")  # main() sets it for the parent; restored after the test
+    calls = []
+    monkeypatch.setattr(table_script, "sweep", lambda runs, ids, workers, seeds, table, *rest: calls.append((ids, table)))
+    write_run(tmp_path, "pendulum", "hints-fc-composite", [evaluation(1.0, 0.0, [1.0])])
+    argv = ["classic_control.py", "--runs", str(tmp_path), "--envs", "pendulum", "--only"]
+    for table, only in ((4, "hints-fc-composite,hints-fc-state,hints-lc-composite"), (2, "hints-fc-composite,hints-fc-state")):
+        monkeypatch.setattr(sys, "argv", [*argv, only, "--table", str(table)])
+        classic_control.main()
+    assert calls == [(["pendulum/hints-fc-state", "pendulum/hints-lc-composite"], 4),
+                     (["pendulum/hints-fc-composite", "pendulum/hints-fc-state"], 2)]
+    monkeypatch.setattr(sys, "argv", argv[:-1])
+    with pytest.raises(SystemExit) as e:
+        classic_control.main()
+    assert e.value.code == 2 and capsys.readouterr().err == "error: give --table 2, --table 4 or --report\n"
+
+
 def test_seeds_below_one_get_one_line(capsys):
     import argparse
 
     parser = argparse.ArgumentParser()
-    sweep.add_arguments(parser, "runs/x", ("pendulum",), seeds=20)
+    table_script.add_arguments(parser, "runs/x", ("pendulum",), seeds=20)
     assert parser.parse_args([]).seeds == 20
     with pytest.raises(SystemExit) as e:
-        sweep.chosen_envs(parser, parser.parse_args(["--seeds", "0"]), ("pendulum",))
+        table_script.chosen_envs(parser, parser.parse_args(["--seeds", "0"]), ("pendulum",))
     assert e.value.code == 2 and capsys.readouterr().err == "error: --seeds must be at least 1, got 0\n"
     assert parser.parse_args(["--alone"]).group_size == 1 and parser.parse_args([]).group_size == 0
     with pytest.raises(SystemExit) as e:
-        sweep.chosen_envs(parser, parser.parse_args(["--group-size", "-1"]), ("pendulum",))
+        table_script.chosen_envs(parser, parser.parse_args(["--group-size", "-1"]), ("pendulum",))
     assert e.value.code == 2 and capsys.readouterr().err.startswith("error: --group-size must be at least 1")
 
 
@@ -447,7 +471,7 @@ def test_car_learning_report_sets_each_variant_beside_the_defaults(tmp_path, mon
     import car_learning
     from hintsjax.settings import layers
 
-    monkeypatch.setattr(report, "ARCHIVE", tmp_path / "archive")
+    monkeypatch.setattr(archive, "ARCHIVE", tmp_path / "archive")
     runs = tmp_path / "car_learning"
     entropy = 3 * (math.log(0.5) + 0.5 * (1 + math.log(2 * math.pi)))
     for name, base in (("gaussian", 100.0), ("tanh", 400.0)):
@@ -514,8 +538,8 @@ def test_set_gives_every_run_of_a_sweep_a_setting_and_bad_ones_are_one_line(tmp_
 
     def parsed(*items: str) -> dict:
         parser = argparse.ArgumentParser()
-        sweep.add_settings(parser)
-        return sweep.chosen_settings(parser, parser.parse_args([f"--set={item}" for item in items]))
+        sweep_settings.add_settings(parser)
+        return sweep_settings.chosen_settings(parser, parser.parse_args([f"--set={item}" for item in items]))
 
     assert parsed("physics=warp", "seed=10") == {"physics": "warp", "seed": 10}
     assert sweep.run_values("ant", "ppo_rgb", 2, settings={"physics": "warp", "seed": 10})["physics"] == "warp"
@@ -531,10 +555,10 @@ def test_set_gives_every_run_of_a_sweep_a_setting_and_bad_ones_are_one_line(tmp_
 
 WORKER_SETTINGS = """
 import argparse, os, sys
-from hintsjax.reproduce import sweep
+from hintsjax.reproduce import sweep_settings
 parser = argparse.ArgumentParser()
-sweep.add_settings(parser)
-settings = sweep.worker_settings(parser, parser.parse_args(sys.argv[1:]))
+sweep_settings.add_settings(parser)
+settings = sweep_settings.worker_settings(parser, parser.parse_args(sys.argv[1:]))
 from jax._src import xla_bridge
 print(xla_bridge.backends_are_initialized(), "--xla_gpu_deterministic_ops=false" in os.environ["XLA_FLAGS"].split())
 """
@@ -586,7 +610,7 @@ def test_locomotion_learners_report_gives_each_ordering_its_verdict(tmp_path, mo
     the plan above the marker is kept, and a row not trained reads '-'."""
     import locomotion
 
-    monkeypatch.setattr(report, "ARCHIVE", tmp_path / "archive")
+    monkeypatch.setattr(archive, "ARCHIVE", tmp_path / "archive")
     monkeypatch.setattr(locomotion, "ARCHIVE", tmp_path / "archive")
     monkeypatch.setattr(locomotion, "RESULTS", tmp_path)
     runs = tmp_path / "runs" / "t20"
@@ -618,7 +642,7 @@ def test_car_learners_report_gives_o1_and_o3_their_verdicts_beside_the_locomotio
     import car_racing
     import locomotion
 
-    for module in (report, car_racing, locomotion):
+    for module in (archive, car_racing, locomotion):
         monkeypatch.setattr(module, "ARCHIVE", tmp_path / "archive")
     for module in (car_racing, locomotion):
         monkeypatch.setattr(module, "RESULTS", tmp_path)
@@ -662,8 +686,8 @@ def test_archive_flag_archives_the_finished_runs_and_nothing_else(tmp_path, monk
     eval.json, config and binned curve go to the archive; the unfinished run and no report do."""
     import locomotion
 
-    monkeypatch.setattr(report, "ARCHIVE", tmp_path / "archive")
-    monkeypatch.setattr(sweep, "ARCHIVE", tmp_path / "archive")
+    monkeypatch.setattr(archive, "ARCHIVE", tmp_path / "archive")
+    monkeypatch.setattr(table_script, "ARCHIVE", tmp_path / "archive")
     runs = tmp_path / "runs" / "t20"
     write_run(runs, "ant", "ppo_rgb", [evaluation(5.0, 1.0, [4.0, 6.0])], returns=[[1.0, 2.0, 3.0], [2.0, 3.0, 4.0]])
     (runs / "ant" / "ppo_rgb" / "config.yaml").write_text("env: ant\n")

@@ -22,7 +22,8 @@ from hintsjax.system import program_cache
 from hintsjax.system.devices import SeedLayout
 from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms.group import cell_state
-from hintsjax.algorithms.ppo import Hyper, gaussian_sample, make_network, pick_hint
+from hintsjax.algorithms.ppo import Hyper, make_network, pick_hint
+from hintsjax.algorithms.ppo_math import gaussian_sample
 from hintsjax.algorithms.trainer import program_identity
 
 EVAL_TAG = 0xE7A1  # folded into a seed's key so evaluation draws differ from training's

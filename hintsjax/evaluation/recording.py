@@ -20,7 +20,8 @@ from flax import struct
 
 from hintsjax import envs
 from hintsjax.settings.config import RunConfig
-from hintsjax.algorithms.ppo import gaussian_sample, make_network
+from hintsjax.algorithms.ppo import make_network
+from hintsjax.algorithms.ppo_math import gaussian_sample
 
 MAX_STEPS = 300  # the default --steps: the env's episode, capped here
 PANEL_WIDTH = 240  # pixels of the text-and-bars panel right of the picture

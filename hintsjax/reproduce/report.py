@@ -1,45 +1,18 @@
-"""Reading finished runs into the result tables, and the committed archive of what they need.
+"""Reading finished runs into the cells of the result tables.
 
-The readers (`load`, `cell`, `metric_cell`, `training_cell`, `kl_cell`, `wall_clock`,
-`sweep_seconds`) give the cells of the tables of classic_control.py, locomotion.py and
-car_racing.py; `markdown_table` renders every table of them, and `write_report` writes a report,
-refusing to blank cells that the committed one fills.
-
-runs/ is not committed (checkpoints, full logs). What the tables need of each finished run is
-kept in the committed archive experiments/results/runs/<sweep>/<env>/<label>/ (`archive_runs`,
-which every `--report` calls first): eval.json and config.yaml as trained, summary.json (the
-training-return and KL cells, worked out from the full metrics.csv) and a metrics.csv of the
-learning curve averaged into runlog.CURVE_POINTS bins, as the plots draw it; the sweeps' records
-go to its sweeps.jsonl. The readers take a run from runs/ when it finished there, else from the
-archive, so a report on a fresh checkout rebuilds the committed tables.
+The readers (`load`, `cell`, `iqm_cell`, `metric_cell`, `training_cell`, `kl_cell`, `wall_clock`,
+`references_note`, `footer`) give the cells and notes of the tables of classic_control.py,
+locomotion.py, car_racing.py and playground.py. Each reads a run from runs/ when it finished
+there, else from the committed archive (archive.py), so a report on a fresh checkout rebuilds the
+committed tables; markdown.py renders the tables and writes the reports.
 """
 
 from __future__ import annotations
 
-import csv
 import json
-import shutil
-import sys
-import time
 from pathlib import Path
 
-# The checkout's experiments/results/runs: the tables and their archive live beside the table
-# scripts, in a checkout (an editable install) rather than in an installed package.
-ARCHIVE = Path(__file__).resolve().parents[2] / "experiments" / "results" / "runs"
-ABOUT_JSON = "about.json"  # in an archive folder, beside its runs: how they were made
-SUMMARY_JSON = "summary.json"
-KL_ABOVE = 0.5  # kl_cell's threshold: an update whose approx. KL exceeds it blew up
-
-
-def run_folder(runs: Path, env: str, label: str) -> Path:
-    """Its archived copy when the run finished only there (runs/env/label lacks eval.json, the
-    archive has it), else runs/env/label (finished, begun, or never run)."""
-    folder = runs / env / label
-    archived = ARCHIVE / runs.name / env / label
-    if (folder / "eval.json").exists() or not (archived / "eval.json").exists():
-        return folder
-    return archived
-
+from hintsjax.reproduce.archive import KL_ABOVE, kl_share, run_folder, sweep_records, sweep_seconds, training_seed_means
 
 def load(runs: Path, env: str, label: str) -> dict | None:
     path = run_folder(runs, env, label) / "eval.json"
@@ -149,30 +122,6 @@ def metrics_path(runs: Path, env: str, label: str) -> Path | None:
     return path if path.exists() else None
 
 
-def summary(folder: Path) -> dict | None:
-    """An archived run's summary.json (None for a run folder in runs/)."""
-    path = folder / SUMMARY_JSON
-    return json.loads(path.read_text()) if path.exists() else None
-
-
-def training_seed_means(folder: Path, last: float = 0.1) -> list[float] | None:
-    """Per seed, the mean return of the training episodes (sampled actions) that ended in the
-    last `last` of a run's updates; None when not run or no episode ended."""
-    import numpy as np
-
-    from hintsjax.training.runlog import read_curves
-
-    if (kept := summary(folder)) is not None:
-        return kept["training_return_seed_means"]
-    if not (folder / "metrics.csv").exists():
-        return None
-    _, values = read_curves(folder / "metrics.csv")
-    tail = values[:, -max(1, int(last * values.shape[1])):]
-    if np.isnan(tail).all():
-        return None
-    return [float(x) for x in np.nanmean(tail, axis=1)]
-
-
 def training_cell(runs: Path, env: str, label: str) -> str:
     """Mean ± std over seeds of `training_seed_means` (the last 10% of updates): beside
     `cell`'s deterministic evaluation; '-' when not run."""
@@ -182,25 +131,6 @@ def training_cell(runs: Path, env: str, label: str) -> str:
     if per_seed is None:
         return "-"
     return f"{np.nanmean(per_seed):.1f} ± {np.nanstd(per_seed):.1f}"
-
-
-def kl_share(folder: Path, above: float = KL_ABOVE) -> float | None:
-    """The share of a run's PPO updates (all seeds) whose approx. KL from the rollout policy (the
-    mean over the update's minibatch steps, as logged) exceeds `above`; None when not run or
-    not trained by PPO (or, for an archived run, `above` is not KL_ABOVE)."""
-    import numpy as np
-
-    if (kept := summary(folder)) is not None:
-        return kept["kl_share"] if above == KL_ABOVE else None
-    path = folder / "metrics.csv"
-    if not path.exists():
-        return None
-    with path.open() as f:
-        reader = csv.DictReader(f)
-        if "approx_kl" not in (reader.fieldnames or ()):
-            return None
-        kl = np.array([float(row["approx_kl"]) for row in reader])
-    return float(np.mean(kl > above))
 
 
 def kl_cell(runs: Path, env: str, label: str, above: float = KL_ABOVE) -> str:
@@ -274,75 +204,7 @@ def wall_clock(result: dict | None) -> str:
     return f"{result['wall_seconds']:.0f}" + (" (CPU)" if on_cpu else "")
 
 
-def unique_lines(*paths: Path) -> list[str]:
-    """The non-empty lines of the files that exist among `paths`, each once, in order."""
-    return list(dict.fromkeys(line for path in paths if path.exists() for line in path.read_text().splitlines() if line.strip()))
-
-
-def sweep_records(runs: Path, table: int | str) -> list[dict]:
-    """The GPU sweeps of `table` recorded in runs/sweeps.jsonl and in the archive's copy (once
-    each). A sweep that trained runs of both tables at once is recorded as table "2+4" and counts
-    for each. Sweeps run on a CPU (recorded with "device": "cpu") are left out: their runs are
-    marked (CPU)."""
-    lines = unique_lines(runs / "sweeps.jsonl", ARCHIVE / runs.name / "sweeps.jsonl")
-    return [r for r in map(json.loads, lines) if str(table) in str(r["table"]).split("+") and r.get("device") != "cpu"]
-
-
-def sweep_seconds(runs: Path, table: int | str) -> float:
-    """The GPU wall-clock of `table`'s sweeps: sweeps that ran at the same time (on one machine's
-    several GPUs) count once, as the union of their [finished - seconds, finished] spans."""
-    records = sweep_records(runs, table)
-    total = sum(r["seconds"] for r in records if "finished" not in r)  # no timestamp: counted alone
-    reach = -float("inf")  # the end of the union so far
-    for start, end in sorted((end - r["seconds"], end) for r in records if "finished" in r
-                             for end in [time.mktime(time.strptime(r["finished"], "%Y-%m-%d %H:%M:%S"))]):
-        total += max(0.0, end - max(start, reach))
-        reach = max(reach, end)
-    return total
-
-
-def archive_run(runs: Path, env: str, label: str) -> Path:
-    """Copy what the tables need of the finished run runs/env/label into
-    ARCHIVE/<runs' name>/env/label (see the module's docstring); returns that folder."""
-    import numpy as np
-
-    from hintsjax.settings.layers import CONFIG_YAML
-    from hintsjax.training.runlog import bin_means, read_curves
-
-    src, dest = runs / env / label, ARCHIVE / runs.name / env / label
-    dest.mkdir(parents=True, exist_ok=True)
-    for name in ("eval.json", CONFIG_YAML):
-        shutil.copyfile(src / name, dest / name)
-    (dest / "metrics.csv").unlink(missing_ok=True)
-    if not (src / "metrics.csv").exists():
-        (dest / SUMMARY_JSON).write_text(json.dumps({"training_return_seed_means": None, "kl_share": None}) + "\n")
-        return dest
-    kept = {"training_return_seed_means": training_seed_means(src), "kl_share": kl_share(src)}
-    steps, values = read_curves(src / "metrics.csv")
-    # metrics.csv's updates count from 1 without gaps (a resumed run goes on from its checkpoint);
-    # each archived row is a bin of them, numbered by its last update
-    updates, _ = bin_means(np.arange(1, len(steps) + 1), values)
-    steps, values = bin_means(steps, values)
-    with (dest / "metrics.csv").open("w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(["update", "seed", "env_steps", "episode_return"])
-        writer.writerows([updates[i], s, f"{steps[i]:.0f}", f"{values[s, i]:.6g}"]
-                         for i in range(len(steps)) for s in range(values.shape[0]))
-    (dest / SUMMARY_JSON).write_text(json.dumps(kept, indent=1) + "\n")
-    return dest
-
-
-def archive_runs(runs: Path, run_ids: list[str]) -> list[str]:
-    """Archive every run of `run_ids` that finished in `runs` (and the sweeps' records); the
-    archived ids."""
-    done = [r for r in run_ids if (runs / r / "eval.json").exists()]
-    for r in done:
-        archive_run(runs, *r.split("/"))
-    if (runs / "sweeps.jsonl").exists():
-        path = ARCHIVE / runs.name / "sweeps.jsonl"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text("".join(line + "\n" for line in unique_lines(path, runs / "sweeps.jsonl")))
-    return done
+ARCHIVED_SUFFIX = "_archived"  # curve_lines' figure of the runs beside kept ones
 
 
 def curve_lines(runs: Path, env: str, labels: list[str], out: Path, title: str, kept: tuple[str, ...] = ()) -> list[str]:
@@ -365,129 +227,6 @@ def curve_lines(runs: Path, env: str, labels: list[str], out: Path, title: str, 
     return [f"![{env} learning curves]({out.name})", ""]
 
 
-def read_about(folder: Path) -> dict:
-    """How a folder's runs were made (commands, hardware, dates, what shared a GPU): its
-    about.json, written by whoever ran them; {} when there is none."""
-    path = folder / ABOUT_JSON
-    return json.loads(path.read_text()) if path.is_file() else {}
-
-
-def about_lines(about: dict) -> list[str]:
-    """A report's closing section from `read_about`'s entries; [] when there are none."""
-    return ["## Where these numbers come from", "", *(f"- {k}: {v}" for k, v in about.items()), ""] if about else []
-
-
-def footer(runs: Path, table: str, run_ids: list[str]) -> str:
-    """The report's last line: the sweeps' GPU wall-clock and hardware."""
-    return (f"Sweep wall-clock recorded in {runs}/sweeps.jsonl on the GPU: {sweep_seconds(runs, table):.0f} s"
-            f" ({sweep_hardware(runs, table, run_ids) or 'none yet'}).")
-
-
-KEPT = "†"  # marks a row kept from the committed report: its run predates the archive
-ARCHIVED_SUFFIX = "_archived"  # curve_lines' figure of the runs beside kept ones
-
-
-def table_line(cells: list[str]) -> str:
-    """One line of a markdown table: `| a | b |`."""
-    return "| " + " | ".join(cells) + " |"
-
-
-def markdown_table(header: list[str], rows: list[list[str]]) -> list[str]:
-    """The lines of a markdown table: its header, the rule under it, then one line per row of cells."""
-    return [table_line(header), "|" + "---|" * len(header), *map(table_line, rows)]
-
-
-def table_rows(text: str):
-    """(section heading, row label without KEPT, its cells) of every row of a report's markdown
-    tables, header rows included."""
-    section = ""
-    for line in text.splitlines():
-        if line.startswith("## "):
-            section = line[3:].split(" (")[0]
-        elif line.startswith("| ") and not line.startswith("|---"):
-            label, *cells = [part.strip() for part in line.strip().strip("|").split("|")]
-            yield section, label.removesuffix(KEPT).strip(), cells
-
-
-def kept_rows(path: Path) -> dict[tuple[str, str], list[str]]:
-    """The table rows (label, then cells) of the committed report at `path`, by (section heading,
-    agent label), each with its label marked KEPT. A report keeps the row of a run that is neither
-    in runs/ nor in the archive (one trained before the archive existed, whose run folder was lost)
-    instead of blanking it."""
-    text = path.read_text() if path.exists() else ""
-    return {(section, label): [f"{label} {KEPT}", *cells]
-            for section, label, cells in table_rows(text) if label != "agent" and cells[0] != "-"}
-
-
-def cell_stats(text: str) -> tuple[float, float] | None:
-    """(mean, std of the per-seed means) of a 'mean ± std (seed std)' cell; None for '-'."""
-    if text.strip() == "-":
-        return None
-    mean, rest = text.split("±")
-    return float(mean), float(rest.split("(")[1].rstrip(") "))
-
-
-def apart_text(a: tuple[float, float], b: tuple[float, float]) -> str:
-    """Whether two agents' means differ by more than their seed stds together."""
-    return "beyond" if abs(a[0] - b[0]) > a[1] + b[1] else "within"
-
-
-def table_cells(text: str) -> dict[tuple[str, str, int], str]:
-    """Every cell of a report's markdown tables, by (section heading, row label, column)."""
-    return {(section, label, i): c for section, label, cells in table_rows(text) for i, c in enumerate(cells, 1)}
-
-
-def lost_cells(old: str, new: str) -> list[str]:
-    """'section/label' of every row with a cell that the report `old` filled and `new` leaves '-'."""
-    after = table_cells(new)
-    return list(dict.fromkeys(f"{section}/{label}" for (section, label, i), c in table_cells(old).items()
-                              if c != "-" and after.get((section, label, i), "-") == "-"))
-
-
-def refuse_lost_cells(path: Path, lines: list[str]) -> None:
-    """Exit 2, naming them, if the report `lines` would blank cells that the committed report at
-    `path` fills: their runs are neither in runs/ nor in the archive (e.g. a checkout whose runs
-    were lost). --force skips this check."""
-    if path.exists() and (lost := lost_cells(path.read_text(), "\n".join(lines))):
-        sys.stderr.write(f"error: {path.name} not rewritten: it would blank {len(lost)} rows whose runs are in neither "
-                         f"--runs nor {ARCHIVE} ({', '.join(lost[:5])}{', ...' if len(lost) > 5 else ''}); "
-                         "--force rewrites it anyway\n")
-        raise SystemExit(2)
-
-
-GENERATED_OPENING = "<!-- generated by "  # how every generated section's marker line begins
-
-
-def generated_marker(script: str) -> str:
-    """The line that opens `script`'s generated section of a report that several scripts share."""
-    return f"{GENERATED_OPENING}experiments/{script} --learners-report, down to the next such line -->"
-
-
-def write_section(path: Path, marker: str, lines: list[str]) -> None:
-    """Write `lines` as the section of `path` that `marker` opens, from the marker down to the
-    next generated marker (or the end); the text above it and the other scripts' sections stay.
-    A file without the marker gets the section at its end."""
-    text = path.read_text() if path.exists() else ""
-    before, after = text, ""
-    if marker in text:
-        start = text.index(marker)
-        end = text.find("\n" + GENERATED_OPENING, start + len(marker))
-        before, after = text[:start], "" if end < 0 else text[end + 1:]
-    while lines and not lines[-1]:  # one blank line between sections, none at the end
-        lines = lines[:-1]
-    rest = ["", *after.rstrip("\n").splitlines()] if after else []
-    write_report(path, [*before.rstrip("\n").splitlines(), "", marker, "", *lines, *rest], force=True)
-
-
-def write_report(path: Path, lines: list[str], force: bool = False) -> None:
-    """Write a report (refused as `refuse_lost_cells` says unless `force`) and print it."""
-    if not force:
-        refuse_lost_cells(path, lines)
-    path.parent.mkdir(exist_ok=True)
-    path.write_text("\n".join(lines) + "\n")
-    print(path.read_text())
-
-
 def sweep_hardware(runs: Path, table: str, run_ids: list[str]) -> str:
     """'NVIDIA H200; 6 runs at once over 2 GPUs' for the GPU sweeps of `table` (from sweeps.jsonl
     and the runs' eval.json), or '' when none ran on a GPU."""
@@ -501,3 +240,9 @@ def sweep_hardware(runs: Path, table: str, run_ids: list[str]) -> str:
     # Runs recorded before this key existed ran with deterministic GPU ops (hintsjax's default).
     fast = [result for result in results if result.get("deterministic", True) is False]
     return f"{', '.join(devices)}; {'; '.join(setups)}" + (f"; deterministic GPU ops off ({len(fast)} runs)" if fast else "")
+
+
+def footer(runs: Path, table: str, run_ids: list[str]) -> str:
+    """The report's last line: the sweeps' GPU wall-clock and hardware."""
+    return (f"Sweep wall-clock recorded in {runs}/sweeps.jsonl on the GPU: {sweep_seconds(runs, table):.0f} s"
+            f" ({sweep_hardware(runs, table, run_ids) or 'none yet'}).")

@@ -1,4 +1,4 @@
-"""The machinery that the reproduction sweeps share (classic_control.py, locomotion.py, car_racing.py).
+"""The machinery that the reproduction sweeps share (classic_control.py, locomotion.py, car_racing.py, playground.py).
 
 A run is named `env/label`, where the label is `RunConfig.label` (an agent's name, or
 hints-<scheme>-<hint>); its folder runs/<sweep>/env/label holds config.yaml, metrics.csv,
@@ -13,8 +13,8 @@ PPO-x+N(0,1)) and trains each group, all its runs and seeds in one compiled prog
 A group's checkpoints and train.log are in runs/<sweep>/env/_groups/<its runs' digest>; a group
 too big for the device's memory is split in halves until each part fits.
 
-`table_main` is a table script's command line: train its runs, or `--report` (archive the
-finished runs, then write the tables with report.py's readers).
+A table script's command line, which calls `sweep`, is hintsjax.reproduce.table_script; --set's
+settings, which every run of a sweep gets, are read by hintsjax.reproduce.sweep_settings.
 """
 
 from __future__ import annotations
@@ -28,10 +28,11 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from hintsjax.models.agents import EXPERT_AGENT
-from hintsjax.reproduce.report import ARCHIVE, archive_runs, load
+from hintsjax.reproduce.report import load
+from hintsjax.reproduce.sweep_settings import add_settings, worker_settings
 
 # A sweep's runs save at most once a minute: fast runs finish 50 updates in seconds, and a big
 # run's checkpoint (every env's MJX state) can reach a GB; an interruption loses at most a minute.
@@ -272,143 +273,8 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int |
         sys.exit(1)
 
 
-def add_arguments(parser: argparse.ArgumentParser, runs: str, envs: tuple[str, ...], seeds: int = 5) -> None:
-    """The options every sweep script takes (`runs`: the default runs folder; `seeds`: the default seeds per run)."""
-    parser.add_argument("--report", action="store_true", help="only write the result tables and curves")
-    parser.add_argument("--force", action="store_true",
-                        help="with --report: rewrite a table even where it would blank cells the committed one fills")
-    parser.add_argument("--envs", default=",".join(envs), help=f"comma-separated subset of {', '.join(envs)}")
-    parser.add_argument("--runs", type=Path, default=Path(runs))
-    parser.add_argument("--workers", type=int, default=1, help="configurations trained at once")
-    parser.add_argument("--seeds", type=int, default=seeds, help=f"seeds per run (default {seeds})")
-    parser.add_argument("--alone", action="store_const", const=1, default=0, dest="group_size",
-                        help="train every run in its own program (default: runs that share shapes train as one group)")
-    parser.add_argument("--group-size", type=int, default=0, metavar="N",
-                        help="at most N runs per group (default: no limit), e.g. so that each group ends within a time limit")
-    parser.add_argument("--smoke", action="store_true", help="tiny budgets: check the plumbing on a CPU")
-    parser.add_argument("--gpus", type=lambda s: tuple(g for g in s.split(",") if g), default=(), metavar="IDS",
-                        help="comma-separated CUDA device ids; each worker gets the least busy one to itself")
-    parser.add_argument("--launch-until", type=float, default=float("inf"), metavar="SECONDS",
-                        help="start no run after this many seconds; running ones finish (for time-limited machines)")
-    parser.add_argument("--only", type=lambda s: tuple(x for x in s.split(",") if x), default=(), metavar="LABELS",
-                        help="comma-separated run labels (e.g. ppo_rgb,hints-fc-speed): train only these of the table's runs")
-    parser.add_argument("--experts", type=lambda s: Path(s).absolute(), default=None,
-                        help="where expert_ppo runs export their expert and dagger/gail read it "
-                             "(default: the package's hintsjax/experts/<env>)")
-    add_settings(parser)
-
-
-def add_settings(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="settings",
-                        help="a top-level run setting for every run, e.g. --set physics=warp --set seed=10 "
-                             "(give each part of a row's seeds its own --runs folder)")
-
-
-def parsed_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict:
-    """--set's KEY=VALUE pairs, values as YAML reads them; exit 2 on one that is not KEY=VALUE.
-    Starts nothing (a worker reads them before JAX's backend starts)."""
-    import yaml
-
-    settings = {}
-    for item in args.settings:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            parser.exit(2, f"error: --set takes KEY=VALUE, got {item!r}\n")
-        settings[key] = yaml.safe_load(value)
-    return settings
-
-
-def check_settings(parser: argparse.ArgumentParser, settings: dict) -> dict:
-    """`settings`, or exit 2 in one line on one that RunConfig refuses (this starts JAX's backend:
-    resolving the physics asks it for the platform)."""
-    from hintsjax.system.errors import UsageError
-    from hintsjax.settings.layers import run_config
-
-    try:
-        run_config({"env": "pendulum", **settings})
-    except UsageError as e:
-        parser.exit(2, f"error: --set: {e}\n")
-    return settings
-
-
-def chosen_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict:
-    """--set's settings, read and checked."""
-    return check_settings(parser, parsed_settings(parser, args))
-
-
-def chosen_envs(parser: argparse.ArgumentParser, args: argparse.Namespace, envs: tuple[str, ...]) -> list[str]:
-    """The envs of --envs; exit 2 naming the valid ones on an unknown env, --workers or --seeds < 1, --group-size < 0."""
-    names = [n.strip() for n in args.envs.split(",") if n.strip()]
-    unknown = [n for n in names if n not in envs]
-    if unknown:
-        parser.exit(2, f"error: unknown env {unknown}; valid choices: {', '.join(envs)}\n")
-    for option in ("workers", "seeds"):
-        if getattr(args, option) < 1:
-            parser.exit(2, f"error: --{option} must be at least 1, got {getattr(args, option)}\n")
-    if args.group_size < 0:
-        parser.exit(2, f"error: --group-size must be at least 1 (or 0 for no limit), got {args.group_size}\n")
-    return names
-
-
-def chosen_runs(parser: argparse.ArgumentParser, args: argparse.Namespace, run_ids: list[str]) -> list[str]:
-    """The runs of --only (all when not given); exit 2 naming the valid labels on an unknown one."""
-    if not args.only:
-        return run_ids
-    labels = list(dict.fromkeys(r.split("/")[1] for r in run_ids))
-    unknown = [label for label in args.only if label not in labels]
-    if unknown:
-        parser.exit(2, f"error: unknown run label {unknown}; valid choices: {', '.join(labels)}\n")
-    return [r for r in run_ids if r.split("/")[1] in args.only]
-
-
-def table_main(description: str, default_runs: str, envs: tuple[str, ...], table: str,
-               run_ids: Callable[[list[str]], list[str]], report: Callable[[Path, bool], None],
-               learners_report: Callable[[Path, list[str], Path], None] | None = None) -> None:
-    """The command line of a table's sweep script: train its runs for --envs, or --report (and,
-    where the script has one, --learners-report FILE: the learner rows at any seed count), or
-    --archive (only archive the finished runs)."""
-    parser = argparse.ArgumentParser(description=description)
-    add_arguments(parser, default_runs, envs)
-    if learners_report is not None:
-        parser.add_argument("--learners-report", type=Path, default=None, metavar="FILE",
-                            help="write the learner rows of --envs from --runs (any seed count) with IQM and orderings")
-    parser.add_argument("--archive", action="store_true",
-                        help="only copy what the reports need of the finished runs into experiments/results/runs "
-                             "(a few hundred KB a run: what a GPU machine sends back)")
-    args = parser.parse_args()
-    os.environ["JAX_PLATFORMS"] = "cpu"  # the parent only reads configs; workers get the devices
-    if args.archive:
-        done = archive_runs(args.runs, run_ids(list(envs)))
-        print(f"archived {len(done)} finished run(s) of {args.runs} in {ARCHIVE / args.runs.name}: {', '.join(done)}")
-        return
-    if getattr(args, "learners_report", None):
-        archive_runs(args.runs, run_ids(list(envs)))
-        learners_report(args.runs, chosen_envs(parser, args, envs), args.learners_report)
-        return
-    if args.report:
-        archive_runs(args.runs, run_ids(list(envs)))
-        report(args.runs, args.force)
-        return
-    names = chosen_envs(parser, args, envs)
-    ids = chosen_runs(parser, args, run_ids(names))
-    settings = chosen_settings(parser, args)
-    sweep(args.runs, ids, args.workers, args.seeds, table, args.smoke, args.launch_until, args.experts, args.gpus,
-          args.group_size, settings)
-
-
-def worker_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict:
-    """A worker's --set settings, read and checked. Under physics=warp it trains without
-    deterministic GPU ops (nothing repeats bit for bit under Warp's atomics), which it must say
-    before the check starts JAX's backend."""
-    settings = parsed_settings(parser, args)
-    if settings.get("physics") == "warp":
-        from hintsjax.system import xla_flags
-
-        xla_flags.drop_determinism()
-    return check_settings(parser, settings)
-
-
 def main() -> None:
+    """A worker: train and evaluate one run, or one group, of a sweep (`WORKER`, launched by `sweep`)."""
     parser = argparse.ArgumentParser(description="train and evaluate one run of a sweep (a worker process)")
     parser.add_argument("--runs", type=Path, required=True)
     parser.add_argument("--seeds", type=int, default=5)

@@ -1,0 +1,162 @@
+"""The committed archive of finished runs: what the result tables need of each, kept in the checkout.
+
+runs/ is not committed (checkpoints, full logs). What the tables need of each finished run is
+kept in experiments/results/runs/<sweep>/<env>/<label>/ (`archive_runs`, which every `--report`
+calls first): eval.json and config.yaml as trained, summary.json (the training-return and KL
+cells: `training_seed_means` and `kl_share`, worked out from the full metrics.csv) and a
+metrics.csv of the learning curve averaged into runlog.CURVE_POINTS bins, as the plots draw it;
+the sweeps' records go to its sweeps.jsonl (`sweep_records`), and an about.json may say how its
+runs were made (`read_about`). `run_folder` takes a run from runs/ when it finished there, else
+from the archive, so a report on a fresh checkout rebuilds the committed tables.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+import time
+from pathlib import Path
+
+# The checkout's experiments/results/runs: the tables and their archive live beside the table
+# scripts, in a checkout (an editable install) rather than in an installed package.
+ARCHIVE = Path(__file__).resolve().parents[2] / "experiments" / "results" / "runs"
+ABOUT_JSON = "about.json"  # in an archive folder, beside its runs: how they were made
+SUMMARY_JSON = "summary.json"
+KL_ABOVE = 0.5  # kl_share's (and kl_cell's) threshold: an update whose approx. KL exceeds it blew up
+
+
+def run_folder(runs: Path, env: str, label: str) -> Path:
+    """Its archived copy when the run finished only there (runs/env/label lacks eval.json, the
+    archive has it), else runs/env/label (finished, begun, or never run)."""
+    folder = runs / env / label
+    archived = ARCHIVE / runs.name / env / label
+    if (folder / "eval.json").exists() or not (archived / "eval.json").exists():
+        return folder
+    return archived
+
+
+def summary(folder: Path) -> dict | None:
+    """An archived run's summary.json (None for a run folder in runs/)."""
+    path = folder / SUMMARY_JSON
+    return json.loads(path.read_text()) if path.exists() else None
+
+
+def training_seed_means(folder: Path, last: float = 0.1) -> list[float] | None:
+    """Per seed, the mean return of the training episodes (sampled actions) that ended in the
+    last `last` of a run's updates; None when not run or no episode ended."""
+    import numpy as np
+
+    from hintsjax.training.runlog import read_curves
+
+    if (kept := summary(folder)) is not None:
+        return kept["training_return_seed_means"]
+    if not (folder / "metrics.csv").exists():
+        return None
+    _, values = read_curves(folder / "metrics.csv")
+    tail = values[:, -max(1, int(last * values.shape[1])):]
+    if np.isnan(tail).all():
+        return None
+    return [float(x) for x in np.nanmean(tail, axis=1)]
+
+
+def kl_share(folder: Path, above: float = KL_ABOVE) -> float | None:
+    """The share of a run's PPO updates (all seeds) whose approx. KL from the rollout policy (the
+    mean over the update's minibatch steps, as logged) exceeds `above`; None when not run or
+    not trained by PPO (or, for an archived run, `above` is not KL_ABOVE)."""
+    import numpy as np
+
+    if (kept := summary(folder)) is not None:
+        return kept["kl_share"] if above == KL_ABOVE else None
+    path = folder / "metrics.csv"
+    if not path.exists():
+        return None
+    with path.open() as f:
+        reader = csv.DictReader(f)
+        if "approx_kl" not in (reader.fieldnames or ()):
+            return None
+        kl = np.array([float(row["approx_kl"]) for row in reader])
+    return float(np.mean(kl > above))
+
+
+def unique_lines(*paths: Path) -> list[str]:
+    """The non-empty lines of the files that exist among `paths`, each once, in order."""
+    return list(dict.fromkeys(line for path in paths if path.exists() for line in path.read_text().splitlines() if line.strip()))
+
+
+def sweep_records(runs: Path, table: int | str) -> list[dict]:
+    """The GPU sweeps of `table` recorded in runs/sweeps.jsonl and in the archive's copy (once
+    each). A sweep that trained runs of both tables at once is recorded as table "2+4" and counts
+    for each. Sweeps run on a CPU (recorded with "device": "cpu") are left out: their runs are
+    marked (CPU)."""
+    lines = unique_lines(runs / "sweeps.jsonl", ARCHIVE / runs.name / "sweeps.jsonl")
+    return [r for r in map(json.loads, lines) if str(table) in str(r["table"]).split("+") and r.get("device") != "cpu"]
+
+
+def sweep_seconds(runs: Path, table: int | str) -> float:
+    """The GPU wall-clock of `table`'s sweeps: sweeps that ran at the same time (on one machine's
+    several GPUs) count once, as the union of their [finished - seconds, finished] spans."""
+    records = sweep_records(runs, table)
+    total = sum(r["seconds"] for r in records if "finished" not in r)  # no timestamp: counted alone
+    reach = -float("inf")  # the end of the union so far
+    for start, end in sorted((end - r["seconds"], end) for r in records if "finished" in r
+                             for end in [time.mktime(time.strptime(r["finished"], "%Y-%m-%d %H:%M:%S"))]):
+        total += max(0.0, end - max(start, reach))
+        reach = max(reach, end)
+    return total
+
+
+def archive_run(runs: Path, env: str, label: str) -> Path:
+    """Copy what the tables need of the finished run runs/env/label into
+    ARCHIVE/<runs' name>/env/label (see the module's docstring); returns that folder."""
+    import numpy as np
+
+    from hintsjax.settings.layers import CONFIG_YAML
+    from hintsjax.training.runlog import bin_means, read_curves
+
+    src, dest = runs / env / label, ARCHIVE / runs.name / env / label
+    dest.mkdir(parents=True, exist_ok=True)
+    for name in ("eval.json", CONFIG_YAML):
+        shutil.copyfile(src / name, dest / name)
+    (dest / "metrics.csv").unlink(missing_ok=True)
+    if not (src / "metrics.csv").exists():
+        (dest / SUMMARY_JSON).write_text(json.dumps({"training_return_seed_means": None, "kl_share": None}) + "\n")
+        return dest
+    kept = {"training_return_seed_means": training_seed_means(src), "kl_share": kl_share(src)}
+    steps, values = read_curves(src / "metrics.csv")
+    # metrics.csv's updates count from 1 without gaps (a resumed run goes on from its checkpoint);
+    # each archived row is a bin of them, numbered by its last update
+    updates, _ = bin_means(np.arange(1, len(steps) + 1), values)
+    steps, values = bin_means(steps, values)
+    with (dest / "metrics.csv").open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["update", "seed", "env_steps", "episode_return"])
+        writer.writerows([updates[i], s, f"{steps[i]:.0f}", f"{values[s, i]:.6g}"]
+                         for i in range(len(steps)) for s in range(values.shape[0]))
+    (dest / SUMMARY_JSON).write_text(json.dumps(kept, indent=1) + "\n")
+    return dest
+
+
+def archive_runs(runs: Path, run_ids: list[str]) -> list[str]:
+    """Archive every run of `run_ids` that finished in `runs` (and the sweeps' records); the
+    archived ids."""
+    done = [r for r in run_ids if (runs / r / "eval.json").exists()]
+    for r in done:
+        archive_run(runs, *r.split("/"))
+    if (runs / "sweeps.jsonl").exists():
+        path = ARCHIVE / runs.name / "sweeps.jsonl"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("".join(line + "\n" for line in unique_lines(path, runs / "sweeps.jsonl")))
+    return done
+
+
+def read_about(folder: Path) -> dict:
+    """How a folder's runs were made (commands, hardware, dates, what shared a GPU): its
+    about.json, written by whoever ran them; {} when there is none."""
+    path = folder / ABOUT_JSON
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
+def about_lines(about: dict) -> list[str]:
+    """A report's closing section from `read_about`'s entries; [] when there are none."""
+    return ["## Where these numbers come from", "", *(f"- {k}: {v}" for k, v in about.items()), ""] if about else []
