@@ -317,9 +317,9 @@ def run_ids(table: int, names: list[str]) -> list[str]:
 
 
 # --table 2 or 4 picks the table to train (Table 4's fc row is Table 2's runs: once finished, its sweep leaves
-# them out); no --archive, and --learners-report reads --runs as they are.
+# them out).
 SCRIPT = TableScript(__doc__.splitlines()[0], "runs/classic", ENVS, {t: partial(run_ids, t) for t in (2, 4)}, report,
-                     learners_report, seeds=20, archive=False)
+                     learners_report, seeds=20)
 
 
 def main() -> None:

@@ -258,7 +258,7 @@ def extra_mode(parser: argparse.ArgumentParser, args: argparse.Namespace) -> boo
     return False
 
 
-SCRIPT = TableScript(__doc__.splitlines()[0], DEFAULT_RUNS, ENVS, {TABLE: run_ids}, report, archive=False,
+SCRIPT = TableScript(__doc__.splitlines()[0], DEFAULT_RUNS, ENVS, {TABLE: run_ids}, report,
                      extra_arguments=extra_arguments, extra_mode=extra_mode)
 
 

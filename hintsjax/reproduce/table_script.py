@@ -3,8 +3,8 @@
 A table script of experiments/ (classic_control.py, locomotion.py, car_racing.py, playground.py)
 declares its runs, the tables they make and its reports, and calls `table_main`, which trains the
 runs of --envs (hintsjax.reproduce.sweep), or with --report archives the finished runs and then
-writes the tables (with report.py's readers); where the script has them, --learners-report FILE,
---archive (only archive the finished runs) and a mode of its own.
+writes the tables (with report.py's readers), or --archive only archives them; where the script
+has them, --learners-report FILE and a mode of its own.
 """
 
 from __future__ import annotations
@@ -34,7 +34,6 @@ class TableScript:
     report: Callable[[Path, bool], None]  # --report: (runs, --force)
     learners_report: Callable[[Path, list[str], Path], None] | None = None  # --learners-report FILE: (runs, envs, FILE)
     seeds: int = 5  # --seeds' default
-    archive: bool = True  # --archive, and the finished runs archived before --learners-report
     extra_arguments: Callable[[argparse.ArgumentParser], None] | None = None  # the script's own options
     # the script's own mode, tried first (before the parent keeps off the GPU); True when it ran
     extra_mode: Callable[[argparse.ArgumentParser, argparse.Namespace], bool] | None = None
@@ -97,8 +96,8 @@ def chosen_runs(parser: argparse.ArgumentParser, args: argparse.Namespace, run_i
 
 def table_main(script: TableScript) -> None:
     """A table script's command line: train the runs of --envs (of --table's table, where it has
-    several), or --report (and, where the script has them, --learners-report FILE: the learner rows
-    at any seed count; --archive: only archive the finished runs; its own mode)."""
+    several), or --report or --archive (only archive the finished runs; every report archives first), and where
+    the script has them, --learners-report FILE (the learner rows at any seed count) and its own mode."""
     tables = list(script.tables)
     parser = argparse.ArgumentParser(description=script.description)
     if len(tables) > 1:  # classic_control.py's --table 2 or 4: the type of the tables' names
@@ -107,23 +106,21 @@ def table_main(script: TableScript) -> None:
     if script.learners_report is not None:
         parser.add_argument("--learners-report", type=Path, default=None, metavar="FILE",
                             help="write the learner rows of --envs from --runs (any seed count) with IQM and orderings")
-    if script.archive:
-        parser.add_argument("--archive", action="store_true",
-                            help="only copy what the reports need of the finished runs into experiments/results/runs "
-                                 "(a few hundred KB a run: what a GPU machine sends back)")
+    parser.add_argument("--archive", action="store_true",
+                        help="only copy what the reports need of the finished runs into experiments/results/runs "
+                             "(a few hundred KB a run: what a GPU machine sends back)")
     if script.extra_arguments is not None:
         script.extra_arguments(parser)
     args = parser.parse_args()
     if script.extra_mode is not None and script.extra_mode(parser, args):
         return
     os.environ["JAX_PLATFORMS"] = "cpu"  # the parent only reads configs; workers get the devices
-    if getattr(args, "archive", False):
+    if args.archive:
         done = archive_runs(args.runs, script.run_ids())
         print(f"archived {len(done)} finished run(s) of {args.runs} in {ARCHIVE / args.runs.name}: {', '.join(done)}")
         return
     if getattr(args, "learners_report", None):
-        if script.archive:
-            archive_runs(args.runs, script.run_ids())
+        archive_runs(args.runs, script.run_ids())
         script.learners_report(args.runs, chosen_envs(parser, args, script.envs), args.learners_report)
         return
     if args.report:
