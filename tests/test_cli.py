@@ -666,6 +666,7 @@ def test_an_env_registered_at_run_time_takes_one_call():
     """One registry entry (class, variants, training defaults) is all a new env needs: its
     defaults reach the resolved config without a second write (ENV_DEFAULTS reads the entry)."""
     from hintsjax import envs
+    from hintsjax.settings.env_defaults import ENV_DEFAULTS
     from hintsjax.settings.layers import run_config
 
     entry = envs.REGISTRY["pendulum"]
@@ -678,5 +679,4 @@ def test_an_env_registered_at_run_time_takes_one_call():
         assert run_config({"env": "pendulum_copy", "agent": "expert_ppo"}).ppo.total_env_steps == 1234
     finally:
         dict.pop(envs.REGISTRY, "pendulum_copy")
-        from hintsjax.settings.env_defaults import ENV_DEFAULTS
         dict.pop(ENV_DEFAULTS, "pendulum_copy", None)

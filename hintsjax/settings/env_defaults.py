@@ -42,8 +42,9 @@ def _env_defaults(training: dict[str, Any]) -> dict[str, Any]:
 
 
 class EnvDefaults(dict):
-    """ENV_DEFAULTS: the suite's envs' defaults, and an adapted env's (`playground:<task>`,
-    `brax:<name>`: its adapter's table, envs/playground.py) added when it is first looked up."""
+    """ENV_DEFAULTS: the suite's envs' defaults, and those of any env the registry gained since
+    (an adapted `playground:<task>` or `brax:<name>`, from its adapter's table, envs/playground.py;
+    or an entry registered at run time, from its `training`), added when first looked up."""
 
     def __contains__(self, name: object) -> bool:
         if not dict.__contains__(self, name) and name in envs.REGISTRY:  # adapts a `<source>:<task>`
