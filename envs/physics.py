@@ -25,6 +25,7 @@ import contextlib
 import importlib.util
 import io
 import math
+import os
 import sys
 from dataclasses import dataclass
 from functools import partial
@@ -61,14 +62,34 @@ def _import_mjx_without_warp() -> Any:
 mjx = _import_mjx_without_warp()
 
 
+# hintsjax/system/errors.py's DEBUG, read here because envs/ imports nothing of the learner
+DEBUG = "HINTSJAX_DEBUG"
+
+
+def debugging() -> bool:
+    """Whether HINTSJAX_DEBUG is set (to anything but 0): then Warp's and MJX's own lines are kept."""
+    return os.environ.get(DEBUG, "0") not in ("", "0")
+
+
+def quiet() -> contextlib.AbstractContextManager:
+    """Swallows what MJX and MuJoCo Warp print on stdout while building a model or data, unless
+    debugging."""
+    return contextlib.nullcontext() if debugging() else contextlib.redirect_stdout(io.StringIO())
+
+
 def enable_warp() -> None:
     """Bind warp-lang and MuJoCo Warp into MJX (what its import does when warp-lang is installed,
-    done here when physics=warp first needs it; mujoco-mjx 3.17.0's module layout)."""
+    done here when physics=warp first needs it; mujoco-mjx 3.17.0's module layout), with Warp's
+    informational lines off unless debugging."""
     import mujoco.mjx.warp as mjxw
+    import warp
 
+    # warp-lang 1.18 logs its init banner and a line per kernel module loaded ("Module ... load on
+    # device 'cuda:0' took ... (compiled)", 34 for the ant) at LOG_INFO on stdout; it has no
+    # `config.quiet` any more (setting it did nothing). Warnings and errors still come through.
+    warp.config.log_level = warp.LOG_INFO if debugging() else warp.LOG_WARNING
     if mjxw.WARP_INSTALLED:
         return
-    import warp
     from mujoco.mjx._src import io as mjx_io
     from mujoco.mjx.third_party import mujoco_warp
     from mujoco.mjx.third_party.mujoco_warp._src import io as mjwp_io
@@ -238,8 +259,6 @@ class WarpPhysics:
         enable_warp()  # warp-lang: checked by `resolve`
         import warp
 
-        warp.config.quiet = True  # no line per kernel module loaded
-
         if not capacity >= 1:
             raise ValueError(f"warp_capacity must be 1 or more, got {capacity}")
         self.mj_model, self.capacity, self.report_overflow = mj_model, capacity, report_overflow
@@ -247,7 +266,7 @@ class WarpPhysics:
         self.contacts_per_world = max(1, math.ceil(capacity * contacts))
         self.rows_per_world = max(1, math.ceil(capacity * rows))
         mode = None if graph_mode is None else warp.JaxCallableGraphMode[graph_mode.upper()]
-        with contextlib.redirect_stdout(io.StringIO()):
+        with quiet():
             model = mjx.put_model(mj_model, impl="warp", graph_mode=mode)
         # warn_overflow 0: MuJoCo Warp prints no line per world and substep (the overflow bits are
         # still set, and checked here); the solver's iteration cap would print thousands.
@@ -261,7 +280,7 @@ class WarpPhysics:
     def template(self, worlds: int) -> mjx.Data:
         """A fresh data of one world, its shared buffers sized for `worlds` worlds (numpy arrays)."""
         if worlds not in self._templates:
-            with contextlib.redirect_stdout(io.StringIO()), jax.ensure_compile_time_eval():  # host arrays, also mid-trace
+            with quiet(), jax.ensure_compile_time_eval():  # host arrays, also mid-trace
                 data = mjx.make_data(self.mj_model, impl="warp", naconmax=worlds * self.contacts_per_world,
                                      njmax=self.rows_per_world, device=jax.devices("cpu")[0])
                 self._templates[worlds] = jax.tree.map(np.asarray, data)

@@ -6,6 +6,11 @@ on 2 cores); the same tests run on a GPU (tests/envs/test_physics.py under `devi
 
 from __future__ import annotations
 
+import os
+import re
+import subprocess
+import sys
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -147,6 +152,38 @@ def test_warp_equals_jax_and_its_nested_vmap_equals_a_loop():
     for i, j in ((0, 0), (1, 2)):
         alone = warp_idp.transition(KEY, warp_idp.state_at(qpos[i, j], qvel[i, j]), action[i, j], params)
         np.testing.assert_allclose(warp.state.qvel[i, j], alone.state.qvel, atol=1e-5)
+
+
+# one idp step through MJX-Warp in a fresh process, where Warp initialises and loads its kernels
+_ONE_WARP_STEP = """
+import jax, jax.numpy as jnp
+from hintsjax.envs import physics
+from hintsjax.envs.idp import InvertedDoublePendulum
+model = InvertedDoublePendulum.make_mj_model()
+warp = physics.WarpPhysics(model)
+out = jax.jit(lambda q: warp.run(q, jnp.zeros(model.nv), jnp.zeros(model.nu), 1, False))(jnp.asarray(model.qpos0))
+print("stepped", bool(jnp.isfinite(out.qpos).all()))
+"""
+
+
+@warp_lang
+def test_warp_prints_no_banner_or_module_lines_unless_debugging():
+    """Warp's init banner and its line per kernel module ("Module ... load on device 'cuda:0'
+    took ... (compiled)", 34 on the ant's command) never reach a user's terminal; with
+    HINTSJAX_DEBUG=1 they do. A fresh process each way (about 7 s on 2 cores once Warp's kernel
+    cache holds the idp's kernels, 30 s before)."""
+    banner = re.compile(r"Module \S+ .*load on device|Warp \d+\.\d+\S* initialized")
+
+    def banner_lines(debug: str) -> list[str]:
+        env = {**os.environ, "HINTSJAX_DEBUG": debug}  # the suite's conftest sets it to 1
+        done = subprocess.run([sys.executable, "-c", _ONE_WARP_STEP], env=env, capture_output=True, text=True,
+                              timeout=600)
+        assert done.returncode == 0 and "stepped True" in done.stdout, done.stderr[-2000:]
+        return [line for line in (done.stdout + done.stderr).splitlines() if banner.match(line)]
+
+    assert banner_lines("0") == []
+    kept = banner_lines("1")
+    assert any(line.startswith("Module ") for line in kept) and any(line.startswith("Warp ") for line in kept), kept
 
 
 @warp_lang
