@@ -26,6 +26,7 @@ from hintsjax.settings.layers import load_run_config
 from hintsjax.cli import choices
 from hintsjax.algorithms.registry import make_trainer
 from hintsjax.evaluation.evaluator import evaluate_variants, metrics_text
+from hintsjax.evaluation.outliers import far_below_text
 
 
 @command
@@ -66,6 +67,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{cfg.label} on {cfg.env}/{result['variant']} ({mode}, {cfg.seeds} seeds x {episodes} episodes"
               f"{'' if not tag else ', hints from ' + source}): "
               f"{result['mean']:.2f} +- {result['std']:.2f}{metrics_text(result)}  -> {out}")
+        if outliers := far_below_text(result, args.run):
+            print(f"{cfg.label} on {cfg.env}/{result['variant']}: {outliers}")
     return 0
 
 

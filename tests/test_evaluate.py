@@ -12,7 +12,8 @@ from hintsjax.algorithms.ppo import make_network
 from hintsjax.evaluation.evaluator import eval_keys, make_evaluator, summarize
 
 # summarize's keys for an env without metrics (what eval.json held before env metrics existed)
-PLAIN_KEYS = ["mean", "std", "seed_means", "seed_std", "seeds", "episodes_per_seed", "mean_length", "returns"]
+PLAIN_KEYS = ["mean", "std", "seed_means", "seed_std", "outlier_seeds", "seeds", "episodes_per_seed", "mean_length",
+              "returns"]
 
 
 def evaluate_countdown(episodes: int):

@@ -25,6 +25,7 @@ from hintsjax.algorithms.group import cell_state
 from hintsjax.algorithms.ppo import Hyper, make_network, pick_hint
 from hintsjax.algorithms.ppo_math import gaussian_sample
 from hintsjax.algorithms.trainer import program_identity
+from hintsjax.evaluation.outliers import far_below
 
 EVAL_TAG = 0xE7A1  # folded into a seed's key so evaluation draws differ from training's
 
@@ -98,8 +99,9 @@ def eval_keys(cfg: RunConfig) -> jax.Array:
 
 
 def summarize(result: EvalResult) -> dict[str, Any]:
-    """Mean and std over all seeds x episodes, and per seed, as plain JSON-able values; for each
-    env metric (e.g. progress) `<name>_mean`, `<name>_std` and `<name>_seed_means`."""
+    """Mean and std over all seeds x episodes, and per seed, as plain JSON-able values, with the
+    seeds that ended far below the others (`outlier_seeds`, hintsjax/evaluation/outliers.py); for
+    each env metric (e.g. progress) `<name>_mean`, `<name>_std` and `<name>_seed_means`."""
     returns = np.asarray(result.episode_return, dtype=np.float64)
     seed_means = returns.mean(axis=1)
     summary = {
@@ -107,6 +109,7 @@ def summarize(result: EvalResult) -> dict[str, Any]:
         "std": float(returns.std()),
         "seed_means": seed_means.tolist(),
         "seed_std": float(seed_means.std()),
+        "outlier_seeds": far_below(seed_means),
         "seeds": int(returns.shape[0]),
         "episodes_per_seed": int(returns.shape[1]),
         "mean_length": float(np.asarray(result.episode_length).mean()),

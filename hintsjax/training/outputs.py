@@ -13,6 +13,7 @@ import jax
 from hintsjax.system import devices, xla_flags
 from hintsjax.settings.config import RunConfig
 from hintsjax.evaluation.evaluator import metrics_text
+from hintsjax.evaluation.outliers import far_below_text
 from hintsjax.training.loop import Training, chunks_rate
 from hintsjax.training.runlog import CURVE_PNG, METRICS_CSV, fresh_folder, plot_curves, read_curves
 
@@ -27,7 +28,8 @@ def new_run_dir(out_dir: str, name: str | None, cfg: RunConfig) -> Path:
 
 def finish(cfg: RunConfig, run_dir: Path, training: Training, evaluations: list[dict], eval_compile: float,
            extra: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Write a run's eval.json (its evaluations and timings) and learning curve; print the results."""
+    """Write a run's eval.json (its evaluations and timings) and learning curve; print the results,
+    and a line naming any seeds that ended far below the others."""
     compiled = training.compiled
     results = {"label": cfg.label, "env": cfg.env, "train_seconds_this_call": training.seconds,
                "train_seconds": training.before + training.seconds,
@@ -48,4 +50,6 @@ def finish(cfg: RunConfig, run_dir: Path, training: Training, evaluations: list[
     for ev in results["evaluations"]:
         print(f"{cfg.env}/{ev['variant']} {cfg.label}: {ev['mean']:.2f} +- {ev['std']:.2f}{metrics_text(ev)} "
               f"({ev['seeds']} seeds x {ev['episodes_per_seed']} episodes)  -> {run_dir}")
+        if outliers := far_below_text(ev, run_dir):
+            print(f"{cfg.env}/{ev['variant']} {cfg.label}: {outliers}")
     return results

@@ -1,0 +1,79 @@
+"""Seeds that ended far below the others (hintsjax/evaluation/outliers.py): the rule on values
+worked out by hand, on the issue's collapsed ant seed, on every committed Table 3 row at 20 seeds
+(none named), on one, two and equal seeds; and a run's end, which names them in eval.json and in
+one printed line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from hintsjax.evaluation.evaluator import EvalResult, variant_summary
+from hintsjax.evaluation.outliers import K, far_below, spread
+from hintsjax.settings.layers import run_config
+from hintsjax.training.outputs import EVAL_JSON, finish
+
+ROOT = Path(__file__).resolve().parents[1]
+ISSUE_59 = [1480.0, 984.0, 1027.0, -3006.0, 997.0]  # five ant seeds of one physics=warp command (issue 59)
+
+
+def test_the_issues_collapsed_ant_seed_is_named():
+    """Median 997; deviations 483, 13, 30, 4003, 0, so MAD 30 and 1.4826 MAD 44.5, below |median|:
+    the spread is 997 and the bar 997 - 3 x 997 = -1994. -3006 is below it; 984 is not."""
+    assert spread(ISSUE_59) == (997.0, 997.0)
+    assert far_below(ISSUE_59) == [3]
+    assert far_below([1480.0, 984.0, 1027.0, -1990.0, 997.0]) == []  # just above the bar
+
+
+def test_negative_returns_and_a_spread_wider_than_the_median():
+    """Pendulum-like returns: median -190, deviations 40, 10, 10, 1110 (MAD 25, 1.4826 MAD 37):
+    spread 190, bar -760. Wide seeds: median 100, deviations 100, 100, 0, 50, 900 (MAD 100,
+    1.4826 MAD 148.26 above |median|): bar 100 - 444.78 = -344.78."""
+    assert far_below([-150.0, -200.0, -180.0, -1300.0]) == [3]
+    assert far_below([-150.0, -200.0, -180.0, -750.0]) == []
+    assert spread([0.0, 200.0, 100.0, 150.0, -800.0]) == (100.0, pytest.approx(148.26))
+    assert far_below([0.0, 200.0, 100.0, 150.0, -344.0]) == [] and far_below([0.0, 200.0, 100.0, 150.0, -345.0]) == [4]
+
+
+def test_one_two_and_equal_seeds_name_none_but_a_collapse_among_three_does():
+    assert far_below([]) == [] and far_below([5.0]) == [] and far_below([-3000.0]) == []
+    assert far_below([1000.0, -3000.0]) == []  # of two, neither is "the others"
+    assert far_below([7.0] * 4) == [] and far_below([0.0] * 3) == []
+    assert far_below([991.0, 993.0, 994.0, 995.0, 996.0, 992.0]) == []  # near-identical: |median| is the spread
+    assert far_below([1000.0, 1000.0, -3000.0]) == [2]  # MAD 0, spread 1000, bar -2000
+    assert far_below([1000.0, float("nan"), 990.0]) == [1]  # a mean that is not a number is always named
+
+
+def test_no_seed_of_table3_at_20_seeds_is_named():
+    """The committed Table 3 rows (locomotion at 20 seeds, the humanoid at 10, the car's references
+    at 5) name no seed; the largest shortfall, halfcheetah hints-fc-max_velocity's -502 against a
+    median of 213, is 1.46 spreads, under half of K."""
+    worst = 0.0
+    rows = sorted((ROOT / "experiments/results/runs/table3_20").glob("*/*/eval.json"))
+    assert len(rows) == 18
+    for path in rows:
+        for evaluation in json.loads(path.read_text())["evaluations"]:
+            means = evaluation["seed_means"]
+            assert far_below(means) == [], (path, means)
+            median, width = spread(means)
+            worst = max(worst, (median - min(means)) / width)
+    assert 1.45 < worst < K / 2
+
+
+def test_a_runs_end_names_the_seed_in_eval_json_and_one_line(tmp_path, capsys):
+    cfg = run_config({"env": "pendulum", "seeds": 5, "eval_variants": ["swingto"]})
+    returns = np.asarray(ISSUE_59)[:, None] + np.array([[-1.0, 1.0]])  # [S, E]: 2 episodes a seed
+    collapsed = variant_summary(cfg, None, False, EvalResult(returns, np.full((5, 2), 1000)))
+    fine = variant_summary(cfg, "swingto", False, EvalResult(returns[[0, 1, 2, 4, 4]], np.full((5, 2), 1000)))
+    compiled = SimpleNamespace(seconds=1.0, trace_seconds=0.5, loaded=False, layout=SimpleNamespace(count=1))
+    training = SimpleNamespace(compiled=compiled, seconds=2.0, before=0.0, done=1, first=0, arrivals=())
+    finish(cfg, tmp_path, training, [collapsed, fine], 0.1)
+    saved = json.loads((tmp_path / EVAL_JSON).read_text())["evaluations"]
+    assert [e["outlier_seeds"] for e in saved] == [[3], []]
+    named = [line for line in capsys.readouterr().out.splitlines() if "far below" in line]
+    assert named == [f"pendulum/swingup {cfg.label}: seed 3 ended far below the others (-3006 against a median "
+                     f"of 997, more than 3 x 997 short): one episode: python -m hintsjax.video {tmp_path} --seed 3"]
