@@ -1,7 +1,7 @@
 """Where one training chunk of a cell spends its GPU time: a kernel table from JAX's profiler.
 
     python experiments/profile_update.py [--env pendulum] [--seeds 5] [--updates 10] [--top 25]
-                                         [--variants base,nodet,...] [--out DIR]
+                                         [--variants base,nodet,...] [--physics auto|jax|warp] [--out DIR]
 
 For each variant (a fresh process, since XLA_FLAGS are read at start-up) it compiles the cell's
 chunk program (`compilation.compile_training`, what `python -m hintsjax.run` runs), times `--updates`
@@ -49,6 +49,10 @@ VARIANTS = {
     "tuned_b": ("--xla_gpu_deterministic_ops=false --xla_gpu_per_fusion_autotune_cache_dir=/tmp/hintsjax_autotune_b", {}),
     "tuned_scatter": ("--xla_gpu_deterministic_ops=false --xla_gpu_enable_scatter_determinism_expander=true "
                       "--xla_gpu_per_fusion_autotune_cache_dir=/tmp/hintsjax_autotune_a", {}),
+    # physics=warp runs with deterministic ops off (MuJoCo Warp's atomics are not reproducible anyway):
+    # its baseline is `nodet`; this adds CUDA graphs over the update's while loops and conditionals
+    "nodet_cmdbuf": ("--xla_gpu_deterministic_ops=false "
+                     "--xla_gpu_enable_command_buffer=FUSION,CUBLAS,CUBLASLT,CUSTOM_CALL,CUDNN,WHILE,CONDITIONAL", {}),
     "unroll_rollout": ("", {64: 8}),
     "unroll_learn": ("", {4: 4}),
     "unroll_both": ("", {64: 8, 4: 4}),
@@ -106,7 +110,7 @@ def one(args: argparse.Namespace) -> dict:
         if flag.startswith("--xla_gpu_per_fusion_autotune_cache_dir="):
             Path(flag.split("=", 1)[1]).mkdir(parents=True, exist_ok=True)
     cfg = run_config({"env": args.env, "agent": "hints", "scheme": "fc", "seeds": args.seeds,
-                      "checkpoint_every": args.updates})
+                      "checkpoint_every": args.updates, "physics": args.physics})
     keys = cfg.seed_keys()
     compiled = compilation.compile_training(make_trainer(cfg), keys, args.updates)
     state = compiled.init(keys)
@@ -125,7 +129,7 @@ def one(args: argparse.Namespace) -> dict:
             state, _ = jax.block_until_ready(compiled.run_chunk(state, n))
         table = kernel_table(Path(folder), args.top)
     per_update = min(times) / args.updates
-    return {"variant": args.variant, "unroll": VARIANTS[args.variant][1], "xla_flags": os.environ.get("XLA_FLAGS", ""), "device": jax.devices()[0].device_kind,
+    return {"variant": args.variant, "physics": cfg.physics, "unroll": VARIANTS[args.variant][1], "xla_flags": os.environ.get("XLA_FLAGS", ""), "device": jax.devices()[0].device_kind,
             "compile_s": compiled.seconds, "digest": digest, "update_ms": 1e3 * per_update,
             "env_steps_per_s": cfg.seeds * cfg.ppo.batch_size / per_update, "kernels": table}
 
@@ -136,6 +140,7 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--updates", type=int, default=10)
     parser.add_argument("--top", type=int, default=25)
+    parser.add_argument("--physics", default="auto", choices=("auto", "jax", "warp"), help="MJCF envs' physics (default: auto)")
     parser.add_argument("--variants", default="base,nodet",
                         help=f"comma-separated of {', '.join(VARIANTS)} (one twice: is it reproducible?)")
     parser.add_argument("--variant", default=None, help=argparse.SUPPRESS)  # set in the child process
@@ -147,7 +152,8 @@ def main() -> None:
     results = []
     for name in flag_variants.chosen(parser, args.variants, VARIANTS):
         r = flag_variants.run(__file__, VARIANTS[name][0], ["--variant", name, "--env", args.env, "--seeds", str(args.seeds),
-                                                            "--updates", str(args.updates), "--top", str(args.top)])
+                                                            "--updates", str(args.updates), "--top", str(args.top),
+                                                            "--physics", args.physics])
         if r is None:
             continue
         results.append(r)
@@ -159,7 +165,7 @@ def main() -> None:
             print(f"  {row['ms']:9.2f} ms {row['count']:7d}x  {row['name']}")
     if args.out:
         Path(args.out).mkdir(parents=True, exist_ok=True)
-        (Path(args.out) / f"profile_{args.env}.json").write_text(json.dumps(results, indent=1))
+        (Path(args.out) / f"profile_{args.env}_{args.physics}.json").write_text(json.dumps(results, indent=1))
 
 
 if __name__ == "__main__":
