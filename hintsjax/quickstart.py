@@ -32,7 +32,8 @@ from hintsjax.evaluation.evaluator import eval_keys, evaluate_params
 from hintsjax.training import outputs, pipeline, runlog
 
 SETTINGS = {"env": "pendulum", "agent": "hints", "hint": "composite", "scheme": "fc", "seeds": 1, "eval_episodes": 20,
-            "checkpoint_every": 10}
+            "checkpoint_every": 10, "ppo": {"epochs": 8}}
+MAX_SEED = 2**31 - 1  # jax.random.key takes an int32-range seed here
 BASELINE_JSON = "random_policy.json"
 
 
@@ -65,12 +66,20 @@ def main(argv: list[str] | None = None) -> int:
                             epilog="After it, python -m hintsjax.run trains any of these:\n\n" + choices.text(), formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--updates", type=int, default=50, help="updates of 1024 env steps (default: 50)")
     parser.add_argument("--out-dir", type=Path, default=Path("runs"), help="where the run folder goes (default: runs)")
+    parser.add_argument("--epochs", type=int, default=SETTINGS["ppo"]["epochs"],
+                        help=f"PPO's epochs over each update's batch (default: {SETTINGS['ppo']['epochs']}, the paper's)")
+    parser.add_argument("--seed", type=int, default=0, help=f"the run's seed, 0 to {MAX_SEED} (default: 0, what the README shows)")
     args = parser.parse_args(argv)
     if args.updates < 1:
         parser.exit(2, f"error: --updates must be at least 1, got {args.updates}\n")
+    if args.epochs < 1:
+        parser.exit(2, f"error: --epochs must be at least 1, got {args.epochs}\n")
+    if not 0 <= args.seed <= MAX_SEED:
+        parser.exit(2, f"error: --seed must be 0 to {MAX_SEED}, got {args.seed}\n")
     paths.check_folder(args.out_dir, "--out-dir")
     t = time.perf_counter()
-    cfg = run_config({**SETTINGS, "ppo": {"total_env_steps": 1024 * args.updates}})
+    cfg = run_config({**SETTINGS, "seed": args.seed, "ppo": {**SETTINGS["ppo"], "epochs": args.epochs,
+                                                                  "total_env_steps": 1024 * args.updates}})
     compilation_cache.enable(compilation_cache.folder(True))
     run_dir = outputs.new_run_dir(str(args.out_dir), f"quickstart-{time.strftime('%Y%m%d-%H%M%S')}", cfg)
     save_run_config(run_dir, cfg)
