@@ -7,11 +7,44 @@ in folders of its own. Subprocesses that the tests start inherit the setting.
 
 HINTSJAX_DEBUG is on: a bug that a test meets raises with its traceback instead of the commands'
 one-line report (tests/test_cli.py turns it off to test that report).
+
+Compiling is most of the suite's time on a CPU (the runs it trains are tiny), so:
+- **One XLA compilation cache for the whole run**: a folder made once, shared by the xdist workers
+  and every process a test starts (they inherit $HINTSJAX_COMPILATION_CACHE), turned on here
+  before anything compiles. A program that another test, worker or process compiled already (the
+  same resumed run, the command-line runs of one tiny config) is read back, not compiled again.
+  XLA keys an entry by the whole program and the flags, so a test that patches a function gets
+  its own entry. The folder is removed when the run ends. HINTSJAX_TEST_XLA_CACHE=off turns it off.
+- **LLVM's cheapest optimisation level** (`--xla_backend_optimization_level=0`) for the programs the
+  tests compile, set before JAX's backend starts (subprocesses inherit it). Their runs are tiny, so
+  compiling faster wins over running slower: the whole suite took 840 s on 2 cores with it and
+  1120 s without (2026-11-27; docs/tests.md), though test_rank's long probe went from 57 s to 153 s.
+  Results move by float32 rounding only (dagger's vmapped weights 7e-6 from its lone run's).
+  Commands run outside the tests keep XLA's default.
 """
 
 import os
+import shutil
+import tempfile
 
-from hintsjax.system import errors, program_cache
+from hintsjax.system import compilation_cache, errors, program_cache
 
 os.environ[program_cache.ENV_VAR] = "off"
 os.environ[errors.DEBUG] = "1"
+
+OPTIMIZATION = "--xla_backend_optimization_level"
+if OPTIMIZATION not in os.environ.get("XLA_FLAGS", ""):  # before JAX's backend starts: it reads XLA_FLAGS once
+    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {OPTIMIZATION}=0".strip()
+
+MADE_CACHE = "HINTSJAX_TEST_XLA_CACHE_MADE"  # the folder this run made (set by the first process: xdist's controller)
+if os.environ.get("HINTSJAX_TEST_XLA_CACHE", "on") != "off":
+    if MADE_CACHE not in os.environ:
+        os.environ[MADE_CACHE] = tempfile.mkdtemp(prefix="hintsjax-tests-xla-")
+        os.environ[compilation_cache.ENV_VAR] = os.environ[MADE_CACHE]
+    compilation_cache.enable(os.environ[MADE_CACHE], min_compile_seconds=0)
+
+
+def pytest_unconfigure(config):
+    """The process that made the cache folder (xdist's controller, or pytest alone) removes it."""
+    if not hasattr(config, "workerinput") and os.environ.get(MADE_CACHE):
+        shutil.rmtree(os.environ.pop(MADE_CACHE), ignore_errors=True)

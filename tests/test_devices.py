@@ -119,6 +119,7 @@ def _processes(folder: Path, count: int, devices_each: int, *args: str, tries: i
     assert all(p.returncode == 0 for p in procs), "\n".join(t[-6000:] for t in texts)
 
 
+@pytest.mark.slow  # two processes of 2 devices on 2 cores: 160 s, and 460 s when a hang is retried
 def test_one_run_over_two_processes_equals_one_process_and_resumes(tmp_path):
     _processes(tmp_path / "one", 1, 4)
     _processes(tmp_path / "two", 2, 2)

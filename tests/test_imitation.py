@@ -56,9 +56,12 @@ def gail_run():
 
 @pytest.mark.parametrize("agent", ["dagger", "gail"])
 def test_vmap_over_two_seeds_equals_two_single_runs(agent, request):
-    """(expert_ppo is PPO, whose invariant test_learning checks.)"""
+    """(expert_ppo is PPO, whose invariant test_learning checks.) To float32 rounding: the vmapped
+    and the lone program may sum a product in another order, more so at the suite's LLVM -O0
+    (tests/conftest.py: one of dagger's 32 weights 7e-6 apart, under 2e-6 at XLA's default);
+    the other seed's weights, the control below, are far off."""
     _, state, _, alone = request.getfixturevalue(f"{agent}_run")
-    jax.tree.map(lambda b, s: np.testing.assert_allclose(b, s, rtol=2e-5, atol=2e-6), seed(state.params, 1), alone.params)
+    jax.tree.map(lambda b, s: np.testing.assert_allclose(b, s, rtol=2e-5, atol=2e-5), seed(state.params, 1), alone.params)
     assert not np.allclose(seed(state.params, 0)["params"]["actor"]["Dense_0"]["kernel"],
                            alone.params["params"]["actor"]["Dense_0"]["kernel"])  # the seeds differ
 

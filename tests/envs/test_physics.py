@@ -111,6 +111,7 @@ def warp_ant() -> Compiled:
     return Compiled(envs.make("ant", "none", ("state",), physics="warp"))
 
 
+@pytest.mark.slow  # Warp's CPU kernels for another model: 33 s on 2 cores; the ant and the idp keep Warp in the default tier
 @warp_lang
 def test_warp_halfcheetah_parity(warp_cheetah):
     """MJX-Warp against HalfCheetah-v5, with the bounds of the JAX path's parity test
@@ -204,6 +205,7 @@ def test_a_warp_overflow_poisons_the_world_and_is_reported():
     assert np.isfinite(np.asarray(fine.qpos)).all() and physics.overflow_seen() is None
 
 
+@pytest.mark.slow  # as the halfcheetah's: 40 s on 2 cores
 @warp_lang
 def test_warp_humanoid_parity():
     """MJX-Warp's humanoid against Humanoid-v5 with our integrator (Euler) on both sides, with the
