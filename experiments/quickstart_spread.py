@@ -10,7 +10,8 @@ chaotic training run gives other digits on another CPU kind (XLA's CPU code diff
 and AVX-512), so the spread over seeds on several CPU kinds is what the README can promise.
 Each row: the seed, the command's wall-clock, its compile and training seconds, the trained
 agent's mean return over 20 episodes and the random policy's; with the CPU's name, jax's version
-and Python's. Results: experiments/results/quickstart_spread.json.
+and Python's. Written to `--out`; experiments/results/quickstart_spread.md reports the committed
+runs, one JSON file per CPU kind (quickstart_spread_epyc.json, quickstart_spread_xeon.json).
 """
 
 from __future__ import annotations

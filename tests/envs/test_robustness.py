@@ -23,13 +23,13 @@ from hintsjax import envs
 
 STEPS_PER_ENV = 10**6
 DEAR = {"ant": 2 * 10**5, "humanoid": 2 * 10**5}  # steps for the envs whose 10^6 take half an hour on 2 cores
+EXTREMES = jnp.array([1e6, -1e6, 0.0])
 
 
 def steps_for(name: str) -> int:
     """How many steps the drive gives env `name` (a multiple of 10^5): $HINTSJAX_DRIVE_STEPS for every env, else
     STEPS_PER_ENV, or DEAR's count."""
     return int(os.environ.get("HINTSJAX_DRIVE_STEPS", 0)) or DEAR.get(name, STEPS_PER_ENV)
-EXTREMES = jnp.array([1e6, -1e6, 0.0])
 
 
 def drive(name: str, num_envs: int, chunks: int, chunk_steps: int) -> dict:
