@@ -45,19 +45,44 @@ def cli(*args: str, cwd: Path, module: str = "hintsjax.run") -> subprocess.Compl
     return subprocess.run([sys.executable, "-m", module, *args], cwd=cwd, capture_output=True, text=True, timeout=300)
 
 
+def with_xla_flag(flag: str) -> str:
+    """The suite's XLA_FLAGS (tests/conftest.py: LLVM's cheapest level) with `flag` added, for a subprocess."""
+    return f"{os.environ.get('XLA_FLAGS', '')} {flag}".strip()
+
+
 BAD = yaml.safe_load((Path(__file__).parent / "data" / "bad_inputs.yaml").read_text())  # every command's bad input
 BAD_RUN_ARGS = BAD["run_command_line"]  # through the real command line
 
 
+@pytest.fixture(scope="module")
+def bad_run_outcomes(tmp_path_factory) -> dict[str, tuple[int, str, str, Path]]:
+    """Every case of BAD_RUN_ARGS as `python -m hintsjax.run <case> out_dir=runs`, each in an empty
+    folder of its own: (exit status, stdout, stderr, the folder). One interpreter start for them
+    all (tests/command_runs.py: a child forked per case runs the module as `python -m` does);
+    what importing the command prints would show on that start's stderr, which must be empty."""
+    root = tmp_path_factory.mktemp("bad_run")
+    cases = []
+    for k, arg in enumerate(BAD_RUN_ARGS):
+        (root / str(k)).mkdir()
+        cases.append({"args": [*arg.split(), "out_dir=runs"], "cwd": str(root / str(k)),
+                      "out": str(root / f"{k}.out"), "err": str(root / f"{k}.err")})
+    out = subprocess.run([sys.executable, str(Path(__file__).parent / "command_runs.py"), "hintsjax.run", json.dumps(cases)],
+                         cwd=root, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0 and out.stderr == "", out.stderr[-2000:]
+    statuses = json.loads(out.stdout)
+    return {arg: (status, Path(case["out"]).read_text(), Path(case["err"]).read_text(), Path(case["cwd"]))
+            for arg, status, case in zip(BAD_RUN_ARGS, statuses, cases, strict=True)}
+
+
 @pytest.mark.parametrize("arg", list(BAD_RUN_ARGS))
-def test_bad_input_exits_2_with_one_line_and_writes_nothing(arg, tmp_path):
-    out = cli(*arg.split(), "out_dir=runs", cwd=tmp_path)
-    assert out.returncode == 2, out.stderr
-    lines = out.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: "), out.stderr
+def test_bad_input_exits_2_with_one_line_and_writes_nothing(arg, bad_run_outcomes):
+    returncode, stdout, stderr, folder = bad_run_outcomes[arg]
+    assert returncode == 2, stderr
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), stderr
     assert BAD_RUN_ARGS[arg] in lines[0]
-    assert "Traceback" not in out.stderr + out.stdout
-    assert list(tmp_path.iterdir()) == []  # no run folder, no Hydra outputs
+    assert "Traceback" not in stderr + stdout
+    assert list(folder.iterdir()) == []  # no run folder, no Hydra outputs
 
 
 # The same checks in-process (no interpreter start): the imitation agents' own settings.
@@ -423,7 +448,7 @@ def test_a_checkpoint_saved_on_another_device_restores_here(finished_run, tmp_pa
         "state, update = checkpoint.restore_latest(src, make_trainer(layers.load_run_config(src)).abstract_state())\n"
         "checkpoint.save(dest, jax.device_put(state, jax.devices()[1]), update)\n"
     )
-    env = {**os.environ, "JAX_PLATFORMS": "cpu", "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
+    env = {**os.environ, "JAX_PLATFORMS": "cpu", "XLA_FLAGS": with_xla_flag("--xla_force_host_platform_device_count=2")}
     out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     assert len(jax.devices()) == 1
@@ -535,7 +560,7 @@ def test_a_config_that_lacks_a_setting_is_not_resumed(cut, finished_run, tmp_pat
 
 
 def test_seeds_sharded_over_two_devices_give_the_single_device_result(finished_run, tmp_path):
-    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
+    env = {**os.environ, "XLA_FLAGS": with_xla_flag("--xla_force_host_platform_device_count=2")}
     args = [*TINY, "out_dir=runs", "name=sharded"]
     out = subprocess.run([sys.executable, "-m", "hintsjax.run", *args], cwd=tmp_path, env=env,
                          capture_output=True, text=True, timeout=300)

@@ -30,6 +30,11 @@ from hintsjax import run
 HERE = Path(__file__).parent
 
 
+def with_xla_flag(flag: str) -> str:
+    """The suite's XLA_FLAGS (tests/conftest.py: LLVM's cheapest level) with `flag` added, for a subprocess."""
+    return f"{os.environ.get('XLA_FLAGS', '')} {flag}".strip()
+
+
 class FakeDevice:
     pass
 
@@ -42,7 +47,7 @@ def test_a_layout_pads_seeds_to_a_multiple_of_the_devices():
 
 
 def _layout_run(folder: Path, devices: int) -> dict:
-    env = {**os.environ, "XLA_FLAGS": f"--xla_force_host_platform_device_count={devices}", "JAX_PLATFORMS": "cpu",
+    env = {**os.environ, "XLA_FLAGS": with_xla_flag(f"--xla_force_host_platform_device_count={devices}"), "JAX_PLATFORMS": "cpu",
            "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])}
     proc = subprocess.run([sys.executable, str(HERE / "layout_run.py"), str(folder)], env=env, capture_output=True,
                           text=True, timeout=600)

@@ -1,0 +1,75 @@
+"""Many `python -m <module> <args>` runs for the price of one interpreter start. Used by tests/test_cli.py.
+
+    python tests/command_runs.py <module> '<cases as JSON>'
+
+Each case is {"args": [...], "cwd": folder, "out": file, "err": file}. This process imports
+<module> once (what costs a fresh `python -m` about 7 s on a CPU: jax, mujoco, orbax, hydra),
+then for each case forks a child that goes into `cwd`, points its stdout and stderr (file
+descriptors 1 and 2) at `out` and `err`, and runs the module as `python -m` does
+(runpy, as `__main__`, with sys.argv[1:] = args): its exit status is what `python -m` gives
+(SystemExit's code; 1 and the traceback on stderr for an uncaught exception), its atexit
+functions run as they would at its end. Each case thus starts from the state of a freshly imported
+module, never from another case's. This process prints one JSON list of the exit statuses on stdout
+and nothing on stderr itself: anything that importing the module prints (which a real `python -m`
+would print in every case) shows on its stderr, which the test checks is empty.
+"""
+
+from __future__ import annotations
+
+import atexit
+import importlib
+import json
+import os
+import runpy
+import sys
+import traceback
+
+
+def run_case(module: str, case: dict) -> None:
+    """In the forked child: one `python -m module *args`; never returns."""
+    code = 1
+    try:
+        os.chdir(case["cwd"])
+        for fd, path in ((1, case["out"]), (2, case["err"])):
+            target = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+            os.dup2(target, fd)
+            os.close(target)
+        sys.argv = [module, *case["args"]]
+        try:
+            runpy.run_module(module, run_name="__main__", alter_sys=True)
+            code = 0
+        except SystemExit as e:  # as the interpreter handles it at its end
+            if e.code is None:
+                code = 0
+            elif isinstance(e.code, int):
+                code = e.code
+            else:
+                print(e.code, file=sys.stderr)
+                code = 1
+        except BaseException:  # noqa: BLE001  what the interpreter does with an uncaught exception
+            traceback.print_exc()
+            code = 1
+        atexit._run_exitfuncs()
+        sys.stdout.flush()
+        sys.stderr.flush()
+    finally:
+        os._exit(code)
+
+
+def main() -> None:
+    module, cases = sys.argv[1], json.loads(sys.argv[2])
+    importlib.import_module(module)  # with everything it imports
+    del sys.modules[module]  # runs as __main__ in each case, as under `python -m`, not from this copy
+    statuses = []
+    for case in cases:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        pid = os.fork()
+        if pid == 0:
+            run_case(module, case)
+        statuses.append(os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]))
+    print(json.dumps(statuses))
+
+
+if __name__ == "__main__":
+    main()
