@@ -1,9 +1,11 @@
-"""Many `python -m <module> <args>` runs for the price of one interpreter start. Used by tests/test_cli.py.
+"""Many `python -m <module> <args>` runs for the price of one interpreter start. Used by tests/test_cli.py and
+tests/test_console.py through `outcomes`.
 
-    python tests/command_runs.py <module> '<cases as JSON>'
+    python tests/command_runs.py <module> '<cases as JSON>' [<module the command runs in turn>...]
 
 Each case is {"args": [...], "cwd": folder, "out": file, "err": file}. This process imports
 <module> once (what costs a fresh `python -m` about 7 s on a CPU: jax, mujoco, orbax, hydra),
+and the modules it runs in turn (the console script's subcommands) with their imports,
 then for each case forks a child that goes into `cwd`, points its stdout and stderr (file
 descriptors 1 and 2) at `out` and `err`, and runs the module as `python -m` does
 (runpy, as `__main__`, with sys.argv[1:] = args): its exit status is what `python -m` gives
@@ -21,8 +23,28 @@ import importlib
 import json
 import os
 import runpy
+import subprocess
 import sys
 import traceback
+from pathlib import Path
+
+
+def outcomes(module: str, cases: list[list[str]], root: Path, runs: tuple[str, ...] = (),
+             cwd: Path | None = None) -> list[tuple[int, str, str, Path]]:
+    """`python -m module *args` for each args of `cases`, through one start of this script: each
+    case's (exit status, stdout, stderr, the folder it ran in: `cwd`, or an empty folder of its own
+    under `root`). Fails unless the start itself printed nothing on stderr."""
+    jobs = []
+    for k, args in enumerate(cases):
+        folder = cwd or root / f"case{k}"
+        folder.mkdir(exist_ok=True)
+        jobs.append({"args": args, "cwd": str(folder), "out": str(root / f"case{k}.out"), "err": str(root / f"case{k}.err")})
+    out = subprocess.run([sys.executable, __file__, module, json.dumps(jobs), *runs], cwd=root, capture_output=True,
+                         text=True, timeout=600)
+    assert out.returncode == 0 and out.stderr == "", out.stderr[-3000:]
+    statuses = json.loads(out.stdout)
+    return [(status, Path(job["out"]).read_text(), Path(job["err"]).read_text(), Path(job["cwd"]))
+            for status, job in zip(statuses, jobs, strict=True)]
 
 
 def run_case(module: str, case: dict) -> None:
@@ -57,9 +79,11 @@ def run_case(module: str, case: dict) -> None:
 
 
 def main() -> None:
-    module, cases = sys.argv[1], json.loads(sys.argv[2])
-    importlib.import_module(module)  # with everything it imports
-    del sys.modules[module]  # runs as __main__ in each case, as under `python -m`, not from this copy
+    module, cases, runs = sys.argv[1], json.loads(sys.argv[2]), sys.argv[3:]
+    for name in (module, *runs):
+        importlib.import_module(name)  # with everything it imports
+    for name in (module, *runs):
+        del sys.modules[name]  # each runs as __main__ in a case, as under `python -m`, not from this copy
     statuses = []
     for case in cases:
         sys.stdout.flush()

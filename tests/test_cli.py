@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
+import command_runs
 from hintsjax.system import checkpoint, errors
 from hintsjax.system.errors import UsageError
 from hintsjax.settings import layers
@@ -60,18 +61,9 @@ def bad_run_outcomes(tmp_path_factory) -> dict[str, tuple[int, str, str, Path]]:
     folder of its own: (exit status, stdout, stderr, the folder). One interpreter start for them
     all (tests/command_runs.py: a child forked per case runs the module as `python -m` does);
     what importing the command prints would show on that start's stderr, which must be empty."""
-    root = tmp_path_factory.mktemp("bad_run")
-    cases = []
-    for k, arg in enumerate(BAD_RUN_ARGS):
-        (root / str(k)).mkdir()
-        cases.append({"args": [*arg.split(), "out_dir=runs"], "cwd": str(root / str(k)),
-                      "out": str(root / f"{k}.out"), "err": str(root / f"{k}.err")})
-    out = subprocess.run([sys.executable, str(Path(__file__).parent / "command_runs.py"), "hintsjax.run", json.dumps(cases)],
-                         cwd=root, capture_output=True, text=True, timeout=600)
-    assert out.returncode == 0 and out.stderr == "", out.stderr[-2000:]
-    statuses = json.loads(out.stdout)
-    return {arg: (status, Path(case["out"]).read_text(), Path(case["err"]).read_text(), Path(case["cwd"]))
-            for arg, status, case in zip(BAD_RUN_ARGS, statuses, cases, strict=True)}
+    done = command_runs.outcomes("hintsjax.run", [[*arg.split(), "out_dir=runs"] for arg in BAD_RUN_ARGS],
+                                 tmp_path_factory.mktemp("bad_run"))
+    return dict(zip(BAD_RUN_ARGS, done, strict=True))
 
 
 @pytest.mark.parametrize("arg", list(BAD_RUN_ARGS))

@@ -12,6 +12,8 @@ from pathlib import Path
 import pytest
 from test_cli import SHIPPED_ENVS
 
+import command_runs
+
 from hintsjax.models.agents import AGENTS
 from hintsjax.models.conditioning import SCHEMES
 from hintsjax.settings.env_defaults import ENV_DEFAULTS
@@ -25,15 +27,34 @@ def command(*args: str, module: str = "hintsjax.console") -> subprocess.Complete
     return subprocess.run([sys.executable, "-m", module, *args], cwd=ROOT, capture_output=True, text=True, timeout=300)
 
 
+TOOLS = ("generator", "rank", "evaluate", "video", "expert", "quickstart")
+MISSING = "{missing}"  # in a case's arguments: a folder that does not exist
+
+
+@pytest.fixture(scope="module")
+def console_runs(tmp_path_factory):
+    """`python -m hintsjax.console <args>` from the checkout's root for each args this file
+    checks, through one interpreter start (tests/command_runs.py: a child forked per case runs
+    the console script's module, which runs the subcommand's, as `python -m` does): args as a
+    string -> (exit status, stdout, stderr), and the missing folder's path."""
+    root = tmp_path_factory.mktemp("console")
+    missing = str(root / "missing")
+    cases = ["--help", "run env=nope", f"evaluate {MISSING}", "generator frames=two", "run --help",
+             *(f"{name} --help" for name in TOOLS)]
+    done = command_runs.outcomes("hintsjax.console", [c.replace(MISSING, missing).split() for c in cases], root,
+                                 runs=tuple(c.module for c in console.COMMANDS.values()), cwd=ROOT)
+    return {c: out[:3] for c, out in zip(cases, done, strict=True)}, missing
+
+
 def test_pyproject_installs_the_console_script():
     scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
     assert scripts == {"hintsjax": "hintsjax.console:main"}
 
 
-def test_help_lists_every_command_and_each_is_a_module_run_as_main():
-    out = command("--help")
-    assert out.returncode == 0
-    listed = [line.split()[0] for line in out.stdout.splitlines() if line.startswith("  ")]
+def test_help_lists_every_command_and_each_is_a_module_run_as_main(console_runs):
+    returncode, stdout, _ = console_runs[0]["--help"]
+    assert returncode == 0
+    listed = [line.split()[0] for line in stdout.splitlines() if line.startswith("  ")]
     assert listed == ["run", "evaluate", "video", "expert", "generator", "rank", "quickstart"] == list(console.COMMANDS)
     for name, c in console.COMMANDS.items():
         source = (ROOT / (c.module.replace(".", "/") + ".py")).read_text()
@@ -49,13 +70,14 @@ def test_a_missing_or_unknown_command_is_one_line_naming_the_commands(capsys):
     assert err.count("\n") == 1 and "unknown command 'trian'; valid choices: evaluate, expert, generator" in err
 
 
-def test_a_subcommand_is_its_module_with_the_rest_of_the_arguments(tmp_path):
+def test_a_subcommand_is_its_module_with_the_rest_of_the_arguments(console_runs):
     """The command's own one-line errors and exit statuses come back through the console script."""
-    for args, err in [(["run", "env=nope"], "error: unknown env 'nope'; valid choices: acrobot, ant"),
-                      (["evaluate", str(tmp_path / "missing")], f"error: no run folder at {tmp_path / 'missing'}\n"),
-                      (["generator", "frames=two"], "error: frames must be int, got 'two'\n")]:
-        out = command(*args)
-        assert out.returncode == 2 and out.stderr.startswith(err) and out.stderr.count("\n") == 1, out.stderr[-500:]
+    outcomes, missing = console_runs
+    for args, err in [("run env=nope", "error: unknown env 'nope'; valid choices: acrobot, ant"),
+                      (f"evaluate {MISSING}", f"error: no run folder at {missing}\n"),
+                      ("generator frames=two", "error: frames must be int, got 'two'\n")]:
+        returncode, _, stderr = outcomes[args]
+        assert returncode == 2 and stderr.startswith(err) and stderr.count("\n") == 1, stderr[-500:]
 
 
 def listed_choices(page: str) -> None:
@@ -71,22 +93,21 @@ def listed_choices(page: str) -> None:
     assert "playground:<name>, brax:<name>" in page
 
 
-def test_run_help_lists_the_choices_then_hydras_settings_both_ways():
-    console_page, module_page = command("run", "--help"), command("--help", module="hintsjax.run")
-    assert console_page.returncode == module_page.returncode == 0
-    assert console_page.stdout == module_page.stdout
-    page = console_page.stdout
+def test_run_help_lists_the_choices_then_hydras_settings_both_ways(console_runs):
+    (returncode, page, _), module_page = console_runs[0]["run --help"], command("--help", module="hintsjax.run")
+    assert returncode == module_page.returncode == 0
+    assert page == module_page.stdout
     listed_choices(page)
     assert page.index("Choices") < page.index("== Config ==") and "starts_per_rollout: null" in page
 
 
-@pytest.mark.parametrize("name", ["generator", "rank", "evaluate", "video", "expert", "quickstart"])
-def test_each_tools_help_lists_its_settings_and_the_choices(name):
-    out = command(name, "--help")
-    assert out.returncode == 0 and out.stdout.startswith(f"usage: python -m hintsjax.{name}"), out.stderr[-500:]
-    listed_choices(out.stdout)
+@pytest.mark.parametrize("name", TOOLS)
+def test_each_tools_help_lists_its_settings_and_the_choices(name, console_runs):
+    returncode, stdout, stderr = console_runs[0][f"{name} --help"]
+    assert returncode == 0 and stdout.startswith(f"usage: python -m hintsjax.{name}"), stderr[-500:]
+    listed_choices(stdout)
     if name in ("generator", "rank"):
-        assert "  env=pendulum" in out.stdout and "  seeds=" in out.stdout
+        assert "  env=pendulum" in stdout and "  seeds=" in stdout
 
 
 def test_the_choices_follow_the_registries():
