@@ -147,16 +147,30 @@ def test_plan_groups_a_table_by_shape():
                      ["dagger"]]
 
 
-def test_train_group_writes_each_members_folder_as_its_own_run(tmp_path, capsys):
+def killed_group(folder: Path) -> tuple[list, Path, list[Path]]:
+    """A group of two cue-env configurations with its members' folders under `folder`:
+    pipeline.train_group's (configs, group folder, member folders)."""
+    cfgs = [cue_cfg(h) for h in ("cue", "cue_pair")]
+    dirs = [folder / c.label for c in cfgs]
+    for d, c in zip(dirs, cfgs):
+        d.mkdir(parents=True, exist_ok=True)
+        save_run_config(d, c)
+    return cfgs, folder / "group", dirs
+
+
+@pytest.fixture(scope="module")
+def whole_group(tmp_path_factory):
+    """killed_group's group trained without interruption by pipeline.train_group: (configs, group
+    folder, member folders, its results)."""
+    cfgs, group_dir, dirs = killed_group(tmp_path_factory.mktemp("whole"))
+    return cfgs, group_dir, dirs, pipeline.train_group(cfgs, group_dir, dirs, progress=False)
+
+
+def test_train_group_writes_each_members_folder_as_its_own_run(whole_group):
     """Each member's folder gets metrics.csv, eval.json and a checkpoint that the member's own
     config restores (so hintsjax.evaluate and hintsjax.video read it as any run's); a second
     call resumes the group at its end and only evaluates."""
-    cfgs = [cue_cfg(h) for h in ("cue", "cue_pair")]
-    dirs = [tmp_path / c.label for c in cfgs]
-    for d, c in zip(dirs, cfgs):
-        d.mkdir()
-        save_run_config(d, c)
-    results = pipeline.train_group(cfgs, tmp_path / "group", dirs, progress=False)
+    cfgs, group_dir, dirs, results = whole_group
     for d, c, r in zip(dirs, cfgs, results):
         saved = json.loads((d / outputs.EVAL_JSON).read_text())
         assert saved["label"] == c.label and saved["group"] == [x.label for x in cfgs] and saved == r
@@ -164,7 +178,7 @@ def test_train_group_writes_each_members_folder_as_its_own_run(tmp_path, capsys)
         assert len(rows) == 1 + UPDATES * SEEDS
         state, update = checkpoint.restore_latest(d, make_trainer(c).abstract_state())
         assert update == UPDATES and state.obs["hint"].shape[-1] == ppo.hint_width(c)
-    again = pipeline.train_group(cfgs, tmp_path / "group", dirs, resume=True, progress=False)
+    again = pipeline.train_group(cfgs, group_dir, dirs, resume=True, progress=False)
     assert [r["evaluations"] for r in again] == [r["evaluations"] for r in results]
 
 
@@ -181,21 +195,10 @@ def test_one_program_evaluates_every_member_as_its_own_run_would(hint_group):
     assert evaluations[0][0]["returns"] != evaluations[1][0]["returns"]
 
 
-def killed_group(folder: Path) -> tuple[list, Path, list[Path]]:
-    """A group of two cue-env configurations with its members' folders under `folder`:
-    pipeline.train_group's (configs, group folder, member folders)."""
-    cfgs = [cue_cfg(h) for h in ("cue", "cue_pair")]
-    dirs = [folder / c.label for c in cfgs]
-    for d, c in zip(dirs, cfgs):
-        d.mkdir(parents=True, exist_ok=True)
-        save_run_config(d, c)
-    return cfgs, folder / "group", dirs
-
-
-def test_a_group_killed_with_sigkill_resumes_to_the_uninterrupted_end_bit_for_bit(tmp_path):
+def test_a_group_killed_with_sigkill_resumes_to_the_uninterrupted_end_bit_for_bit(whole_group, tmp_path):
     """The group trained in a subprocess is killed with SIGKILL once its first checkpoint is
     written (tests/killed_run.py); resumed, every member's final state equals, bit for bit, that
-    of the same group trained without interruption."""
+    of the same group trained without interruption (`whole_group`)."""
     import subprocess
     import sys
 
@@ -205,8 +208,7 @@ def test_a_group_killed_with_sigkill_resumes_to_the_uninterrupted_end_bit_for_bi
     cfgs, group_dir, dirs = killed_group(tmp_path / "killed")
     assert checkpoint.latest_update(group_dir) == 2
     pipeline.train_group(cfgs, group_dir, dirs, resume=True, progress=False)
-    _, whole_dir, whole_dirs = killed_group(tmp_path / "whole")
-    pipeline.train_group(cfgs, whole_dir, whole_dirs, progress=False)
+    whole_dirs = whole_group[2]
     for cfg, d, w in zip(cfgs, dirs, whole_dirs):
         abstract = make_trainer(cfg).abstract_state()
         for a, b in zip(arrays(checkpoint.restore_latest(d, abstract)[0]), arrays(checkpoint.restore_latest(w, abstract)[0]), strict=True):
