@@ -18,7 +18,8 @@ Compiling is most of the suite's time on a CPU (the runs it trains are tiny), so
 - **LLVM's cheapest optimisation level** (`--xla_backend_optimization_level=0`) for the programs the
   tests compile, set before JAX's backend starts (subprocesses inherit it). Their runs are tiny, so
   compiling faster wins over running slower: the whole suite took 851 s on 2 cores with it and
-  1120 s without (2026-11-27; docs/tests.md), though test_rank's long probe went from 57 s to 153 s.
+  1120 s without (2026-11-27; docs/tests.md), though test_rank's long probe went from 57 s to 153 s
+  (so tests/test_rank.py runs that command in a process of its own, without the flag).
   Results move by float32 rounding only (dagger's vmapped weights 7e-6 from its lone run's).
   Commands run outside the tests keep XLA's default.
 """
