@@ -117,15 +117,15 @@ def env_names() -> list[str]:
 
 
 def make(name: str, hint: str = NO_HINT, observe: tuple[str, ...] = OBS_KEYS, physics: str = AUTO,
-         warp_capacity: float = DEFAULT_CAPACITY) -> Env:
+         warp_capacity: float = DEFAULT_CAPACITY, image_size: int | None = None) -> Env:
     """The env `name` observing `observe`, with hint `hint` (see `hints.make_hint`); an MJX env
     stepped by `physics` (`resolve_physics`; Warp's buffers `warp_capacity` times the model's
-    most contacts per world)."""
+    most contacts per world); its pictures `image_size` pixels a side (None: the env's own)."""
     entry = choose("env", name, REGISTRY)
     impl = resolve_physics(name, physics)
     if issubclass(entry.cls, MjxEnv):
-        return entry.cls(make_hint(name, hint), observe, impl, warp_capacity)
-    return entry.cls(make_hint(name, hint), observe, **entry.options)
+        return entry.cls(make_hint(name, hint), observe, impl, warp_capacity, image_size)
+    return entry.cls(make_hint(name, hint), observe, image_size, **entry.options)
 
 
 def check_drawable(name: str) -> None:

@@ -128,8 +128,8 @@ class AdaptedEnv(Env):
     """A `Task` as an Env: its reset and step, with the adapter's picture, state observation,
     truncation and hints. Made by `envs.make('<source>:<task>', ...)`."""
 
-    def __init__(self, hint: Hint, observe: tuple[str, ...] = OBS_KEYS, *, task: Task):
-        super().__init__(hint, observe)
+    def __init__(self, hint: Hint, observe: tuple[str, ...] = OBS_KEYS, image_size: int | None = None, *, task: Task):
+        super().__init__(hint, observe, image_size)
         self.task = task
         self.name = task.name
         self.mj_model = task.mj_model

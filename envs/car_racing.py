@@ -577,6 +577,7 @@ class CarRacing(Env):
     max_steps = 1000
     action_size = 3
     image_size = SIZE
+    fixed_image_size = True
 
     def default_params(self) -> CarRacingParams:
         return VARIANTS["standard"]

@@ -58,12 +58,19 @@ class Env:
     name: str = ""
     max_steps: int = 0
     action_size: int = 0
-    image_size: int = 64
+    image_size: int = 64  # the picture's side in pixels; an instance may draw at another (`image_size=`)
+    fixed_image_size: bool = False  # True: the env draws at its own side only (the car's precomputed grid)
 
-    def __init__(self, hint: Hint, observe: tuple[str, ...] = OBS_KEYS):
+    def __init__(self, hint: Hint, observe: tuple[str, ...] = OBS_KEYS, image_size: int | None = None):
         unknown = set(observe) - set(OBS_KEYS)
         if unknown:
             raise ValueError(f"unknown observation keys {sorted(unknown)}; valid: {OBS_KEYS}")
+        if image_size is not None and image_size != self.image_size:
+            if self.fixed_image_size:
+                raise ValueError(f"{self.name} draws {self.image_size}x{self.image_size} pictures only, not {image_size}")
+            if not 1 <= image_size:
+                raise ValueError(f"image_size must be a positive number of pixels, got {image_size}")
+            self.image_size = int(image_size)
         self.hint = hint
         self.observe = tuple(observe)
         # The picture through one jax.jit per env: a program that draws several (a step's and

@@ -39,8 +39,8 @@ class MjxEnv(Env):
     warp_by_default: bool = False
 
     def __init__(self, hint: Hint, observe: tuple[str, ...] = OBS_KEYS, physics: str = AUTO,
-                 warp_capacity: float = DEFAULT_CAPACITY):
-        super().__init__(hint, observe)
+                 warp_capacity: float = DEFAULT_CAPACITY, image_size: int | None = None):
+        super().__init__(hint, observe, image_size)
         self.mj_model = self.make_mj_model()
         impl = resolve(physics, jax.default_backend(), self.warp_by_default)
         key = PhysicsKey(impl, float(warp_capacity) if impl == WARP else 0.0)

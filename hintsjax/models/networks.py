@@ -67,6 +67,10 @@ class PatchConv(nn.Module):
         return patches @ kernel.reshape(k * k * c, self.features).astype(dtype) + bias.astype(dtype)
 
 
+# The smallest picture side the encoder takes: its VALID convolutions map 36 pixels to 8, 3 and 1.
+MIN_IMAGE_SIZE = 36
+
+
 class Encoder(nn.Module):
     """Three conv layers (32 8x8/4, 64 4x4/2, 64 3x3/1, ReLU), flattened: [B, H, W, C] -> [B, k]."""
 

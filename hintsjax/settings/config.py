@@ -19,9 +19,12 @@ from hintsjax.envs.errors import ChoiceError, choose
 from hintsjax.system.errors import UsageError, require_positive
 from hintsjax.models.agents import AGENTS, AgentSpec, EXPERT_AGENT
 from hintsjax.models.conditioning import SCHEMES
+from hintsjax.models.networks import MIN_IMAGE_SIZE
 from hintsjax.settings.algorithm_settings import DaggerConfig, GailConfig, PPOConfig
 from hintsjax.settings.env_defaults import ENV_DEFAULTS
 from hintsjax.settings.hint_sources import PROGRAMMATIC, check_matches, hinted_env, hinted_params
+
+MAX_IMAGE_SIZE = 256  # image_size's largest: 4x the default's 64, already 16x its pixels
 
 
 def env_params(env: str, variant: str | None) -> Any:
@@ -56,6 +59,7 @@ class RunConfig:
     # warp-lang, else JAX), jax (bit-reproducible) or warp (envs/physics.py)
     physics: str = "auto"
     warp_capacity: float = 2.0  # MJX-Warp's contact and constraint buffers: this many times the model's most per world
+    image_size: int | None = None  # the pictures' side in pixels (None: the env's own, 64 but for the car's 96)
     ppo: PPOConfig = field(default_factory=PPOConfig)
     dagger: DaggerConfig = field(default_factory=DaggerConfig)
     gail: GailConfig = field(default_factory=GailConfig)
@@ -87,7 +91,7 @@ class RunConfig:
         training or of deployment); its params are `task_params`'."""
         observe = self.agent_spec.observe if observe is None else observe
         env = hinted_env(self.env, self.effective_hint if hint is None else hint, observe, self.hint_source_for(deploy),
-                         physics=self.physics, warp_capacity=self.warp_capacity)
+                         physics=self.physics, warp_capacity=self.warp_capacity, image_size=self.image_size)
         return envs.SquashedActions(env) if self.ppo.action_head == "tanh" else env
 
     def task_params(self, variant: str | None, deploy: bool = False) -> Any:
@@ -118,6 +122,7 @@ class RunConfig:
             self._check_hint_widths(hint)
         if not 1 <= self.warp_capacity < float("inf"):
             raise UsageError(f"warp_capacity must be a number of at least 1, got {self.warp_capacity}")
+        self._check_image_size()
         for v in (self.variant, *self.eval_variants):
             env_params(self.env, v)
         self._check_hint_sources()
@@ -142,6 +147,21 @@ class RunConfig:
             envs.check_hint_shapes(hint, state, params)
         except envs.HintFileError as e:
             raise UsageError(f"hints_from={self.hints_from}: {e}") from None
+
+    def _check_image_size(self) -> None:
+        """UsageError where `image_size` is no side the encoder takes, or one the env cannot draw."""
+        if self.image_size is None:
+            return
+        own = envs.REGISTRY[self.env].cls
+        if isinstance(self.image_size, bool) or not isinstance(self.image_size, int) or not MIN_IMAGE_SIZE <= self.image_size <= MAX_IMAGE_SIZE:
+            raise UsageError(f"image_size must be a whole number of pixels from {MIN_IMAGE_SIZE} (the encoder's smallest) "
+                             f"to {MAX_IMAGE_SIZE}, or null for the env's own ({own.image_size}); got {self.image_size!r}")
+        if own.fixed_image_size and self.image_size != own.image_size:
+            raise UsageError(f"{self.env} draws {own.image_size}x{own.image_size} pictures only (image_size={own.image_size} "
+                             f"or null), not {self.image_size}")
+        if self.image_size != own.image_size and any(s not in (None, PROGRAMMATIC) for s in (self.hint_source, self.eval_hint_source)):
+            raise UsageError(f"image_size={self.image_size}: a generator's hints are read off the env's own "
+                             f"{own.image_size}x{own.image_size} pictures; leave image_size null with hint_source=<generator folder>")
 
     def _check_hint_sources(self) -> None:
         for name in ("hint_source", "eval_hint_source"):

@@ -233,7 +233,7 @@ def load(folder: str | Path, seed: int = 0) -> tuple[Generator, GeneratorParams]
 
 def hinted_env(env: str, hint: str, observe: tuple[str, ...], source: str, **physics: Any) -> Env:
     """`env` with `hint` from `source`: the programmatic hint, or a generator folder's; `physics`
-    (physics, warp_capacity) as `envs.make` takes them."""
+    (physics, warp_capacity, image_size) as `envs.make` takes them."""
     if source == PROGRAMMATIC or "hint" not in observe:
         return envs.make(env, hint, observe, **physics)
     generator, _ = load(source)

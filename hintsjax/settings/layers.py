@@ -138,8 +138,8 @@ def save_run_config(run_dir: Path, cfg: RunConfig) -> None:
 
 
 # Settings added since runs were first saved whose absence means their default (a run saved before
-# hints_from had no hint file), so a saved config without them is complete.
-OPTIONAL_IN_SAVED = {"hints_from"}
+# hints_from had no hint file; before image_size, the env's own pictures), so a saved config without them is complete.
+OPTIONAL_IN_SAVED = {"hints_from", "image_size"}
 
 
 def missing_keys(values: Mapping[str, Any]) -> list[str]:

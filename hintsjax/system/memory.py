@@ -49,7 +49,7 @@ def picture_bytes(cfg: Any) -> int:
     """One observation's picture (uint8 [S, S, 3]), or 0 for an agent that sees none."""
     if "pixels" not in cfg.agent_spec.observe:
         return 0
-    return 3 * envs.REGISTRY[cfg.env].cls.image_size ** 2
+    return 3 * (cfg.image_size or envs.REGISTRY[cfg.env].cls.image_size) ** 2
 
 
 def transition_bytes(cfg: Any) -> int:
