@@ -35,8 +35,9 @@ run: setup
 test: setup
 	$(BIN)/python -m pytest -q -n 2 --dist loadfile
 
+# The slow tier's files hold several long tests each (8 drives in one): spread test by test.
 test-slow: setup
-	$(BIN)/python -m pytest -q -m slow -n 2 --dist loadfile
+	$(BIN)/python -m pytest -q -m slow -n 2 --dist load
 
 lint: setup
 	$(BIN)/ruff check .

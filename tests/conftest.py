@@ -16,7 +16,8 @@ Compiling is most of the suite's time on a CPU (the runs it trains are tiny), so
   XLA keys an entry by the whole program and the flags, so a test that patches a function gets
   its own entry. The folder is removed when the run ends. HINTSJAX_TEST_XLA_CACHE=off turns it off.
 - **LLVM's cheapest optimisation level** (`--xla_backend_optimization_level=0`) for the programs the
-  tests compile, set before JAX's backend starts (subprocesses inherit it). Their runs are tiny, so
+  default tier compiles, set before JAX's backend starts (subprocesses inherit it; the slow tier keeps
+  XLA's default: `pytest_configure`). Their runs are tiny, so
   compiling faster wins over running slower: the whole suite took 851 s on 2 cores with it and
   1120 s without (2026-11-27; docs/tests.md), though test_rank's long probe went from 57 s to 153 s
   (so tests/test_rank.py runs that command in a process of its own, without the flag).
@@ -34,8 +35,6 @@ os.environ[program_cache.ENV_VAR] = "off"
 os.environ[errors.DEBUG] = "1"
 
 OPTIMIZATION = "--xla_backend_optimization_level"
-if OPTIMIZATION not in os.environ.get("XLA_FLAGS", ""):  # before JAX's backend starts: it reads XLA_FLAGS once
-    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {OPTIMIZATION}=0".strip()
 
 MADE_CACHE = "HINTSJAX_TEST_XLA_CACHE_MADE"  # the folder this run made (set by the first process: xdist's controller)
 if os.environ.get("HINTSJAX_TEST_XLA_CACHE", "on") != "off":
@@ -43,6 +42,15 @@ if os.environ.get("HINTSJAX_TEST_XLA_CACHE", "on") != "off":
         os.environ[MADE_CACHE] = tempfile.mkdtemp(prefix="hintsjax-tests-xla-")
         os.environ[compilation_cache.ENV_VAR] = os.environ[MADE_CACHE]
     compilation_cache.enable(os.environ[MADE_CACHE], min_compile_seconds=0)
+
+
+def pytest_configure(config):
+    """LLVM -O0 for the default tier, set before JAX's backend starts (it reads XLA_FLAGS once; no
+    test module is imported yet, and xdist's workers start later and inherit it). The slow tier
+    alone (`-m slow`, `make test-slow`) keeps XLA's default: its drives run for minutes, which -O0
+    made several times longer (the humanoid's 2x10^5-step drive took 1296 s on a core)."""
+    if config.option.markexpr.strip() != "slow" and OPTIMIZATION not in os.environ.get("XLA_FLAGS", ""):
+        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {OPTIMIZATION}=0".strip()
 
 
 def pytest_unconfigure(config):
