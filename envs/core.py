@@ -65,17 +65,25 @@ class Env:
         unknown = set(observe) - set(OBS_KEYS)
         if unknown:
             raise ValueError(f"unknown observation keys {sorted(unknown)}; valid: {OBS_KEYS}")
-        if image_size is not None and image_size != self.image_size:
-            if self.fixed_image_size:
-                raise ValueError(f"{self.name} draws {self.image_size}x{self.image_size} pictures only, not {image_size}")
-            if not 1 <= image_size:
-                raise ValueError(f"image_size must be a positive number of pixels, got {image_size}")
+        if image_size is not None:
+            self.check_image_size(image_size)
             self.image_size = int(image_size)
         self.hint = hint
         self.observe = tuple(observe)
         # The picture through one jax.jit per env: a program that draws several (a step's and
         # AutoReset's fresh start) traces the drawing once.
         self._render = jax.jit(self.render)
+
+    @classmethod
+    def check_image_size(cls, image_size: int) -> None:
+        """ValueError where this env cannot draw pictures `image_size` pixels a side."""
+        if image_size == cls.image_size:
+            return
+        if cls.fixed_image_size:
+            raise ValueError(f"{cls.name} draws {cls.image_size}x{cls.image_size} pictures only "
+                             f"(image_size={cls.image_size} or null), not {image_size}")
+        if not 1 <= image_size:
+            raise ValueError(f"image_size must be a positive number of pixels, got {image_size}")
 
     # -- the four pieces each env supplies ---------------------------------------------------
     def default_params(self) -> Any:

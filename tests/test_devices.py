@@ -20,6 +20,7 @@ import pytest
 
 import linear_env  # noqa: F401  (registers the test env "linear")
 from process_run import HUNG_MARK, HUNG_SECONDS
+from test_cli import with_xla_flag
 from hintsjax.system import checkpoint
 from hintsjax.system.devices import SeedLayout
 from hintsjax.settings.layers import load_run_config
@@ -28,11 +29,6 @@ from hintsjax.training import loop, pipeline
 from hintsjax import run
 
 HERE = Path(__file__).parent
-
-
-def with_xla_flag(flag: str) -> str:
-    """The suite's XLA_FLAGS (tests/conftest.py: LLVM's cheapest level) with `flag` added, for a subprocess."""
-    return f"{os.environ.get('XLA_FLAGS', '')} {flag}".strip()
 
 
 class FakeDevice:

@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from test_cli import without_optimisation_level
 
 ROOT = Path(__file__).resolve().parents[1]
 PROMISE = 400  # the README: "at least 400 better than the random policy" (a Xeon seed ended 474 better)
@@ -38,8 +39,7 @@ def test_the_readme_states_the_promise():
 
 @pytest.mark.slow
 def test_make_run_ends_as_the_readme_promises(tmp_path):
-    flags = " ".join(f for f in os.environ.get("XLA_FLAGS", "").split() if "optimization_level" not in f)
-    env = {**os.environ, "XLA_FLAGS": flags, "HINTSJAX_COMPILATION_CACHE": "off", "JAX_PLATFORMS": "cpu"}
+    env = {**os.environ, "XLA_FLAGS": without_optimisation_level(), "HINTSJAX_COMPILATION_CACHE": "off", "JAX_PLATFORMS": "cpu"}
     env.pop("HINTSJAX_DEBUG", None)
     done = subprocess.run([sys.executable, "-m", "hintsjax.quickstart", "--out-dir", str(tmp_path)], env=env,
                           capture_output=True, text=True, timeout=1800)

@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import cue_env  # noqa: F401  (registers the test env "cue": hints cue (the right action) and distractor (noise))
+from test_cli import without_optimisation_level
 from hintsjax.hints import ranking
 from hintsjax import envs
 
@@ -25,7 +26,7 @@ def test_every_score_ranks_the_informative_hint_first(tmp_path):
     pixel agents, which the suite's LLVM -O0 (tests/conftest.py) runs slower than it compiles
     faster. probe_fraction 0.02, not 0.05: the probe took 47 s on a core, not 156 s at -O0, and
     every seed still put the cue far above the noise (about -1.26 against -1.86)."""
-    flags = " ".join(f for f in os.environ.get("XLA_FLAGS", "").split() if not f.startswith("--xla_backend_optimization_level"))
+    flags = without_optimisation_level()
     script = "import sys, cue_env; from hintsjax import rank; sys.exit(rank.main(sys.argv[1:]))"
     out = subprocess.run([sys.executable, "-c", script, *TINY, f"out_dir={tmp_path}", "name=r"], cwd=Path(__file__).parent,
                          env={**os.environ, "XLA_FLAGS": flags}, capture_output=True, text=True, timeout=600)

@@ -156,9 +156,10 @@ class RunConfig:
         if isinstance(self.image_size, bool) or not isinstance(self.image_size, int) or not MIN_IMAGE_SIZE <= self.image_size <= MAX_IMAGE_SIZE:
             raise UsageError(f"image_size must be a whole number of pixels from {MIN_IMAGE_SIZE} (the encoder's smallest) "
                              f"to {MAX_IMAGE_SIZE}, or null for the env's own ({own.image_size}); got {self.image_size!r}")
-        if own.fixed_image_size and self.image_size != own.image_size:
-            raise UsageError(f"{self.env} draws {own.image_size}x{own.image_size} pictures only (image_size={own.image_size} "
-                             f"or null), not {self.image_size}")
+        try:
+            own.check_image_size(self.image_size)
+        except ValueError as e:
+            raise UsageError(str(e)) from None
         if self.image_size != own.image_size and any(s not in (None, PROGRAMMATIC) for s in (self.hint_source, self.eval_hint_source)):
             raise UsageError(f"image_size={self.image_size}: a generator's hints are read off the env's own "
                              f"{own.image_size}x{own.image_size} pictures; leave image_size null with hint_source=<generator folder>")
