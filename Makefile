@@ -26,7 +26,7 @@ $(GPU_STAMP): $(STAMP)
 setup-gpu: $(GPU_STAMP)
 
 # A first agent that learns on CPU (python -m hintsjax.quickstart): pendulum, composite hint, FiLM,
-# 40x40 pictures, one seed, 32 updates of 3200 env steps, evaluated beside a random policy, with a GIF.
+# 36x36 pictures, one seed, 32 updates of 3200 env steps, evaluated beside a random policy, with a GIF.
 run: setup
 	$(BIN)/python -m hintsjax.quickstart
 

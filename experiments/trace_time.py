@@ -30,8 +30,8 @@ def trace_seconds(env: str, physics: str = envs.AUTO) -> tuple[float, float]:
     init = jax.jit(jax.vmap(trainer.init)).lower(cfg.seed_keys())
     jax.jit(jax.vmap(partial(trainer.run_chunk, length=10), in_axes=(0, None))).lower(init.out_info, np.int32(10))
     t1 = time.perf_counter()
-    evaluate = jax.jit(jax.vmap(make_task_evaluator(cfg, cfg.eval_episodes), in_axes=(0, 0, None)))
-    evaluate.lower(init.out_info.params, eval_keys(cfg), envs.make_params(env, None))
+    evaluate = jax.jit(jax.vmap(make_task_evaluator(cfg, cfg.eval_episodes), in_axes=(0, 0, None, None)))
+    evaluate.lower(init.out_info.params, eval_keys(cfg), envs.make_params(env, None), False)
     return t1 - t, time.perf_counter() - t1
 
 

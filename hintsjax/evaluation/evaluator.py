@@ -40,18 +40,19 @@ class EvalResult:
     metrics: dict[str, jax.Array] = struct.field(default_factory=dict)
 
 
-def make_task_evaluator(
-    cfg: RunConfig, num_episodes: int, stochastic: bool = False, hint: str | None = None
-) -> Callable[..., EvalResult]:
-    """`evaluate(params, key, task_params[, pick]) -> EvalResult[E]` for one seed's params on any
-    variant of the env (its params are an argument, so one compiled program serves every variant).
+def make_task_evaluator(cfg: RunConfig, num_episodes: int, hint: str | None = None) -> Callable[..., EvalResult]:
+    """`evaluate(params, key, task_params, stochastic[, pick]) -> EvalResult[E]` for one seed's
+    params on any variant of the env, acting with the policy's mean or, where `stochastic` (a bool,
+    or a traced one), sampling around it. Both are arguments, so one compiled program serves every
+    variant, and a trained and a sampling agent alike.
     With `hint` (a group's env hint, hintsjax.algorithms.group) the agent sees the hint that `pick` (a member's
     Hyper) picks out of it: one program then evaluates every member of a group."""
     env = cfg.make_env(hint=hint, deploy=True)
     network = make_network(cfg, env)
     metrics_of = jax.vmap(env.metrics, in_axes=(0, None))
 
-    def evaluate(params: Any, key: jax.Array, task_params: Any, pick: Hyper | None = None) -> EvalResult:
+    def evaluate(params: Any, key: jax.Array, task_params: Any, stochastic: bool | jax.Array,
+                 pick: Hyper | None = None) -> EvalResult:
         k_reset, k_run = jax.random.split(key)
         ts = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_reset, num_episodes), task_params)
         see = (lambda obs: obs) if pick is None else (lambda obs: pick_hint(obs, pick))  # noqa: E731
@@ -60,7 +61,7 @@ def make_task_evaluator(
             t, state, obs, ret, length, metrics, alive = carry
             k_act, k_env = jax.random.split(jax.random.fold_in(k_run, t))
             mean, log_std, _ = network.apply(params, see(obs))
-            action = gaussian_sample(k_act, mean, log_std) if stochastic else mean
+            action = jnp.where(stochastic, gaussian_sample(k_act, mean, log_std), mean)
             ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
                 jax.random.split(k_env, num_episodes), state, action, task_params
             )
@@ -88,9 +89,9 @@ def make_evaluator(
     cfg: RunConfig, variant: str | None, num_episodes: int, stochastic: bool = False
 ) -> Callable[[Any, jax.Array], EvalResult]:
     """`evaluate(params, key) -> EvalResult[E]` for one seed's params on `variant`; vmap it over seeds."""
-    evaluate = make_task_evaluator(cfg, num_episodes, stochastic)
+    evaluate = make_task_evaluator(cfg, num_episodes)
     task_params = cfg.task_params(variant, deploy=True)
-    return lambda params, key: evaluate(params, key, task_params)
+    return lambda params, key: evaluate(params, key, task_params, stochastic)
 
 
 def eval_keys(cfg: RunConfig) -> jax.Array:
@@ -132,23 +133,24 @@ def one_device(cfg: RunConfig, layout: SeedLayout | None) -> SeedLayout:
     return layout or SeedLayout.of(cfg.seeds, jax.local_devices()[:1])
 
 
-def compile_evaluator(cfg: RunConfig, params: Any, variant: str | None, episodes: int, stochastic: bool,
+def compile_evaluator(cfg: RunConfig, params: Any, variant: str | None, episodes: int,
                       hint: str | None = None, pick: Hyper | None = None,
                       layout: SeedLayout | None = None) -> tuple[Any, float]:
     """The evaluation program for seed-batched params shaped like `params` (arrays, or
     jax.ShapeDtypeStructs with their shardings: it can compile before training has finished, e.g.
-    in a thread while it runs), `evaluate(params, keys, task_params)` for any variant of the env,
-    or with a group's `hint` and a member's `pick` (`evaluate_group`) `evaluate(params, keys,
-    task_params, pick)` for any member; (that executable, seconds spent compiling). With a
-    `layout` of several devices, params are its padded seeds, and each device evaluates its share."""
+    in a thread while it runs), `evaluate(params, keys, task_params, stochastic)` for any variant
+    of the env and either way of acting (`stochastic`: a bool array), or with a group's `hint` and
+    a member's `pick` (`evaluate_group`) `evaluate(params, keys, task_params, stochastic, pick)`
+    for any member; (that executable, seconds spent compiling). With a `layout` of several
+    devices, params are its padded seeds, and each device evaluates its share."""
     t = time.perf_counter()
     layout = one_device(cfg, layout)
     picked = () if pick is None else (pick,)
-    evaluate = jax.vmap(make_task_evaluator(cfg, episodes, stochastic, hint), in_axes=(0, 0, None) + (None,) * len(picked))
-    evaluate = layout.spread(evaluate, batched=2, shared=1 + len(picked))
-    identity = program_identity(cfg, episodes, stochastic, hint) if layout.count == 1 else None
+    evaluate = jax.vmap(make_task_evaluator(cfg, episodes, hint), in_axes=(0, 0, None, None) + (None,) * len(picked))
+    evaluate = layout.spread(evaluate, batched=2, shared=2 + len(picked))
+    identity = program_identity(cfg, episodes, hint) if layout.count == 1 else None
     compiled = program_cache.lower(evaluate, params, layout.pad(eval_keys(cfg)), cfg.task_params(variant, deploy=True),
-                                   *picked, name="evaluate", context=identity).compile()
+                                   jnp.asarray(False), *picked, name="evaluate", context=identity).compile()
     return compiled, time.perf_counter() - t
 
 
@@ -159,10 +161,9 @@ def evaluate_variants(cfg: RunConfig, params: Any, variants: tuple[str | None, .
     of one program compiled once (`compiled`, from `compile_evaluator` with the same `layout`, if
     given); (one summary per variant, seconds spent compiling)."""
     layout = one_device(cfg, layout)
-    evaluate, compile_seconds = compiled or compile_evaluator(cfg, params, variants[0], episodes, stochastic,
-                                                              layout=layout)
-    keys = layout.pad(eval_keys(cfg))
-    summaries = [variant_summary(cfg, v, stochastic, layout.fetch(evaluate(params, keys, cfg.task_params(v, deploy=True))))
+    evaluate, compile_seconds = compiled or compile_evaluator(cfg, params, variants[0], episodes, layout=layout)
+    keys, sample = layout.pad(eval_keys(cfg)), jnp.asarray(stochastic)
+    summaries = [variant_summary(cfg, v, stochastic, layout.fetch(evaluate(params, keys, cfg.task_params(v, deploy=True), sample)))
                  for v in variants]
     return summaries, compile_seconds
 
@@ -181,17 +182,18 @@ def evaluate_group(group: Any, state: Any, layout: SeedLayout | None = None) -> 
     and its padded weights (exact zeros) in place: what the member alone computes, its sums
     over the hint axis padded with zero terms."""
     cfg = group.cfgs[0]
-    if len({(c.eval_episodes, c.stochastic_eval) for c in group.cfgs}) > 1:  # not one program: each alone
+    if len({c.eval_episodes for c in group.cfgs}) > 1:  # not one program: each alone
         results = [evaluate_variants(c, cell_state(group, state, k).params, (c.variant, *c.eval_variants),
                                      c.eval_episodes, c.stochastic_eval, layout=layout) for k, c in enumerate(group.cfgs)]
         return [r for r, _ in results], sum(t for _, t in results)
     layout = one_device(cfg, layout)
     keys, params = layout.pad(eval_keys(cfg)), state.params
     member = lambda k: jax.tree.map(lambda x: x[:, k], params)  # noqa: E731
-    evaluate, compile_seconds = compile_evaluator(cfg, member(0), cfg.variant, cfg.eval_episodes, cfg.stochastic_eval,
-                                                  group.hint, group.hyper(0), layout)
+    evaluate, compile_seconds = compile_evaluator(cfg, member(0), cfg.variant, cfg.eval_episodes, group.hint,
+                                                  group.hyper(0), layout)
     summaries = [[variant_summary(c, v, c.stochastic_eval, layout.fetch(
-                                  evaluate(member(k), keys, c.task_params(v, deploy=True), group.hyper(k))))
+                                  evaluate(member(k), keys, c.task_params(v, deploy=True), jnp.asarray(c.stochastic_eval),
+                                           group.hyper(k))))
                   for v in (c.variant, *c.eval_variants)] for k, c in enumerate(group.cfgs)]
     return summaries, compile_seconds
 

@@ -13,12 +13,14 @@ import numpy as np
 
 from hintsjax.envs import physics
 from hintsjax.system import checkpoint, devices
+from hintsjax.system.devices import SeedLayout
 from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms.group import cell_state, make_group, make_group_trainer
 from hintsjax.algorithms.registry import make_trainer
+from hintsjax.algorithms.trainer import Trainer
 from hintsjax.evaluation.evaluator import compile_evaluator, evaluate_group, evaluate_variants
 from hintsjax.training.guards import check_physics
-from hintsjax.training.loop import advance, start
+from hintsjax.training.loop import advance, seed_layout, start
 from hintsjax.training.outputs import finish
 from hintsjax.training.runlog import RunLog
 
@@ -48,20 +50,28 @@ def run_log(run_dir: Path, resume_update: int) -> RunLog | Unlogged:
     return RunLog(run_dir, resume_update=resume_update) if devices.is_main() else Unlogged()
 
 
+def params_shapes(trainer: Trainer, layout: SeedLayout) -> Any:
+    """The seed-batched params as training will hold them ([padded seeds, ...], placed by
+    `layout`), as jax.ShapeDtypeStructs: known before anything is compiled or computed."""
+    return jax.tree.map(lambda x: jax.ShapeDtypeStruct((layout.padded, *x.shape[1:]), x.dtype, sharding=layout.sharding),
+                        trainer.abstract_state().params)
+
+
 def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = True) -> dict[str, Any]:
     """Train all seeds (in chunks, with checkpoints: see `advance`), evaluate, plot; returns eval results."""
-    training = start(make_trainer(cfg), cfg, run_dir, resume, cfg.label)
-    log = run_log(run_dir, training.done)
+    trainer, layout = make_trainer(cfg), seed_layout(cfg)
     variants = (cfg.variant, *cfg.eval_variants)
-    shapes = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=x.sharding), training.state.params)
-    # The evaluation program compiles on the host while the device trains (it needs only the
-    # params' shapes), so its compile adds nothing to the wall-clock of a run that trains longer;
-    # under physics=warp it compiles first (`evaluation_compiles_first`).
+    # The evaluation program needs only the params' shapes, so it compiles on the host in a
+    # thread from the start: beside the training program's compile (mostly one core's work) and
+    # then while the device trains, adding nothing to the wall-clock of a run that trains longer.
+    # Under physics=warp it compiles first, alone (`evaluation_compiles_first`).
     with ThreadPoolExecutor(max_workers=1) as pool:
-        evaluator = pool.submit(compile_evaluator, cfg, shapes, variants[0], cfg.eval_episodes, cfg.stochastic_eval,
-                                layout=training.compiled.layout)
+        evaluator = pool.submit(lambda: compile_evaluator(cfg, params_shapes(trainer, layout), variants[0],
+                                                          cfg.eval_episodes, layout=layout))
         if evaluation_compiles_first(cfg):
             evaluator.result()
+        training = start(trainer, cfg, run_dir, resume, cfg.label)
+        log = run_log(run_dir, training.done)
         try:
             training = advance(training, cfg, run_dir, log.write, progress, cfg.label)
         finally:
