@@ -173,7 +173,7 @@ def logged_returns(run_dir: Path) -> list[tuple[str, str, str]]:
         return [(r["update"], r["seed"], r["episode_return"]) for r in csv.DictReader(f)]
 
 
-@pytest.mark.parametrize("when", ["after", "during"])
+@pytest.mark.parametrize("when", [pytest.param("after", marks=pytest.mark.slow), "during"])  # after: 27 s, in the slow tier
 def test_a_run_killed_with_sigkill_resumes_to_the_uninterrupted_end_bit_for_bit(when, finished_run, tmp_path):
     """SIGKILL once the first checkpoint is written (`after`), or while the second is being written
     in the background (`during`): the resumed run (the real command) ends with the uninterrupted

@@ -57,6 +57,7 @@ def runs(tmp_path_factory):
     return {n: (base / f"d{n}", _layout_run(base / f"d{n}", n)) for n in (1, 4)}
 
 
+@pytest.mark.slow  # with the next: 50 s of the suite; two devices: test_cli's test_seeds_sharded_over_two_devices
 def test_three_seeds_on_four_devices_match_one_device(runs):
     (_, one), (folder, four) = runs[1], runs[4]
     assert (one["devices"], four["devices"]) == (1, 4)
@@ -68,6 +69,7 @@ def test_three_seeds_on_four_devices_match_one_device(runs):
     assert eval_json["devices"] == 4 and eval_json["evaluations"][0]["seeds"] == 3
 
 
+@pytest.mark.slow
 def test_a_checkpoint_written_on_four_devices_resumes_on_one(runs, tmp_path):
     folder, four = runs[4]
     run_dir = tmp_path / "alone"

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import cue_env  # noqa: F401  (registers the test env "cue": hints cue (the right action) and distractor (noise))
 from test_cli import without_optimisation_level
@@ -21,6 +22,7 @@ TINY = ["env=cue", "hints=distractor,cue", "seeds=2", "info_envs=64", "info_step
         "info_epochs=3", "info_minibatch_size=64", "info_lr=1e-3", "probe_fraction=0.02"]
 
 
+@pytest.mark.slow  # 80 s of the suite on 2 cores: the probe trains pixel agents; ranking's pieces are checked below
 def test_every_score_ranks_the_informative_hint_first(tmp_path):
     """The command in a process of its own, under XLA's default optimisation: the probe trains 4
     pixel agents, which the suite's LLVM -O0 (tests/conftest.py) runs slower than it compiles

@@ -122,6 +122,7 @@ def test_warp_halfcheetah_parity(warp_cheetah):
     assert worst["obs"] < 2e-3 and worst["reward"] < 2e-5
 
 
+@pytest.mark.slow  # 43 s of the suite; Warp in the fast tier: test_warp_equals_jax_and_its_nested_vmap_equals_a_loop
 @warp_lang
 def test_warp_ant_parity_as_shipped(warp_ant):
     """MJX-Warp against Ant-v5 as Gymnasium ships it (pyramidal cones; Newton capped at 8
