@@ -2,12 +2,18 @@
 
     python experiments/profile_update.py [--env pendulum] [--seeds 5] [--updates 10] [--top 25]
                                          [--variants base,nodet,...] [--physics auto|jax|warp] [--out DIR]
+                                         [--part update|learn] [--ppo num_envs=1024,...]
 
 For each variant (a fresh process, since XLA_FLAGS are read at start-up) it compiles the cell's
 chunk program (`compilation.compile_training`, what `python -m hintsjax.run` runs), times `--updates`
 updates back to back (best of 3), then records one chunk under `jax.profiler.trace` and sums the
 GPU kernels' time by name: the device's busy fraction (the union of kernel intervals over the
 chunk's wall time) says whether the chunk is bound by the GPU's work or by launching it.
+
+`--part learn` profiles the learner alone: one seed-vmapped `learn` (GAE and the epochs of
+minibatch steps) on one rollout's transitions, `--updates` times, with the kernels of one call
+sorted into kinds (the encoder's patch copies, matrix products, the optimiser's and the loss's
+elementwise fusions) by their names.
 """
 
 from __future__ import annotations
@@ -53,6 +59,7 @@ VARIANTS = {
     # its baseline is `nodet`; this adds CUDA graphs over the update's while loops and conditionals
     "nodet_cmdbuf": ("--xla_gpu_deterministic_ops=false "
                      "--xla_gpu_enable_command_buffer=FUSION,CUBLAS,CUBLASLT,CUSTOM_CALL,CUDNN,WHILE,CONDITIONAL", {}),
+    "nodet_unroll_learn": ("--xla_gpu_deterministic_ops=false", {4: 4}),
     "unroll_rollout": ("", {64: 8}),
     "unroll_learn": ("", {4: 4}),
     "unroll_both": ("", {64: 8, 4: 4}),
@@ -92,9 +99,71 @@ def kernel_table(trace_dir: Path, top: int) -> dict:
             busy += b - max(a, end)
             end = b
     span = intervals[-1][1] - intervals[0][0]
-    rows = sorted(by_name.items(), key=lambda kv: -kv[1][0])
+    rows = [{"name": n[:120], "ms": t / 1e3, "count": c} for n, (t, c) in sorted(by_name.items(), key=lambda kv: -kv[1][0])]
     return {"span_ms": span / 1e3, "busy_ms": busy / 1e3, "busy_fraction": busy / span, "events": len(kernels),
-            "top": [{"name": n[:120], "ms": t / 1e3, "count": c} for n, (t, c) in rows[:top]]}
+            "top": rows[:top], "all": rows}
+
+
+def kinds(table: dict) -> dict:
+    """The kernel table's time summed by kind of kernel (a guess from XLA's and Warp's names)."""
+    out: dict[str, list[float]] = defaultdict(lambda: [0.0, 0])
+    for row in table.get("all", []):
+        name = row["name"]
+        kind = ("physics (Warp)" if "cuda_kernel_forward" in name
+                else "patch copies (concatenate)" if "concatenate" in name
+                else "matrix products" if any(k in name for k in ("gemm", "cutlass", "cublas", "dot", "sm90", "xmma", "ampere"))
+                else "reductions" if "reduce" in name
+                else "copies and transposes" if any(k in name for k in ("transpose", "copy", "memcpy", "memset"))
+                else "other fusions")
+        out[kind][0] += row["ms"]
+        out[kind][1] += row["count"]
+    return {k: {"ms": v[0], "count": v[1]} for k, v in sorted(out.items(), key=lambda kv: -kv[1][0])}
+
+
+def ppo_overrides(text: str) -> dict:
+    """'num_envs=1024,epochs=4' -> {'num_envs': 1024, 'epochs': 4} (numbers as int or float)."""
+    out = {}
+    for item in filter(None, text.split(",")):
+        k, v = item.split("=", 1)
+        out[k] = float(v) if "." in v or "e" in v else int(v)
+    return out
+
+
+def one_learn(args: argparse.Namespace, cfg) -> dict:
+    """The learner alone: `learn` on one rollout's transitions, vmapped over seeds."""
+    import jax
+
+    from hintsjax.algorithms.ppo import make_ppo
+
+    parts = make_ppo(cfg)
+    keys = cfg.seed_keys()
+    state = jax.jit(jax.vmap(parts.init))(keys)
+    state, traj, last = jax.jit(jax.vmap(parts.rollout))(state, keys)
+    learn = jax.jit(jax.vmap(parts.learn))
+    t = time.perf_counter()
+    compiled = learn.lower(state, traj, last, traj.reward, keys).compile()
+    compile_s = time.perf_counter() - t
+    after, _ = jax.block_until_ready(compiled(state, traj, last, traj.reward, keys))
+    digest = flag_variants.params_digest(after.params)
+    times = []
+    for _ in range(args.updates):
+        t = time.perf_counter()
+        jax.block_until_ready(compiled(state, traj, last, traj.reward, keys))
+        times.append(time.perf_counter() - t)
+    with tempfile.TemporaryDirectory() as folder:
+        with jax.profiler.trace(folder, create_perfetto_trace=True):
+            jax.block_until_ready(compiled(state, traj, last, traj.reward, keys))
+        table = kernel_table(Path(folder), args.top)
+    table["kinds"] = kinds(table)
+    table.pop("all")
+    ppo = cfg.ppo
+    steps = ppo.epochs * ppo.num_minibatches
+    return {"variant": args.variant, "part": "learn", "env": cfg.env, "seeds": cfg.seeds,
+            "ppo": {k: getattr(ppo, k) for k in ("num_envs", "rollout_length", "batch_size", "epochs", "minibatch_size")},
+            "xla_flags": os.environ.get("XLA_FLAGS", ""), "device": jax.devices()[0].device_kind,
+            "compile_s": compile_s, "digest": digest, "learn_ms": 1e3 * min(times),
+            "gradient_steps": steps, "ms_per_gradient_step": 1e3 * min(times) / steps,
+            "samples_per_s": cfg.seeds * ppo.batch_size * ppo.epochs / min(times), "kernels": table}
 
 
 def one(args: argparse.Namespace) -> dict:
@@ -110,7 +179,9 @@ def one(args: argparse.Namespace) -> dict:
         if flag.startswith("--xla_gpu_per_fusion_autotune_cache_dir="):
             Path(flag.split("=", 1)[1]).mkdir(parents=True, exist_ok=True)
     cfg = run_config({"env": args.env, "agent": "hints", "scheme": "fc", "seeds": args.seeds,
-                      "checkpoint_every": args.updates, "physics": args.physics})
+                      "checkpoint_every": args.updates, "physics": args.physics, "ppo": ppo_overrides(args.ppo)})
+    if args.part == "learn":
+        return one_learn(args, cfg)
     keys = cfg.seed_keys()
     compiled = compilation.compile_training(make_trainer(cfg), keys, args.updates)
     state = compiled.init(keys)
@@ -128,6 +199,8 @@ def one(args: argparse.Namespace) -> dict:
         with jax.profiler.trace(folder, create_perfetto_trace=True):
             state, _ = jax.block_until_ready(compiled.run_chunk(state, n))
         table = kernel_table(Path(folder), args.top)
+    table["kinds"] = kinds(table)
+    table.pop("all")
     per_update = min(times) / args.updates
     return {"variant": args.variant, "physics": cfg.physics, "unroll": VARIANTS[args.variant][1], "xla_flags": os.environ.get("XLA_FLAGS", ""), "device": jax.devices()[0].device_kind,
             "compile_s": compiled.seconds, "digest": digest, "update_ms": 1e3 * per_update,
@@ -145,6 +218,9 @@ def main() -> None:
                         help=f"comma-separated of {', '.join(VARIANTS)} (one twice: is it reproducible?)")
     parser.add_argument("--variant", default=None, help=argparse.SUPPRESS)  # set in the child process
     parser.add_argument("--out", default=None, help="write every variant's result as JSON into this folder")
+    parser.add_argument("--part", default="update", choices=("update", "learn"),
+                        help="profile a whole chunk of updates, or the learner alone (default: update)")
+    parser.add_argument("--ppo", default="", help="PPO settings over the env's, e.g. num_envs=1024,epochs=4")
     args = parser.parse_args()
     if args.variant is not None:
         flag_variants.report(one(args))
@@ -153,19 +229,24 @@ def main() -> None:
     for name in flag_variants.chosen(parser, args.variants, VARIANTS):
         r = flag_variants.run(__file__, VARIANTS[name][0], ["--variant", name, "--env", args.env, "--seeds", str(args.seeds),
                                                             "--updates", str(args.updates), "--top", str(args.top),
-                                                            "--physics", args.physics])
+                                                            "--physics", args.physics, "--part", args.part, "--ppo", args.ppo])
         if r is None:
             continue
         results.append(r)
         k = r["kernels"]
-        print(f"\n== {name} ({r['xla_flags']}): {r['update_ms']:.1f} ms/update = {r['env_steps_per_s']:,.0f} env steps/s, "
+        rate = (f"{r['update_ms']:.1f} ms/update = {r['env_steps_per_s']:,.0f} env steps/s" if args.part == "update" else
+                f"learn {r['learn_ms']:.1f} ms = {r['gradient_steps']} steps of {r['ms_per_gradient_step']:.2f} ms, "
+                f"{r['samples_per_s']:,.0f} samples/s")
+        print(f"\n== {name} ({r['xla_flags']}): {rate}, "
               f"compile {r['compile_s']:.1f} s, params digest {r['digest']}; GPU busy {k.get('busy_ms', 0):.1f} of {k.get('span_ms', 0):.1f} ms "
               f"({k.get('busy_fraction', 0):.0%}), {k.get('events', 0)} kernels", flush=True)
+        for kind, v in k.get("kinds", {}).items():
+            print(f"  {v['ms']:9.2f} ms {v['count']:7d}x  [{kind}]")
         for row in k.get("top", []):
             print(f"  {row['ms']:9.2f} ms {row['count']:7d}x  {row['name']}")
     if args.out:
         Path(args.out).mkdir(parents=True, exist_ok=True)
-        (Path(args.out) / f"profile_{args.env}_{args.physics}.json").write_text(json.dumps(results, indent=1))
+        (Path(args.out) / f"profile_{args.part}_{args.env}_{args.physics}.json").write_text(json.dumps(results, indent=1))
 
 
 if __name__ == "__main__":
