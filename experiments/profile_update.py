@@ -155,7 +155,7 @@ def one_learn(args: argparse.Namespace, cfg) -> dict:
             jax.block_until_ready(compiled(state, traj, last, traj.reward, keys))
         table = kernel_table(Path(folder), args.top)
     table["kinds"] = kinds(table)
-    table.pop("all")
+    table.pop("all", None)
     ppo = cfg.ppo
     steps = ppo.epochs * ppo.num_minibatches
     return {"variant": args.variant, "part": "learn", "env": cfg.env, "seeds": cfg.seeds,
@@ -200,7 +200,7 @@ def one(args: argparse.Namespace) -> dict:
             state, _ = jax.block_until_ready(compiled.run_chunk(state, n))
         table = kernel_table(Path(folder), args.top)
     table["kinds"] = kinds(table)
-    table.pop("all")
+    table.pop("all", None)
     per_update = min(times) / args.updates
     return {"variant": args.variant, "physics": cfg.physics, "unroll": VARIANTS[args.variant][1], "xla_flags": os.environ.get("XLA_FLAGS", ""), "device": jax.devices()[0].device_kind,
             "compile_s": compiled.seconds, "digest": digest, "update_ms": 1e3 * per_update,
