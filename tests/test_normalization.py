@@ -51,7 +51,7 @@ def test_the_network_reads_the_state_through_its_statistics():
 def test_ppo_merges_each_rollout_after_learning_and_never_trains_the_statistics():
     cfg = layers.run_config({**LINEAR, "agent": "ppo_state"})
     ppo = make_ppo(cfg)
-    state = ppo.init(jax.random.key(0))
+    state = jax.jit(ppo.init)(jax.random.key(0))  # jitted: op by op, it took most of this test's time
     before = stats_of(state.params)
     rolled, traj, last_value = jax.jit(ppo.rollout)(state, jax.random.key(1))
     learnt, _ = jax.jit(ppo.learn)(rolled, traj, last_value, traj.reward, jax.random.key(2))
@@ -61,7 +61,7 @@ def test_ppo_merges_each_rollout_after_learning_and_never_trains_the_statistics(
     assert not np.allclose(learnt.params["params"]["actor"]["Dense_0"]["kernel"], state.params["params"]["actor"]["Dense_0"]["kernel"])
     optimizer = make_optimizer(state.hyper, state.params)  # even a gradient on the statistics moves nothing
     ones = jax.tree.map(jnp.ones_like, state.params)
-    updates, _ = optimizer.update(ones, optimizer.init(state.params), state.params)
+    updates, _ = jax.jit(lambda p: optimizer.update(ones, optimizer.init(p), p))(state.params)
     assert all(np.all(np.asarray(u) == 0) for u in jax.tree.leaves(updates[normalization.COLLECTION]))
     assert np.all(np.asarray(updates["params"]["log_std"]) != 0)
 
