@@ -20,7 +20,7 @@ import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from hintsjax.system import checkpoint, compilation_cache, devices, xla_flags
-from hintsjax.system.errors import INTERRUPTED, UsageError, command, fail, report_bug
+from hintsjax.system.errors import INTERRUPTED, UsageError, command, fail, machines, report_bug, report_machine
 from hintsjax.settings.layers import save_run_config
 from hintsjax.cli import choices, overrides
 from hintsjax.training.guards import NONFINITE_JSON, NonFiniteError
@@ -40,13 +40,16 @@ def main_from_values(values: dict[str, Any]) -> int:
         return report_bug(e)
     cfg, run_dir = asked.cfg, asked.run_dir
     compilation_cache.enable(compilation_cache.folder(values.get("compilation_cache")))
-    if run_dir is None:
-        if devices.is_main():
-            run_dir = new_run_dir(asked.out_dir, asked.name, cfg)
-            save_run_config(run_dir, cfg)
-        run_dir = Path(devices.agree(str(run_dir)))  # the folder process 0 made, on every process
-    elif asked.longer and devices.is_main():
-        save_run_config(run_dir, cfg)  # the budget it now trains to
+    try:
+        if run_dir is None:
+            if devices.is_main():
+                run_dir = new_run_dir(asked.out_dir, asked.name, cfg)
+                save_run_config(run_dir, cfg)
+            run_dir = Path(devices.agree(str(run_dir)))  # the folder process 0 made, on every process
+        elif asked.longer and devices.is_main():
+            save_run_config(run_dir, cfg)  # the budget it now trains to
+    except Exception as e:  # noqa: BLE001  the boundary: a full disk or read-only folder, else a bug
+        return report_machine(e, run_dir or asked.out_dir) if machines(e) else report_bug(e, run_dir)
     try:
         train(cfg, run_dir, resume=asked.run_dir is not None)
     except UsageError as e:
@@ -65,8 +68,8 @@ def main_from_values(values: dict[str, Any]) -> int:
             (run_dir / NONFINITE_JSON).write_text(json.dumps({**e.found, "last_good_checkpoint": good}) + "\n")
         print(f"error: {e}; last good checkpoint: {f'update {good}' if good else 'none'} ({run_dir})", file=sys.stderr)
         return 1
-    except Exception as e:  # noqa: BLE001  the boundary: a bug, its traceback kept in the run folder
-        return report_bug(e, run_dir)
+    except Exception as e:  # noqa: BLE001  the boundary: the machine's refusals; else a bug, its traceback kept in the run folder
+        return report_machine(e, run_dir) if machines(e) else report_bug(e, run_dir)
     return 0
 
 

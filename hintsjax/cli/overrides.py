@@ -93,7 +93,20 @@ def check_overrides(argv: list[str]) -> None:
             hint = f"did you mean {close[0]!r}? " if close else ""
             raise UsageError(f"unknown config key {key!r}; {hint}valid: {', '.join(k for k in keys if '.' not in k)}, "
                              "ppo.<key>, dagger.<key>, gail.<key> (hintsjax/conf/config.yaml)")
-    parse(overrides)
+    parsed = parse(overrides)
+    if not MULTIRUN_FLAGS & set(argv):
+        for arg, override in zip(overrides, parsed, strict=True):
+            if override.is_sweep_override() and not _is_hydras(override.key_or_group):
+                raise UsageError(ambiguous(arg))
+
+
+def ambiguous(arg: str) -> str:
+    """The one line for a sweep's value given to one run (Hydra's five-line "Ambiguous value"):
+    the list it most likely meant, the sweep, the string."""
+    key, _, value = arg.partition("=")
+    key = key.lstrip("+")
+    listed = f"for a list write {key}=[{value}], " if "(" not in value else ""
+    return f"{arg!r} gives several values to one run: {listed}for a sweep add -m, for one string quote it: {key}='{value}'"
 
 
 def parse(overrides: list[str]) -> list[Any]:

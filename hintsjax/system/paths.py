@@ -1,13 +1,15 @@
 """Paths a command will write, checked before any work: a folder that is a file, a file that is
 a folder, or a place that cannot be written is one line naming it (UsageError), not a traceback
-after training."""
+after training. A write the machine refuses all the same (a full disk) is one line naming the
+path (hintsjax.system.errors.WriteFailed), and `write_whole` leaves what was there intact."""
 
 from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Callable
 
-from hintsjax.system.errors import UsageError
+from hintsjax.system.errors import UsageError, writing_to
 
 
 def _nearest_existing(path: Path) -> Path:
@@ -35,3 +37,20 @@ def check_file(path: str | os.PathLike, what: str) -> None:
     if path.is_dir():
         raise UsageError(f"{what} {path} is a folder; give a file's path")
     check_folder(path.parent, what, shown=path)
+
+
+def write_whole(path: str | os.PathLike, write: Callable[[Path], None]) -> None:
+    """`write(p)` of the file at `path`, whole or not at all: into a sibling, then renamed over it,
+    so a failed write (a full disk) leaves what was there; a path that is not a regular file
+    (/dev/stdout) is written directly. A refusal of the machine's is a WriteFailed naming `path`."""
+    path = Path(path)
+    with writing_to(path):
+        if path.exists() and not path.is_file():
+            write(path)
+            return
+        part = path.with_name(f".{path.name}.part")
+        try:
+            write(part)
+            part.replace(path)
+        finally:
+            part.unlink(missing_ok=True)
