@@ -26,7 +26,7 @@ from hintsjax.cli import choices, overrides
 from hintsjax.training.guards import NONFINITE_JSON, NonFiniteError
 from hintsjax.training.outputs import new_run_dir
 from hintsjax.training.pipeline import train
-from hintsjax.training.request import request
+from hintsjax.training.request import request, rounded_budget
 
 
 
@@ -39,6 +39,8 @@ def main_from_values(values: dict[str, Any]) -> int:
     except Exception as e:  # noqa: BLE001  the boundary: a bug, not bad input
         return report_bug(e)
     cfg, run_dir = asked.cfg, asked.run_dir
+    if (note := rounded_budget(cfg)) and devices.is_main():
+        print(note, file=sys.stderr)
     compilation_cache.enable(compilation_cache.folder(values.get("compilation_cache")))
     try:
         if run_dir is None:

@@ -102,6 +102,21 @@ def test_names_and_folders_are_strings_whatever_yaml_makes_of_them():
     assert run_config({"env": "pendulum", "ppo": {"hidden": [64]}}).ppo.hidden == (64,)
 
 
+def test_a_budget_that_is_not_whole_updates_says_what_it_was_rounded_to(tmp_path, monkeypatch, capsys):
+    """`ppo.total_env_steps=300` with batches of 64: one line saying it trains 4 updates, 256 env
+    steps a seed (it did so without a word); a whole number of updates says nothing."""
+    from hintsjax.settings.layers import run_config
+
+    values = {k: v for k, v in tiny_values(ppo={**tiny_values()["ppo"], "total_env_steps": 300}).items() if k != "out_dir"}
+    cfg = run_config(values)
+    assert request.rounded_budget(cfg) == ("note: ppo.total_env_steps=300 is not a multiple of ppo.batch_size=64: "
+                                           "trains 4 updates, 256 env steps a seed")
+    assert request.rounded_budget(run_config({**values, "ppo": tiny_values()["ppo"]})) is None
+    monkeypatch.setattr(run, "train", lambda *args, **kwargs: None)
+    assert run.main_from_values(tiny_values(out_dir=str(tmp_path), ppo={**tiny_values()["ppo"], "total_env_steps": 300})) == 0
+    assert capsys.readouterr().err.strip().splitlines() == [request.rounded_budget(cfg)]
+
+
 def parsed(text: str):
     """A command-line value as Hydra parses it (numbers, lists, or the string)."""
     return yaml.safe_load({"nan": ".nan", "inf": ".inf"}.get(text, text))
