@@ -488,10 +488,12 @@ def test_mismatched_checkpoint_is_refused(finished_run, tmp_path):
     assert sorted(p.name for p in copy.rglob("*")) == before  # nothing written or removed
 
 
-def test_corrupt_checkpoint_is_refused_through_the_command_line(finished_run, tmp_path):
+def test_corrupt_checkpoints_are_refused_through_the_command_line(finished_run, tmp_path):
+    """Every checkpoint garbage (the newest alone falls back: the next test): one line naming the
+    newest, exit 2, for evaluate and for resume, and nothing rewritten."""
     copy = tmp_path / "corrupt"
     shutil.copytree(finished_run, copy)
-    for f in (copy / "checkpoints" / "4").rglob("*"):
+    for f in (copy / "checkpoints").rglob("*"):
         if f.is_file():
             f.write_bytes(b"\0garbage")
     metrics_before = (copy / "metrics.csv").read_text()
@@ -503,15 +505,69 @@ def test_corrupt_checkpoint_is_refused_through_the_command_line(finished_run, tm
     assert (copy / "metrics.csv").read_text() == metrics_before
 
 
-def test_a_stray_empty_checkpoint_folder_does_not_block_resuming(finished_run, tmp_path):
-    """An empty checkpoints/99 (made by hand) is no checkpoint: the run resumes from its newest
-    real one (4, its last update: it only evaluates), and the empty folder is gone."""
+def corrupted(step: Path, how: str) -> None:
+    """Checkpoint folder `step` damaged as a crash leaves it: array files cut short (`truncated`),
+    its OCDBT manifests gone (`no_manifest`), every file renamed into place but its data never
+    flushed, as after a power cut (`zeroed`), or its array metadata gone (`no_metadata`)."""
+    if how == "truncated":
+        for f in (step / "default" / "ocdbt.process_0" / "d").iterdir():
+            f.write_bytes(f.read_bytes()[: f.stat().st_size // 2])
+    elif how == "no_manifest":
+        for f in step.rglob("manifest.ocdbt"):
+            f.unlink()
+    elif how == "zeroed":
+        for f in [f for f in step.rglob("*") if f.is_file()]:
+            f.write_bytes(b"")
+    elif how == "no_metadata":
+        (step / "default" / "_METADATA").unlink()
+    else:
+        raise ValueError(how)
+
+
+def test_a_corrupt_newest_checkpoint_falls_back_to_the_one_before_and_resumes_bit_for_bit(finished_run, tmp_path, capsys):
+    """Checkpoint 4 damaged four ways a crash leaves one: each restore passes it over for
+    checkpoint 2 (its arrays exactly those of checkpoint 2 read while whole) with one line naming
+    both; resumed through the run command, the run sets 4 aside (checkpoints-corrupt/), trains
+    2 -> 4 again and ends as the uninterrupted run did, every array equal bit for bit, with the
+    same logged returns; a stray empty checkpoint folder beside them does not block it."""
+    cfg = layers.load_run_config(finished_run)
+    abstract = make_trainer(cfg).abstract_state()
+    whole = tmp_path / "whole"
+    shutil.copytree(finished_run, whole)
+    shutil.rmtree(whole / "checkpoints" / "4")
+    two = state_arrays(whole)
+    for how in ("truncated", "no_manifest", "zeroed", "no_metadata"):
+        copy = tmp_path / how
+        shutil.copytree(finished_run, copy)
+        corrupted(copy / "checkpoints" / "4", how)
+        capsys.readouterr()
+        state, update = checkpoint.restore_latest(copy, abstract)
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert update == 2 and len(lines) == 1, (how, lines)
+        assert lines[0].startswith(f"warning: checkpoint 4 in {copy / 'checkpoints'} cannot be restored (") and \
+            lines[0].endswith("); using checkpoint 2, the newest that restores"), lines
+        restored = [np.asarray(jax.random.key_data(x) if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key) else x)
+                    for x in jax.tree.leaves(state)]
+        for a, b in zip(restored, two, strict=True):
+            np.testing.assert_array_equal(a, b)
+        assert (copy / "checkpoints" / "4").exists()  # only a run that trains on sets it aside
+    (copy / "checkpoints" / "99").mkdir()  # and a stray empty folder (made by hand) is no checkpoint
+    assert run.main_from_values({"resume": str(copy)}) == 0
+    assert not (copy / "checkpoints" / "99").exists()
+    assert f"using checkpoint 2, the newest that restores; set aside in {copy / checkpoint.CORRUPT}" in capsys.readouterr().err
+    assert [p.name.split("-")[0] for p in (copy / checkpoint.CORRUPT).iterdir()] == ["4"]
+    for a, b in zip(state_arrays(copy), state_arrays(finished_run), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert logged_returns(copy) == logged_returns(finished_run)
+
+
+def test_a_stray_empty_checkpoint_folder_is_no_checkpoint(finished_run, tmp_path):
+    """An empty checkpoints/99 (made by hand) is no checkpoint: the newest is the real 4, and the
+    empty folder is gone (a run resumes past one: the corrupt checkpoint's test above)."""
     copy = tmp_path / "stray"
     shutil.copytree(finished_run, copy)
     (copy / "checkpoints" / "99").mkdir()
     assert checkpoint.latest_update(copy) == 4 and not (copy / "checkpoints" / "99").exists()
-    (copy / "checkpoints" / "99").mkdir()
-    assert run.main_from_values({"resume": str(copy)}) == 0
 
 
 @pytest.mark.parametrize("garbage", [b"not,a,metrics\nfile,at,all\n", b"update,seed\nfour,0\n", b"\xff\xfe\x00"])

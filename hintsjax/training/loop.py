@@ -88,7 +88,7 @@ def start(trainer: Trainer, cfg: RunConfig, run_dir: Path, resume: bool, label: 
     if check_memory:
         check_fits(compiled.run_chunk, label)
     if resume:  # a checkpoint holds the run's own seeds, restored onto one device: padded and placed as at the start
-        state, done = checkpoint.restore_latest(run_dir, trainer.abstract_state())
+        state, done = checkpoint.restore_latest(run_dir, trainer.abstract_state(), set_aside=True)
         state = layout.pad(state)
     else:
         state, done = compiled.init(keys), 0
