@@ -20,7 +20,8 @@ import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from hintsjax.system import checkpoint, compilation_cache, devices, xla_flags
-from hintsjax.system.errors import INTERRUPTED, UsageError, command, fail, machines, report_bug, report_machine
+from hintsjax.system.errors import (INTERRUPTED, TERMINATED, Terminated, UsageError, command, fail, machines, report_bug,
+                                    report_machine, sigterm_as_interrupt)
 from hintsjax.settings.layers import save_run_config
 from hintsjax.cli import choices, overrides
 from hintsjax.training.guards import NONFINITE_JSON, NonFiniteError
@@ -31,7 +32,14 @@ from hintsjax.training.request import request, rounded_budget
 
 
 def main_from_values(values: dict[str, Any]) -> int:
-    """Run from plain config values (what Hydra resolved); returns the exit status."""
+    """Run from plain config values (what Hydra resolved); returns the exit status. SIGTERM (a
+    cluster's time limit or preemption) is handled as Ctrl-C is, and always saves the newest state
+    whose metrics are logged."""
+    with sigterm_as_interrupt():
+        return _run(values)
+
+
+def _run(values: dict[str, Any]) -> int:
     try:
         asked = request(values)
     except UsageError as e:
@@ -59,11 +67,12 @@ def main_from_values(values: dict[str, Any]) -> int:
     except checkpoint.CheckpointWriteError as e:  # the newest complete checkpoint stays; resume from it
         print(f"error: {e}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:  # Ctrl-C: advance saved a checkpoint if one was due, and its writes are done
+    except KeyboardInterrupt as e:  # Ctrl-C (SIGTERM): advance saved a checkpoint if one was due, and its writes are done
         good = checkpoint.latest_update(run_dir)
-        print(f"interrupted; {f'checkpoint at update {good}' if good else 'no checkpoint yet'}; "
+        stopped = "terminated (SIGTERM)" if isinstance(e, Terminated) else "interrupted"
+        print(f"{stopped}; {f'checkpoint at update {good}' if good else 'no checkpoint yet'}; "
               f"go on with: python -m hintsjax.run resume={run_dir}", file=sys.stderr)
-        return INTERRUPTED
+        return TERMINATED if isinstance(e, Terminated) else INTERRUPTED
     except NonFiniteError as e:  # its checkpoints were all written before it went non-finite
         good = checkpoint.latest_update(run_dir)  # read once the background writes are done
         if devices.is_main():

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -222,6 +223,61 @@ def test_ctrl_c_saves_the_due_checkpoint_says_how_to_go_on_and_resumes_bit_for_b
     assert out.stderr.strip().splitlines()[-1] == (f"interrupted; checkpoint at update 2; "
                                                    f"go on with: python -m hintsjax.run resume={folder}")
     assert checkpoint.latest_update(folder) == 2 and not (folder / "eval.json").exists()
+    resumed = cli(f"resume={folder}", cwd=tmp_path)
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    for a, b in zip(state_arrays(folder), state_arrays(finished_run), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert logged_returns(folder) == logged_returns(finished_run)
+
+
+def test_sigterm_saves_the_newest_logged_state_the_uninterrupted_runs_bit_for_bit(finished_run, tmp_path,
+                                                                                         monkeypatch, capsys):
+    """SIGTERM (how a cluster stops a job at its time limit or on preemption), sent to the run's
+    process by a real kill once the first chunk's metrics are logged: no checkpoint is due
+    (checkpoint_seconds=1e9, where Ctrl-C would save nothing), yet that state is saved; one line
+    names it and the command that goes on, no traceback, exit 143; SIGTERM's handler is put back.
+    The saved state is the uninterrupted run's at update 2, every array equal bit for bit, and the
+    logged returns its first two updates' (from there a resumed run ends as the uninterrupted one:
+    the SIGKILL and Ctrl-C tests). In-process (a real signal, the run's own handler); through a
+    process of its own, resumed by the command line to the uninterrupted end: the slow tier's test below."""
+    real_check, checks = loop.check_physics, []
+
+    def check_then_terminate(*args):  # advance's report calls it once a chunk's metrics are logged
+        real_check(*args)
+        checks.append(1)
+        if len(checks) == 1:
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    monkeypatch.setattr(loop, "check_physics", check_then_terminate)
+    before = signal.getsignal(signal.SIGTERM)
+    folder = tmp_path / "terminated"
+    assert run.main_from_values(tiny_values(out_dir=str(tmp_path), name="terminated", checkpoint_seconds=1e9)) == 143
+    assert signal.getsignal(signal.SIGTERM) == before
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and err.strip().splitlines()[-1] == (
+        f"terminated (SIGTERM); checkpoint at update 2; go on with: python -m hintsjax.run resume={folder}")
+    assert checkpoint.latest_update(folder) == 2 and not (folder / "eval.json").exists()
+    at_two = tmp_path / "uninterrupted_at_2"
+    shutil.copytree(finished_run / "checkpoints", at_two / "checkpoints")
+    shutil.rmtree(at_two / "checkpoints" / "4")
+    shutil.copy(finished_run / "config.yaml", at_two)
+    for a, b in zip(state_arrays(folder), state_arrays(at_two), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert logged_returns(folder) == [r for r in logged_returns(finished_run) if int(r[0]) <= 2]
+
+
+@pytest.mark.slow
+def test_sigterm_through_the_command_line_resumes_bit_for_bit(finished_run, tmp_path):
+    """The test above in a process of its own (tests/killed_run.py: a real kill of itself, as a
+    scheduler's), resumed by the real command: exit 143, the one line, bit-for-bit end."""
+    values = tiny_values(out_dir=str(tmp_path), name="terminated", checkpoint_seconds=1e9)
+    out = subprocess.run([sys.executable, str(Path(__file__).parent / "killed_run.py"), "terminate", json.dumps(values)],
+                         cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    folder = tmp_path / "terminated"
+    assert out.returncode == errors.TERMINATED == 143, out.stderr[-2000:]
+    assert "Traceback" not in out.stderr + out.stdout
+    assert out.stderr.strip().splitlines()[-1] == (f"terminated (SIGTERM); checkpoint at update 2; "
+                                                   f"go on with: python -m hintsjax.run resume={folder}")
     resumed = cli(f"resume={folder}", cwd=tmp_path)
     assert resumed.returncode == 0, resumed.stderr[-2000:]
     for a, b in zip(state_arrays(folder), state_arrays(finished_run), strict=True):

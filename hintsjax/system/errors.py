@@ -14,14 +14,17 @@ import errno
 import functools
 import math
 import os
+import signal
 import sys
 import tempfile
+import threading
 import time
 import traceback
 from pathlib import Path
 from typing import Any, Callable
 
 INTERRUPTED = 130  # the exit status of a command stopped by Ctrl-C (128 + SIGINT), as a shell's
+TERMINATED = 143  # the exit status of a command stopped by SIGTERM (128 + SIGTERM), as a shell's
 CLOSED_PIPE = 141  # the exit status of a command whose reader closed its output (128 + SIGPIPE), as a shell's
 BUG = 1
 MACHINE = 1  # the exit status of a command the machine stopped: a write it refused, memory it lacks
@@ -34,6 +37,32 @@ DEBUG = "HINTSJAX_DEBUG"  # set (to anything but 0): a bug's traceback on stderr
 
 class UsageError(ValueError):
     """Bad input from the user: reported in one line, exit status 2."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (a cluster's time limit or preemption, `kill`), raised in the main thread as Ctrl-C
+    raises KeyboardInterrupt, so whatever handles Ctrl-C (a run saves its newest logged state)
+    handles it too; reported as its own line, exit 143."""
+
+
+@contextlib.contextmanager
+def sigterm_as_interrupt():
+    """Within this block SIGTERM raises Terminated in the main thread (once: a second SIGTERM while
+    the first is handled is ignored, and SIGKILL still kills); SIGTERM's handler is put back after.
+    Outside the main thread (where Python cannot handle signals) nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        raise Terminated()
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
 
 
 def require_positive(obj: Any, names: tuple[str, ...], prefix: str = "") -> None:
@@ -202,6 +231,9 @@ def command(main: Callable[..., int]) -> Callable[..., int]:
                 sys.stdout.flush()  # a closed pipe shows here, in the boundary, not at the interpreter's exit
         except UsageError as e:
             return fail(e)
+        except Terminated:
+            print("terminated (SIGTERM)", file=sys.stderr)
+            return TERMINATED
         except KeyboardInterrupt:
             print("interrupted", file=sys.stderr)
             return INTERRUPTED
