@@ -12,6 +12,7 @@ Bad input is reported in one line with the valid choices, exit status 2, nothing
 from __future__ import annotations
 
 import json
+import shutil
 import sys
 from pathlib import Path
 from typing import Any
@@ -22,7 +23,7 @@ from omegaconf import DictConfig, OmegaConf
 from hintsjax.system import checkpoint, compilation_cache, devices, xla_flags
 from hintsjax.system.errors import (INTERRUPTED, TERMINATED, Terminated, UsageError, command, fail, machines, report_bug,
                                     report_machine, sigterm_as_interrupt)
-from hintsjax.settings.layers import save_run_config
+from hintsjax.settings.layers import CONFIG_YAML, save_run_config
 from hintsjax.cli import choices, overrides
 from hintsjax.training.guards import NONFINITE_JSON, NonFiniteError
 from hintsjax.training.outputs import new_run_dir
@@ -62,7 +63,9 @@ def _run(values: dict[str, Any]) -> int:
         return report_machine(e, run_dir or asked.out_dir) if machines(e) else report_bug(e, run_dir)
     try:
         train(cfg, run_dir, resume=asked.run_dir is not None)
-    except UsageError as e:
+    except UsageError as e:  # found before the first update (a program that cannot fit): a new folder goes again
+        if asked.run_dir is None and devices.is_main() and {p.name for p in run_dir.iterdir()} <= {CONFIG_YAML}:
+            shutil.rmtree(run_dir, ignore_errors=True)
         return fail(e)
     except checkpoint.CheckpointWriteError as e:  # the newest complete checkpoint stays; resume from it
         print(f"error: {e}", file=sys.stderr)

@@ -169,6 +169,26 @@ def test_a_run_whose_folder_is_read_only_or_whose_device_runs_out_of_memory_says
     assert not (tmp_path / "oom" / "traceback.txt").exists()
 
 
+def test_a_run_whose_compiled_program_cannot_fit_is_refused_before_training_and_leaves_nothing(
+        monkeypatch, tmp_path, capsys):
+    """A device of 300 KB: the lower bounds pass (64 transitions of 16 bytes a seed), but XLA's
+    memory analysis of the compiled training program (params and Adam's moments alone are MBs)
+    refuses it before the first update: one line naming the settings to lower, exit 2, and the
+    run folder made for it is gone again."""
+    from hintsjax.system import memory
+
+    monkeypatch.setattr(memory, "device_bytes", lambda device=None: 300_000)
+    monkeypatch.setattr(pipeline, "compile_evaluator", lambda *args, **kwargs: None)  # not this test's: its compile's time
+    assert run.main_from_values({**TINY, "out_dir": str(tmp_path), "name": "r"}) == 2
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: seeds=2 x ppo.batch_size=64 cannot fit: training's compiled "
+                                                   "program needs ") and lines[0].endswith(
+        "(XLA's memory analysis), a device has 293.0 KiB; lower ppo.batch_size (with ppo.num_envs and "
+        "ppo.minibatch_size), seeds or image_size"), lines
+    assert "Traceback" not in err and list(tmp_path.iterdir()) == []
+
+
 def test_the_table_holds_at_least_120_cases_across_all_seven_commands():
     commands = {name.split("_")[0] for name in TABLE} - {"unwritable"}
     assert commands == {"run", *COMMANDS} and sum(map(len, TABLE.values())) >= 120

@@ -22,7 +22,7 @@ from hintsjax.system.devices import SeedLayout
 from hintsjax.system.errors import Terminated, UsageError
 from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms.trainer import Trainer
-from hintsjax.training.compilation import Compiled, check_fits, compile_training
+from hintsjax.training.compilation import Compiled, check_fits, check_run_fits, compile_training
 from hintsjax.training.guards import check_physics, finite_seeds, first_nonfinite, stop_nonfinite
 
 
@@ -87,6 +87,8 @@ def start(trainer: Trainer, cfg: RunConfig, run_dir: Path, resume: bool, label: 
     compiled = compile_training(trainer, keys, min(cfg.checkpoint_every, total), layout)
     if check_memory:
         check_fits(compiled.run_chunk, label)
+    else:
+        check_run_fits(compiled.run_chunk, cfg)
     if resume:  # a checkpoint holds the run's own seeds, restored onto one device: padded and placed as at the start
         state, done = checkpoint.restore_latest(run_dir, trainer.abstract_state(), set_aside=True)
         state = layout.pad(state)
