@@ -132,6 +132,8 @@ def test_a_file_written_whole_keeps_what_was_there_when_the_disk_fills(tmp_path)
     assert out.read_text() == "old\n" and [p.name for p in tmp_path.iterdir()] == ["eval.json"]
     paths.write_whole(out, lambda part: part.write_text("new\n"))
     assert out.read_text() == "new\n" and [p.name for p in tmp_path.iterdir()] == ["eval.json"]
+    refused = errors.machine_write(PermissionError(errno.EACCES, "Permission denied", "/x/y"))
+    assert refused.strerror == "could not read or write /x/y: Permission denied"  # outside writing_to: maybe a read
     with pytest.raises(PermissionError):  # not the machine's refusal of a write: passes as it was
         with errors.writing_to(out):
             raise PermissionError(errno.ENOTDIR, "not this")

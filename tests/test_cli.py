@@ -230,8 +230,8 @@ def test_ctrl_c_saves_the_due_checkpoint_says_how_to_go_on_and_resumes_bit_for_b
     assert logged_returns(folder) == logged_returns(finished_run)
 
 
-def test_sigterm_saves_the_newest_logged_state_the_uninterrupted_runs_bit_for_bit(finished_run, tmp_path,
-                                                                                         monkeypatch, capsys):
+def test_sigterm_saves_the_newest_logged_state_the_uninterrupted_runs_bit_for_bit(finished_run, tmp_path, monkeypatch,
+                                                                                   capsys):
     """SIGTERM (how a cluster stops a job at its time limit or on preemption), sent to the run's
     process by a real kill once the first chunk's metrics are logged: no checkpoint is due
     (checkpoint_seconds=1e9, where Ctrl-C would save nothing), yet that state is saved; one line

@@ -128,7 +128,9 @@ def machine_write(error: OSError, path: Any = None) -> WriteFailed | None:
     if error.errno not in WRITE_ERRNOS:
         return None
     where = error.filename or path
-    return WriteFailed(error.errno, f"could not write {where if where is not None else 'a file'}: "
+    # A refused permission or a failed disk may have been a read, where nothing says it was a write
+    verb = "read or write" if path is None and error.errno in (errno.EACCES, errno.EPERM, errno.EIO) else "write"
+    return WriteFailed(error.errno, f"could not {verb} {where if where is not None else 'a file'}: "
                                     f"{error.strerror or os.strerror(error.errno)}")
 
 
