@@ -64,7 +64,8 @@ def _run(values: dict[str, Any]) -> int:
     try:
         train(cfg, run_dir, resume=asked.run_dir is not None)
     except UsageError as e:  # found before the first update (a program that cannot fit): a new folder goes again
-        if asked.run_dir is None and devices.is_main() and {p.name for p in run_dir.iterdir()} <= {CONFIG_YAML}:
+        if (asked.run_dir is None and devices.is_main() and run_dir.is_dir()
+                and {p.name for p in run_dir.iterdir()} <= {CONFIG_YAML}):
             shutil.rmtree(run_dir, ignore_errors=True)
         return fail(e)
     except checkpoint.CheckpointWriteError as e:  # the newest complete checkpoint stays; resume from it

@@ -14,6 +14,7 @@ import contextlib
 import logging
 import sys
 import time
+import types
 from pathlib import Path
 
 import jax
@@ -31,10 +32,17 @@ def _quiet_closed_loops(previous):
     one line naming the checkpoint, under `ulimit -f`). Anything else goes to `previous`."""
 
     def hook(unraisable) -> None:
-        if not _closed_loop(unraisable.exc_value):
+        if not (_closed_loop(unraisable.exc_value) or _orbax_read(unraisable.object)):
             previous(unraisable)
 
     return hook
+
+
+def _orbax_read(obj) -> bool:
+    """Whether `obj` is one of orbax's coroutines: when one array of a checkpoint cannot be read,
+    the reads of the others are dropped unawaited and each printed "Exception ignored in:
+    <coroutine _read_array_index_and_device_put>" with its traceback (up to 45 of them)."""
+    return isinstance(obj, types.CoroutineType) and "orbax" in obj.cr_code.co_filename
 
 
 def _closed_loop(value: BaseException | None) -> bool:
@@ -44,7 +52,8 @@ def _closed_loop(value: BaseException | None) -> bool:
 def _drop_closed_loop_noise() -> None:
     """For the rest of the process, drop the "Event loop is closed" errors that tensorstore's
     threads print (through sys.excepthook, 0 to 32 of them) when a restore of unreadable files
-    fails and orbax closes its event loop: the one line naming the checkpoint says it all."""
+    fails and orbax closes its event loop, and its dropped reads (`_orbax_read`,
+    `_unretrieved_reads`): the one line naming the checkpoint says it all."""
     if getattr(sys.excepthook, "drops_closed_loops", False):
         return
     previous_except = sys.excepthook
@@ -56,6 +65,14 @@ def _drop_closed_loop_noise() -> None:
     excepthook.drops_closed_loops = True
     sys.excepthook = excepthook
     sys.unraisablehook = _quiet_closed_loops(sys.unraisablehook)
+    logging.getLogger("asyncio").addFilter(_unretrieved_reads)
+
+
+def _unretrieved_reads(record: logging.LogRecord) -> bool:
+    """A logging filter that drops asyncio's "Task exception was never retrieved" for a read of
+    tensorstore's (orbax's reads of a checkpoint's other arrays, left when one failed)."""
+    text = record.getMessage()
+    return not (text.startswith("Task exception was never retrieved") and "tensorstore" in text.lower())
 
 
 class CheckpointWriteError(RuntimeError):
