@@ -32,6 +32,8 @@ MULTIRUN_FLAGS = {"-m", "--multirun"}
 LAUNCHERS = {"submitit_slurm": "hydra_plugins.hydra_submitit_launcher", "submitit_local": "hydra_plugins.hydra_submitit_launcher",
              "basic": "hydra._internal.core_plugins.basic_launcher"}
 GRAMMAR = "https://hydra.cc/docs/advanced/override_grammar/basic"
+LIST_KEYS = {"eval_variants", "ppo.hidden", "gail.disc_hidden"}  # settings whose value is a list: key=[a,b]
+TEXT_KEYS = {"name", "out_dir", "resume", "expert", "hints_from", "hint_source", "eval_hint_source"}  # names, paths
 
 
 def defaults() -> dict[str, Any]:
@@ -102,11 +104,19 @@ def check_overrides(argv: list[str]) -> None:
 
 def ambiguous(arg: str) -> str:
     """The one line for a sweep's value given to one run (Hydra's five-line "Ambiguous value"):
-    the list it most likely meant, the sweep, the string."""
+    what it most likely meant (a list for a list-valued key, `+` for hints, a quoted name or
+    path), and the sweep."""
     key, _, value = arg.partition("=")
     key = key.lstrip("+")
-    listed = f"for a list write {key}=[{value}], " if "(" not in value else ""
-    return f"{arg!r} gives several values to one run: {listed}for a sweep add -m, for one string quote it: {key}='{value}'"
+    if key in LIST_KEYS and "(" not in value:
+        meant = f"for a list write {key}=[{value}]"
+    elif key == "hint" and "(" not in value:
+        meant = f"for several hints write hint={value.replace(',', '+')}"
+    elif key in TEXT_KEYS:
+        meant = f"for one string quote it: {key}='{value}'"
+    else:
+        return f"{arg!r} gives several values to one run; for a sweep add -m"
+    return f"{arg!r} gives several values to one run: {meant}; for a sweep add -m"
 
 
 def parse(overrides: list[str]) -> list[Any]:
