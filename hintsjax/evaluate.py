@@ -19,7 +19,7 @@ from pathlib import Path
 
 from hintsjax.system import checkpoint, memory, paths
 from hintsjax.system.devices import SeedLayout
-from hintsjax.system.errors import ArgumentParser, UsageError, command, whole
+from hintsjax.system.errors import ArgumentParser, UsageError, command, sized_by, whole
 from hintsjax.settings.config import env_params
 from hintsjax.settings.hint_sources import PROGRAMMATIC
 from hintsjax.settings.layers import load_run_config
@@ -57,7 +57,8 @@ def main(argv: list[str] | None = None) -> int:
     memory.check_episodes(cfg, SeedLayout.of(cfg.seeds).per_device, episodes, "--episodes")
     state, _ = checkpoint.restore_latest(args.run, make_trainer(cfg).abstract_state())
     stochastic = args.stochastic or (cfg.stochastic_eval and not args.deterministic)
-    results, _ = evaluate_variants(cfg, state.params, variants, episodes, stochastic)
+    with sized_by("--episodes"):  # an allocation that fails anyway: one line naming it
+        results, _ = evaluate_variants(cfg, state.params, variants, episodes, stochastic)
     mode = "stochastic" if stochastic else "deterministic"
     source = cfg.hint_source_for(deploy=True)
     tag = "" if source == PROGRAMMATIC else f"-hints-{Path(source).name}"

@@ -17,7 +17,7 @@ import jax
 
 from hintsjax import envs
 from hintsjax.system import checkpoint, memory, paths
-from hintsjax.system.errors import ArgumentParser, UsageError, command, whole
+from hintsjax.system.errors import ArgumentParser, UsageError, command, sized_by, whole
 from hintsjax.settings.config import env_params
 from hintsjax.settings.layers import load_run_config
 from hintsjax.cli import choices
@@ -53,8 +53,9 @@ def main(argv: list[str] | None = None) -> int:
     paths.check_file(out, "--out")
     state, _ = checkpoint.restore_latest(args.run, make_trainer(cfg).abstract_state())
     params = jax.tree.map(lambda x: x[args.seed], state.params)
-    episode = rollout(cfg, params, variant, steps, eval_keys(cfg)[args.seed]).cut()
-    frames = compose_frames(episode, hint_labels(env.hint), args.scale, env.max_steps)
+    with sized_by("--steps or --scale"):  # an allocation that fails anyway: one line naming them
+        episode = rollout(cfg, params, variant, steps, eval_keys(cfg)[args.seed]).cut()
+        frames = compose_frames(episode, hint_labels(env.hint), args.scale, env.max_steps)
     out.parent.mkdir(parents=True, exist_ok=True)
     paths.write_whole(out, lambda part: write_gif(frames, part, args.fps))
     ended = "episode ended" if episode.done.any() else f"cut at {steps} steps"

@@ -161,6 +161,16 @@ def test_a_run_whose_folder_is_read_only_or_whose_device_runs_out_of_memory_says
                      f"{pipeline.TRAINING_SIZES} and run again"], lines
     assert not (tmp_path / "oom" / "traceback.txt").exists()
 
+    @errors.command
+    def evaluating() -> int:  # as hintsjax.evaluate sizes its evaluation
+        with errors.sized_by("--episodes"):
+            too_big()
+        return 0
+
+    assert evaluating() == errors.MACHINE
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"error: the device ran out of memory (Out of memory allocating {2**45} bytes.); lower --episodes and run again"]
+
 
 def test_a_run_whose_compiled_program_cannot_fit_is_refused_before_training_and_leaves_nothing(
         monkeypatch, tmp_path, capsys):
