@@ -12,7 +12,6 @@ Bad input is reported in one line with the valid choices, exit status 2, nothing
 from __future__ import annotations
 
 import json
-import shutil
 import sys
 from pathlib import Path
 from typing import Any
@@ -20,7 +19,7 @@ from typing import Any
 import hydra
 from omegaconf import DictConfig, OmegaConf
 
-from hintsjax.system import checkpoint, compilation_cache, devices, xla_flags
+from hintsjax.system import checkpoint, compilation_cache, devices, paths, xla_flags
 from hintsjax.system.errors import (INTERRUPTED, TERMINATED, Terminated, UsageError, command, fail, machines, report_bug,
                                     report_machine, sigterm_as_interrupt)
 from hintsjax.settings.layers import CONFIG_YAML, save_run_config
@@ -51,6 +50,7 @@ def _run(values: dict[str, Any]) -> int:
     if (note := rounded_budget(cfg)) and devices.is_main():
         print(note, file=sys.stderr)
     compilation_cache.enable(compilation_cache.folder(values.get("compilation_cache")))
+    existed = paths.existing_part(asked.out_dir)  # what stays if the run goes again before its first update
     try:
         if run_dir is None:
             if devices.is_main():
@@ -66,7 +66,7 @@ def _run(values: dict[str, Any]) -> int:
     except UsageError as e:  # found before the first update (a program that cannot fit): a new folder goes again
         if (asked.run_dir is None and devices.is_main() and run_dir.is_dir()
                 and {p.name for p in run_dir.iterdir()} <= {CONFIG_YAML}):
-            shutil.rmtree(run_dir, ignore_errors=True)
+            paths.unmake(run_dir, existed)
         return fail(e)
     except checkpoint.CheckpointWriteError as e:  # the newest complete checkpoint stays; resume from it
         print(f"error: {e}", file=sys.stderr)

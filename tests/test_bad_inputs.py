@@ -177,12 +177,12 @@ def test_a_run_whose_compiled_program_cannot_fit_is_refused_before_training_and_
     """A device of 300 KB: the lower bounds pass (64 transitions of 16 bytes a seed), but XLA's
     memory analysis of the compiled training program (params and Adam's moments alone are MBs)
     refuses it before the first update: one line naming the settings to lower, exit 2, and the
-    run folder made for it is gone again."""
+    run folder made for it, and the out_dir folders made for that, are gone again."""
     from hintsjax.system import memory
 
     monkeypatch.setattr(memory, "device_bytes", lambda device=None: 300_000)
     monkeypatch.setattr(pipeline, "compile_evaluator", lambda *args, **kwargs: None)  # not this test's: its compile's time
-    assert run.main_from_values({**TINY, "out_dir": str(tmp_path), "name": "r"}) == 2
+    assert run.main_from_values({**TINY, "out_dir": str(tmp_path / "runs" / "new"), "name": "r"}) == 2
     err = capsys.readouterr().err
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: seeds=2 x ppo.batch_size=64 cannot fit: training's compiled "

@@ -6,6 +6,7 @@ path (hintsjax.system.errors.WriteFailed), and `write_whole` leaves what was the
 from __future__ import annotations
 
 import os
+import shutil
 from pathlib import Path
 from typing import Callable
 
@@ -16,6 +17,25 @@ def _nearest_existing(path: Path) -> Path:
     while not path.exists() and path != path.parent:
         path = path.parent
     return path
+
+
+def existing_part(path: str | os.PathLike) -> Path:
+    """The longest part of `path` (made absolute) that exists: what `unmake` keeps."""
+    return _nearest_existing(Path(path).expanduser().absolute())
+
+
+def unmake(folder: str | os.PathLike, existed: Path) -> None:
+    """Remove `folder` (one this command made) and the folders above it that were made for it:
+    up to `existed` (`existing_part` before it was made), each only if empty."""
+    folder = Path(folder).expanduser().absolute()
+    shutil.rmtree(folder, ignore_errors=True)
+    for parent in folder.parents:
+        if parent == existed or not parent.is_relative_to(existed):
+            break
+        try:
+            parent.rmdir()
+        except OSError:
+            break
 
 
 def check_folder(path: str | os.PathLike, what: str, shown: Path | None = None) -> None:
