@@ -253,7 +253,7 @@ def restore_latest(run_dir: Path, abstract, set_aside: bool = False):
     else:
         newest, reason = failed[0]
         raise UsageError(f"checkpoint {newest} in {run_dir} is corrupt or does not match its config.yaml: {reason}"
-                         + (f" (and {len(failed) - 1} older ones)" if len(failed) > 1 else ""))
+                         + (f" (and the {len(failed) - 1} before it)" if len(failed) > 1 else ""))
     if failed:
         kept = ""
         if set_aside:
