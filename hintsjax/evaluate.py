@@ -17,9 +17,9 @@ import sys
 from pathlib import Path
 
 
-from hintsjax.system import checkpoint, memory
+from hintsjax.system import checkpoint, memory, paths
 from hintsjax.system.devices import SeedLayout
-from hintsjax.system.errors import ArgumentParser, UsageError, command
+from hintsjax.system.errors import ArgumentParser, UsageError, command, sized_by, whole
 from hintsjax.settings.config import env_params
 from hintsjax.settings.hint_sources import PROGRAMMATIC
 from hintsjax.settings.layers import load_run_config
@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--variant", default=None,
                         help="env variant(s) to evaluate on, comma-separated, all by one compiled program "
                              "(default: the training one)")
-    parser.add_argument("--episodes", type=int, default=None, help="episodes per seed (default: the run's)")
+    parser.add_argument("--episodes", type=whole, default=None, help="episodes per seed (default: the run's)")
     mode = parser.add_mutually_exclusive_group()
     mode.add_argument("--stochastic", action="store_true", help="sample actions (default: as the run's stochastic_eval)")
     mode.add_argument("--deterministic", action="store_true", help="the mean action (default: as the run's stochastic_eval)")
@@ -57,13 +57,15 @@ def main(argv: list[str] | None = None) -> int:
     memory.check_episodes(cfg, SeedLayout.of(cfg.seeds).per_device, episodes, "--episodes")
     state, _ = checkpoint.restore_latest(args.run, make_trainer(cfg).abstract_state())
     stochastic = args.stochastic or (cfg.stochastic_eval and not args.deterministic)
-    results, _ = evaluate_variants(cfg, state.params, variants, episodes, stochastic)
+    with sized_by("--episodes"):  # an allocation that fails anyway: one line naming it
+        results, _ = evaluate_variants(cfg, state.params, variants, episodes, stochastic)
     mode = "stochastic" if stochastic else "deterministic"
     source = cfg.hint_source_for(deploy=True)
     tag = "" if source == PROGRAMMATIC else f"-hints-{Path(source).name}"
     for result in results:
         out = args.run / f"eval-{result['variant']}-{mode}-{episodes}{tag}.json"
-        out.write_text(json.dumps({"label": cfg.label, "env": cfg.env, "hint_source": source, **result}, indent=1))
+        text = json.dumps({"label": cfg.label, "env": cfg.env, "hint_source": source, **result}, indent=1)
+        paths.write_whole(out, lambda part: part.write_text(text))
         print(f"{cfg.label} on {cfg.env}/{result['variant']} ({mode}, {cfg.seeds} seeds x {episodes} episodes"
               f"{'' if not tag else ', hints from ' + source}): "
               f"{result['mean']:.2f} +- {result['std']:.2f}{metrics_text(result)}  -> {out}")

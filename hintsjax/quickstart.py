@@ -29,7 +29,7 @@ from pathlib import Path
 import jax
 
 from hintsjax.system import checkpoint, compilation_cache, paths
-from hintsjax.system.errors import ArgumentParser, command
+from hintsjax.system.errors import ArgumentParser, command, whole, writing_to
 from hintsjax.cli import choices
 from hintsjax.settings.config import RunConfig
 from hintsjax.settings.layers import run_config, save_run_config
@@ -74,9 +74,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = ArgumentParser(prog="python -m hintsjax.quickstart", description=__doc__.splitlines()[0],
                             epilog="After it, python -m hintsjax.run trains any of these:\n\n" + choices.text(), formatter_class=argparse.RawDescriptionHelpFormatter)
     batch = SETTINGS["ppo"]["batch_size"]
-    parser.add_argument("--updates", type=int, default=32, help=f"updates of {batch} env steps (default: 32)")
+    parser.add_argument("--updates", type=whole, default=32, help=f"updates of {batch} env steps (default: 32)")
     parser.add_argument("--out-dir", type=Path, default=Path("runs"), help="where the run folder goes (default: runs)")
-    parser.add_argument("--epochs", type=int, default=SETTINGS["ppo"]["epochs"],
+    parser.add_argument("--epochs", type=whole, default=SETTINGS["ppo"]["epochs"],
                         help=f"PPO's epochs over each update's batch (default: {SETTINGS['ppo']['epochs']})")
     parser.add_argument("--seed", type=int, default=0, help=f"the run's seed, 0 to {MAX_SEED} (default: 0, what the README shows)")
     args = parser.parse_args(argv)
@@ -91,13 +91,14 @@ def main(argv: list[str] | None = None) -> int:
     cfg = run_config({**SETTINGS, "seed": args.seed, "ppo": {**SETTINGS["ppo"], "epochs": args.epochs,
                                                                   "total_env_steps": batch * args.updates}})
     compilation_cache.enable(compilation_cache.folder(True))
-    run_dir = outputs.new_run_dir(str(args.out_dir), f"quickstart-{time.strftime('%Y%m%d-%H%M%S')}", cfg)
-    save_run_config(run_dir, cfg)
-    trained = pipeline.train(cfg, run_dir)["evaluations"][0]
-    with ThreadPoolExecutor(max_workers=2) as pool:  # each is mostly a compile, one core's work: side by side
-        baseline_done, gif_done = pool.submit(random_policy, cfg, cfg.variant), pool.submit(swing_up_gif, cfg, run_dir)
-        baseline, gif = baseline_done.result(), gif_done.result()
-    (run_dir / BASELINE_JSON).write_text(json.dumps(baseline, indent=1))
+    with writing_to(args.out_dir):  # a full disk or read-only folder: one line naming it
+        run_dir = outputs.new_run_dir(str(args.out_dir), f"quickstart-{time.strftime('%Y%m%d-%H%M%S')}", cfg)
+        save_run_config(run_dir, cfg)
+        trained = pipeline.train(cfg, run_dir)["evaluations"][0]
+        with ThreadPoolExecutor(max_workers=2) as pool:  # each is mostly a compile, one core's work: side by side
+            baseline_done, gif_done = pool.submit(random_policy, cfg, cfg.variant), pool.submit(swing_up_gif, cfg, run_dir)
+            baseline, gif = baseline_done.result(), gif_done.result()
+        (run_dir / BASELINE_JSON).write_text(json.dumps(baseline, indent=1))
     print(f"\n{cfg.env}/{trained['variant']}, {cfg.eval_episodes} episodes each ({time.perf_counter() - t:.0f} s in all):\n"
           f"  trained agent ({cfg.label}, {cfg.ppo.total_env_steps} env steps): "
           f"{trained['mean']:8.1f} +- {trained['std']:.1f}\n"

@@ -21,7 +21,8 @@ import jax
 import numpy as np
 import yaml
 
-from hintsjax.system.errors import command
+from hintsjax.system import paths
+from hintsjax.system.errors import command, writing_to
 from hintsjax.cli.arguments import parse_key_values
 from hintsjax.training.runlog import fresh_folder
 from hintsjax.hints.ranking import RankConfig, SCORES, rank_hints, ranking
@@ -67,11 +68,14 @@ def plot(path: Path, cfg: RankConfig, result: dict[str, Any]) -> None:
 def main(argv: list[str] | None = None) -> int:
     cfg = parse_key_values(RankConfig, sys.argv[1:] if argv is None else argv, "python -m hintsjax.rank",
                            __doc__.splitlines()[0]).validate()
+    paths.check_folder(cfg.out_dir, "out_dir")  # before anything is trained
     print(f"ranking {len(cfg.candidates)} hints of {cfg.env} by {cfg.scores}, {cfg.seeds} seeds", flush=True)
-    folder = fresh_folder(Path(cfg.out_dir) / (cfg.name or f"rank-{cfg.env}-{time.strftime('%Y%m%d-%H%M%S')}"))
-    (folder / "config.yaml").write_text(yaml.safe_dump(dataclasses.asdict(cfg), sort_keys=False))
-    result = rank_hints(cfg)
-    rows = write_folder(folder, cfg, result)
+    folder = Path(cfg.out_dir) / (cfg.name or f"rank-{cfg.env}-{time.strftime('%Y%m%d-%H%M%S')}")
+    with writing_to(folder):  # a full disk or read-only folder: one line naming it
+        folder = fresh_folder(folder)
+        (folder / "config.yaml").write_text(yaml.safe_dump(dataclasses.asdict(cfg), sort_keys=False))
+        result = rank_hints(cfg)
+        rows = write_folder(folder, cfg, result)
     width = max(len(h) for h in cfg.candidates)
     for name in result["scores"]:
         print(f"{name} ({result['seconds'][name]:.0f} s):")

@@ -19,19 +19,27 @@ from typing import Any
 import hydra
 from omegaconf import DictConfig, OmegaConf
 
-from hintsjax.system import checkpoint, compilation_cache, devices, xla_flags
-from hintsjax.system.errors import INTERRUPTED, UsageError, command, fail, report_bug
-from hintsjax.settings.layers import save_run_config
+from hintsjax.system import checkpoint, compilation_cache, devices, paths, xla_flags
+from hintsjax.system.errors import (INTERRUPTED, TERMINATED, Terminated, UsageError, command, fail, machines, report_bug,
+                                    report_machine, sigterm_as_interrupt)
+from hintsjax.settings.layers import CONFIG_YAML, save_run_config
 from hintsjax.cli import choices, overrides
 from hintsjax.training.guards import NONFINITE_JSON, NonFiniteError
 from hintsjax.training.outputs import new_run_dir
 from hintsjax.training.pipeline import train
-from hintsjax.training.request import request
+from hintsjax.training.request import request, rounded_budget
 
 
 
 def main_from_values(values: dict[str, Any]) -> int:
-    """Run from plain config values (what Hydra resolved); returns the exit status."""
+    """Run from plain config values (what Hydra resolved); returns the exit status. SIGTERM (a
+    cluster's time limit or preemption) is handled as Ctrl-C is, and always saves the newest state
+    whose metrics are logged."""
+    with sigterm_as_interrupt():
+        return _run(values)
+
+
+def _run(values: dict[str, Any]) -> int:
     try:
         asked = request(values)
     except UsageError as e:
@@ -39,34 +47,44 @@ def main_from_values(values: dict[str, Any]) -> int:
     except Exception as e:  # noqa: BLE001  the boundary: a bug, not bad input
         return report_bug(e)
     cfg, run_dir = asked.cfg, asked.run_dir
+    if (note := rounded_budget(cfg)) and devices.is_main():
+        print(note, file=sys.stderr)
     compilation_cache.enable(compilation_cache.folder(values.get("compilation_cache")))
-    if run_dir is None:
-        if devices.is_main():
-            run_dir = new_run_dir(asked.out_dir, asked.name, cfg)
-            save_run_config(run_dir, cfg)
-        run_dir = Path(devices.agree(str(run_dir)))  # the folder process 0 made, on every process
-    elif asked.longer and devices.is_main():
-        save_run_config(run_dir, cfg)  # the budget it now trains to
+    existed = paths.existing_part(asked.out_dir)  # what stays if the run goes again before its first update
+    try:
+        if run_dir is None:
+            if devices.is_main():
+                run_dir = new_run_dir(asked.out_dir, asked.name, cfg)
+                save_run_config(run_dir, cfg)
+            run_dir = Path(devices.agree(str(run_dir)))  # the folder process 0 made, on every process
+        elif asked.longer and devices.is_main():
+            save_run_config(run_dir, cfg)  # the budget it now trains to
+    except Exception as e:  # noqa: BLE001  the boundary: a full disk or read-only folder, else a bug
+        return report_machine(e, run_dir or asked.out_dir) if machines(e) else report_bug(e, run_dir)
     try:
         train(cfg, run_dir, resume=asked.run_dir is not None)
-    except UsageError as e:
+    except UsageError as e:  # found before the first update (a program that cannot fit): a new folder goes again
+        if (asked.run_dir is None and devices.is_main() and run_dir.is_dir()
+                and {p.name for p in run_dir.iterdir()} <= {CONFIG_YAML}):
+            paths.unmake(run_dir, existed)
         return fail(e)
     except checkpoint.CheckpointWriteError as e:  # the newest complete checkpoint stays; resume from it
         print(f"error: {e}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:  # Ctrl-C: advance saved a checkpoint if one was due, and its writes are done
+    except KeyboardInterrupt as e:  # Ctrl-C (SIGTERM): advance saved a checkpoint if one was due, and its writes are done
         good = checkpoint.latest_update(run_dir)
-        print(f"interrupted; {f'checkpoint at update {good}' if good else 'no checkpoint yet'}; "
+        stopped = "terminated (SIGTERM)" if isinstance(e, Terminated) else "interrupted"
+        print(f"{stopped}; {f'checkpoint at update {good}' if good else 'no checkpoint yet'}; "
               f"go on with: python -m hintsjax.run resume={run_dir}", file=sys.stderr)
-        return INTERRUPTED
+        return TERMINATED if isinstance(e, Terminated) else INTERRUPTED
     except NonFiniteError as e:  # its checkpoints were all written before it went non-finite
         good = checkpoint.latest_update(run_dir)  # read once the background writes are done
         if devices.is_main():
             (run_dir / NONFINITE_JSON).write_text(json.dumps({**e.found, "last_good_checkpoint": good}) + "\n")
         print(f"error: {e}; last good checkpoint: {f'update {good}' if good else 'none'} ({run_dir})", file=sys.stderr)
         return 1
-    except Exception as e:  # noqa: BLE001  the boundary: a bug, its traceback kept in the run folder
-        return report_bug(e, run_dir)
+    except Exception as e:  # noqa: BLE001  the boundary: the machine's refusals; else a bug, its traceback kept in the run folder
+        return report_machine(e, run_dir) if machines(e) else report_bug(e, run_dir)
     return 0
 
 

@@ -17,7 +17,7 @@ import jax
 
 from hintsjax import envs
 from hintsjax.system import checkpoint, memory, paths
-from hintsjax.system.errors import ArgumentParser, UsageError, command
+from hintsjax.system.errors import ArgumentParser, UsageError, command, sized_by, whole
 from hintsjax.settings.config import env_params
 from hintsjax.settings.layers import load_run_config
 from hintsjax.cli import choices
@@ -31,12 +31,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = ArgumentParser(prog="python -m hintsjax.video", description=__doc__.splitlines()[0], epilog=choices.text(),
                             formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("run", type=Path, help="a run folder written by python -m hintsjax.run")
-    parser.add_argument("--seed", type=int, default=0, help="which of the run's seeds acts (default: 0)")
+    parser.add_argument("--seed", type=whole, default=0, help="which of the run's seeds acts (default: 0)")
     parser.add_argument("--variant", default=None, help="env variant (default: the training one)")
-    parser.add_argument("--steps", type=int, default=None, help=f"at most this many steps (default: the episode, at most {MAX_STEPS})")
-    parser.add_argument("--scale", type=int, default=4, help="picture upscaling, nearest neighbour (default: 4)")
+    parser.add_argument("--steps", type=whole, default=None, help=f"at most this many steps (default: the episode, at most {MAX_STEPS})")
+    parser.add_argument("--scale", type=whole, default=4, help="picture upscaling, nearest neighbour (default: 4)")
     parser.add_argument("--out", type=Path, default=None, help="GIF path (default: RUN/video-<variant>-seed<seed>.gif)")
-    parser.add_argument("--fps", type=int, default=25, help="frames per second (default: 25)")
+    parser.add_argument("--fps", type=whole, default=25, help="frames per second (default: 25)")
     args = parser.parse_args(argv)
     cfg = load_run_config(args.run)
     variant = args.variant or cfg.variant or envs.variant_names(cfg.env)[0]
@@ -53,10 +53,11 @@ def main(argv: list[str] | None = None) -> int:
     paths.check_file(out, "--out")
     state, _ = checkpoint.restore_latest(args.run, make_trainer(cfg).abstract_state())
     params = jax.tree.map(lambda x: x[args.seed], state.params)
-    episode = rollout(cfg, params, variant, steps, eval_keys(cfg)[args.seed]).cut()
-    frames = compose_frames(episode, hint_labels(env.hint), args.scale, env.max_steps)
+    with sized_by("--steps or --scale"):  # an allocation that fails anyway: one line naming them
+        episode = rollout(cfg, params, variant, steps, eval_keys(cfg)[args.seed]).cut()
+        frames = compose_frames(episode, hint_labels(env.hint), args.scale, env.max_steps)
     out.parent.mkdir(parents=True, exist_ok=True)
-    write_gif(frames, out, args.fps)
+    paths.write_whole(out, lambda part: write_gif(frames, part, args.fps))
     ended = "episode ended" if episode.done.any() else f"cut at {steps} steps"
     print(f"{out}: {len(frames)} frames, return {float(episode.rewards.sum()):.2f} "
           f"({cfg.label} on {cfg.env}/{variant}, seed {args.seed}, {ended})")

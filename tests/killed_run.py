@@ -1,7 +1,7 @@
 """A run killed with SIGKILL, as a crash or the kernel's out-of-memory killer would: no clean-up,
 no `finally` blocks, no flushed files. Used by tests/test_cli.py.
 
-    python tests/killed_run.py after|during|interrupt '<run values as JSON>'
+    python tests/killed_run.py after|during|interrupt|terminate '<run values as JSON>'
     python tests/killed_run.py group <folder>
 
 `after`: killed once the first checkpoint is completely written. `during`: killed as soon as the
@@ -9,7 +9,9 @@ second checkpoint has been handed to the background writer, so its files are (mo
 half-written. `group`: tests/test_group.py's group of two cue-env configurations (`killed_group`)
 trained into <folder>, killed once the group's first checkpoint is written. `interrupt`: not
 killed but sent SIGINT (Ctrl-C) once the first chunk's metrics are logged, raised in the main
-thread so that it takes effect there and then; it exits with the run's own status.
+thread so that it takes effect there and then; it exits with the run's own status. `terminate`:
+sent SIGTERM (as a cluster's time limit or preemption) by a real kill at the same point; it exits
+with the run's own status.
 """
 
 from __future__ import annotations
@@ -38,6 +40,20 @@ def main() -> None:
         if mode == "during" and len(saves) == 2:
             os.kill(os.getpid(), signal.SIGKILL)
 
+    if mode == "terminate":
+        real_check, checks = loop.check_physics, []
+
+        def check_then_terminate(*args):  # loop.advance's report calls it once a chunk's metrics are logged
+            real_check(*args)
+            checks.append(1)
+            if len(checks) == 1:
+                os.kill(os.getpid(), signal.SIGTERM)
+
+        loop.check_physics = check_then_terminate
+        status = run.main_from_values(json.loads(sys.argv[2]))
+        if status == 0:
+            sys.exit(f"the run ended without being terminated (the hook ran {len(checks)} time(s))")
+        sys.exit(status)
     if mode == "interrupt":
         # Python raises KeyboardInterrupt on SIGINT only if the signal was not ignored when it
         # started (a test runner's child may inherit SIG_IGN; a terminal's never does), and a

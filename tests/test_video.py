@@ -11,10 +11,11 @@ from typing import Any
 import jax
 import numpy as np
 import pytest
+import yaml
 from PIL import Image
 
 from hintsjax import envs
-from hintsjax.system import checkpoint
+from hintsjax.system import checkpoint, errors
 from hintsjax.settings.config import RunConfig
 from hintsjax.settings.layers import run_config, save_run_config
 from hintsjax.algorithms.ppo import make_network
@@ -142,6 +143,24 @@ def test_command_writes_one_gif_frame_per_step(tiny_run, capsys):
         assert gif.n_frames == STEPS
         assert gif.size == (64 * 4 + 240, 64 * 4)  # (width, height) at the default scale 4
     assert out.stat().st_size < 200_000
+
+
+UNWRITABLE = yaml.safe_load((Path(__file__).parent / "data" / "bad_inputs.yaml").read_text())["unwritable"]
+
+
+@pytest.mark.parametrize("case", list(UNWRITABLE))
+def test_a_gif_the_machine_refuses_to_write_is_one_line_naming_it_not_a_bug(case, tiny_run, capsys):
+    """The bad-input table's unwritable cases (`--out /dev/full`: ENOSPC on the first write) on this
+    file's tiny run, at its seed 1 and STEPS steps (the rollout compiled for the test above serves):
+    exit 1, one line naming the path, no traceback, nothing written into the run folder."""
+    command, *args = case.split()
+    assert command == "video"
+    before = sorted(p.name for p in tiny_run.path.iterdir())
+    argv = [a.format(run=tiny_run.path) for a in args] + ["--seed", "1", "--steps", str(STEPS)]
+    assert main(argv) == errors.MACHINE == 1
+    err = capsys.readouterr().err
+    assert err.strip().splitlines() == ["error: " + UNWRITABLE[case].format(run=tiny_run.path)], err
+    assert "Traceback" not in err and sorted(p.name for p in tiny_run.path.iterdir()) == before
 
 
 def test_bad_input_fails_in_one_line_and_writes_nothing(tiny_run, tmp_path, capsys):

@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, TypeVar
 
-from hintsjax.system.errors import UsageError
+from hintsjax.system.errors import UsageError, beyond_int32
 from hintsjax.cli import choices
 
 T = TypeVar("T")
@@ -43,4 +43,6 @@ def parse_key_values(cls: type[T], argv: list[str], prog: str = "", about: str =
                 values[key] = (int if kind.startswith("int") else float)(raw)
             except ValueError:
                 raise UsageError(f"{key} must be {kind}, got {raw!r}") from None
+            if isinstance(values[key], int) and beyond_int32(values[key]):
+                raise UsageError(f"{key} {beyond_int32(values[key])}, got {raw}")
     return cls(**values)

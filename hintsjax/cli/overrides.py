@@ -32,6 +32,8 @@ MULTIRUN_FLAGS = {"-m", "--multirun"}
 LAUNCHERS = {"submitit_slurm": "hydra_plugins.hydra_submitit_launcher", "submitit_local": "hydra_plugins.hydra_submitit_launcher",
              "basic": "hydra._internal.core_plugins.basic_launcher"}
 GRAMMAR = "https://hydra.cc/docs/advanced/override_grammar/basic"
+LIST_KEYS = {"eval_variants", "ppo.hidden", "gail.disc_hidden"}  # settings whose value is a list: key=[a,b]
+TEXT_KEYS = {"name", "out_dir", "resume", "expert", "hints_from", "hint_source", "eval_hint_source"}  # names, paths
 
 
 def defaults() -> dict[str, Any]:
@@ -93,7 +95,28 @@ def check_overrides(argv: list[str]) -> None:
             hint = f"did you mean {close[0]!r}? " if close else ""
             raise UsageError(f"unknown config key {key!r}; {hint}valid: {', '.join(k for k in keys if '.' not in k)}, "
                              "ppo.<key>, dagger.<key>, gail.<key> (hintsjax/conf/config.yaml)")
-    parse(overrides)
+    parsed = parse(overrides)
+    if not MULTIRUN_FLAGS & set(argv):
+        for arg, override in zip(overrides, parsed, strict=True):
+            if override.is_sweep_override() and not _is_hydras(override.key_or_group):
+                raise UsageError(ambiguous(arg))
+
+
+def ambiguous(arg: str) -> str:
+    """The one line for a sweep's value given to one run (Hydra's five-line "Ambiguous value"):
+    what it most likely meant (a list for a list-valued key, `+` for hints, a quoted name or
+    path), and the sweep."""
+    key, _, value = arg.partition("=")
+    key = key.lstrip("+")
+    if key in LIST_KEYS and "(" not in value:
+        meant = f"for a list write {key}=[{value}]"
+    elif key == "hint" and "(" not in value:
+        meant = f"for several hints write hint={value.replace(',', '+')}"
+    elif key in TEXT_KEYS:
+        meant = f"for one string quote it: {key}='{value}'"
+    else:
+        return f"{arg!r} gives several values to one run; for a sweep add -m"
+    return f"{arg!r} gives several values to one run: {meant}; for a sweep add -m"
 
 
 def parse(overrides: list[str]) -> list[Any]:

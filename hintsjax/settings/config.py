@@ -16,7 +16,7 @@ import jax.numpy as jnp
 
 from hintsjax import envs
 from hintsjax.envs.errors import ChoiceError, choose
-from hintsjax.system.errors import UsageError, require_positive
+from hintsjax.system.errors import INT_MAX, UsageError, require_positive
 from hintsjax.models.agents import AGENTS, AgentSpec, EXPERT_AGENT
 from hintsjax.models.conditioning import SCHEMES
 from hintsjax.models.networks import MIN_IMAGE_SIZE
@@ -127,6 +127,9 @@ class RunConfig:
             env_params(self.env, v)
         self._check_hint_sources()
         require_positive(self, ("seeds", "eval_episodes", "checkpoint_every"))
+        if not 0 <= self.seed <= INT_MAX - self.seeds + 1:  # seed i's key is key(seed + i): 32 bits
+            raise UsageError(f"seed must be 0 to {INT_MAX - self.seeds + 1} (seed + i for each of {self.seeds} seeds "
+                             f"is a 32-bit key), got {self.seed}")
         if not self.checkpoint_seconds >= 0:  # NaN too
             raise UsageError(f"checkpoint_seconds must be 0 or more, got {self.checkpoint_seconds}")
         for section in SECTIONS:

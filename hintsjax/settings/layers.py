@@ -13,7 +13,7 @@ import yaml
 
 from hintsjax import envs
 from hintsjax.envs.errors import ChoiceError, choose
-from hintsjax.system.errors import UsageError
+from hintsjax.system.errors import UsageError, require_int32
 from hintsjax.settings.config import RunConfig, SECTIONS
 from hintsjax.settings.env_defaults import ENV_DEFAULTS
 
@@ -108,12 +108,16 @@ def hint_file(source: str) -> str:
 
 
 def _check_types(cfg: RunConfig) -> None:
-    for obj in (cfg, *(getattr(cfg, name) for name in SECTIONS)):
+    """UsageError naming a setting of the wrong type, or an integer beyond JAX's int32 (every count,
+    size and seed: `seed=99999999999999999999` overflowed only once a run folder was made)."""
+    for prefix, obj in (("", cfg), *((f"{name}.", getattr(cfg, name)) for name in SECTIONS)):
         for f in dataclasses.fields(obj):
             value = getattr(obj, f.name)
             kind = {"int": int, "float": (int, float), "bool": bool, "str": str}.get(str(f.type))
             if kind is not None and (not isinstance(value, kind) or (kind is int and isinstance(value, bool))):
                 raise UsageError(f"{f.name} must be {f.type}, got {value!r}")
+            if str(f.type).startswith(("int", "tuple[int")):
+                require_int32(obj, (f.name,), prefix)
 
 
 def to_dict(cfg: RunConfig) -> dict[str, Any]:

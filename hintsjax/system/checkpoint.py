@@ -13,6 +13,8 @@ from __future__ import annotations
 import contextlib
 import logging
 import sys
+import time
+import types
 from pathlib import Path
 
 import jax
@@ -30,11 +32,47 @@ def _quiet_closed_loops(previous):
     one line naming the checkpoint, under `ulimit -f`). Anything else goes to `previous`."""
 
     def hook(unraisable) -> None:
-        value = unraisable.exc_value
-        if not (isinstance(value, RuntimeError) and str(value) == "Event loop is closed"):
+        if not (_closed_loop(unraisable.exc_value) or _orbax_read(unraisable.object)):
             previous(unraisable)
 
     return hook
+
+
+def _orbax_read(obj) -> bool:
+    """Whether `obj` is one of orbax's coroutines: when one array of a checkpoint cannot be read,
+    the reads of the others are dropped unawaited and each printed "Exception ignored in:
+    <coroutine _read_array_index_and_device_put>" with its traceback (up to 45 of them)."""
+    return isinstance(obj, types.CoroutineType) and "orbax" in obj.cr_code.co_filename
+
+
+def _closed_loop(value: BaseException | None) -> bool:
+    return isinstance(value, RuntimeError) and str(value) == "Event loop is closed"
+
+
+def _drop_closed_loop_noise() -> None:
+    """For the rest of the process, drop the "Event loop is closed" errors that tensorstore's
+    threads print (through sys.excepthook, 0 to 32 of them) when a restore of unreadable files
+    fails and orbax closes its event loop, and its dropped reads (`_orbax_read`,
+    `_unretrieved_reads`): the one line naming the checkpoint says it all."""
+    if getattr(sys.excepthook, "drops_closed_loops", False):
+        return
+    previous_except = sys.excepthook
+
+    def excepthook(kind, value, tb) -> None:
+        if not _closed_loop(value):
+            previous_except(kind, value, tb)
+
+    excepthook.drops_closed_loops = True
+    sys.excepthook = excepthook
+    sys.unraisablehook = _quiet_closed_loops(sys.unraisablehook)
+    logging.getLogger("asyncio").addFilter(_unretrieved_reads)
+
+
+def _unretrieved_reads(record: logging.LogRecord) -> bool:
+    """A logging filter that drops asyncio's "Task exception was never retrieved" for a read of
+    tensorstore's (orbax's reads of a checkpoint's other arrays, left when one failed)."""
+    text = record.getMessage()
+    return not (text.startswith("Task exception was never retrieved") and "tensorstore" in text.lower())
 
 
 class CheckpointWriteError(RuntimeError):
@@ -180,26 +218,72 @@ def latest_update(run_dir: Path) -> int | None:
         return manager.latest_step()
 
 
-def restore_latest(run_dir: Path, abstract):
-    """(runner state, update) of the newest checkpoint; UsageError if missing, corrupt or mismatched.
+CORRUPT = "checkpoints-corrupt"  # where a resumed run sets aside the checkpoints it could not restore
+
+
+def restore_latest(run_dir: Path, abstract, set_aside: bool = False):
+    """(runner state, update) of the newest checkpoint that restores; UsageError if there is none,
+    or if the newest does not match (its arrays' shapes and types differ from `abstract`'s).
+
+    A newer checkpoint that cannot be read (a truncated array file, a missing manifest, a step
+    half-written when the power went) is passed over for the one before it, with one line on
+    stderr naming both; with `set_aside` (a run that trains on, and would write that step again)
+    it is moved into the run folder's checkpoints-corrupt/, kept for a look, never deleted.
 
     `abstract` is the seed-batched state's shapes and types, which the caller knows (a run's
     `Trainer.abstract_state()`), so that checkpointing needs nothing of the code that trains.
     """
-    update = latest_update(run_dir)
-    if update is None:
+    if latest_update(run_dir) is None:
         raise UsageError(f"no checkpoint in {Path(run_dir) / CHECKPOINTS}")
     expected = on_this_device(jax.eval_shape(_raw_keys, abstract))
-    try:
-        with _quiet(), _manager(run_dir, create=False) as manager:
-            require_same_arrays(manager.item_metadata(update), expected, "the config gives")
-            raw = manager.restore(update, args=ocp.args.StandardRestore(expected))
-    except Exception as e:  # orbax raises many types for unreadable or mismatched files
-        raise UsageError(
-            f"checkpoint {update} in {run_dir} is corrupt or does not match its config.yaml: {_first_line(e)}"
-        ) from None
+    with _quiet(), _manager(run_dir, create=False) as manager:
+        steps = sorted(manager.all_steps(), reverse=True)
+    failed: list[tuple[int, str]] = []
+    _drop_closed_loop_noise()  # before the first read: an unreadable one's noise starts while it fails
+    for update in steps:
+        try:
+            raw = _restore(run_dir, update, expected)
+            break
+        except _Mismatch as e:
+            if not failed:  # the newest is readable and of another shape: its config.yaml is the wrong one
+                raise UsageError(f"checkpoint {update} in {run_dir} does not match its config.yaml: {e}") from None
+            failed.append((update, str(e)))
+        except Exception as e:  # orbax raises many types for unreadable files
+            failed.append((update, _first_line(e)))
+    else:
+        newest, reason = failed[0]
+        raise UsageError(f"checkpoint {newest} in {run_dir} is corrupt or does not match its config.yaml: {reason}"
+                         + (f" (and the {len(failed) - 1} before it)" if len(failed) > 1 else ""))
+    if failed:
+        kept = ""
+        if set_aside:
+            aside = Path(run_dir) / CORRUPT
+            aside.mkdir(exist_ok=True)
+            for step, _ in failed:
+                (Path(run_dir) / CHECKPOINTS / str(step)).replace(aside / f"{step}-{time.strftime('%Y%m%d-%H%M%S')}")
+            kept = f"; set aside in {aside}"
+        newest, reason = failed[0]
+        print(f"warning: checkpoint {newest} in {Path(run_dir) / CHECKPOINTS} cannot be restored ({reason[:120]}); "
+              f"using checkpoint {update}, the newest that restores{kept}", file=sys.stderr)
     state = jax.tree.map(
         lambda a, r: jax.random.wrap_key_data(r) if jax.dtypes.issubdtype(a.dtype, jax.dtypes.prng_key) else r,
         abstract, raw,
     )
     return state, update
+
+
+class _Mismatch(ValueError):
+    """A checkpoint whose arrays are readable and of other shapes or types than expected."""
+
+
+def _restore(run_dir: Path, update: int, expected):
+    """The raw arrays of checkpoint `update`; _Mismatch where its metadata reads but differs."""
+    with _quiet(), _manager(run_dir, create=False) as manager:
+        stored = manager.item_metadata(update)
+        if not jax.tree.leaves(stored):  # no metadata: a step cut short, not another config's
+            raise ValueError("its metadata lists no arrays")
+        try:
+            require_same_arrays(stored, expected, "the config gives")
+        except ValueError as e:
+            raise _Mismatch(str(e)) from None
+        return manager.restore(update, args=ocp.args.StandardRestore(expected))

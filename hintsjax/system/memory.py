@@ -7,11 +7,13 @@ must be held at once:
 
 - training: a rollout's pictures (uint8), actions, rewards and values, for every seed a device
   holds;
-- evaluation: the picture of every seed's every episode, all stepped in one call;
+- evaluation: the picture of every seed's every episode, all stepped in one call, and its
+  policy's widest layer of activations;
 - a video: its frames, upscaled, on the host.
 
 The programs hold more (activations, copies, the physics), so a size under a bound may still not
-fit; XLA's memory analysis of a compiled group speaks for that (training.compilation.check_fits).
+fit; XLA's memory analysis of the compiled training program speaks for that before the first update
+(training.compilation.check_fits and check_run_fits).
 """
 
 from __future__ import annotations
@@ -72,14 +74,22 @@ def check_run(cfg: Any, seeds_per_device: int) -> None:
     check_episodes(cfg, seeds_per_device, cfg.eval_episodes, "eval_episodes")
 
 
+def episode_bytes(cfg: Any) -> int:
+    """What evaluating one episode holds at least at each step: a transition (`transition_bytes`)
+    and the activations of the policy's widest hidden layer (float32), which every episode computes
+    at once (pendulum's ppo_state asked for 446.5 GB for 10^8 episodes a seed, issue 62, where
+    the transitions counted 8 GB)."""
+    return transition_bytes(cfg) + 4 * max(cfg.ppo.hidden)
+
+
 def check_episodes(cfg: Any, seeds_per_device: int, episodes: int, key: str) -> None:
     """UsageError where evaluating `episodes` episodes of each of `seeds_per_device` seeds at
     once cannot fit on a device (`key` names the setting in the message)."""
-    have, one = device_bytes(), transition_bytes(cfg)  # at least an action, reward, value and flag: never 0
+    have, one = device_bytes(), episode_bytes(cfg)  # at least an action, reward, value and flag: never 0
     need = seeds_per_device * episodes * one
     if need > have:
         raise UsageError(f"{key}={episodes} cannot fit: evaluating {seeds_per_device} seeds x {episodes} episodes at once "
-                         f"holds at least {sized(need)} of pictures and actions, a device has {sized(have)} "
+                         f"holds at least {sized(need)} of pictures, actions and activations, a device has {sized(have)} "
                          f"(at most {have // (seeds_per_device * one)} episodes)")
 
 

@@ -2,8 +2,9 @@
 
 `compile_training` lowers a trainer's `init` and its chunk of updates for the seeds' layout over
 the devices (each device runs its share of the seeds), through the traced-program cache
-(hintsjax/system/program_cache.py), then compiles both; `check_fits` refuses a program that needs
-more memory than the device has (GroupTooBig, which the sweeps answer by splitting a group).
+(hintsjax/system/program_cache.py), then compiles both; `check_fits` refuses a group's program that
+needs more memory than the device has (GroupTooBig, which the sweeps answer by splitting a group),
+`check_run_fits` a run's (one line naming the settings to lower), both by XLA's memory analysis.
 """
 
 from __future__ import annotations
@@ -16,7 +17,8 @@ from typing import Any, Callable
 import jax
 import numpy as np
 
-from hintsjax.system import program_cache
+from hintsjax.system import memory, program_cache
+from hintsjax.system.errors import UsageError
 from hintsjax.system.devices import SeedLayout
 from hintsjax.algorithms.trainer import Trainer
 
@@ -58,13 +60,35 @@ class GroupTooBig(RuntimeError):
     """A group's compiled training program needs more memory than the device has."""
 
 
-def check_fits(compiled: Any, what: str) -> None:
-    """GroupTooBig if `compiled` (an XLA executable) needs more than 90 % of the device's memory
-    (only where the device reports both: GPUs do, the CPU does not)."""
-    stats = jax.devices()[0].memory_stats() or {}
+FITS = 0.9  # of a device's memory, the most a compiled program may need: the rest is the runtime's, other buffers'
+
+
+def needs(compiled: Any) -> tuple[int, int] | None:
+    """(bytes `compiled` (an XLA executable) needs by XLA's memory analysis: its arguments, outputs
+    and temporaries, less what outputs share with arguments; the bytes a device has: a GPU's
+    allocator limit, else the host's memory), or None where XLA gives no analysis."""
     analysis = compiled.memory_analysis()
-    if "bytes_limit" not in stats or analysis is None:
-        return
-    need = analysis.temp_size_in_bytes + analysis.argument_size_in_bytes + analysis.output_size_in_bytes
-    if need > 0.9 * stats["bytes_limit"]:
-        raise GroupTooBig(f"{what} needs {need / 2**30:.1f} GiB of the device's {stats['bytes_limit'] / 2**30:.1f} GiB")
+    if analysis is None:
+        return None
+    need = (analysis.temp_size_in_bytes + analysis.argument_size_in_bytes + analysis.output_size_in_bytes
+            - analysis.alias_size_in_bytes)
+    return need, memory.device_bytes()
+
+
+def check_fits(compiled: Any, what: str) -> None:
+    """GroupTooBig if `compiled` needs more than FITS of the device's memory (`needs`)."""
+    found = needs(compiled)
+    if found is not None and found[0] > FITS * found[1]:
+        raise GroupTooBig(f"{what} needs {found[0] / 2**30:.1f} GiB of the device's {found[1] / 2**30:.1f} GiB")
+
+
+def check_run_fits(compiled: Any, cfg: Any) -> None:
+    """UsageError naming the settings to lower if a run's compiled training program needs more than
+    FITS of the device's memory: found from the compiled program before the first update, not as
+    an out-of-memory error once it runs (the lower bounds of hintsjax.system.memory count less)."""
+    found = needs(compiled)
+    if found is not None and found[0] > FITS * found[1]:
+        raise UsageError(f"seeds={cfg.seeds} x ppo.batch_size={cfg.ppo.batch_size} cannot fit: training's compiled "
+                         f"program needs {memory.sized(found[0])} (XLA's memory analysis), a device has "
+                         f"{memory.sized(found[1])}; lower ppo.batch_size (with ppo.num_envs and ppo.minibatch_size), "
+                         "seeds or image_size")

@@ -19,10 +19,10 @@ from tqdm import tqdm
 from hintsjax.envs import physics
 from hintsjax.system import checkpoint, devices
 from hintsjax.system.devices import SeedLayout
-from hintsjax.system.errors import UsageError
+from hintsjax.system.errors import Terminated, UsageError
 from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms.trainer import Trainer
-from hintsjax.training.compilation import Compiled, check_fits, compile_training
+from hintsjax.training.compilation import Compiled, check_fits, check_run_fits, compile_training
 from hintsjax.training.guards import check_physics, finite_seeds, first_nonfinite, stop_nonfinite
 
 
@@ -87,8 +87,10 @@ def start(trainer: Trainer, cfg: RunConfig, run_dir: Path, resume: bool, label: 
     compiled = compile_training(trainer, keys, min(cfg.checkpoint_every, total), layout)
     if check_memory:
         check_fits(compiled.run_chunk, label)
+    else:
+        check_run_fits(compiled.run_chunk, cfg)
     if resume:  # a checkpoint holds the run's own seeds, restored onto one device: padded and placed as at the start
-        state, done = checkpoint.restore_latest(run_dir, trainer.abstract_state())
+        state, done = checkpoint.restore_latest(run_dir, trainer.abstract_state(), set_aside=True)
         state = layout.pad(state)
     else:
         state, done = compiled.init(keys), 0
@@ -167,11 +169,14 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
                 if pending is not None:  # something was trained (a run resumed at its end only evaluates)
                     report(*pending)
                     save(state, total, finite)
-            except KeyboardInterrupt:
-                # Ctrl-C: `state` (at `done`, its metrics logged) is saved when a checkpoint is due
-                # (one process only: several would have to agree); then the interrupt goes on up
-                if (jax.process_count() == 1 and finite is not None and written == done > last_saved
-                        and time.perf_counter() - saved >= cfg.checkpoint_seconds and not checkpoint.saving(run_dir)):
+            except KeyboardInterrupt as e:
+                # Ctrl-C: `state` (at `done`, its metrics logged) is saved when a checkpoint is due;
+                # SIGTERM (the job is going away: a time limit, preemption) saves it whenever it is
+                # newer than the last save, after that write (one process only: several would
+                # have to agree); then the interrupt goes on up
+                due = isinstance(e, Terminated) or (time.perf_counter() - saved >= cfg.checkpoint_seconds
+                                                    and not checkpoint.saving(run_dir))
+                if jax.process_count() == 1 and finite is not None and written == done > last_saved and due:
                     save(state, done, finite)
                 raise
     finally:

@@ -14,6 +14,7 @@ import numpy as np
 from hintsjax.envs import physics
 from hintsjax.system import checkpoint, devices
 from hintsjax.system.devices import SeedLayout
+from hintsjax.system.errors import sized_by
 from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms.group import cell_state, make_group, make_group_trainer
 from hintsjax.algorithms.registry import make_trainer
@@ -34,6 +35,11 @@ def evaluation_compiles_first(cfg: RunConfig) -> bool:
     earlier "Warp CUDA error 904", in 3 of 4 runs beside, none of 3 first
     (experiments/results/warp_det_off_h100.json)."""
     return cfg.physics == physics.WARP
+
+
+# The settings that size what an allocation failed for (hintsjax.system.errors.sized_by names them).
+TRAINING_SIZES = "ppo.batch_size (with ppo.num_envs and ppo.minibatch_size), seeds or image_size"
+EVALUATION_SIZES = "eval_episodes (or seeds)"
 
 
 class Unlogged:
@@ -68,17 +74,21 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
     with ThreadPoolExecutor(max_workers=1) as pool:
         evaluator = pool.submit(lambda: compile_evaluator(cfg, params_shapes(trainer, layout), variants[0],
                                                           cfg.eval_episodes, layout=layout))
-        if evaluation_compiles_first(cfg):
-            evaluator.result()
-        training = start(trainer, cfg, run_dir, resume, cfg.label)
-        log = run_log(run_dir, training.done)
-        try:
-            training = advance(training, cfg, run_dir, log.write, progress, cfg.label)
-        finally:
-            log.close()
-        compiled = evaluator.result()
-    evaluations, eval_compile = evaluate_variants(cfg, training.state.params, variants, cfg.eval_episodes,
-                                                  cfg.stochastic_eval, compiled, training.compiled.layout)
+        with sized_by(EVALUATION_SIZES):
+            if evaluation_compiles_first(cfg):
+                evaluator.result()
+        with sized_by(TRAINING_SIZES):
+            training = start(trainer, cfg, run_dir, resume, cfg.label)
+            log = run_log(run_dir, training.done)
+            try:
+                training = advance(training, cfg, run_dir, log.write, progress, cfg.label)
+            finally:
+                log.close()
+        with sized_by(EVALUATION_SIZES):
+            compiled = evaluator.result()
+    with sized_by(EVALUATION_SIZES):
+        evaluations, eval_compile = evaluate_variants(cfg, training.state.params, variants, cfg.eval_episodes,
+                                                      cfg.stochastic_eval, compiled, training.compiled.layout)
     check_physics(cfg, cfg.label)
     return finish(cfg, run_dir, training, evaluations, eval_compile)
 

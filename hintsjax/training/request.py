@@ -83,6 +83,16 @@ def request(values: dict[str, Any]) -> Request:
     return Request(cfg, run_dir, out_dir, name, longer=steps is not None)
 
 
+def rounded_budget(cfg: RunConfig) -> str | None:
+    """The one line saying what a budget that is not a whole number of updates was rounded down
+    to (`ppo.total_env_steps=300` with batches of 64 trains 256 steps a seed); None where it is."""
+    ppo = cfg.ppo
+    if ppo.total_env_steps % ppo.batch_size == 0:
+        return None
+    return (f"note: ppo.total_env_steps={ppo.total_env_steps} is not a multiple of ppo.batch_size={ppo.batch_size}: "
+            f"trains {ppo.num_updates} updates, {ppo.num_updates * ppo.batch_size} env steps a seed")
+
+
 def train_longer(cfg: RunConfig, steps: Any) -> RunConfig:
     """cfg with a budget of `steps` env steps a seed, for a resumed run to train on to; UsageError
     for a budget smaller than the one it was started with. The learning rates are constant, so
