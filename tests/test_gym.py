@@ -13,6 +13,7 @@ compiled once for the module (hintsjax.gym.core.programs caches them by settings
 
 from __future__ import annotations
 
+import importlib
 import warnings
 
 import gymnasium
@@ -189,7 +190,7 @@ def test_every_env_passes_check_env_and_its_vector_env_steps(name):
     2-env vector env equal to the single env's first step from the same seed."""
     if name.startswith("playground:"):
         pytest.importorskip("mujoco_playground")
-        import hintsjax.gym.playground  # noqa: F401  (registers Playground's tasks)
+        importlib.import_module("hintsjax.gym.playground")  # registers Playground's tasks
     gid = hintsjax.gym.env_id(name)
     single = gymnasium.make(gid)
     with warnings.catch_warnings():

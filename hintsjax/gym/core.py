@@ -133,13 +133,13 @@ class _Settings:
         self.programs = programs(env, self.hint, self.keys, image_size, physics)
         made = self.programs.env
         side = made.image_size
-        boxes = {
-            "pixels": spaces.Box(0, 255, (side, side, 3), np.uint8),
-            "state": spaces.Box(-np.inf, np.inf, (made.state_size,), np.float32),
-            "hint": spaces.Box(-np.inf, np.inf, (resolved.dim,), np.float32),
+        boxes = {  # made only for the keys observed: the state's width is traced (Env.state_size)
+            "pixels": lambda: spaces.Box(0, 255, (side, side, 3), np.uint8),
+            "state": lambda: spaces.Box(-np.inf, np.inf, (made.state_size,), np.float32),
+            "hint": lambda: spaces.Box(-np.inf, np.inf, (resolved.dim,), np.float32),
         }
-        self.observation_space = (spaces.Dict({k: boxes[k] for k in self.keys}) if self.as_dict
-                                  else boxes[self.keys[0]])
+        self.observation_space = (spaces.Dict({k: boxes[k]() for k in self.keys}) if self.as_dict
+                                  else boxes[self.keys[0]]())
         low, high = (np.asarray(x, np.float32) for x in made.action_range(self.params))
         self.action_space = spaces.Box(low, high, (made.action_size,), np.float32)
 
@@ -155,12 +155,18 @@ def _host(tree: Any) -> Any:
 
 
 def _seeds(seed: int | Sequence[int] | None, num_envs: int) -> list[int] | None:
+    """Each env's seed: s + i for a seed s, a list as given (one per env), None for none."""
     if seed is None:
         return None
-    seeds = [seed + i for i in range(num_envs)] if isinstance(seed, (int, np.integer)) else [int(s) for s in seed]
-    if len(seeds) != num_envs:
-        raise ValueError(f"seed: {len(seeds)} seeds for {num_envs} envs")
+    seeds = [int(seed) + i for i in range(num_envs)] if isinstance(seed, (int, np.integer)) else [int(s) for s in seed]
+    if len(seeds) != num_envs or min(seeds) < 0:
+        raise ValueError(f"seed={seed!r}: give one non-negative int, or a list of {num_envs}")
     return seeds
+
+
+def _no_options(options: dict[str, Any] | None) -> None:
+    if options:
+        raise ValueError(f"reset options {sorted(options)} are not supported: hintsjax's envs take none")
 
 
 class VectorEnv(gymnasium.vector.VectorEnv):
@@ -191,8 +197,7 @@ class VectorEnv(gymnasium.vector.VectorEnv):
 
     def reset(self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None):
         """obs of N fresh episodes, {}; seed s (or a list of N seeds) seeds env i with s + i."""
-        if options:
-            raise ValueError(f"reset options {sorted(options)} are not supported; the only option is none")
+        _no_options(options)
         super().reset(seed=seed if isinstance(seed, (int, np.integer)) or seed is None else None)
         seeds = _seeds(seed, self.num_envs)
         if seeds is None and self._keys is None:
@@ -240,6 +245,8 @@ class SingleEnv(gymnasium.Env):
         self._key = self._state = None
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """(obs, {}) of a fresh episode; a seed restarts the env's random stream, None goes on with it."""
+        _no_options(options)
         super().reset(seed=seed)
         if seed is None and self._key is None:
             seed = int(self.np_random.integers(0, 2**63))
@@ -250,6 +257,7 @@ class SingleEnv(gymnasium.Env):
         return self.settings.to_numpy(_host(ts.obs)), {}
 
     def step(self, action):
+        """(obs, reward, terminated, truncated, {}) after `action` (float32[A]; clipped by the env)."""
         if self._key is None:
             raise gymnasium.error.ResetNeeded("call reset() before step()")
         action = jnp.asarray(np.asarray(action, np.float32).reshape(self.action_space.shape))
@@ -260,6 +268,7 @@ class SingleEnv(gymnasium.Env):
         return self.settings.to_numpy(obs), float(reward), bool(terminated), bool(truncated), {}
 
     def render(self):
+        """uint8[S, S, 3] picture of the current state (render_mode="rgb_array"), else None."""
         if self.render_mode is None or self._state is None:
             return None
         return np.array(self.settings.programs.picture(self._state, self.settings.params))
