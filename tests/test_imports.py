@@ -15,7 +15,7 @@ PACKAGES = {"hintsjax": ROOT / "hintsjax", "hintsjax.envs": ROOT / "envs"}  # py
 # The sub-packages, lowest first: a module may import the modules of its own sub-package and of
 # those before it here, never of one after it. "hintsjax" stands for the package's own modules:
 # its __init__ and the commands (hintsjax/<command>.py, run as python -m hintsjax.<command>).
-LAYERS = ("hintsjax.envs", "hintsjax.system", "hintsjax.models", "hintsjax.settings", "hintsjax.cli",
+LAYERS = ("hintsjax.envs", "hintsjax.gym", "hintsjax.system", "hintsjax.models", "hintsjax.settings", "hintsjax.cli",
           "hintsjax.algorithms", "hintsjax.evaluation", "hintsjax.training", "hintsjax.hints", "hintsjax",
           "hintsjax.reproduce")
 
