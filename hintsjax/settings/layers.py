@@ -13,6 +13,7 @@ import yaml
 
 from hintsjax import envs
 from hintsjax.envs.errors import ChoiceError, choose
+from hintsjax.system import paths
 from hintsjax.system.errors import UsageError, require_int32
 from hintsjax.settings.config import RunConfig, SECTIONS
 from hintsjax.settings.env_defaults import ENV_DEFAULTS
@@ -136,9 +137,8 @@ def to_dict(cfg: RunConfig) -> dict[str, Any]:
 def save_run_config(run_dir: Path, cfg: RunConfig) -> None:
     """Write the resolved config into a run folder (what load_run_config reads back), whole or
     not at all (a resumed run that trains longer rewrites it)."""
-    part = Path(run_dir) / f".{CONFIG_YAML}.part"
-    part.write_text(yaml.safe_dump(to_dict(cfg), sort_keys=False))
-    part.replace(Path(run_dir) / CONFIG_YAML)
+    text = yaml.safe_dump(to_dict(cfg), sort_keys=False)
+    paths.write_whole(Path(run_dir) / CONFIG_YAML, lambda part: part.write_text(text))
 
 
 # Settings added since runs were first saved whose absence means their default (a run saved before

@@ -82,6 +82,11 @@ def check_fits(compiled: Any, what: str) -> None:
         raise GroupTooBig(f"{what} needs {found[0] / 2**30:.1f} GiB of the device's {found[1] / 2**30:.1f} GiB")
 
 
+# The settings that size a run's training programs: what a run that cannot fit is told to lower
+# (here, and where an allocation fails anyway: hintsjax.training.pipeline).
+TRAINING_SIZES = "ppo.batch_size (with ppo.num_envs and ppo.minibatch_size), seeds or image_size"
+
+
 def check_run_fits(compiled: Any, cfg: Any) -> None:
     """UsageError naming the settings to lower if a run's compiled training program needs more than
     FITS of the device's memory: found from the compiled program before the first update, not as
@@ -90,5 +95,4 @@ def check_run_fits(compiled: Any, cfg: Any) -> None:
     if found is not None and found[0] > FITS * found[1]:
         raise UsageError(f"seeds={cfg.seeds} x ppo.batch_size={cfg.ppo.batch_size} cannot fit: training's compiled "
                          f"program needs {memory.sized(found[0])} (XLA's memory analysis), a device has "
-                         f"{memory.sized(found[1])}; lower ppo.batch_size (with ppo.num_envs and ppo.minibatch_size), "
-                         "seeds or image_size")
+                         f"{memory.sized(found[1])}; lower {TRAINING_SIZES}")

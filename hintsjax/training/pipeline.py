@@ -20,6 +20,7 @@ from hintsjax.algorithms.group import cell_state, make_group, make_group_trainer
 from hintsjax.algorithms.registry import make_trainer
 from hintsjax.algorithms.trainer import Trainer
 from hintsjax.evaluation.evaluator import compile_evaluator, evaluate_group, evaluate_variants
+from hintsjax.training.compilation import TRAINING_SIZES
 from hintsjax.training.guards import check_physics
 from hintsjax.training.loop import advance, seed_layout, start
 from hintsjax.training.outputs import finish
@@ -37,8 +38,8 @@ def evaluation_compiles_first(cfg: RunConfig) -> bool:
     return cfg.physics == physics.WARP
 
 
-# The settings that size what an allocation failed for (hintsjax.system.errors.sized_by names them).
-TRAINING_SIZES = "ppo.batch_size (with ppo.num_envs and ppo.minibatch_size), seeds or image_size"
+# The settings that size evaluation, named where an allocation fails (hintsjax.system.errors.sized_by);
+# training's are compilation.TRAINING_SIZES.
 EVALUATION_SIZES = "eval_episodes (or seeds)"
 
 
