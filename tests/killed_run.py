@@ -27,6 +27,24 @@ from hintsjax import run
 from hintsjax.training import loop, pipeline
 
 
+def stopped_at_the_first_report(stop, what: str) -> None:
+    """Run the command's values (argv[2]), calling `stop` once the first chunk's metrics are logged
+    (loop.advance's report calls check_physics then); exit with the run's status (never 0)."""
+    real_check, checks = loop.check_physics, []
+
+    def check_then_stop(*args):
+        real_check(*args)
+        checks.append(1)
+        if len(checks) == 1:
+            stop()
+
+    loop.check_physics = check_then_stop
+    status = run.main_from_values(json.loads(sys.argv[2]))
+    if status == 0:
+        sys.exit(f"the run ended without being {what} (the hook ran {len(checks)} time(s))")
+    sys.exit(status)
+
+
 def main() -> None:
     mode = sys.argv[1]
     real, saves = checkpoint.save, []
@@ -40,42 +58,22 @@ def main() -> None:
         if mode == "during" and len(saves) == 2:
             os.kill(os.getpid(), signal.SIGKILL)
 
-    if mode == "terminate":
-        real_check, checks = loop.check_physics, []
-
-        def check_then_terminate(*args):  # loop.advance's report calls it once a chunk's metrics are logged
-            real_check(*args)
-            checks.append(1)
-            if len(checks) == 1:
-                os.kill(os.getpid(), signal.SIGTERM)
-
-        loop.check_physics = check_then_terminate
-        status = run.main_from_values(json.loads(sys.argv[2]))
-        if status == 0:
-            sys.exit(f"the run ended without being terminated (the hook ran {len(checks)} time(s))")
-        sys.exit(status)
+    if mode == "terminate":  # a real kill, as a scheduler's
+        stopped_at_the_first_report(lambda: os.kill(os.getpid(), signal.SIGTERM), "terminated")
     if mode == "interrupt":
         # Python raises KeyboardInterrupt on SIGINT only if the signal was not ignored when it
         # started (a test runner's child may inherit SIG_IGN; a terminal's never does), and a
         # library may take the handler over: set Python's own, and check it is still there
         signal.signal(signal.SIGINT, signal.default_int_handler)
-        real_check, checks = loop.check_physics, []
 
-        def check_then_interrupt(*args):  # loop.advance's report calls it once a chunk's metrics are logged
-            real_check(*args)
-            checks.append(1)
-            if len(checks) == 1:
-                handler = signal.getsignal(signal.SIGINT)
-                if handler is not signal.default_int_handler:
-                    sys.exit(f"SIGINT's handler at the first report is {handler!r}, not Python's own")
-                # As Ctrl-C, but raised in this (the main) thread, so it takes effect here and now
-                signal.raise_signal(signal.SIGINT)
+        def interrupt() -> None:
+            handler = signal.getsignal(signal.SIGINT)
+            if handler is not signal.default_int_handler:
+                sys.exit(f"SIGINT's handler at the first report is {handler!r}, not Python's own")
+            # As Ctrl-C, but raised in this (the main) thread, so it takes effect here and now
+            signal.raise_signal(signal.SIGINT)
 
-        loop.check_physics = check_then_interrupt
-        status = run.main_from_values(json.loads(sys.argv[2]))
-        if status == 0:
-            sys.exit(f"the run ended without being interrupted (the hook ran {len(checks)} time(s))")
-        sys.exit(status)
+        stopped_at_the_first_report(interrupt, "interrupted")
     checkpoint.save = save_then_die
     if mode == "group":
         from test_group import killed_group

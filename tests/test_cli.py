@@ -189,45 +189,61 @@ def logged_returns(run_dir: Path) -> list[tuple[str, str, str]]:
         return [(r["update"], r["seed"], r["episode_return"]) for r in csv.DictReader(f)]
 
 
+def killed_run(mode: str, values: dict, cwd: Path) -> subprocess.CompletedProcess:
+    """tests/killed_run.py in `mode` on a run of `values`, in a process of its own."""
+    return subprocess.run([sys.executable, str(Path(__file__).parent / "killed_run.py"), mode, json.dumps(values)],
+                          cwd=cwd, capture_output=True, text=True, timeout=300)
+
+
+def assert_ends_as(folder: Path, finished_run: Path) -> None:
+    """The run in `folder` ended with `finished_run`'s state, every array equal bit for bit, and
+    logged its returns."""
+    for a, b in zip(state_arrays(folder), state_arrays(finished_run), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert logged_returns(folder) == logged_returns(finished_run)
+
+
+def assert_resumes_to_the_uninterrupted_end(folder: Path, finished_run: Path, cwd: Path) -> None:
+    """`python -m hintsjax.run resume=folder` succeeds and ends as the uninterrupted run did."""
+    resumed = cli(f"resume={folder}", cwd=cwd)
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    assert_ends_as(folder, finished_run)
+
+
 @pytest.mark.parametrize("when", [pytest.param("after", marks=pytest.mark.slow), "during"])  # after: 27 s, in the slow tier
 def test_a_run_killed_with_sigkill_resumes_to_the_uninterrupted_end_bit_for_bit(when, finished_run, tmp_path):
     """SIGKILL once the first checkpoint is written (`after`), or while the second is being written
     in the background (`during`): the resumed run (the real command) ends with the uninterrupted
     run's state, every array equal bit for bit, and logs the same returns; a checkpoint the kill
     cut short is never read."""
-    values = tiny_values(out_dir=str(tmp_path), name="killed")
-    killed = subprocess.run([sys.executable, str(Path(__file__).parent / "killed_run.py"), when, json.dumps(values)],
-                            cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    killed = killed_run(when, tiny_values(out_dir=str(tmp_path), name="killed"), tmp_path)
     assert killed.returncode == -9, killed.stderr[-2000:]
     folder = tmp_path / "killed"
     # after: the first checkpoint (update 2); during: 2, or 4 where the writer finished before the kill
     assert checkpoint.latest_update(folder) in ((2,) if when == "after" else (2, 4))
-    resumed = cli(f"resume={folder}", cwd=tmp_path)
-    assert resumed.returncode == 0, resumed.stderr[-2000:]
-    for a, b in zip(state_arrays(folder), state_arrays(finished_run), strict=True):
-        np.testing.assert_array_equal(a, b)
-    assert logged_returns(folder) == logged_returns(finished_run)
+    assert_resumes_to_the_uninterrupted_end(folder, finished_run, tmp_path)
 
 
-def test_ctrl_c_saves_the_due_checkpoint_says_how_to_go_on_and_resumes_bit_for_bit(finished_run, tmp_path):
-    """SIGINT (Ctrl-C) once the first chunk's metrics are logged: a checkpoint is due
-    (checkpoint_seconds=0), so that state is saved; the run prints one line naming it and the
-    command that goes on, no traceback, and exits 130. Resumed, it ends as the uninterrupted run
-    did, every array equal bit for bit, with the same logged returns."""
-    values = tiny_values(out_dir=str(tmp_path), name="interrupted")
-    out = subprocess.run([sys.executable, str(Path(__file__).parent / "killed_run.py"), "interrupt", json.dumps(values)],
-                         cwd=tmp_path, capture_output=True, text=True, timeout=300)
-    folder = tmp_path / "interrupted"
-    assert out.returncode == errors.INTERRUPTED == 130, out.stderr[-2000:]
+@pytest.mark.parametrize("mode, status, said, values", [
+    ("interrupt", errors.INTERRUPTED, "interrupted", {}),
+    # in the slow tier: SIGTERM in-process is the default tier's (the test below)
+    pytest.param("terminate", errors.TERMINATED, "terminated (SIGTERM)", {"checkpoint_seconds": 1e9}, marks=pytest.mark.slow),
+])
+def test_a_stopped_run_saves_says_how_to_go_on_and_resumes_bit_for_bit(mode, status, said, values, finished_run, tmp_path):
+    """SIGINT (Ctrl-C, `interrupt`) once the first chunk's metrics are logged: a checkpoint is due
+    (checkpoint_seconds=0), so that state is saved; SIGTERM (`terminate`: a real kill of the run's
+    own process, as a scheduler's) saves it though none is due (checkpoint_seconds=1e9). Either
+    way the run prints one line naming the checkpoint and the command that goes on, no traceback,
+    and exits 130 (143). Resumed by the real command, it ends as the uninterrupted run did, every
+    array equal bit for bit, with the same logged returns."""
+    out = killed_run(mode, tiny_values(out_dir=str(tmp_path), name="stopped", **values), tmp_path)
+    folder = tmp_path / "stopped"
+    assert out.returncode == status == {"interrupt": 130, "terminate": 143}[mode], out.stderr[-2000:]
     assert "Traceback" not in out.stderr + out.stdout
-    assert out.stderr.strip().splitlines()[-1] == (f"interrupted; checkpoint at update 2; "
+    assert out.stderr.strip().splitlines()[-1] == (f"{said}; checkpoint at update 2; "
                                                    f"go on with: python -m hintsjax.run resume={folder}")
     assert checkpoint.latest_update(folder) == 2 and not (folder / "eval.json").exists()
-    resumed = cli(f"resume={folder}", cwd=tmp_path)
-    assert resumed.returncode == 0, resumed.stderr[-2000:]
-    for a, b in zip(state_arrays(folder), state_arrays(finished_run), strict=True):
-        np.testing.assert_array_equal(a, b)
-    assert logged_returns(folder) == logged_returns(finished_run)
+    assert_resumes_to_the_uninterrupted_end(folder, finished_run, tmp_path)
 
 
 def test_sigterm_saves_the_newest_logged_state_the_uninterrupted_runs_bit_for_bit(finished_run, tmp_path, monkeypatch,
@@ -264,25 +280,6 @@ def test_sigterm_saves_the_newest_logged_state_the_uninterrupted_runs_bit_for_bi
     for a, b in zip(state_arrays(folder), state_arrays(at_two), strict=True):
         np.testing.assert_array_equal(a, b)
     assert logged_returns(folder) == [r for r in logged_returns(finished_run) if int(r[0]) <= 2]
-
-
-@pytest.mark.slow
-def test_sigterm_through_the_command_line_resumes_bit_for_bit(finished_run, tmp_path):
-    """The test above in a process of its own (tests/killed_run.py: a real kill of itself, as a
-    scheduler's), resumed by the real command: exit 143, the one line, bit-for-bit end."""
-    values = tiny_values(out_dir=str(tmp_path), name="terminated", checkpoint_seconds=1e9)
-    out = subprocess.run([sys.executable, str(Path(__file__).parent / "killed_run.py"), "terminate", json.dumps(values)],
-                         cwd=tmp_path, capture_output=True, text=True, timeout=300)
-    folder = tmp_path / "terminated"
-    assert out.returncode == errors.TERMINATED == 143, out.stderr[-2000:]
-    assert "Traceback" not in out.stderr + out.stdout
-    assert out.stderr.strip().splitlines()[-1] == (f"terminated (SIGTERM); checkpoint at update 2; "
-                                                   f"go on with: python -m hintsjax.run resume={folder}")
-    resumed = cli(f"resume={folder}", cwd=tmp_path)
-    assert resumed.returncode == 0, resumed.stderr[-2000:]
-    for a, b in zip(state_arrays(folder), state_arrays(finished_run), strict=True):
-        np.testing.assert_array_equal(a, b)
-    assert logged_returns(folder) == logged_returns(finished_run)
 
 
 def test_a_sweep_is_expanded_in_hydras_order_with_every_value_checked_first():
@@ -615,9 +612,7 @@ def test_a_corrupt_newest_checkpoint_falls_back_to_the_one_before_and_resumes_bi
     assert not (copy / "checkpoints" / "99").exists()
     assert f"using checkpoint 2, the newest that restores; set aside in {copy / checkpoint.CORRUPT}" in capsys.readouterr().err
     assert [p.name.split("-")[0] for p in (copy / checkpoint.CORRUPT).iterdir()] == ["4"]
-    for a, b in zip(state_arrays(copy), state_arrays(finished_run), strict=True):
-        np.testing.assert_array_equal(a, b)
-    assert logged_returns(copy) == logged_returns(finished_run)
+    assert_ends_as(copy, finished_run)
 
 
 def test_a_stray_empty_checkpoint_folder_is_no_checkpoint(finished_run, tmp_path):
@@ -662,9 +657,7 @@ def test_a_resumed_run_trains_longer_to_the_longer_runs_end_bit_for_bit(finished
     longer = cli(f"resume={short}", "ppo.total_env_steps=256", cwd=tmp_path)
     assert longer.returncode == 0, longer.stderr[-2000:]
     assert layers.load_run_config(short) == layers.load_run_config(finished_run)
-    for a, b in zip(state_arrays(short), state_arrays(finished_run), strict=True):
-        np.testing.assert_array_equal(a, b)
-    assert logged_returns(short) == logged_returns(finished_run)
+    assert_ends_as(short, finished_run)
     assert json.loads((short / "eval.json").read_text())["evaluations"] == json.loads((finished_run / "eval.json").read_text())["evaluations"]
 
 
