@@ -101,13 +101,13 @@ def kernel_table(trace_dir: Path, top: int) -> dict:
     span = intervals[-1][1] - intervals[0][0]
     rows = [{"name": n[:120], "ms": t / 1e3, "count": c} for n, (t, c) in sorted(by_name.items(), key=lambda kv: -kv[1][0])]
     return {"span_ms": span / 1e3, "busy_ms": busy / 1e3, "busy_fraction": busy / span, "events": len(kernels),
-            "top": rows[:top], "all": rows}
+            "top": rows[:top], "kinds": kinds(rows)}
 
 
-def kinds(table: dict) -> dict:
-    """The kernel table's time summed by kind of kernel (a guess from XLA's and Warp's names)."""
+def kinds(rows: list[dict]) -> dict:
+    """The kernel table's rows' time summed by kind of kernel (a guess from XLA's and Warp's names)."""
     out: dict[str, list[float]] = defaultdict(lambda: [0.0, 0])
-    for row in table.get("all", []):
+    for row in rows:
         name = row["name"]
         kind = ("physics (Warp)" if "cuda_kernel_forward" in name
                 else "patch copies (concatenate)" if "concatenate" in name
@@ -154,8 +154,6 @@ def one_learn(args: argparse.Namespace, cfg) -> dict:
         with jax.profiler.trace(folder, create_perfetto_trace=True):
             jax.block_until_ready(compiled(state, traj, last, traj.reward, keys))
         table = kernel_table(Path(folder), args.top)
-    table["kinds"] = kinds(table)
-    table.pop("all", None)
     ppo = cfg.ppo
     steps = ppo.epochs * ppo.num_minibatches
     return {"variant": args.variant, "part": "learn", "env": cfg.env, "seeds": cfg.seeds,
@@ -199,8 +197,6 @@ def one(args: argparse.Namespace) -> dict:
         with jax.profiler.trace(folder, create_perfetto_trace=True):
             state, _ = jax.block_until_ready(compiled.run_chunk(state, n))
         table = kernel_table(Path(folder), args.top)
-    table["kinds"] = kinds(table)
-    table.pop("all", None)
     per_update = min(times) / args.updates
     return {"variant": args.variant, "physics": cfg.physics, "unroll": VARIANTS[args.variant][1], "xla_flags": os.environ.get("XLA_FLAGS", ""), "device": jax.devices()[0].device_kind,
             "compile_s": compiled.seconds, "digest": digest, "update_ms": 1e3 * per_update,
