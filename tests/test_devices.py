@@ -91,10 +91,11 @@ def _processes(folder: Path, count: int, devices_each: int, *args: str, tries: i
     """tests/process_run.py in `count` processes joined into one run, each with `devices_each` CPU devices.
 
     A run that hangs (each process dumps its stacks and exits after process_run.HUNG_SECONDS) is
-    started once more, on a fresh coordinator port, and the hang is reported as a warning with
-    the stacks: CI once saw the two-process resume hang past 600 s (2026-11-27) where hundreds of
-    runs here did not, so its cause is in the stacks the next one prints. Wrong results, a crash
-    or a second hang fail."""
+    started once more, on a fresh coordinator port and from an empty folder (a resume from the
+    same checkpoint), and the hang is reported as a warning with the stacks: CI saw two hangs
+    where hundreds of runs here had none, the second (2026-11-27) with both processes in a
+    checkpoint's eager per-leaf slicing, which SeedLayout.crop now does in one program. Wrong
+    results, a crash or a second hang fail."""
     with socket.socket() as s:
         s.bind(("localhost", 0))
         port = s.getsockname()[1]
@@ -118,6 +119,8 @@ def _processes(folder: Path, count: int, devices_each: int, *args: str, tries: i
     if tries > 1 and any(p.returncode != 0 for p in procs) and any(HUNG_MARK in t for t in texts):
         warnings.warn(f"a {count}-process run hung and was started again; its stacks:\n" +
                       "\n".join(t[-6000:] for t in texts))
+        if "--resume" not in args:
+            shutil.rmtree(folder)  # the hung run's folder: the retry makes it again, not run-1 beside it
         return _processes(folder, count, devices_each, *args, tries=tries - 1)
     assert all(p.returncode == 0 for p in procs), "\n".join(t[-6000:] for t in texts)
 

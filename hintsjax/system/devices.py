@@ -16,6 +16,7 @@ differently: a seed's numbers then agree statistically, not bit for bit.
 
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import dataclass
 from typing import Any, Callable
@@ -71,6 +72,12 @@ def agree_that(flag: bool) -> bool:
     return bool(multihost_utils.broadcast_one_to_all(np.asarray(flag)))
 
 
+@functools.lru_cache(maxsize=None)
+def _first_seeds(seeds: int, everywhere: NamedSharding) -> Callable[[Any], Any]:
+    """A compiled program: a tree's first `seeds` of each leaf, a whole copy on every device."""
+    return jax.jit(lambda tree: jax.tree.map(lambda x: x[:seeds], tree), out_shardings=everywhere)
+
+
 def _place(x: Any, sharding: NamedSharding) -> jax.Array:
     """`x` (the same value on every process) as a global array split by `sharding`."""
     if jax.process_count() == 1:
@@ -124,8 +131,16 @@ class SeedLayout:
         return tree if self.sharding is None else jax.tree.map(lambda x: _place(x, self.sharding), tree)
 
     def crop(self, tree: Any) -> Any:
-        """[padded, ...] leaves -> their first S seeds (the run's own)."""
-        return tree if self.padded == self.seeds else jax.tree.map(lambda x: x[: self.seeds], tree)
+        """[padded, ...] leaves -> their first S seeds (the run's own), on every device.
+
+        One compiled program for the whole tree, not an eager slice a leaf: over several
+        processes each eager op is a program that every process must run in step, and a
+        checkpoint's hundreds of them hung two processes on 2 cores in CI (2026-11-27)."""
+        if self.padded == self.seeds:
+            return tree
+        if self.sharding is None:
+            return jax.tree.map(lambda x: x[: self.seeds], tree)
+        return _first_seeds(self.seeds, NamedSharding(self.mesh, PartitionSpec()))(tree)
 
     def spread(self, fn: Callable[..., Any], batched: int, shared: int = 0) -> Callable[..., Any]:
         """`fn(*batched_args, *shared_args)`, a function of seed-batched arrays (and of `shared`
@@ -142,8 +157,10 @@ class SeedLayout:
         """Leaves as numpy arrays on this host, the run's S seeds of each (gathered from every
         process's devices when they are not all this process's)."""
         def host(x: Any) -> np.ndarray:
-            if isinstance(x, jax.Array) and not x.is_fully_addressable:
-                x = multihost_utils.process_allgather(x, tiled=True)
+            if isinstance(x, jax.Array) and not x.is_fully_addressable:  # replicated by `crop`: any copy
+                x = x.addressable_data(0)
             return np.asarray(x)[: self.seeds]
 
+        if jax.process_count() > 1:  # one program gathers the whole tree (see `crop`)
+            tree = _first_seeds(self.seeds, NamedSharding(self.mesh, PartitionSpec()))(tree)
         return jax.tree.map(host, tree)
