@@ -189,9 +189,10 @@ def bench_train(name: str, seeds: int, updates: int, overrides: dict, agent: str
 
 def update_parts(cfg, state) -> dict:
     """Seconds of one seed-vmapped PPO update's parts: the rollout (env steps with pictures and
-    the policy's actions), the learning (GAE and the epochs of minibatch steps), and the env steps
-    alone without their pictures (physics, reward and hint under random actions, as `bench_env`
-    times them)."""
+    the policy's actions), the learning (GAE and the epochs of minibatch steps), and the rollout's
+    env steps under random actions as `bench_env` times them, with their pictures and without
+    (physics, reward and hint): the rollout less the first is the policy's share, the first less
+    the second the pictures'. Every part steps with the run's physics (`cfg.physics`)."""
     from hintsjax.algorithms.ppo import make_ppo
 
     parts = make_ppo(cfg)
@@ -203,7 +204,9 @@ def update_parts(cfg, state) -> dict:
     return {
         "rollout": best_time(lambda s, k: rollout(s, k)[2], state, key),
         "learn": best_time(lambda s: learn(s, traj, last, traj.reward, key)[1]["approx_kl"], state),
-        "env_steps_only": width * steps / bench_env(cfg.env, width, steps, pixels=False)["env_steps_per_s"],
+        "env_steps_with_pictures": width * steps / bench_env(cfg.env, width, steps, physics=cfg.physics)["env_steps_per_s"],
+        "env_steps_only": width * steps / bench_env(cfg.env, width, steps, pixels=False,
+                                                    physics=cfg.physics)["env_steps_per_s"],
     }
 
 
@@ -247,10 +250,10 @@ def main() -> None:
     q = args.quick
     if args.parts:
         for name in names:
-            cfg = run_config({"env": name, "agent": "hints", "scheme": "fc", "seeds": 5})
+            cfg = run_config({"env": name, "agent": "hints", "scheme": "fc", "seeds": 5, "physics": args.physics})
             state = jax.jit(jax.vmap(make_trainer(cfg).init))(cfg.seed_keys())
             parts = update_parts(cfg, state)
-            print(f"update  {name:>9} 5 seeds {cfg.ppo.num_envs} envs x {cfg.ppo.rollout_length} steps: "
+            print(f"update  {name:>9} 5 seeds {cfg.ppo.num_envs} envs x {cfg.ppo.rollout_length} steps, {cfg.physics}: "
                   + ", ".join(f"{k} {1e3 * v:.1f} ms" for k, v in parts.items()), flush=True)
         return
     compilation_cache.enable(compilation_cache.folder(True))  # as the command line: a second bench compiles little
