@@ -19,10 +19,11 @@ from typing import Any
 import hydra
 from omegaconf import DictConfig, OmegaConf
 
-from hintsjax.system import checkpoint, compilation_cache, devices, paths, xla_flags
+from hintsjax.system import checkpoint, compilation_cache, devices, paths, requeue, xla_flags
 from hintsjax.system.errors import (INTERRUPTED, TERMINATED, Terminated, UsageError, command, fail, machines, report_bug,
                                     report_machine, sigterm_as_interrupt)
-from hintsjax.settings.layers import CONFIG_YAML, save_run_config
+from hintsjax.settings.config import RunConfig
+from hintsjax.settings.layers import CONFIG_YAML, load_run_config, save_run_config
 from hintsjax.cli import choices, overrides
 from hintsjax.training.guards import NONFINITE_JSON, NonFiniteError
 from hintsjax.training.outputs import new_run_dir
@@ -34,9 +35,22 @@ from hintsjax.training.request import request, rounded_budget
 def main_from_values(values: dict[str, Any]) -> int:
     """Run from plain config values (what Hydra resolved); returns the exit status. SIGTERM (a
     cluster's time limit or preemption) is handled as Ctrl-C is, and always saves the newest state
-    whose metrics are logged."""
-    with sigterm_as_interrupt():
+    whose metrics are logged; so is submitit's preemption signal, after which submitit requeues
+    the job (system/requeue.py)."""
+    with sigterm_as_interrupt(), requeue.preemption_as_interrupt():
         return _run(values)
+
+
+def requeued_run(out_dir: str, cfg: RunConfig) -> Path | None:
+    """The folder in out_dir that this submitit job made for `cfg` before it was requeued (its
+    job.json names the job and its config.yaml is cfg), or None: a run to go on with."""
+    for folder in requeue.folders_of_this_job(out_dir):
+        try:
+            if load_run_config(folder, complete=True) == cfg:
+                return folder
+        except UsageError:  # its config.yaml is unreadable or foreign: not this run's
+            continue
+    return None
 
 
 def _run(values: dict[str, Any]) -> int:
@@ -51,21 +65,29 @@ def _run(values: dict[str, Any]) -> int:
         print(note, file=sys.stderr)
     compilation_cache.enable(compilation_cache.folder(values.get("compilation_cache")))
     existed = paths.existing_part(asked.out_dir)  # what stays if the run goes again before its first update
+    made = resume = False
     try:
         if run_dir is None:
             if devices.is_main():
-                run_dir = new_run_dir(asked.out_dir, asked.name, cfg)
-                save_run_config(run_dir, cfg)
-            run_dir = Path(devices.agree(str(run_dir)))  # the folder process 0 made, on every process
-        elif asked.longer and devices.is_main():
-            save_run_config(run_dir, cfg)  # the budget it now trains to
+                run_dir = requeued_run(asked.out_dir, cfg)
+                if run_dir is None:
+                    run_dir, made = new_run_dir(asked.out_dir, asked.name, cfg), True
+                    save_run_config(run_dir, cfg)
+                    requeue.record(run_dir)
+                else:
+                    print(f"requeued job {requeue.job_id()}: goes on in {run_dir}", file=sys.stderr)
+            run_dir = Path(devices.agree(str(run_dir)))  # the folder process 0 made (or found), on every process
+            resume = checkpoint.latest_update(run_dir) is not None  # a requeued run's newest checkpoint
+        else:
+            resume = True
+            if asked.longer and devices.is_main():
+                save_run_config(run_dir, cfg)  # the budget it now trains to
     except Exception as e:  # noqa: BLE001  the boundary: a full disk or read-only folder, else a bug
         return report_machine(e, run_dir or asked.out_dir) if machines(e) else report_bug(e, run_dir)
     try:
-        train(cfg, run_dir, resume=asked.run_dir is not None)
+        train(cfg, run_dir, resume=resume)
     except UsageError as e:  # found before the first update (a program that cannot fit): a new folder goes again
-        if (asked.run_dir is None and devices.is_main() and run_dir.is_dir()
-                and {p.name for p in run_dir.iterdir()} <= {CONFIG_YAML}):
+        if made and run_dir.is_dir() and {p.name for p in run_dir.iterdir()} <= {CONFIG_YAML, requeue.JOB_JSON}:
             paths.unmake(run_dir, existed)
         return fail(e)
     except checkpoint.CheckpointWriteError as e:  # the newest complete checkpoint stays; resume from it
@@ -73,9 +95,13 @@ def _run(values: dict[str, Any]) -> int:
         return 1
     except KeyboardInterrupt as e:  # Ctrl-C (SIGTERM): advance saved a checkpoint if one was due, and its writes are done
         good = checkpoint.latest_update(run_dir)
+        saved = f"checkpoint at update {good}" if good else "no checkpoint yet"
+        if isinstance(e, requeue.Preempted):  # submitit's signal: its own handler requeues the job and exits
+            print(f"preempted ({e.name}); {saved}; submitit requeues job {requeue.job_id()}, which goes on in "
+                  f"{run_dir}", file=sys.stderr)
+            e.requeue()
         stopped = "terminated (SIGTERM)" if isinstance(e, Terminated) else "interrupted"
-        print(f"{stopped}; {f'checkpoint at update {good}' if good else 'no checkpoint yet'}; "
-              f"go on with: python -m hintsjax.run resume={run_dir}", file=sys.stderr)
+        print(f"{stopped}; {saved}; go on with: python -m hintsjax.run resume={run_dir}", file=sys.stderr)
         return TERMINATED if isinstance(e, Terminated) else INTERRUPTED
     except NonFiniteError as e:  # its checkpoints were all written before it went non-finite
         good = checkpoint.latest_update(run_dir)  # read once the background writes are done

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import gc
 import json
+import re
 import os
 import shutil
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import jax
@@ -280,6 +283,29 @@ def test_sigterm_saves_the_newest_logged_state_the_uninterrupted_runs_bit_for_bi
     for a, b in zip(state_arrays(folder), state_arrays(at_two), strict=True):
         np.testing.assert_array_equal(a, b)
     assert logged_returns(folder) == [r for r in logged_returns(finished_run) if int(r[0]) <= 2]
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")  # the dropped exception, as Python reports it
+def test_a_sigterm_python_dropped_is_raised_again_where_training_checks():
+    """A signal's exception raised while a garbage collector's callback runs (JAX has one) is
+    dropped by Python ("Exception ignored in ..."): it happened to submitit's preemption signal in
+    a trial. The stop is kept, raise_dropped_stop (called at each chunk of training) raises it
+    again, and nothing is left once the block ends."""
+    def terminate_inside(phase, info):
+        if phase == "start":
+            signal.raise_signal(signal.SIGTERM)
+
+    with errors.sigterm_as_interrupt():
+        gc.callbacks.append(terminate_inside)
+        try:
+            gc.collect()  # the SIGTERM's Terminated is raised in the callback, and dropped
+        finally:
+            gc.callbacks.remove(terminate_inside)
+        with pytest.raises(errors.Terminated):
+            errors.raise_dropped_stop()
+        with pytest.raises(errors.Terminated):
+            errors.raise_dropped_stop()  # until the block that asked for it ends
+    errors.raise_dropped_stop()
 
 
 def test_a_sweep_is_expanded_in_hydras_order_with_every_value_checked_first():
@@ -708,6 +734,48 @@ def test_a_sweep_runs_through_hydras_submitit_launcher(tmp_path):
     assert len(folders) == 2 and (tmp_path / "runs" / "multirun.yaml").exists()
     seeds = sorted(yaml.safe_load((f / "config.yaml").read_text())["seed"] for f in folders)
     assert seeds == [0, 1] and all(json.loads((f / "eval.json").read_text())["evaluations"] for f in folders)
+
+
+def submitit_task(folder: Path) -> int | None:
+    """The process id of a submitit job's task (`python -m submitit.core._submit <folder>/...`),
+    or None while there is none."""
+    for proc in Path("/proc").iterdir():
+        try:
+            words = (proc / "cmdline").read_bytes().split(b"\0")
+        except OSError:  # not a process, or one that has just ended
+            continue
+        if b"submitit.core._submit" in words and any(str(folder).encode() in w for w in words):
+            return int(proc.name)
+    return None
+
+
+@pytest.mark.slow  # two starts of a submitit job and a run to compare with: about 60 s on 2 cores
+def test_a_preempted_submitit_job_is_requeued_and_goes_on_in_its_folder_bit_for_bit(tmp_path):
+    """A sweep's job under Hydra's submitit launcher (local executor) sent submitit's preemption
+    signal (SIGUSR2) once it has a checkpoint, as SLURM's would be: the run saves its newest
+    logged state, submitit requeues the job, and the requeued job goes on in the same folder (its
+    job.json names the job), ending as the uninterrupted run does, every array bit for bit."""
+    longer = {"checkpoint_every": 10, "ppo": {**tiny_values()["ppo"], "total_env_steps": 64 * 400}}
+    whole = tiny_values(out_dir=str(tmp_path / "whole"), name="run", **longer)
+    assert run.main_from_values(whole) == 0
+    sweep = tmp_path / "sweep"
+    args = [f"{k}={v}" for k, v in whole.items() if k not in ("ppo", "out_dir")]
+    args += [f"ppo.{k}={v}" for k, v in whole["ppo"].items()]
+    job = subprocess.Popen([sys.executable, "-m", "hintsjax.run", "-m", "hydra/launcher=submitit_local", *args,
+                            f"out_dir={sweep}"], cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    folder = sweep / "run"
+    while job.poll() is None and not any(p.name.isdigit() for p in (folder / "checkpoints").glob("*")):
+        time.sleep(0.02)
+    task = submitit_task(sweep)
+    assert task is not None, "the job ended before its first checkpoint was written"
+    os.kill(task, signal.SIGUSR2)
+    assert job.wait(timeout=300) == 0
+    assert sorted(p.name for p in sweep.iterdir() if not p.name.startswith(".")) == ["multirun.yaml", "run"]
+    said = "\n".join(p.read_text() for p in (sweep / ".submitit").rglob("*_log.err"))
+    job_id = json.loads((folder / "job.json").read_text())["job_id"]
+    assert re.search(rf"preempted \(SIGUSR2\); checkpoint at update \d+; submitit requeues job {job_id}", said), said[-3000:]
+    assert f"requeued job {job_id}: goes on in" in said
+    assert_ends_as(folder, tmp_path / "whole" / "run")
 
 
 @pytest.mark.slow

@@ -45,24 +45,46 @@ class Terminated(KeyboardInterrupt):
     handles it too; reported as its own line, exit 143."""
 
 
+_stops: list[KeyboardInterrupt] = []  # the stop a signal asked for (within `signal_as_interrupt`)
+
+
 @contextlib.contextmanager
-def sigterm_as_interrupt():
-    """Within this block SIGTERM raises Terminated in the main thread (once: a second SIGTERM while
-    the first is handled is ignored, and SIGKILL still kills); SIGTERM's handler is put back after.
-    Outside the main thread (where Python cannot handle signals) nothing changes."""
+def signal_as_interrupt(number: int, make: Callable[[int, Any], KeyboardInterrupt]):
+    """Within this block the signal `number` raises `make(number, frame)` in the main thread, as
+    Ctrl-C raises KeyboardInterrupt (once: another signal while a stop is under way is ignored,
+    and SIGKILL still kills); the signal's handler is put back after. Outside the main thread
+    (where Python cannot handle signals) nothing changes.
+
+    Python drops an exception raised while a garbage collector's callback runs (JAX has one): it
+    prints "Exception ignored in ..." and goes on. So the stop is also kept, and a loop that must
+    stop calls `raise_dropped_stop` at its safe points (training does, each chunk)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def handler(signum, frame):
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        raise Terminated()
+        if not _stops:
+            _stops.append(make(signum, frame))
+            raise _stops[0]
 
-    previous = signal.signal(signal.SIGTERM, handler)
+    previous = signal.signal(number, handler)
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
+        signal.signal(number, signal.SIG_DFL if previous is None else previous)
+        _stops.clear()
+
+
+def raise_dropped_stop() -> None:
+    """Raise the stop a signal asked for (see `signal_as_interrupt`) again, if any: where it was
+    raised before, in the code this is called from, it has not been handled, or Python dropped it."""
+    if _stops:
+        raise _stops[0]
+
+
+def sigterm_as_interrupt():
+    """Within this block SIGTERM raises Terminated in the main thread (`signal_as_interrupt`)."""
+    return signal_as_interrupt(signal.SIGTERM, lambda number, frame: Terminated())
 
 
 def require_positive(obj: Any, names: tuple[str, ...], prefix: str = "") -> None:

@@ -19,7 +19,7 @@ from tqdm import tqdm
 from hintsjax.envs import physics
 from hintsjax.system import checkpoint, devices
 from hintsjax.system.devices import SeedLayout
-from hintsjax.system.errors import Terminated, UsageError
+from hintsjax.system.errors import Terminated, UsageError, raise_dropped_stop
 from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms.trainer import Trainer
 from hintsjax.training.compilation import Compiled, check_fits, check_run_fits, compile_training
@@ -156,6 +156,7 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
         with checkpoint.writing(run_dir):  # leaving it, even by Ctrl-C, waits for the writes under way
             try:
                 while done < total:
+                    raise_dropped_stop()  # a SIGTERM (or preemption) whose exception Python dropped
                     n = min(compiled.chunk, total - done)
                     following, metrics = compiled.run_chunk(state, np.int32(n))  # returns at once; the device works on
                     # queued behind the chunk, so reading it once the chunk has run never stalls the device

@@ -36,7 +36,7 @@ class RunLog:
 
         self.path = Path(run_dir) / METRICS_CSV
         self.columns: list[str] | None = None
-        if resume_update and self.path.exists():
+        if self.path.exists():  # a resumed run, or one started again in its folder (a requeued job's, at 0)
             self._truncate(resume_update)
         self.tb = SummaryWriter(str(Path(run_dir) / "tb"))
 

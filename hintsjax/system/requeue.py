@@ -1,0 +1,94 @@
+"""A run whose cluster job is requeued goes on in its own folder.
+
+Hydra's submitit launcher (`-m hydra/launcher=submitit_slurm`, or `submitit_local`) runs each job
+of a sweep under submitit. At a job's time limit, or when it is preempted, submitit signals the job
+(SIGUSR2, or what SUBMITIT_PREEMPT_SIGNAL names), pickles the job's call and requeues it: SLURM
+starts the job again under the same job id, the local executor runs it again. The requeued call is
+the same command line, which alone would start a new run in a new folder. So, inside a submitit job:
+
+- `preemption_as_interrupt`: the signal stops training as SIGTERM does (the newest state whose
+  metrics are logged is saved), and only then does submitit's own handler requeue the job;
+- `record`: a new run writes the job's id into its folder (job.json);
+- `folders_of_this_job`: the folders in out_dir that this job made before it was requeued, which
+  the run command resumes (hintsjax/run.py, where the folder's config must also be the one asked for).
+
+Outside a submitit job (SUBMITIT_EXECUTOR unset) none of this does anything.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+from pathlib import Path
+from typing import Any, Callable
+
+from hintsjax.system.errors import Terminated, signal_as_interrupt
+
+JOB_JSON = "job.json"  # {"job_id": ..., "executor": ...}: the submitit job that made the run folder
+
+
+class Preempted(Terminated):
+    """submitit's preemption or time-limit signal, raised in the main thread as SIGTERM's
+    Terminated is (a run saves its newest logged state); `requeue()` then hands the signal to
+    submitit's own handler, which requeues the job and exits."""
+
+    def __init__(self, name: str, requeue: Callable[[], Any]):
+        super().__init__(name)
+        self.name, self.requeue = name, requeue
+
+
+def executor() -> str | None:
+    """submitit's executor running this process ("slurm", "local"), or None outside a submitit job."""
+    return os.environ.get("SUBMITIT_EXECUTOR") or None
+
+
+def job_id() -> str | None:
+    """submitit's id of the job this process runs (SLURM's job id, `<array id>_<task>` in an array;
+    the same after a requeue), or None outside a submitit job."""
+    if executor() is None:
+        return None
+    import submitit  # only inside a submitit job, which has it
+
+    return str(submitit.JobEnvironment().job_id)
+
+
+def record(run_dir: Path) -> None:
+    """Write this job's id into a new run folder (nothing outside a submitit job)."""
+    if (job := job_id()) is not None:
+        (Path(run_dir) / JOB_JSON).write_text(json.dumps({"job_id": job, "executor": executor()}) + "\n")
+
+
+def folders_of_this_job(out_dir: str | Path) -> list[Path]:
+    """The run folders in `out_dir` whose job.json names this job, oldest name first (none outside
+    a submitit job)."""
+    job, out = job_id(), Path(out_dir)
+    if job is None or not out.is_dir():
+        return []
+    found = []
+    for folder in sorted(p for p in out.iterdir() if p.is_dir()):
+        try:
+            if json.loads((folder / JOB_JSON).read_text()).get("job_id") == job:
+                found.append(folder)
+        except (OSError, ValueError, AttributeError):  # no job.json, or not one this package wrote
+            continue
+    return found
+
+
+def preemption_as_interrupt() -> contextlib.AbstractContextManager:
+    """Within this block, inside a submitit job, submitit's preemption signal raises Preempted in
+    the main thread (errors.signal_as_interrupt); its handler is put back after. Elsewhere nothing
+    changes."""
+    if executor() is None:
+        return contextlib.nullcontext()
+    import submitit
+
+    number = submitit.JobEnvironment._usr_sig()  # the signal submitit's handler is set on (USR2 unless told)
+    submitits = signal.getsignal(number)
+
+    def preempted(signum: int, frame: Any) -> Preempted:
+        requeue = (lambda: submitits(signum, frame)) if callable(submitits) else (lambda: None)
+        return Preempted(signal.Signals(signum).name, requeue)
+
+    return signal_as_interrupt(number, preempted)
