@@ -23,6 +23,11 @@ Compiling is most of the suite's time on a CPU (the runs it trains are tiny), so
   (so tests/test_rank.py runs that command in a process of its own, without the flag).
   Results move by float32 rounding only (dagger's vmapped weights 7e-6 from its lone run's).
   Commands run outside the tests keep XLA's default.
+- **XLA's loop emitters for CPU fusions** (`--xla_cpu_use_fusion_emitters=false`), for the same
+  tier: jaxlib 0.10's newer MLIR fusion emitters took most of a compile; without them the cue
+  env's training programs compiled in about half the time (5.0 -> 2.7 s) and `make test` took
+  382 s, not 592 s (2026-11-28, 2-core EPYC; docs/tests.md). Also float32 rounding only: one
+  test's two programs that were bit for bit equal are now 1.5e-8 apart (test_learning's target_kl).
 """
 
 import os
@@ -35,6 +40,7 @@ os.environ[program_cache.ENV_VAR] = "off"
 os.environ[errors.DEBUG] = "1"
 
 OPTIMIZATION = "--xla_backend_optimization_level"
+LOOP_EMITTERS = "--xla_cpu_use_fusion_emitters=false"
 
 MADE_CACHE = "HINTSJAX_TEST_XLA_CACHE_MADE"  # the folder this run made (set by the first process: xdist's controller)
 if os.environ.get("HINTSJAX_TEST_XLA_CACHE", "on") != "off":
@@ -45,12 +51,12 @@ if os.environ.get("HINTSJAX_TEST_XLA_CACHE", "on") != "off":
 
 
 def pytest_configure(config):
-    """LLVM -O0 for the default tier, set before JAX's backend starts (it reads XLA_FLAGS once; no
+    """LLVM -O0 and the loop emitters for the default tier, set before JAX's backend starts (it reads XLA_FLAGS once; no
     test module is imported yet, and xdist's workers start later and inherit it). The slow tier
     alone (`-m slow`, `make test-slow`) keeps XLA's default: its drives run for minutes, which -O0
     made several times longer (the humanoid's 2x10^5-step drive took 1296 s on a core)."""
     if config.option.markexpr.strip() != "slow" and OPTIMIZATION not in os.environ.get("XLA_FLAGS", ""):
-        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {OPTIMIZATION}=0".strip()
+        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {OPTIMIZATION}=0 {LOOP_EMITTERS}".strip()
 
 
 def pytest_unconfigure(config):

@@ -229,7 +229,10 @@ def test_target_kl_stops_an_update_after_the_first_minibatch_whose_kl_exceeds_it
     """One update of 2 epochs x 2 minibatches. The first minibatch meets the rollout's own policy
     (KL 0), so it always steps; with a tiny target the second minibatch's KL (above 0 after that
     step) stops the update: one Adam step, 3 of 4 minibatches skipped. A huge target steps every
-    minibatch and gives exactly the parameters of no early stop (target_kl None)."""
+    minibatch and gives the parameters of no early stop (target_kl None), to float32 rounding:
+    the two programs differ by the stop's select, which XLA's CPU emitters may fuse, and so
+    round, differently (bit for bit under the fusion emitters, 1.5e-8 apart under the loop
+    emitters the default tier compiles with); the stopped update's are far from both."""
     def make(target_kl):
         return ppo.make_ppo(layers.run_config(dict(env="cue", agent="hints_blind", seeds=1,
                                                    ppo={**SMALL_PPO, "target_kl": target_kl})))
@@ -247,8 +250,9 @@ def test_target_kl_stops_an_update_after_the_first_minibatch_whose_kl_exceeds_it
             assert "kl_stopped" not in metrics
         else:
             np.testing.assert_allclose(metrics["kl_stopped"], 1.0 - steps / 4)
-        same = jax.tree.map(lambda a, b: bool(jnp.array_equal(a, b)), after.params, learnt[None][0].params)
-        assert all(jax.tree.leaves(same)) == (target != 1e-12)
+        apart = max(float(jnp.max(jnp.abs(a - b))) for a, b in zip(jax.tree.leaves(after.params),
+                                                                    jax.tree.leaves(learnt[None][0].params)))
+        assert apart > 1e-4 if target == 1e-12 else apart < 1e-6, (target, apart)
 
 
 def test_target_kl_must_be_positive():
