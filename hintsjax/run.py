@@ -47,6 +47,7 @@ def requeued_run(out_dir: str, cfg: RunConfig) -> Path | None:
     for folder in requeue.folders_of_this_job(out_dir):
         try:
             if load_run_config(folder, complete=True) == cfg:
+                print(f"requeued job {requeue.job_id()}: goes on in {folder}", file=sys.stderr)
                 return folder
         except UsageError:  # its config.yaml is unreadable or foreign: not this run's
             continue
@@ -65,7 +66,7 @@ def _run(values: dict[str, Any]) -> int:
         print(note, file=sys.stderr)
     compilation_cache.enable(compilation_cache.folder(values.get("compilation_cache")))
     existed = paths.existing_part(asked.out_dir)  # what stays if the run goes again before its first update
-    made = resume = False
+    made = False  # a folder made by this call (not a resumed or requeued run's)
     try:
         if run_dir is None:
             if devices.is_main():
@@ -74,16 +75,12 @@ def _run(values: dict[str, Any]) -> int:
                     run_dir, made = new_run_dir(asked.out_dir, asked.name, cfg), True
                     save_run_config(run_dir, cfg)
                     requeue.record(run_dir)
-                else:
-                    print(f"requeued job {requeue.job_id()}: goes on in {run_dir}", file=sys.stderr)
             run_dir = Path(devices.agree(str(run_dir)))  # the folder process 0 made (or found), on every process
-            resume = checkpoint.latest_update(run_dir) is not None  # a requeued run's newest checkpoint
-        else:
-            resume = True
-            if asked.longer and devices.is_main():
-                save_run_config(run_dir, cfg)  # the budget it now trains to
+        elif asked.longer and devices.is_main():
+            save_run_config(run_dir, cfg)  # the budget it now trains to
     except Exception as e:  # noqa: BLE001  the boundary: a full disk or read-only folder, else a bug
         return report_machine(e, run_dir or asked.out_dir) if machines(e) else report_bug(e, run_dir)
+    resume = asked.run_dir is not None or checkpoint.latest_update(run_dir) is not None  # a requeued run's too
     try:
         train(cfg, run_dir, resume=resume)
     except UsageError as e:  # found before the first update (a program that cannot fit): a new folder goes again
@@ -100,6 +97,7 @@ def _run(values: dict[str, Any]) -> int:
             print(f"preempted ({e.name}); {saved}; submitit requeues job {requeue.job_id()}, which goes on in "
                   f"{run_dir}", file=sys.stderr)
             e.requeue()
+            return TERMINATED  # a task other than the job's first: submitit leaves the requeue to that one
         stopped = "terminated (SIGTERM)" if isinstance(e, Terminated) else "interrupted"
         print(f"{stopped}; {saved}; go on with: python -m hintsjax.run resume={run_dir}", file=sys.stderr)
         return TERMINATED if isinstance(e, Terminated) else INTERRUPTED
