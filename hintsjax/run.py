@@ -26,7 +26,7 @@ from hintsjax.settings.config import RunConfig
 from hintsjax.settings.layers import CONFIG_YAML, load_run_config, save_run_config
 from hintsjax.cli import choices, overrides
 from hintsjax.training.guards import NONFINITE_JSON, NonFiniteError
-from hintsjax.training.outputs import new_run_dir
+from hintsjax.training.outputs import EVAL_JSON, new_run_dir
 from hintsjax.training.pipeline import train
 from hintsjax.training.request import request, rounded_budget
 
@@ -37,16 +37,20 @@ def main_from_values(values: dict[str, Any]) -> int:
     cluster's time limit or preemption) is handled as Ctrl-C is, and always saves the newest state
     whose metrics are logged; so is submitit's preemption signal, after which submitit requeues
     the job (system/requeue.py)."""
-    with sigterm_as_interrupt(), requeue.preemption_as_interrupt():
-        return _run(values)
+    with requeue.preemption_as_interrupt(), sigterm_as_interrupt():  # submitit's own handler kept, whatever its signal
+        try:
+            return _run(values)
+        except requeue.Preempted as e:  # before the run had a folder: nothing to save
+            return requeue.hand_over(e, None, "nothing trained")
 
 
 def requeued_run(out_dir: str, cfg: RunConfig) -> Path | None:
     """The folder in out_dir that this submitit job made for `cfg` before it was requeued (its
-    job.json names the job and its config.yaml is cfg), or None: a run to go on with."""
+    job.json names the job, its config.yaml is cfg, and it has not finished), or None: a run to
+    go on with."""
     for folder in requeue.folders_of_this_job(out_dir):
         try:
-            if load_run_config(folder, complete=True) == cfg:
+            if not (folder / EVAL_JSON).exists() and load_run_config(folder, complete=True) == cfg:
                 print(f"requeued job {requeue.job_id()}: goes on in {folder}", file=sys.stderr)
                 return folder
         except UsageError:  # its config.yaml is unreadable or foreign: not this run's
@@ -66,7 +70,7 @@ def _run(values: dict[str, Any]) -> int:
         print(note, file=sys.stderr)
     compilation_cache.enable(compilation_cache.folder(values.get("compilation_cache")))
     existed = paths.existing_part(asked.out_dir)  # what stays if the run goes again before its first update
-    made = False  # a folder made by this call (not a resumed or requeued run's)
+    made = resume = False  # a folder made by this call (not a resumed or requeued run's); a checkpoint to go on from
     try:
         if run_dir is None:
             if devices.is_main():
@@ -76,11 +80,14 @@ def _run(values: dict[str, Any]) -> int:
                     save_run_config(run_dir, cfg)
                     requeue.record(run_dir)
             run_dir = Path(devices.agree(str(run_dir)))  # the folder process 0 made (or found), on every process
-        elif asked.longer and devices.is_main():
-            save_run_config(run_dir, cfg)  # the budget it now trains to
+            # a requeued run's newest checkpoint, if it had one (process 0 looks: the look tidies the folder)
+            resume = devices.agree_that(devices.is_main() and checkpoint.latest_update(run_dir) is not None)
+        else:
+            resume = True
+            if asked.longer and devices.is_main():
+                save_run_config(run_dir, cfg)  # the budget it now trains to
     except Exception as e:  # noqa: BLE001  the boundary: a full disk or read-only folder, else a bug
         return report_machine(e, run_dir or asked.out_dir) if machines(e) else report_bug(e, run_dir)
-    resume = asked.run_dir is not None or checkpoint.latest_update(run_dir) is not None  # a requeued run's too
     try:
         train(cfg, run_dir, resume=resume)
     except UsageError as e:  # found before the first update (a program that cannot fit): a new folder goes again
@@ -94,10 +101,7 @@ def _run(values: dict[str, Any]) -> int:
         good = checkpoint.latest_update(run_dir)
         saved = f"checkpoint at update {good}" if good else "no checkpoint yet"
         if isinstance(e, requeue.Preempted):  # submitit's signal: its own handler requeues the job and exits
-            print(f"preempted ({e.name}); {saved}; submitit requeues job {requeue.job_id()}, which goes on in "
-                  f"{run_dir}", file=sys.stderr)
-            e.requeue()
-            return TERMINATED  # a task other than the job's first: submitit leaves the requeue to that one
+            return requeue.hand_over(e, run_dir, saved)
         stopped = "terminated (SIGTERM)" if isinstance(e, Terminated) else "interrupted"
         print(f"{stopped}; {saved}; go on with: python -m hintsjax.run resume={run_dir}", file=sys.stderr)
         return TERMINATED if isinstance(e, Terminated) else INTERRUPTED

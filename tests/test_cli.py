@@ -289,8 +289,9 @@ def test_sigterm_saves_the_newest_logged_state_the_uninterrupted_runs_bit_for_bi
 def test_a_sigterm_python_dropped_is_raised_again_where_training_checks():
     """A signal's exception raised while a garbage collector's callback runs (JAX has one) is
     dropped by Python ("Exception ignored in ..."): it happened to submitit's preemption signal in
-    a trial. The stop is kept, raise_dropped_stop (called at each chunk of training) raises it
-    again, and nothing is left once the block ends."""
+    a trial. The stop is kept, raise_stop_asked (called at training's safe points) raises it
+    again, and nothing is left once the block ends. Within stops_deferred (training's loop) the
+    signal only keeps its stop, for the loop to raise."""
     def terminate_inside(phase, info):
         if phase == "start":
             signal.raise_signal(signal.SIGTERM)
@@ -302,10 +303,15 @@ def test_a_sigterm_python_dropped_is_raised_again_where_training_checks():
         finally:
             gc.callbacks.remove(terminate_inside)
         with pytest.raises(errors.Terminated):
-            errors.raise_dropped_stop()
+            errors.raise_stop_asked()
         with pytest.raises(errors.Terminated):
-            errors.raise_dropped_stop()  # until the block that asked for it ends
-    errors.raise_dropped_stop()
+            errors.raise_stop_asked()  # until the block that asked for it ends
+    errors.raise_stop_asked()
+    with errors.sigterm_as_interrupt():
+        with errors.stops_deferred():
+            signal.raise_signal(signal.SIGTERM)  # kept, not raised
+            with pytest.raises(errors.Terminated):
+                errors.raise_stop_asked()
 
 
 def test_a_sweep_is_expanded_in_hydras_order_with_every_value_checked_first():
@@ -773,9 +779,42 @@ def test_a_preempted_submitit_job_is_requeued_and_goes_on_in_its_folder_bit_for_
     assert sorted(p.name for p in sweep.iterdir() if not p.name.startswith(".")) == ["multirun.yaml", "run"]
     said = "\n".join(p.read_text() for p in (sweep / ".submitit").rglob("*_log.err"))
     job_id = json.loads((folder / "job.json").read_text())["job_id"]
-    assert re.search(rf"preempted \(SIGUSR2\); checkpoint at update \d+; submitit requeues job {job_id}", said), said[-3000:]
+    assert re.search(rf"preempted \(SIGUSR2\); checkpoint at update \d+; submitit is asked to requeue job {job_id}, "
+                     rf"which goes on in {re.escape(str(folder))}", said), said[-3000:]
     assert f"requeued job {job_id}: goes on in" in said
     assert_ends_as(folder, tmp_path / "whole" / "run")
+
+
+def test_a_preemption_that_submitit_will_not_requeue_says_so_and_names_the_command(monkeypatch, tmp_path, capsys):
+    """submitit refuses to requeue a job that timed out more often than max_num_timeout allows
+    (its handler raises UncompletedJobError): after the line that asked, one line says so and names
+    the command that goes on; exit 143. Outside a submitit job a run writes no job.json."""
+    # submitit's import configures logging (dictConfig), which closes the handlers that pytest's capture set up
+    monkeypatch.setenv("SUBMITIT_LOG_LEVEL", "NOCONFIG")
+    from submitit.core.utils import UncompletedJobError
+
+    from hintsjax.system import requeue
+
+    folder = tmp_path / "runs" / "run"
+    folder.mkdir(parents=True)
+    assert requeue.job_id() is None and requeue.folders_of_this_job(folder.parent) == []
+    requeue.record(folder)
+    assert not (folder / requeue.JOB_JSON).exists()
+    monkeypatch.setenv("SUBMITIT_EXECUTOR", "local")
+    monkeypatch.setenv("SUBMITIT_LOCAL_JOB_ID", "4242")
+
+    def refuse():
+        raise UncompletedJobError("Job not requeued because: timed-out too many times.")
+
+    assert requeue.hand_over(requeue.Preempted("SIGUSR2", refuse), folder, "checkpoint at update 2") == errors.TERMINATED
+    assert capsys.readouterr().err.splitlines() == [
+        f"preempted (SIGUSR2); checkpoint at update 2; submitit is asked to requeue job 4242, which goes on in {folder}",
+        f"submitit did not requeue job 4242 (Job not requeued because: timed-out too many times.); "
+        f"go on with: python -m hintsjax.run resume={folder}"]
+    requeue.record(folder)
+    assert requeue.folders_of_this_job(folder.parent) == [folder]
+    monkeypatch.setenv("SUBMITIT_LOCAL_JOB_ID", "4243")  # another job (or the same id on another cluster)
+    assert requeue.folders_of_this_job(folder.parent) == []
 
 
 @pytest.mark.slow

@@ -120,7 +120,7 @@ def _processes(folder: Path, count: int, devices_each: int, *args: str, tries: i
         warnings.warn(f"a {count}-process run hung and was started again; its stacks:\n" +
                       "\n".join(t[-6000:] for t in texts))
         if "--resume" not in args:
-            shutil.rmtree(folder)  # the hung run's folder: the retry makes it again, not run-1 beside it
+            shutil.rmtree(folder, ignore_errors=True)  # the hung run's folder (if it got that far): the retry makes it again, not run-1 beside it
         return _processes(folder, count, devices_each, *args, tries=tries - 1)
     assert all(p.returncode == 0 for p in procs), "\n".join(t[-6000:] for t in texts)
 

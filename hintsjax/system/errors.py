@@ -46,6 +46,8 @@ class Terminated(KeyboardInterrupt):
 
 
 _stops: list[KeyboardInterrupt] = []  # the stop a signal asked for (within `signal_as_interrupt`)
+_blocks: list[int] = []  # the signals of the `signal_as_interrupt` blocks open now, outermost first
+_deferring: list[bool] = []  # `stops_deferred` blocks open now
 
 
 @contextlib.contextmanager
@@ -55,9 +57,11 @@ def signal_as_interrupt(number: int, make: Callable[[int, Any], KeyboardInterrup
     and SIGKILL still kills); the signal's handler is put back after. Outside the main thread
     (where Python cannot handle signals) nothing changes.
 
-    Python drops an exception raised while a garbage collector's callback runs (JAX has one): it
-    prints "Exception ignored in ..." and goes on. So the stop is also kept, and a loop that must
-    stop calls `raise_dropped_stop` at its safe points (training does, each chunk)."""
+    Within `stops_deferred` (training's loop) the stop is only kept, and the loop raises it at its
+    safe points (`raise_stop_asked`), so that it never lands in the middle of a metrics row or a
+    checkpoint's hand-over. Python also drops an exception raised while a garbage collector's
+    callback runs (JAX has one: it prints "Exception ignored in ..." and goes on); the kept stop is
+    raised at the next safe point then too."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -65,19 +69,34 @@ def signal_as_interrupt(number: int, make: Callable[[int, Any], KeyboardInterrup
     def handler(signum, frame):
         if not _stops:
             _stops.append(make(signum, frame))
-            raise _stops[0]
+            if not _deferring:
+                raise _stops[0]
 
     previous = signal.signal(number, handler)
+    _blocks.append(number)
     try:
         yield
     finally:
         signal.signal(number, signal.SIG_DFL if previous is None else previous)
-        _stops.clear()
+        _blocks.pop()
+        if not _blocks:  # the outermost block: a stop taken in an inner one still holds off the outer's signal till here
+            _stops.clear()
 
 
-def raise_dropped_stop() -> None:
-    """Raise the stop a signal asked for (see `signal_as_interrupt`) again, if any: where it was
-    raised before, in the code this is called from, it has not been handled, or Python dropped it."""
+@contextlib.contextmanager
+def stops_deferred():
+    """Within this block a signal's stop (`signal_as_interrupt`) is kept, not raised: the code in
+    it raises the stop at its own safe points (`raise_stop_asked`)."""
+    _deferring.append(True)
+    try:
+        yield
+    finally:
+        _deferring.pop()
+
+
+def raise_stop_asked() -> None:
+    """Raise the stop a signal asked for, if any (`signal_as_interrupt`): kept within
+    `stops_deferred`, or dropped by Python where it was raised."""
     if _stops:
         raise _stops[0]
 

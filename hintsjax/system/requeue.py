@@ -7,8 +7,9 @@ starts the job again under the same job id, the local executor runs it again. Th
 the same command line, which alone would start a new run in a new folder. So, inside a submitit job:
 
 - `preemption_as_interrupt`: the signal stops training as SIGTERM does (the newest state whose
-  metrics are logged is saved), and only then does submitit's own handler requeue the job;
-- `record`: a new run writes the job's id into its folder (job.json);
+  metrics are logged is saved), and only then does submitit's own handler requeue the job
+  (`hand_over`);
+- `record`: a new run writes the job's id (with the executor and SLURM's cluster) into its folder (job.json);
 - `folders_of_this_job`: the folders in out_dir that this job made before it was requeued, which
   the run command resumes (hintsjax/run.py, where the folder's config must also be the one asked for).
 
@@ -21,10 +22,12 @@ import contextlib
 import json
 import os
 import signal
+import sys
+import time
 from pathlib import Path
 from typing import Any, Callable
 
-from hintsjax.system.errors import Terminated, signal_as_interrupt
+from hintsjax.system.errors import TERMINATED, Terminated, signal_as_interrupt
 
 JOB_JSON = "job.json"  # {"job_id": ..., "executor": ...}: the submitit job that made the run folder
 
@@ -46,34 +49,67 @@ def executor() -> str | None:
 
 def job_id() -> str | None:
     """submitit's id of the job this process runs (SLURM's job id, `<array id>_<task>` in an array;
-    the same after a requeue), or None outside a submitit job."""
+    the same after a requeue), or None outside a submitit job (or where submitit is not installed,
+    as in a process that a job's task started and that inherited its variables)."""
     if executor() is None:
         return None
-    import submitit  # only inside a submitit job, which has it
-
+    try:
+        import submitit
+    except ImportError:
+        return None
     return str(submitit.JobEnvironment().job_id)
 
 
+def _job() -> dict[str, str] | None:
+    """What names this job in a run folder's job.json: its id, the executor, and SLURM's cluster
+    (job ids of clusters that share a file system may meet); None outside a submitit job."""
+    job = job_id()
+    return None if job is None else {"job_id": job, "executor": executor(),
+                                     "cluster": os.environ.get("SLURM_CLUSTER_NAME", "")}
+
+
 def record(run_dir: Path) -> None:
-    """Write this job's id into a new run folder (nothing outside a submitit job)."""
-    if (job := job_id()) is not None:
-        (Path(run_dir) / JOB_JSON).write_text(json.dumps({"job_id": job, "executor": executor()}) + "\n")
+    """Write this job's names into a new run folder (nothing outside a submitit job)."""
+    if (job := _job()) is not None:
+        (Path(run_dir) / JOB_JSON).write_text(json.dumps(job) + "\n")
 
 
 def folders_of_this_job(out_dir: str | Path) -> list[Path]:
     """The run folders in `out_dir` whose job.json names this job, oldest name first (none outside
-    a submitit job)."""
-    job, out = job_id(), Path(out_dir)
+    a submitit job). A job id can come back (the local executor's is a process id; SLURM's
+    counter can be reset), so the caller also compares the run's config."""
+    job, out = _job(), Path(out_dir)
     if job is None or not out.is_dir():
         return []
     found = []
     for folder in sorted(p for p in out.iterdir() if p.is_dir()):
         try:
-            if json.loads((folder / JOB_JSON).read_text()).get("job_id") == job:
+            if json.loads((folder / JOB_JSON).read_text()) == job:
                 found.append(folder)
-        except (OSError, ValueError, AttributeError):  # no job.json, or not one this package wrote
+        except (OSError, ValueError):  # no job.json, or not one this package wrote
             continue
     return found
+
+
+def hand_over(stop: Preempted, folder: Path | None, saved: str) -> int:
+    """After a run stopped for submitit's signal (its newest state saved): say so in one line, and
+    let submitit's own handler requeue the job, which exits this process. Where submitit will not
+    (the job timed out more times than hydra.launcher.max_num_timeout allows), a second line says
+    so and names the command that goes on; exit status 143. A task other than the job's first is
+    left running by submitit's handler: it waits for the requeue to end it (2 minutes at most)."""
+    job = job_id()
+    goes_on = f"; go on with: python -m hintsjax.run resume={folder}" if folder else ""
+    print(f"preempted ({stop.name}); {saved}; submitit is asked to requeue job {job}"
+          + (f", which goes on in {folder}" if folder else ""), file=sys.stderr)
+    from submitit.core.utils import UncompletedJobError
+
+    try:
+        stop.requeue()  # on the job's first task: requeues the job, then exits (SystemExit)
+    except UncompletedJobError as e:
+        print(f"submitit did not requeue job {job} ({e}){goes_on}", file=sys.stderr)
+        return TERMINATED
+    time.sleep(120)  # another task: the first one's requeue ends this one
+    return TERMINATED
 
 
 def preemption_as_interrupt() -> contextlib.AbstractContextManager:

@@ -19,7 +19,7 @@ from tqdm import tqdm
 from hintsjax.envs import physics
 from hintsjax.system import checkpoint, devices
 from hintsjax.system.devices import SeedLayout
-from hintsjax.system.errors import Terminated, UsageError, raise_dropped_stop
+from hintsjax.system.errors import Terminated, UsageError, raise_stop_asked, stops_deferred
 from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms.trainer import Trainer
 from hintsjax.training.compilation import Compiled, check_fits, check_run_fits, compile_training
@@ -155,21 +155,23 @@ def advance(training: Training, cfg: RunConfig, run_dir: Path, write: Callable[[
     try:
         with checkpoint.writing(run_dir):  # leaving it, even by Ctrl-C, waits for the writes under way
             try:
-                while done < total:
-                    raise_dropped_stop()  # a SIGTERM (or preemption) whose exception Python dropped
-                    n = min(compiled.chunk, total - done)
-                    following, metrics = compiled.run_chunk(state, np.int32(n))  # returns at once; the device works on
-                    # queued behind the chunk, so reading it once the chunk has run never stalls the device
-                    following_finite = finite_seeds(following.params)
-                    if pending is not None:
+                with stops_deferred():  # SIGTERM (or a preemption) waits for the safe point below, its state logged
+                    while done < total:
+                        n = min(compiled.chunk, total - done)
+                        following, metrics = compiled.run_chunk(state, np.int32(n))  # returns at once; the device works on
+                        # queued behind the chunk, so reading it once the chunk has run never stalls the device
+                        following_finite = finite_seeds(following.params)
+                        if pending is not None:
+                            report(*pending)
+                        raise_stop_asked()  # here `state` (at `done`) has its metrics logged, and no write is half-made
+                        if devices.agree_that(done > training.first and time.perf_counter() - saved >= cfg.checkpoint_seconds
+                                              and not checkpoint.saving(run_dir)):  # process 0 decides for all
+                            save(state, done, finite)  # the state this chunk started from: computed, copied off as the chunk runs
+                        state, finite, pending, done = following, following_finite, (metrics, done, n), done + n
+                    if pending is not None:  # something was trained (a run resumed at its end only evaluates)
                         report(*pending)
-                    if devices.agree_that(done > training.first and time.perf_counter() - saved >= cfg.checkpoint_seconds
-                                          and not checkpoint.saving(run_dir)):  # process 0 decides for all
-                        save(state, done, finite)  # the state this chunk started from: computed, copied off as the chunk runs
-                    state, finite, pending, done = following, following_finite, (metrics, done, n), done + n
-                if pending is not None:  # something was trained (a run resumed at its end only evaluates)
-                    report(*pending)
-                    save(state, total, finite)
+                        save(state, total, finite)
+                raise_stop_asked()  # one asked during the last chunk: the end is saved; the run stops before evaluating
             except KeyboardInterrupt as e:
                 # Ctrl-C: `state` (at `done`, its metrics logged) is saved when a checkpoint is due;
                 # SIGTERM (the job is going away: a time limit, preemption) saves it whenever it is
