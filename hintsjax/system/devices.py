@@ -118,6 +118,11 @@ class SeedLayout:
         return Mesh(np.array(self.devices), (AXIS,))
 
     @property
+    def everywhere(self) -> NamedSharding:
+        """A whole copy on every device (what `spread`'s shared arguments and `crop`'s result are)."""
+        return NamedSharding(self.mesh, PartitionSpec())
+
+    @property
     def sharding(self) -> NamedSharding | None:
         """The seed axis split over the devices (None on one device: arrays stay where they are)."""
         return None if self.count == 1 else NamedSharding(self.mesh, PartitionSpec(AXIS))
@@ -140,7 +145,7 @@ class SeedLayout:
             return tree
         if self.sharding is None:
             return jax.tree.map(lambda x: x[: self.seeds], tree)
-        return _first_seeds(self.seeds, NamedSharding(self.mesh, PartitionSpec()))(tree)
+        return _first_seeds(self.seeds, self.everywhere)(tree)
 
     def spread(self, fn: Callable[..., Any], batched: int, shared: int = 0) -> Callable[..., Any]:
         """`fn(*batched_args, *shared_args)`, a function of seed-batched arrays (and of `shared`
@@ -150,8 +155,8 @@ class SeedLayout:
         a segfault in the first chunk), so the partitioner does it."""
         if self.count == 1:
             return fn
-        seeds, everywhere = self.sharding, NamedSharding(self.mesh, PartitionSpec())
-        return jax.jit(fn, in_shardings=(seeds,) * batched + (everywhere,) * shared, out_shardings=seeds)
+        seeds = self.sharding
+        return jax.jit(fn, in_shardings=(seeds,) * batched + (self.everywhere,) * shared, out_shardings=seeds)
 
     def fetch(self, tree: Any) -> Any:
         """Leaves as numpy arrays on this host, the run's S seeds of each (gathered from every
@@ -162,5 +167,5 @@ class SeedLayout:
             return np.asarray(x)[: self.seeds]
 
         if jax.process_count() > 1:  # one program gathers the whole tree (see `crop`)
-            tree = _first_seeds(self.seeds, NamedSharding(self.mesh, PartitionSpec()))(tree)
+            tree = _first_seeds(self.seeds, self.everywhere)(tree)
         return jax.tree.map(host, tree)

@@ -29,7 +29,7 @@ from typing import Any, Callable
 
 from hintsjax.system.errors import TERMINATED, Terminated, signal_as_interrupt
 
-JOB_JSON = "job.json"  # {"job_id": ..., "executor": ...}: the submitit job that made the run folder
+JOB_JSON = "job.json"  # {"job_id", "executor", "cluster"}: the submitit job that made the run folder
 
 
 class Preempted(Terminated):
@@ -47,17 +47,23 @@ def executor() -> str | None:
     return os.environ.get("SUBMITIT_EXECUTOR") or None
 
 
-def job_id() -> str | None:
-    """submitit's id of the job this process runs (SLURM's job id, `<array id>_<task>` in an array;
-    the same after a requeue), or None outside a submitit job (or where submitit is not installed,
-    as in a process that a job's task started and that inherited its variables)."""
+def _submitit() -> Any:
+    """The submitit module inside a submitit job; None outside one, or where submitit is not
+    installed (a process that a job's task started, which inherited its variables)."""
     if executor() is None:
         return None
     try:
         import submitit
     except ImportError:
         return None
-    return str(submitit.JobEnvironment().job_id)
+    return submitit
+
+
+def job_id() -> str | None:
+    """submitit's id of the job this process runs (SLURM's job id, `<array id>_<task>` in an array;
+    the same after a requeue), or None outside a submitit job (`_submitit`)."""
+    submitit = _submitit()
+    return None if submitit is None else str(submitit.JobEnvironment().job_id)
 
 
 def _job() -> dict[str, str] | None:
@@ -116,10 +122,9 @@ def preemption_as_interrupt() -> contextlib.AbstractContextManager:
     """Within this block, inside a submitit job, submitit's preemption signal raises Preempted in
     the main thread (errors.signal_as_interrupt); its handler is put back after. Elsewhere nothing
     changes."""
-    if executor() is None:
+    submitit = _submitit()
+    if submitit is None:
         return contextlib.nullcontext()
-    import submitit
-
     number = submitit.JobEnvironment._usr_sig()  # the signal submitit's handler is set on (USR2 unless told)
     submitits = signal.getsignal(number)
 
