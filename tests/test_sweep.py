@@ -711,3 +711,31 @@ def test_archive_flag_archives_the_finished_runs_and_nothing_else(tmp_path, monk
     assert sorted(p.name for p in (archived / "ant" / "ppo_rgb").iterdir()) == \
         ["config.yaml", "eval.json", "metrics.csv", "summary.json"]
     assert "archived 1 finished run(s)" in capsys.readouterr().out
+
+
+def test_physics_learning_pools_the_seeds_of_several_runs_and_compares_training_at_equal_steps(tmp_path):
+    """experiments/physics_learning.py with about.json's `arms`: jax's two 5-seed runs pooled into 10
+    seeds against warp's one, the evaluation compared (every warp seed 100 below: decided), and
+    the training return taken over the last 10 % of the env steps that both physics reached: a warp
+    run cut at 10 updates is compared with jax's updates 10 and 9 (steps 9216 to 10240), not with jax's end."""
+    import physics_learning
+
+    runs = tmp_path / "physics"
+    jax_returns = [[float(u) for u in range(20)]] * 5  # return = the update's index, every seed
+    write_run(runs, "ant", "jax-s0", [evaluation(1000.0, 5.0, [1000.0 + i for i in range(5)])], returns=jax_returns)
+    write_run(runs, "ant", "jax-s5", [evaluation(1000.0, 5.0, [1005.0 + i for i in range(5)])], returns=jax_returns)
+    write_run(runs, "ant", "warp", [evaluation(900.0, 5.0, [900.0 + i for i in range(10)])],
+              returns=[[float(u) for u in range(10)]] * 10)
+    (runs / "about.json").write_text(json.dumps({
+        "what": "test", "hardware": "none", "date": "today", "commands": {}, "notes": [],
+        "arms": {"ant": {"jax": ["ant/jax-s0", "ant/jax-s5"], "warp": ["ant/warp"]}}}))
+    lines = physics_learning.report(runs)
+    evaluation_row = next(line for line in lines if line.startswith("| ant |") and "10 / 10" in line and "none / none" in line)
+    assert "1004.5 [" in evaluation_row and "904.5 [" in evaluation_row and "0.00 [0.00, 0.00]" in evaluation_row
+    assert "- ant, evaluation: decided: warp scores below jax (the difference's interval excludes 0)" in lines
+    training_row = next(line for line in lines if line.startswith("| ant | 10,240 |"))
+    assert training_row.count("9.0 [9.0, 9.0]") == 2  # both physics: update 9's return (steps 10240), the window's one
+    (runs / "ant" / "jax-s5" / "eval.json").unlink()  # a run brought back before its evaluation
+    lines = physics_learning.report(runs)
+    assert any(line.startswith("| ant | - | - | - | 904.5 [") for line in lines)
+    assert not any(line.startswith("- ant, evaluation") for line in lines)
