@@ -12,8 +12,10 @@ started at seed=0 and seed=5. Writes per env:
 - the training return at equal env steps: each seed's mean over the training episodes logged in
   the last 10 % of the env steps that every run of the env reached (metrics.csv), compared the same
   way, so a run brought back before its end still counts;
-- the seeds that ended far below the others (hintsjax/evaluation/outliers.py), and the training
-  rate and compile seconds of each run.
+- the seeds that ended far below the others (hintsjax/evaluation/outliers.py), the seeds whose
+  policy's std (its logged entropy) ended above where it started: with actions clipped to the
+  box, a std that grows saturates them, which costs a locomotion task's control cost in training
+  but not its deterministic evaluation; and the training rate and compile seconds of each run.
 """
 
 from __future__ import annotations
@@ -63,6 +65,21 @@ class Arm:
             window = (steps > (1 - LAST) * up_to) & (steps <= up_to)
             means.append(np.nanmean(values[:, window], axis=1))
         return np.concatenate(means)
+
+    def std_grown(self, up_to: float) -> str:
+        """'k of S': the seeds whose policy entropy (so its std: a Gaussian's entropy grows with its
+        log std) over the last LAST of up_to env steps is above its first logged value; '-' when a
+        run's metrics.csv has no entropy (archived runs keep the return alone)."""
+        grown, seeds = 0, 0
+        for f in self.folders:
+            try:
+                steps, entropy = read_curves(f / "metrics.csv", "entropy")
+            except KeyError:
+                return "-"
+            window = (steps > (1 - LAST) * up_to) & (steps <= up_to)
+            grown += int(np.sum(np.nanmean(entropy[:, window], axis=1) > entropy[:, 0]))
+            seeds += entropy.shape[0]
+        return f"{grown} of {seeds}"
 
     def reached(self) -> float:
         """The env steps per seed that every run of the arm logged."""
@@ -114,7 +131,8 @@ def report(runs: Path) -> list[str]:
     training = ["", "## The training return at equal env steps (sampled actions, each seed's mean over the episodes "
                 f"logged in the last {LAST:.0%} of the steps both physics reached)", "",
                 "| env | env steps per seed | seeds, jax / warp | jax: IQM [95 % CI] | warp: IQM [95 % CI] | P(warp > jax) | "
-                "warp - jax, mean [95 % CI] |", "|---|---|---|---|---|---|---|"]
+                "warp - jax, mean [95 % CI] | seeds whose policy std ended above its start, jax / warp |",
+                "|---|---|---|---|---|---|---|---|"]
     speed = ["", "## Each run's training rate and compile", "",
              "| env | training env steps/s, jax | training env steps/s, warp | training compile s, jax | training compile s, warp |",
              "|---|---|---|---|---|"]
@@ -135,7 +153,7 @@ def report(runs: Path) -> list[str]:
         tj, tw = arms["jax"].training_means(up_to), arms["warp"].training_means(up_to)
         poi, diff, verdict = comparison(tw, tj)
         training.append(f"| {env} | {up_to:,.0f} | {len(tj)} / {len(tw)} | {stats.iqm_cell(tj)} | {stats.iqm_cell(tw)} | "
-                        f"{poi} | {diff} |")
+                        f"{poi} | {diff} | {arms['jax'].std_grown(up_to)} / {arms['warp'].std_grown(up_to)} |")
         verdicts.append(f"- {env}, training return at {up_to:,.0f} env steps: {verdict}")
         speed.append(f"| {env} | {arms['jax'].runs_text('train_env_steps_per_s', 1e3, ' K')} | "
                      f"{arms['warp'].runs_text('train_env_steps_per_s', 1e3, ' K')} | "

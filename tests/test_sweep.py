@@ -735,6 +735,15 @@ def test_physics_learning_pools_the_seeds_of_several_runs_and_compares_training_
     assert "- ant, evaluation: decided: warp scores below jax (the difference's interval excludes 0)" in lines
     training_row = next(line for line in lines if line.startswith("| ant | 10,240 |"))
     assert training_row.count("9.0 [9.0, 9.0]") == 2  # both physics: update 9's return (steps 10240), the window's one
+    assert training_row.endswith("| - / - |")  # no entropy logged
+    metrics = runs / "ant" / "warp" / "metrics.csv"
+    rows = list(csv.DictReader(metrics.open()))
+    with metrics.open("w", newline="") as f:  # seeds 0-2: the entropy rises after update 0; the others: it falls
+        writer = csv.DictWriter(f, [*rows[0], "entropy"])
+        writer.writeheader()
+        writer.writerows({**r, "entropy": 11.0 + (1 if int(r["seed"]) < 3 else -1) * int(r["update"])} for r in rows)
+    training_row = next(line for line in physics_learning.report(runs) if line.startswith("| ant | 10,240 |"))
+    assert training_row.endswith("| - / 3 of 10 |")
     (runs / "ant" / "jax-s5" / "eval.json").unlink()  # a run brought back before its evaluation
     lines = physics_learning.report(runs)
     assert any(line.startswith("| ant | - | - | - | 904.5 [") for line in lines)
