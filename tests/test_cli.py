@@ -717,7 +717,7 @@ def test_seeds_sharded_over_two_devices_give_the_single_device_result(finished_r
     out = subprocess.run([sys.executable, "-m", "hintsjax.run", *args], cwd=tmp_path, env=env,
                          capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
-    assert "on 2 cpu device(s)" in out.stdout
+    assert "on 2 cpu device(s) (1 a device), jax physics, compiled in" in out.stdout  # the pendulum's MJX physics: auto on a CPU
     sharded = json.loads((tmp_path / "runs" / "sharded" / "eval.json").read_text())["evaluations"]
     single = json.loads((finished_run / "eval.json").read_text())["evaluations"]
     for a, b in zip(sharded, single):

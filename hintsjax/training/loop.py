@@ -16,6 +16,7 @@ import jax
 import numpy as np
 from tqdm import tqdm
 
+from hintsjax import envs
 from hintsjax.envs import physics
 from hintsjax.system import checkpoint, devices
 from hintsjax.system.devices import SeedLayout
@@ -95,8 +96,9 @@ def start(trainer: Trainer, cfg: RunConfig, run_dir: Path, resume: bool, label: 
     else:
         state, done = compiled.init(keys), 0
     spread = f" ({layout.per_device} a device{f', {layout.padded - cfg.seeds} of them padding' if layout.padded > cfg.seeds else ''})"
+    stepped_by = f", {cfg.physics} physics" if cfg.env in envs.mjx_env_names() else ""  # what auto chose, too
     print(f"{cfg.env} {label}: {cfg.seeds} seeds x {total} updates of {cfg.ppo.batch_size} env steps "
-          f"on {layout.count} {jax.default_backend()} device(s){spread if layout.count > 1 else ''}, "
+          f"on {layout.count} {jax.default_backend()} device(s){spread if layout.count > 1 else ''}{stepped_by}, "
           f"compiled in {compiled.seconds:.1f} s -> {run_dir}", flush=True)
     return Training(compiled, state, done, done, seconds_trained(run_dir) if resume else 0.0)
 
