@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+from hintsjax.system import paths
 from hintsjax.system.errors import TERMINATED, Terminated, signal_as_interrupt
 
 JOB_JSON = "job.json"  # {"job_id", "executor", "cluster"}: the submitit job that made the run folder
@@ -77,7 +78,7 @@ def _job() -> dict[str, str] | None:
 def record(run_dir: Path) -> None:
     """Write this job's names into a new run folder (nothing outside a submitit job)."""
     if (job := _job()) is not None:
-        (Path(run_dir) / JOB_JSON).write_text(json.dumps(job) + "\n")
+        paths.write_whole(Path(run_dir) / JOB_JSON, lambda p: p.write_text(json.dumps(job) + "\n"))  # a full disk: one line
 
 
 def folders_of_this_job(out_dir: str | Path) -> list[Path]:
