@@ -91,7 +91,7 @@ def hintsjax_values(brax: dict, seeds: int, steps: int, smoke: bool) -> dict:
     update collects num_envs rollouts of batch_size * num_minibatches * unroll_length / num_envs
     steps, and takes num_updates_per_batch epochs of num_minibatches minibatches; the discount,
     one learning rate for actor and critic, the entropy cost, the reward scale and the running
-    observation normalisation. Left at hintsjax's: the networks ((256, 256) beside Brax's
+    observation normalisation, updated before learning as Brax's is. Left at hintsjax's: the networks ((256, 256) beside Brax's
     policy (32,)x4 and value (256,)x5), GAE over the whole rollout (Brax's over each unroll) and
     the clipping (0.2 and 0.5 beside Brax's 0.3 and 1.0)."""
     batch = brax["batch_size"] * brax["num_minibatches"] * brax["unroll_length"]
@@ -99,7 +99,10 @@ def hintsjax_values(brax: dict, seeds: int, steps: int, smoke: bool) -> dict:
            "minibatch_size": batch // brax["num_minibatches"], "epochs": brax["num_updates_per_batch"],
            "gamma": brax["discounting"], "actor_lr": brax["learning_rate"], "critic_lr": brax["learning_rate"],
            "ent_coef": brax["entropy_cost"], "reward_scale": brax["reward_scaling"],
-           "normalize_state": brax["normalize_observations"]}
+           "normalize_state": brax["normalize_observations"],
+           # Brax's order: a rollout's states join the statistics before learning on it (issue 61:
+           # after it, at 20 updates, cost CartpoleSwingup more than half its return on a CPU)
+           "normalize_before_learning": brax["normalize_observations"]}
     return {"env": f"playground:{VERSUS_TASK}", "agent": "ppo_state", "seeds": seeds, "eval_episodes": 2 if smoke else 50,
             "checkpoint_every": 10 ** 9, "ppo": ppo}
 

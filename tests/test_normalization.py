@@ -66,6 +66,22 @@ def test_ppo_merges_each_rollout_after_learning_and_never_trains_the_statistics(
     assert np.all(np.asarray(updates["params"]["log_std"]) != 0)
 
 
+
+def test_normalize_before_learning_learns_on_the_merged_statistics():
+    # Brax's order (ppo.normalize_before_learning): learning on a rollout sees the statistics that
+    # already include it, so the first update learns on normalised states, not through the identity.
+    # It learns exactly what the default order learns from a state whose statistics were merged first.
+    after = layers.run_config({**LINEAR, "agent": "ppo_state"})
+    before = layers.run_config({**LINEAR, "agent": "ppo_state", "ppo": {**LINEAR["ppo"], "normalize_before_learning": True}})
+    ppo_after, ppo_before = make_ppo(after), make_ppo(before)
+    state = jax.jit(ppo_before.init)(jax.random.key(0))
+    rolled, traj, last_value = jax.jit(ppo_before.rollout)(state, jax.random.key(1))
+    learnt, _ = jax.jit(ppo_before.learn)(rolled, traj, last_value, traj.reward, jax.random.key(2))
+    merged = rolled.replace(params=normalization.update(rolled.params, traj.obs))
+    by_hand, _ = jax.jit(ppo_after.learn)(merged, traj, last_value, traj.reward, jax.random.key(2))
+    jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6), learnt.params["params"], by_hand.params["params"])
+    assert float(stats_of(learnt.params)["count"]) == before.ppo.batch_size  # merged once, not again after learning
+
 def test_dagger_merges_the_visited_states():
     cfg = layers.run_config({**LINEAR, "agent": "dagger", "dagger": dict(grad_steps=4, buffer_size=256)})
     trainer = dagger.make_trainer(cfg, expert=linear_env.EXPERT)

@@ -110,6 +110,19 @@ def test_gae_termination_wins_over_truncation():
     np.testing.assert_allclose(adv_both[2, 1], 1.0 + 0.0 - 2.0, rtol=0, atol=1e-6)
 
 
+
+def test_gae_segments_cut_the_advantage_but_keep_the_bootstrap():
+    # segment=2 cuts after rows 1 and 3 (Brax's unrolls of 2 steps). Column 0 already ends at row 1
+    # (terminated) and row 3 is the rollout's end: unchanged. Column 1 is cut after row 1: A_1 is
+    # its own delta, 1 (bootstrapped from v_2 = 2 as before), not 1.5, and A_0 = -1.5 + 0.25 * 1.
+    advantage, target = gae(REWARD, VALUE, TERMINATED, TRUNCATED, FINAL_VALUE, LAST_VALUE, GAMMA, LAM, segment=2)
+    expected = EXPECTED_ADVANTAGE.copy()
+    expected[1, 1], expected[0, 1] = 1.0, -1.25
+    np.testing.assert_allclose(np.asarray(advantage), expected, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(np.asarray(target), expected + VALUE, rtol=0, atol=1e-6)
+    whole, _ = gae(REWARD, VALUE, TERMINATED, TRUNCATED, FINAL_VALUE, LAST_VALUE, GAMMA, LAM, segment=4)
+    np.testing.assert_allclose(np.asarray(whole), EXPECTED_ADVANTAGE, rtol=0, atol=1e-6)  # one segment: GAE as before
+
 # -- clipped surrogate --------------------------------------------------------------------------
 
 CLIP, VF, ENT = 0.2, 0.5, 0.01

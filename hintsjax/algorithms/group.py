@@ -31,7 +31,8 @@ from hintsjax.algorithms.trainer import Trainer, program_identity
 # The PPO settings that fix the shapes of a run's arrays or the structure of its program: the
 # members of a group agree on these; every other PPO number is a Hyper leaf and may differ.
 SHAPES = ("total_env_steps", "num_envs", "batch_size", "epochs", "minibatch_size", "hint_width", "hidden",
-          "starts_per_rollout", "normalize_state", "action_head")
+          "starts_per_rollout", "normalize_state", "action_head", "grad_clip", "adam_eps", "gae_segment",
+          "normalize_before_learning")
 
 
 def signature(cfg: RunConfig) -> dict[str, Any]:
@@ -126,7 +127,7 @@ def make_group_trainer(group: Group) -> Trainer:
         states = []
         for member, hyper in zip(group.cfgs, hypers):  # each drawn at its own width, as alone
             params = pad_to(ppo.start_params(k_net, base.network, ts.obs, hyper, ppo.hint_width(member)), padded)
-            opt_state = ppo.make_optimizer(hyper, params).init(params)
+            opt_state = ppo.optimizer_for(cfg)(hyper, params).init(params)
             states.append(RunnerState(params, opt_state, ts.state, ts.obs, k_run, jnp.zeros((), jnp.int32), hyper))
         return jax.tree.map(lambda *x: jnp.stack(x), *states)
 

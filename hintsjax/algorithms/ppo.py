@@ -97,14 +97,29 @@ def make_network(cfg: RunConfig, env: envs.Env) -> ActorCritic:
                        cfg.ppo.normalize_state, cfg.ppo.action_head)
 
 
-def make_optimizer(hyper: Hyper, params: Any) -> optax.GradientTransformation:
-    """Adam with the paper's per-part learning rates, after global-norm gradient clipping (the
-    normaliser's statistics, if any, are not trained). The rates may be traced arrays."""
+def make_optimizer(hyper: Hyper, params: Any, grad_clip: str = "global", adam_eps: float = 1e-5) -> optax.GradientTransformation:
+    """Adam with the paper's per-part learning rates, after gradient clipping to max_grad_norm (the
+    normaliser's statistics, if any, are not trained). The rates may be traced arrays.
+
+    `grad_clip` (ppo.grad_clip): "global" clips the norm of all parts' gradients together, so a
+    large critic loss shrinks the actor's step too; "per_part" clips each part's (encoder, actor,
+    critic) alone. `adam_eps`: Adam's epsilon (ppo.adam_eps)."""
     rates = {"encoder": hyper.encoder_lr, "actor": hyper.actor_lr, "critic": hyper.critic_lr}
-    groups = {g: optax.adam(lr, eps=1e-5) for g, lr in rates.items()}
+
+    def part(lr):
+        adam = optax.adam(lr, eps=adam_eps)
+        return optax.chain(optax.clip_by_global_norm(hyper.max_grad_norm), adam) if grad_clip == "per_part" else adam
+
+    groups = {g: part(lr) for g, lr in rates.items()}
     if normalization.COLLECTION in params:  # only then: older checkpoints keep their optimiser state's shape
         groups["frozen"] = optax.set_to_zero()
-    return optax.chain(optax.clip_by_global_norm(hyper.max_grad_norm), optax.multi_transform(groups, lr_labels(params)))
+    parts = optax.multi_transform(groups, lr_labels(params))
+    return parts if grad_clip == "per_part" else optax.chain(optax.clip_by_global_norm(hyper.max_grad_norm), parts)
+
+
+def optimizer_for(cfg: RunConfig) -> Callable[[Hyper, Any], optax.GradientTransformation]:
+    """make_optimizer with cfg's static choices (ppo.grad_clip, ppo.adam_eps) bound."""
+    return lambda hyper, params: make_optimizer(hyper, params, cfg.ppo.grad_clip, cfg.ppo.adam_eps)
 
 
 def pick_hint(obs: dict[str, jax.Array], hyper: Hyper) -> dict[str, jax.Array]:
@@ -173,10 +188,11 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
     env_params = cfg.task_params(cfg.variant)
     network = make_network(cfg, env)
     T, N = ppo.rollout_length, ppo.num_envs
+    optimizer_of = optimizer_for(cfg)
 
     def init(key: jax.Array) -> RunnerState:
         hyper = Hyper.of(cfg)
-        return start_runner(key, env, env_params, network, N, lambda params: make_optimizer(hyper, params).init(params), hyper)
+        return start_runner(key, env, env_params, network, N, lambda params: optimizer_of(hyper, params).init(params), hyper)
 
     def rollout(state: RunnerState, key: jax.Array) -> tuple[RunnerState, Transition, jax.Array]:
         starts = None
@@ -227,6 +243,8 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
 
     def learn(state: RunnerState, traj: Transition, last_value: jax.Array, reward: jax.Array, key: jax.Array):
         hyper = state.hyper
+        if ppo.normalize_before_learning:
+            state = state.replace(params=normalization.update(state.params, traj.obs))
         advantage, target = gae(
             reward,
             traj.value,
@@ -236,10 +254,11 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
             last_value,
             hyper.gamma,
             hyper.gae_lambda,
+            ppo.gae_segment,
         )
         flat = lambda x: x.reshape((T * N,) + x.shape[2:])  # noqa: E731
         batch = jax.tree.map(flat, Batch(traj.obs, traj.action, traj.log_prob, advantage, target))
-        optimizer = make_optimizer(hyper, state.params)
+        optimizer = optimizer_of(hyper, state.params)
 
         def minibatch_step(carry, mb: Batch):
             params, opt_state, stopped = carry
@@ -260,7 +279,8 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
         (params, opt_state, _), parts = jax.lax.scan(
             epoch, (state.params, state.opt_state, jnp.zeros((), bool)), jax.random.split(key, ppo.epochs)
         )
-        params = normalization.update(params, traj.obs)  # after learning: the next rollout's statistics
+        if not ppo.normalize_before_learning:
+            params = normalization.update(params, traj.obs)  # after learning: the next rollout's statistics
         metrics = {
             **jax.tree.map(jnp.mean, parts),
             **episode_metrics(traj.terminated | traj.truncated, traj.episode_return),

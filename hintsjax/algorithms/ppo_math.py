@@ -65,19 +65,25 @@ def gae(
     last_value: jax.Array,
     gamma: float,
     lam: float,
+    segment: int = 0,
 ) -> tuple[jax.Array, jax.Array]:
     """Generalised advantage estimates and value targets, both [T, N].
 
     reward, value, terminated, truncated, final_value: [T, N]; last_value: [N], the value of
     the observation after the last step. The step after t is the next row unless an episode
     ended at t: then the bootstrap is final_value[t] if it was truncated and 0 if terminated,
-    and no advantage flows back across the boundary.
+    and no advantage flows back across the boundary. With `segment` L > 0 (static, dividing T)
+    the rollout is cut into runs of L steps, as Brax's unrolls: the last step of each is
+    bootstrapped from the next row's value and no advantage flows back across the cut.
     """
     next_value = jnp.concatenate([value[1:], last_value[None]], axis=0)
     next_value = jnp.where(truncated, final_value, next_value)
     next_value = jnp.where(terminated, 0.0, next_value)
     delta = reward + gamma * next_value - value
     carry_on = 1.0 - (terminated | truncated).astype(jnp.float32)
+    if segment:
+        cut = (jnp.arange(reward.shape[0]) % segment == segment - 1)[:, None]
+        carry_on = jnp.where(cut, 0.0, carry_on)
 
     def back(acc, x):
         d, c = x

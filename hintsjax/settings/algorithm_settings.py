@@ -17,6 +17,10 @@ from hintsjax.system.errors import UsageError, require_positive, require_range
 #             the entropy bonus stays the Gaussian's, before the squash (no closed form after it);
 #   sigmoid:  the authors' head: mean = 2 sigmoid(x) - 1 in [-1, 1], std floored at 0.01; clipped as gaussian.
 ACTION_HEADS = ("gaussian", "tanh", "sigmoid")
+# How max_grad_norm clips (hintsjax.algorithms.ppo.make_optimizer): "global", the norm of every part's
+# gradient together (a large critic loss then shrinks the actor's step as well); "per_part", the
+# encoder's, the actor's and the critic's each alone.
+GRAD_CLIPS = ("global", "per_part")
 
 
 @dataclass(frozen=True)
@@ -50,6 +54,15 @@ class PPOConfig:
     # State agents: normalise the state by its running mean and std (hintsjax.models.normalization).
     normalize_state: bool = False
     action_head: str = "gaussian"  # one of ACTION_HEADS
+    grad_clip: str = "global"  # one of GRAD_CLIPS
+    adam_eps: float = 1e-5  # Adam's epsilon (optax's default is 1e-8; CleanRL's PPO and ours 1e-5)
+    # GAE's horizon: 0 runs it over the whole rollout; L > 0 cuts the rollout into segments of L
+    # steps, each bootstrapped from the value after it, no advantage flowing across (Brax's unrolls).
+    gae_segment: int = 0
+    # normalize_state: merge each rollout's states into the statistics before learning on it (Brax's
+    # order: the first update already learns on normalised states) rather than after (ours: the
+    # rollout and the learning on it see the same statistics).
+    normalize_before_learning: bool = False
 
     @property
     def rollout_length(self) -> int:
@@ -81,6 +94,13 @@ class PPOConfig:
                              "ent_coef": (0.0, math.inf)}, "ppo.")
         if self.action_head not in ACTION_HEADS:
             raise UsageError(f"unknown ppo.action_head {self.action_head!r}; valid: {', '.join(ACTION_HEADS)}")
+        if self.grad_clip not in GRAD_CLIPS:
+            raise UsageError(f"unknown ppo.grad_clip {self.grad_clip!r}; valid: {', '.join(GRAD_CLIPS)}")
+        if not self.adam_eps > 0:
+            raise UsageError(f"ppo.adam_eps ({self.adam_eps}) must be positive")
+        if self.gae_segment < 0 or (self.gae_segment and self.rollout_length % self.gae_segment):
+            raise UsageError(f"ppo.gae_segment ({self.gae_segment}) must be 0 or divide the rollout length "
+                             f"({self.rollout_length} = batch_size / num_envs)")
         if self.target_kl is not None and not self.target_kl > 0:
             raise UsageError(f"ppo.target_kl ({self.target_kl}) must be positive, or null for no KL early stop")
 

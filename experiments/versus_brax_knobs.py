@@ -1,0 +1,188 @@
+"""Which unmatched knob explains hintsjax's PPO trailing Brax's on CartpoleSwingup (issue 61, item 3).
+
+    python experiments/versus_brax_knobs.py --side brax                               # Brax's PPO
+    python experiments/versus_brax_knobs.py --side hintsjax --label baseline          # hintsjax, as --versus-brax maps it
+    python experiments/versus_brax_knobs.py --side hintsjax --label no-grad-clip ppo.max_grad_norm=1e9
+    python experiments/versus_brax_knobs.py --table                                    # the rows so far
+
+A CPU-sized version of experiments/playground.py's --versus-brax: Playground's Brax settings for
+CartpoleSwingup (dm_control_suite_params) with fewer envs and epochs (`CPU`, the same on both
+sides), both trainers held to exactly `--updates` updates of the same batch per seed. hintsjax's
+side takes `hintsjax_values`' mapping plus any `ppo.<key>=<value>` overrides (the knob under test).
+Each side's final policy is evaluated both ways, deterministic (mean action) and stochastic, on
+`EVAL_EPISODES` fresh episodes per seed: hintsjax by its own evaluator, Brax by its own Evaluator.
+Each run appends one row to runs/versus_brax_knobs/rows.jsonl.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # experiments/playground.py, a script beside this one
+import playground  # noqa: E402
+
+ROWS = Path("runs/versus_brax_knobs/rows.jsonl")
+EVAL_EPISODES = 128  # Brax's num_eval_envs
+# Playground's settings scaled to 2 CPU cores, in two regimes. Both have 64 envs, each of which
+# collects 16 unrolls of 30 steps per update (480 steps, as 2048 envs do on the GPU):
+#   many: 96 updates of 16 minibatches of 64 unrolls, 4 epochs (not 16), 2.95 M env steps per seed;
+#   few:  20 updates of 32 minibatches of 32 unrolls, 16 epochs: the GPU run's 20 updates of 512
+#         gradient steps each, with minibatches 32 times smaller, 614,400 env steps per seed.
+REGIMES = {
+    "many": (96, dict(num_envs=64, batch_size=64, num_minibatches=16, unroll_length=30, num_updates_per_batch=4)),
+    "few": (20, dict(num_envs=64, batch_size=32, num_minibatches=32, unroll_length=30, num_updates_per_batch=16)),
+}
+
+
+def settings(regime: str) -> dict:
+    brax = playground.brax_settings(False)
+    brax.update(REGIMES[regime][1])
+    return brax
+
+
+def steps_per_update(brax: dict) -> int:
+    return brax["batch_size"] * brax["num_minibatches"] * brax["unroll_length"]
+
+
+def brax_schedule(updates: int) -> dict:
+    """num_evals and num_resets_per_eval that make Brax's train take exactly `updates` training
+    steps, each followed by a reset of every env (as Playground's settings give on the GPU: one
+    training step per epoch, num_resets_per_eval epochs between evaluations)."""
+    evals = next(e for e in (5, 4, 3, 2) if updates % (e - 1) == 0)
+    return {"num_evals": evals, "num_resets_per_eval": updates // (evals - 1)}
+
+
+def parse_overrides(pairs: list[str]) -> dict:
+    ppo = {}
+    for pair in pairs:
+        key, value = pair.split("=", 1)
+        section, name = key.split(".", 1)
+        assert section == "ppo", key
+        value = yaml.safe_load(value)
+        ppo[name] = float(value) if isinstance(value, str) and value[:1].isdigit() else value  # YAML reads 1e9 as text
+    return ppo
+
+
+def train_hintsjax(regime: str, seeds: int, updates: int, overrides: dict) -> dict:
+    import jax
+    import numpy as np
+
+    from hintsjax.algorithms.registry import make_trainer
+    from hintsjax.evaluation.evaluator import compile_evaluator, evaluate_variants
+    from hintsjax.settings.layers import run_config
+
+    brax = settings(regime)
+    values = playground.hintsjax_values(brax, seeds, updates * steps_per_update(brax), False)
+    values["ppo"].update(overrides)
+    values["eval_episodes"] = EVAL_EPISODES
+    cfg = run_config(values)
+    trainer = make_trainer(cfg)
+    t = time.time()
+    state = jax.jit(jax.vmap(trainer.init))(cfg.seed_keys())
+    every = 4 if updates % 8 else 8
+    chunk = jax.jit(jax.vmap(lambda s: trainer.run(s, every)))
+    curve = []
+    for _ in range(updates // every):
+        state, metrics = chunk(state)
+        curve.append(np.asarray(metrics["episode_return"])[:, -1].round(1).tolist())
+        print(f"update {int(np.asarray(state.update)[0])}: training return per seed {curve[-1]}", flush=True)
+    assert int(np.asarray(state.update)[0]) == updates
+    seconds = time.time() - t
+    compiled = compile_evaluator(cfg, state.params, None, EVAL_EPISODES)
+    evals = {mode: evaluate_variants(cfg, state.params, (None,), EVAL_EPISODES, mode == "stochastic", compiled)[0][0]
+             for mode in ("deterministic", "stochastic")}
+    from hintsjax.settings.layers import to_dict
+
+    return {"env_steps_per_seed": int(np.asarray(state.update)[0]) * cfg.ppo.batch_size, "seconds": seconds,
+            "deterministic": [float(x) for x in evals["deterministic"]["seed_means"]],
+            "stochastic": [float(x) for x in evals["stochastic"]["seed_means"]],
+            "curve": curve, "ppo": to_dict(cfg)["ppo"]}
+
+
+def train_brax(regime: str, seeds: int, updates: int) -> dict:
+    import functools
+
+    import jax
+    from brax.training import acting
+    from brax.training.agents.ppo import networks as ppo_networks
+    from brax.training.agents.ppo import train as ppo
+    from mujoco_playground import registry, wrapper
+
+    playground.mend_brax_for_this_jax()
+    brax = settings(regime)
+    run = {**brax, **brax_schedule(updates), "num_timesteps": updates * steps_per_update(brax), "num_eval_envs": EVAL_EPISODES}
+    out = {"deterministic": [], "stochastic": [], "brax_final_eval": [], "env_steps_per_seed": [], "curve": []}
+    t = time.time()
+    for seed in range(seeds):
+        env = registry.load(playground.VERSUS_TASK, config_overrides={"impl": "jax"})
+        seen = []
+
+        def progress(step, metrics, seen=seen):
+            if "eval/episode_reward" in metrics:
+                seen.append((int(step), round(float(metrics["eval/episode_reward"]), 1)))
+                print(f"seed {seed} step {step}: eval return {seen[-1][1]}", flush=True)
+
+        make_policy, params, _ = ppo.train(environment=env, wrap_env_fn=wrapper.wrap_for_brax_training,
+                                           network_factory=ppo_networks.make_ppo_networks, progress_fn=progress,
+                                           seed=seed, **run)
+        out["brax_final_eval"].append(seen[-1][1])
+        out["env_steps_per_seed"].append(seen[-1][0])
+        out["curve"].append(seen)
+        eval_env = wrapper.wrap_for_brax_training(env, episode_length=brax["episode_length"], action_repeat=1)
+        for mode in ("deterministic", "stochastic"):
+            evaluator = acting.Evaluator(eval_env, functools.partial(make_policy, deterministic=mode == "deterministic"),
+                                         num_eval_envs=EVAL_EPISODES, episode_length=brax["episode_length"],
+                                         action_repeat=1, key=jax.random.PRNGKey(1000 + seed))
+            out[mode].append(float(evaluator.run_evaluation(params, {})["eval/episode_reward"]))
+    out["seconds"] = time.time() - t
+    out["settings"] = {k: v for k, v in run.items() if k != "network_factory"}
+    return out
+
+
+def table() -> None:
+    rows = [json.loads(line) for line in ROWS.read_text().splitlines()]
+    mean = lambda xs: sum(xs) / len(xs)  # noqa: E731
+    print("| regime | side | knob | env steps per seed | deterministic return per seed (mean) | stochastic return per seed (mean) | wall-clock (s) |")
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        det, sto = r["deterministic"], r["stochastic"]
+        steps = r["env_steps_per_seed"]
+        steps = steps if isinstance(steps, int) else "/".join(str(s) for s in sorted(set(steps)))
+        print(f"| {r.get('regime', 'many')} | {r['side']} | {r['label']} | {steps} | {', '.join(f'{x:.1f}' for x in det)} ({mean(det):.1f}) | "
+              f"{', '.join(f'{x:.1f}' for x in sto)} ({mean(sto):.1f}) | {r['seconds']:.0f} |")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--side", choices=("hintsjax", "brax"))
+    parser.add_argument("--label", default="baseline")
+    parser.add_argument("--seeds", type=int, default=2)
+    parser.add_argument("--regime", choices=tuple(REGIMES), default="many")
+    parser.add_argument("--updates", type=int, default=None, help="default: the regime's")
+    parser.add_argument("--table", action="store_true")
+    parser.add_argument("overrides", nargs="*", help="hintsjax's knob: ppo.<key>=<value>")
+    args = parser.parse_args()
+    if args.table:
+        return table()
+    args.updates = args.updates or REGIMES[args.regime][0]
+    if args.side == "brax":
+        assert not args.overrides, "Brax's side takes no overrides"
+        result = train_brax(args.regime, args.seeds, args.updates)
+    else:
+        result = train_hintsjax(args.regime, args.seeds, args.updates, parse_overrides(args.overrides))
+    row = {"side": args.side, "label": args.label, "regime": args.regime, "overrides": args.overrides, "seeds": args.seeds,
+           "updates": args.updates, "date": time.strftime("%Y-%m-%d %H:%M"), **result}
+    ROWS.parent.mkdir(parents=True, exist_ok=True)
+    with ROWS.open("a") as f:
+        f.write(json.dumps(row) + "\n")
+    print(json.dumps({k: row[k] for k in ("side", "label", "env_steps_per_seed", "deterministic", "stochastic", "seconds")}))
+
+
+if __name__ == "__main__":
+    main()
