@@ -142,15 +142,17 @@ def save_run_config(run_dir: Path, cfg: RunConfig) -> None:
 
 
 # Settings added since runs were first saved whose absence means their default (a run saved before
-# hints_from had no hint file; before image_size, the env's own pictures), so a saved config without them is complete.
-OPTIONAL_IN_SAVED = {"hints_from", "image_size"}
+# hints_from had no hint file; before image_size, the env's own pictures; before the PPO knobs of the
+# Brax side by side, the one order and clip there were), so a saved config without them is complete.
+OPTIONAL_IN_SAVED = {"hints_from", "image_size", "ppo.grad_clip", "ppo.adam_eps", "ppo.gae_segment",
+                     "ppo.normalize_before_learning"}
 
 
 def missing_keys(values: Mapping[str, Any]) -> list[str]:
     """The settings of today's RunConfig that a saved config (to_dict's layout) lacks."""
     missing = sorted(_fields(RunConfig) - set(SECTIONS) - OPTIONAL_IN_SAVED - set(values))
     return missing + [f"{name}.{k}" for name, cls in SECTIONS.items()
-                      for k in sorted(_fields(cls) - set(values.get(name) or {}))]
+                      for k in sorted(_fields(cls) - set(values.get(name) or {})) if f"{name}.{k}" not in OPTIONAL_IN_SAVED]
 
 
 def load_run_config(run_dir: Path, complete: bool = False) -> RunConfig:
