@@ -130,7 +130,7 @@ def bench_ceiling(batch: int) -> dict:
         "hint": jax.random.normal(k, (batch, env.hint.dim)),
     }
     params = network.init(k, jax.tree.map(lambda x: x[:1], obs))
-    tx = make_optimizer(Hyper.of(cfg), params)
+    tx = make_optimizer(Hyper.of(cfg), params, cfg.ppo)
     opt_state = tx.init(params)
     action = jax.random.normal(k, (batch, 1))
 

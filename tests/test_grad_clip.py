@@ -26,9 +26,9 @@ LR = 1e-3
 def actor_step(grad_clip: str, critic_gradient: float) -> np.ndarray:
     """The actor's first Adam step (its weights' change) for actor gradients of 1e-3 and critic
     gradients of `critic_gradient`, max_grad_norm 0.5."""
-    hyper = Hyper.of(layers.run_config({"env": "pendulum", "agent": "ppo_state",
-                                        "ppo": {"max_grad_norm": 0.5, "actor_lr": LR, "critic_lr": LR}}))
-    optimizer = make_optimizer(hyper, PARAMS, grad_clip)
+    cfg = layers.run_config({"env": "pendulum", "agent": "ppo_state",
+                             "ppo": {"max_grad_norm": 0.5, "actor_lr": LR, "critic_lr": LR, "grad_clip": grad_clip}})
+    optimizer = make_optimizer(Hyper.of(cfg), PARAMS, cfg.ppo)
     grads = {"params": {"actor": {"w": jnp.full(4, 1e-3)}, "log_std": jnp.full(1, 1e-3),
                         "critic": {"w": jnp.full(4, critic_gradient)}}}
     updates, _ = optimizer.update(grads, optimizer.init(PARAMS), PARAMS)

@@ -59,7 +59,7 @@ def test_ppo_merges_each_rollout_after_learning_and_never_trains_the_statistics(
     jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-6), stats_of(learnt.params), want)
     assert float(stats_of(learnt.params)["count"]) == cfg.ppo.batch_size
     assert not np.allclose(learnt.params["params"]["actor"]["Dense_0"]["kernel"], state.params["params"]["actor"]["Dense_0"]["kernel"])
-    optimizer = make_optimizer(state.hyper, state.params)  # even a gradient on the statistics moves nothing
+    optimizer = make_optimizer(state.hyper, state.params, cfg.ppo)  # even a gradient on the statistics moves nothing
     ones = jax.tree.map(jnp.ones_like, state.params)
     updates, _ = jax.jit(lambda p: optimizer.update(ones, optimizer.init(p), p))(state.params)
     assert all(np.all(np.asarray(u) == 0) for u in jax.tree.leaves(updates[normalization.COLLECTION]))

@@ -127,7 +127,7 @@ def make_group_trainer(group: Group) -> Trainer:
         states = []
         for member, hyper in zip(group.cfgs, hypers):  # each drawn at its own width, as alone
             params = pad_to(ppo.start_params(k_net, base.network, ts.obs, hyper, ppo.hint_width(member)), padded)
-            opt_state = ppo.optimizer_for(cfg)(hyper, params).init(params)
+            opt_state = ppo.make_optimizer(hyper, params, cfg.ppo).init(params)
             states.append(RunnerState(params, opt_state, ts.state, ts.obs, k_run, jnp.zeros((), jnp.int32), hyper))
         return jax.tree.map(lambda *x: jnp.stack(x), *states)
 

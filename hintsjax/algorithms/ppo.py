@@ -22,6 +22,7 @@ from flax import struct
 from hintsjax import envs
 from hintsjax.models import normalization
 from hintsjax.models.networks import ActorCritic, lr_labels
+from hintsjax.settings.algorithm_settings import PPOConfig
 from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms.ppo_math import (Batch, Transition, clipped_surrogate_loss, gae, gaussian_entropy, gaussian_log_prob,
                                           gaussian_sample)
@@ -97,29 +98,24 @@ def make_network(cfg: RunConfig, env: envs.Env) -> ActorCritic:
                        cfg.ppo.normalize_state, cfg.ppo.action_head)
 
 
-def make_optimizer(hyper: Hyper, params: Any, grad_clip: str = "global", adam_eps: float = 1e-5) -> optax.GradientTransformation:
+def make_optimizer(hyper: Hyper, params: Any, ppo: PPOConfig) -> optax.GradientTransformation:
     """Adam with the paper's per-part learning rates, after gradient clipping to max_grad_norm (the
-    normaliser's statistics, if any, are not trained). The rates may be traced arrays.
-
-    `grad_clip` (ppo.grad_clip): "global" clips the norm of all parts' gradients together, so a
-    large critic loss shrinks the actor's step too; "per_part" clips each part's (encoder, actor,
-    critic) alone. `adam_eps`: Adam's epsilon (ppo.adam_eps)."""
+    normaliser's statistics, if any, are not trained). The rates may be traced arrays; the static
+    choices come from `ppo`: `grad_clip` "global" clips the norm of all parts' gradients together,
+    so a large critic loss shrinks the actor's step too, "per_part" clips each part's (encoder,
+    actor, critic) alone; `adam_eps` is Adam's epsilon."""
     rates = {"encoder": hyper.encoder_lr, "actor": hyper.actor_lr, "critic": hyper.critic_lr}
+    per_part = ppo.grad_clip == "per_part"
 
     def part(lr):
-        adam = optax.adam(lr, eps=adam_eps)
-        return optax.chain(optax.clip_by_global_norm(hyper.max_grad_norm), adam) if grad_clip == "per_part" else adam
+        adam = optax.adam(lr, eps=ppo.adam_eps)
+        return optax.chain(optax.clip_by_global_norm(hyper.max_grad_norm), adam) if per_part else adam
 
     groups = {g: part(lr) for g, lr in rates.items()}
     if normalization.COLLECTION in params:  # only then: older checkpoints keep their optimiser state's shape
         groups["frozen"] = optax.set_to_zero()
     parts = optax.multi_transform(groups, lr_labels(params))
-    return parts if grad_clip == "per_part" else optax.chain(optax.clip_by_global_norm(hyper.max_grad_norm), parts)
-
-
-def optimizer_for(cfg: RunConfig) -> Callable[[Hyper, Any], optax.GradientTransformation]:
-    """make_optimizer with cfg's static choices (ppo.grad_clip, ppo.adam_eps) bound."""
-    return lambda hyper, params: make_optimizer(hyper, params, cfg.ppo.grad_clip, cfg.ppo.adam_eps)
+    return parts if per_part else optax.chain(optax.clip_by_global_norm(hyper.max_grad_norm), parts)
 
 
 def pick_hint(obs: dict[str, jax.Array], hyper: Hyper) -> dict[str, jax.Array]:
@@ -188,11 +184,10 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
     env_params = cfg.task_params(cfg.variant)
     network = make_network(cfg, env)
     T, N = ppo.rollout_length, ppo.num_envs
-    optimizer_of = optimizer_for(cfg)
 
     def init(key: jax.Array) -> RunnerState:
         hyper = Hyper.of(cfg)
-        return start_runner(key, env, env_params, network, N, lambda params: optimizer_of(hyper, params).init(params), hyper)
+        return start_runner(key, env, env_params, network, N, lambda params: make_optimizer(hyper, params, ppo).init(params), hyper)
 
     def rollout(state: RunnerState, key: jax.Array) -> tuple[RunnerState, Transition, jax.Array]:
         starts = None
@@ -258,7 +253,7 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
         )
         flat = lambda x: x.reshape((T * N,) + x.shape[2:])  # noqa: E731
         batch = jax.tree.map(flat, Batch(traj.obs, traj.action, traj.log_prob, advantage, target))
-        optimizer = optimizer_of(hyper, state.params)
+        optimizer = make_optimizer(hyper, state.params, ppo)
 
         def minibatch_step(carry, mb: Batch):
             params, opt_state, stopped = carry
