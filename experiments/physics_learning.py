@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -44,8 +45,9 @@ class Arm:
 
     folders: tuple[Path, ...]
 
-    @property
+    @cached_property
     def results(self) -> list[dict | None]:
+        """Each run's eval.json (None where it has none), read once."""
         return [json.loads((f / "eval.json").read_text()) if (f / "eval.json").exists() else None for f in self.folders]
 
     def seed_means(self) -> np.ndarray | None:
@@ -55,13 +57,15 @@ class Arm:
             return None
         return np.concatenate([r["evaluations"][0]["seed_means"] for r in results])
 
+    @cached_property
     def curves(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Each run's training return (env_steps [U], values [S, U]), read once."""
         return [read_curves(f / "metrics.csv") for f in self.folders]
 
     def training_means(self, up_to: float) -> np.ndarray:
         """[S] each seed's mean training return over the episodes logged in (1 - LAST) x up_to to up_to env steps."""
         means = []
-        for steps, values in self.curves():
+        for steps, values in self.curves:
             window = (steps > (1 - LAST) * up_to) & (steps <= up_to)
             means.append(np.nanmean(values[:, window], axis=1))
         return np.concatenate(means)
@@ -83,7 +87,7 @@ class Arm:
 
     def reached(self) -> float:
         """The env steps per seed that every run of the arm logged."""
-        return min(float(steps[-1]) for steps, _ in self.curves())
+        return min(float(steps[-1]) for steps, _ in self.curves)
 
     def runs_text(self, key: str, scale: float = 1.0, unit: str = "") -> str:
         values = [("-" if r is None or r.get(key) is None else f"{_value(r[key]) / scale:.1f}{unit}") for r in self.results]
