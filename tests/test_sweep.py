@@ -272,6 +272,7 @@ def test_an_archived_run_reads_as_the_run_did(tmp_path, monkeypatch):
     before = [f(runs, "ant", "ppo_rgb") for f in (lambda *a: report.cell(report.load(*a)), report.training_cell, report.kl_cell)]
     assert before[2] == "25.0%"
     binned = bin_means(*read_curves(runs / "ant" / "ppo_rgb" / "metrics.csv"))
+    binned_kl = bin_means(*read_curves(runs / "ant" / "ppo_rgb" / "metrics.csv", "approx_kl"))[1]
 
     assert archive.archive_runs(runs, ["ant/ppo_rgb", "ant/ppo_state"]) == ["ant/ppo_rgb"]  # ppo_state never ran
     import shutil
@@ -284,6 +285,11 @@ def test_an_archived_run_reads_as_the_run_did(tmp_path, monkeypatch):
     assert len(steps) == CURVE_POINTS and steps[-1] == 1024 * 600  # bins of 2 or 3 updates
     np.testing.assert_array_equal(steps, binned[0])
     np.testing.assert_allclose(values, binned[1], rtol=1e-5)  # written to 6 digits
+    # the logged diagnostics come along, binned as the return (4 digits); unlogged ones are left out
+    np.testing.assert_allclose(read_curves(report.metrics_path(runs, "ant", "ppo_rgb"), "approx_kl")[1], binned_kl, rtol=1e-3)
+    assert binned_kl.max() > 0.3  # bins of 2 or 3 updates, one of them blown up
+    with pytest.raises(KeyError):
+        read_curves(report.metrics_path(runs, "ant", "ppo_rgb"), "entropy")
     assert archive.sweep_seconds(runs, "3-locomotion") == pytest.approx(60.0)  # the records came along
     assert report.cell(report.load(runs, "ant", "ppo_state")) == "-"
 

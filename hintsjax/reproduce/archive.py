@@ -4,7 +4,8 @@ runs/ is not committed (checkpoints, full logs). What the tables need of each fi
 kept in experiments/results/runs/<sweep>/<env>/<label>/ (`archive_runs`, which every `--report`
 calls first): eval.json and config.yaml as trained, summary.json (the training-return and KL
 cells: `training_seed_means` and `kl_share`, worked out from the full metrics.csv) and a
-metrics.csv of the learning curve averaged into runlog.CURVE_POINTS bins, as the plots draw it;
+metrics.csv of the learning curve averaged into runlog.CURVE_POINTS bins, as the plots draw it,
+with the learning's DIAGNOSTICS averaged into the same bins;
 the sweeps' records go to its sweeps.jsonl (`sweep_records`), and an about.json may say how its
 runs were made (`read_about`). `run_folder` takes a run from runs/ when it finished there, else
 from the archive, so a report on a fresh checkout rebuilds the committed tables.
@@ -23,6 +24,9 @@ from pathlib import Path
 ARCHIVE = Path(__file__).resolve().parents[2] / "experiments" / "results" / "runs"
 ABOUT_JSON = "about.json"  # in an archive folder, beside its runs: how they were made
 SUMMARY_JSON = "summary.json"
+# metrics.csv columns an archived run keeps beside the return (binned as it), where the run logged
+# them: what a collapsed seed's policy did (its std, its steps' KL, the critic's loss, the reward)
+DIAGNOSTICS = ("entropy", "approx_kl", "value_loss", "step_reward")
 KL_ABOVE = 0.5  # kl_share's (and kl_cell's) threshold: an update whose approx. KL exceeds it blew up
 
 
@@ -123,15 +127,19 @@ def archive_run(runs: Path, env: str, label: str) -> Path:
         (dest / SUMMARY_JSON).write_text(json.dumps({"training_return_seed_means": None, "kl_share": None}) + "\n")
         return dest
     kept = {"training_return_seed_means": training_seed_means(src), "kl_share": kl_share(src)}
+    with (src / "metrics.csv").open() as f:
+        columns = csv.DictReader(f).fieldnames or ()
+    logged = [c for c in DIAGNOSTICS if c in columns]
     steps, values = read_curves(src / "metrics.csv")
+    extra = [bin_means(steps, read_curves(src / "metrics.csv", c)[1])[1] for c in logged]
     # metrics.csv's updates count from 1 without gaps (a resumed run goes on from its checkpoint);
     # each archived row is a bin of them, numbered by its last update
     updates, _ = bin_means(np.arange(1, len(steps) + 1), values)
     steps, values = bin_means(steps, values)
     with (dest / "metrics.csv").open("w", newline="") as f:
         writer = csv.writer(f)
-        writer.writerow(["update", "seed", "env_steps", "episode_return"])
-        writer.writerows([updates[i], s, f"{steps[i]:.0f}", f"{values[s, i]:.6g}"]
+        writer.writerow(["update", "seed", "env_steps", "episode_return", *logged])
+        writer.writerows([updates[i], s, f"{steps[i]:.0f}", f"{values[s, i]:.6g}", *(f"{e[s, i]:.4g}" for e in extra)]
                          for i in range(len(steps)) for s in range(values.shape[0]))
     (dest / SUMMARY_JSON).write_text(json.dumps(kept, indent=1) + "\n")
     return dest
