@@ -157,6 +157,14 @@ def resolve_physics(name: str, physics: str = AUTO) -> str:
     return _physics.resolve(physics, jax.default_backend(), cls.warp_by_default)
 
 
+def auto_likely_warp(name: str) -> bool:
+    """Whether physics=auto will step env `name` with MJX-Warp on this machine, read without
+    starting JAX (`gpu_likely`): what a command decides its XLA flags by."""
+    entry = REGISTRY.get(name)
+    return (entry is not None and issubclass(entry.cls, MjxEnv) and entry.cls.warp_by_default
+            and _physics.warp_installed() and _physics.gpu_likely())
+
+
 def variant_names(name: str) -> list[str]:
     return list(choose("env", name, REGISTRY).variants)
 

@@ -32,10 +32,10 @@ class MjxEnv(Env):
     asset: str = ""
     options: dict[str, Any] = {}
 
-    # Whether physics=auto picks MJX-Warp for this env on an NVIDIA GPU. False for every env until
-    # a task's agents are shown to learn alike on both (docs/environments.md, "Physics"): the one
-    # comparison so far, the ant's hints-fc-speed row, scored 905 +- 194 with Warp against 1239 +- 283
-    # with JAX (another GPU, an earlier day), beyond the seeds' spread. physics=warp asks for it.
+    # Whether physics=auto picks MJX-Warp for this env on an NVIDIA GPU (with warp-lang). The
+    # locomotion envs do (envs/locomotion.py); the small classic-control models keep MJX's JAX
+    # solver, where Warp was never measured faster and Table 2's rows stay bit-reproducible
+    # (docs/environments.md, "Physics").
     warp_by_default: bool = False
 
     def __init__(self, hint: Hint, observe: tuple[str, ...] = OBS_KEYS, physics: str = AUTO,

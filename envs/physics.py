@@ -114,6 +114,21 @@ def warp_installed() -> bool:
     return importlib.util.find_spec("warp") is not None
 
 
+def gpu_likely() -> bool:
+    """Whether JAX will start on an NVIDIA GPU, read without starting it (XLA's flags are read
+    once, when it starts): JAX_PLATFORMS allows one, a CUDA plugin of jax is installed and the
+    driver's device node exists. A guess for choosing flags early; a run's config resolves `auto`
+    from the backend JAX really started."""
+    from importlib import metadata
+
+    platforms = {p.strip() for p in os.environ.get("JAX_PLATFORMS", "").lower().split(",") if p.strip()}
+    if platforms and not platforms & {"cuda", "gpu"}:
+        return False
+    plugin = any((d.metadata["Name"] or "").lower().replace("_", "-").startswith("jax-cuda")
+                 for d in metadata.distributions())
+    return plugin and os.path.exists("/dev/nvidiactl")
+
+
 def resolve(choice: str, platform: str, warp_by_default: bool = True) -> str:
     """`jax` or `warp` for a run on `platform` (jax.default_backend(): cpu, gpu, tpu).
 

@@ -70,8 +70,9 @@ def test_deterministic_ops_drop_for_warp_only_where_the_user_left_them_and_jax_h
         assert dropped == "False" and "--xla_gpu_deterministic_ops=true" in flags.split() and FLAG not in flags
 
 
-def test_a_command_asks_only_for_warp_when_every_job_does(tmp_path):
+def test_a_command_asks_only_for_warp_when_every_job_does(tmp_path, monkeypatch):
     from hintsjax.cli.overrides import asks_only_for_warp
+    from hintsjax.envs import physics
 
     warp_run = tmp_path / "warp_run"
     warp_run.mkdir()
@@ -79,9 +80,32 @@ def test_a_command_asks_only_for_warp_when_every_job_does(tmp_path):
     assert asks_only_for_warp(["env=ant", "physics=warp"])
     assert asks_only_for_warp(["-m", "env=ant", "physics=warp", "seeds=1,2"])
     assert asks_only_for_warp([f"resume={warp_run}"])
-    assert not asks_only_for_warp(["env=ant"])  # physics=auto: JAX's solver
+    assert not asks_only_for_warp(["env=ant"])  # physics=auto without an NVIDIA GPU: JAX's solver
     assert not asks_only_for_warp(["-m", "env=ant", "physics=warp,jax"])
     assert not asks_only_for_warp([f"resume={tmp_path / 'missing'}"])
+    # where JAX will find an NVIDIA GPU, auto asks for Warp for the envs that prefer it
+    monkeypatch.setattr(physics, "warp_installed", lambda: True)
+    monkeypatch.setattr(physics, "gpu_likely", lambda: True)
+    assert asks_only_for_warp(["env=ant", "hint=speed", "scheme=fc"])  # the design's command
+    assert asks_only_for_warp(["-m", "env=ant,humanoid"])
+    assert not asks_only_for_warp(["env=ant", "physics=jax"])
+    assert not asks_only_for_warp(["-m", "env=ant,pendulum"])  # the pendulum keeps JAX's solver
+    assert not asks_only_for_warp(["env=playground:CartpoleSwingup"])
+    monkeypatch.setattr(physics, "warp_installed", lambda: False)
+    assert not asks_only_for_warp(["env=ant"])
+
+
+def test_a_gpu_is_guessed_only_where_jax_may_use_one(monkeypatch):
+    """gpu_likely, read before JAX starts: never where JAX_PLATFORMS names no GPU, nor on this
+    suite's machines (no CUDA plugin), whatever JAX_PLATFORMS says."""
+    from hintsjax.envs import physics
+
+    monkeypatch.setenv("JAX_PLATFORMS", "cpu")
+    assert not physics.gpu_likely()
+    monkeypatch.setenv("JAX_PLATFORMS", "cuda,cpu")
+    import jax
+
+    assert physics.gpu_likely() == (jax.default_backend() == "gpu")
 
 
 def test_a_child_of_a_hintsjax_process_tells_its_parents_flags_from_the_users(tmp_path):

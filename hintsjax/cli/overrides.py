@@ -173,10 +173,15 @@ def jobs_values(argv: list[str]) -> list[dict[str, Any]]:
 
 
 def asks_only_for_warp(argv: list[str]) -> bool:
-    """Whether every job steps its physics with MuJoCo Warp (`physics=warp`, or a resumed run's
+    """Whether every job steps its physics with MuJoCo Warp (`physics=warp`; `auto` for an env
+    that prefers Warp, on a machine that looks like an NVIDIA GPU's; or a resumed run's
     config.yaml says so), read without starting JAX."""
+    from hintsjax import envs
+
     def physics(values: dict[str, Any]) -> Any:
         if values.get("resume") is None:
+            if values.get("physics") == "auto" and envs.auto_likely_warp(str(values.get("env"))):
+                return "warp"
             return values.get("physics")
         try:
             return yaml.safe_load((Path(str(values["resume"])) / "config.yaml").read_text()).get("physics")

@@ -36,14 +36,18 @@ def test_auto_picks_warp_only_on_an_nvidia_gpu_with_warp_lang(monkeypatch):
     assert physics.resolve("auto", "gpu") == "jax"
 
 
-def test_auto_keeps_jax_for_every_env_until_learning_on_warp_matches(monkeypatch):
-    """Today no env asks for Warp under auto (envs/mjx_env.py `warp_by_default`): on an NVIDIA GPU
-    with warp-lang, auto still resolves to jax everywhere, and physics=warp is what asks for Warp."""
+def test_auto_gives_warp_to_the_locomotion_envs_on_an_nvidia_gpu(monkeypatch):
+    """On an NVIDIA GPU with warp-lang, auto steps the locomotion envs with MJX-Warp
+    (envs/locomotion.py `warp_by_default`) and keeps JAX's solver for the classic-control models
+    and every env without a MuJoCo model; physics=warp asks for Warp on any MJCF env."""
     monkeypatch.setattr(physics, "warp_installed", lambda: True)
     monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
-    assert {envs.resolve_physics(name) for name in envs.env_names()} == {"jax"}
+    warp = {name for name in envs.env_names() if envs.resolve_physics(name) == "warp"}
+    assert warp == {"halfcheetah", "ant", "ant_fast", "humanoid"}
     assert {envs.resolve_physics(name, "warp") for name in envs.mjx_env_names()} == {"warp"}
     assert set(envs.mjx_env_names()) == {"pendulum", "acrobot", "idp", "halfcheetah", "ant", "ant_fast", "humanoid"}
+    monkeypatch.setattr(jax, "default_backend", lambda: "cpu")
+    assert {envs.resolve_physics(name) for name in envs.env_names()} == {"jax"}  # CPU runs stay reproducible
 
 
 def test_physics_warp_without_warp_lang_is_one_line_naming_the_gpu_extra(monkeypatch, tmp_path, capsys):
@@ -59,8 +63,8 @@ def test_physics_warp_without_warp_lang_is_one_line_naming_the_gpu_extra(monkeyp
 
 
 def test_the_config_keeps_the_physics_a_run_is_stepped_with():
-    """auto is resolved when the config is built (jax on a CPU, and for every env today on a GPU
-    too: no env prefers Warp yet), so config.yaml and eval.json say what stepped the run, and a
+    """auto is resolved when the config is built (jax on a CPU; on an NVIDIA GPU, warp for the
+    locomotion envs), so config.yaml and eval.json say what stepped the run, and a
     resumed run keeps it; a config saved before the setting existed was stepped by JAX."""
     assert run_config({"env": "ant"}).physics == physics.resolve("auto", jax.default_backend(), Ant.warp_by_default)
     assert run_config({"env": "ant"}).physics == "jax"
