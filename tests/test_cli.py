@@ -935,12 +935,13 @@ def test_an_env_registered_at_run_time_takes_one_call():
 
 
 def test_a_config_saved_before_the_brax_knobs_resumes_under_their_defaults(tmp_path):
-    """Runs saved before ppo.grad_clip, adam_eps, gae_segment and normalize_before_learning existed
-    trained as their defaults do, so a config.yaml without them is complete; without clip_eps it is not."""
+    """Runs saved before ppo.grad_clip, adam_eps, gae_segment, normalize_before_learning and
+    critic_trains_encoder existed trained as their defaults do, so a config.yaml without them is
+    complete; without clip_eps it is not."""
     cfg = layers.run_config({k: v for k, v in tiny_values().items() if k != "out_dir"})
     layers.save_run_config(tmp_path, cfg)
     values = yaml.safe_load((tmp_path / "config.yaml").read_text())
-    for key in ("grad_clip", "adam_eps", "gae_segment", "normalize_before_learning"):
+    for key in ("grad_clip", "adam_eps", "gae_segment", "normalize_before_learning", "critic_trains_encoder"):
         del values["ppo"][key]
     (tmp_path / "config.yaml").write_text(yaml.safe_dump(values))
     assert layers.load_run_config(tmp_path, complete=True) == cfg

@@ -98,3 +98,24 @@ def test_each_agent_reads_only_its_inputs(agent):
     assert labels["critic"]["Dense_0"]["kernel"] == "critic"
     if spec.pixels:
         assert labels["encoder"]["PatchConv_0"]["kernel"] == "encoder"
+
+
+def test_a_critic_that_does_not_train_the_encoder_leaves_the_shared_features_to_the_actor():
+    """critic_trains_encoder=False (ppo.critic_trains_encoder): the same outputs, but the value's
+    gradient reaches the critic's MLP alone, none of the encoder or the conditioning it shares
+    with the actor; the actor's gradient still reaches them."""
+    spec = AGENTS["hints"]
+    obs = {k: OBS[k] for k in spec.observe}
+    shared, own = ActorCritic(spec, "fc", 2), ActorCritic(spec, "fc", 2, critic_trains_encoder=False)
+    params = shared.init(jax.random.key(0), obs)
+    for a, b in zip(shared.apply(params, obs), own.apply(params, obs)):
+        np.testing.assert_array_equal(a, b)
+
+    def grads(net, output):
+        return jax.grad(lambda p: net.apply(p, obs)[output].sum())(params)["params"]
+
+    nonzero = lambda tree: any(bool(np.any(x)) for x in jax.tree.leaves(tree))  # noqa: E731
+    for part in ("encoder", "conditioning"):
+        assert nonzero(grads(shared, 2)[part]) and not nonzero(grads(own, 2)[part]), part
+        assert nonzero(grads(own, 0)[part]), part  # the policy still trains them
+    jax.tree.map(np.testing.assert_array_equal, grads(own, 2)["critic"], grads(shared, 2)["critic"])

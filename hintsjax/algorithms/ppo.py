@@ -95,7 +95,7 @@ class RunnerState:
 
 def make_network(cfg: RunConfig, env: envs.Env) -> ActorCritic:
     return ActorCritic(cfg.agent_spec, cfg.scheme, env.action_size, cfg.ppo.hint_width, cfg.ppo.hidden,
-                       cfg.ppo.normalize_state, cfg.ppo.action_head)
+                       cfg.ppo.normalize_state, cfg.ppo.action_head, cfg.ppo.critic_trains_encoder)
 
 
 def make_optimizer(hyper: Hyper, params: Any, ppo: PPOConfig) -> optax.GradientTransformation:

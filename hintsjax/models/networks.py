@@ -105,7 +105,8 @@ class ActorCritic(nn.Module):
     three-layer MLPs on z'; the policy is a Gaussian with a learnt, state-independent std. With
     `action_head` "sigmoid" (the authors' head) its mean is 2 sigmoid(x) - 1 and its std at least
     SIGMOID_MIN_STD; "gaussian" and "tanh" leave both as they are (tanh squashes in the env:
-    envs.SquashedActions).
+    envs.SquashedActions). Without `critic_trains_encoder` the critic reads z' through a
+    stop-gradient: its loss trains the critic's MLP alone.
     Top-level parameter names ("encoder", "conditioning", "actor", "log_std", "critic") are the
     optimiser's learning-rate groups. With `normalize_state` the state passes through the running
     normaliser first (hintsjax.models.normalization; its statistics are the "obs_stats" collection).
@@ -118,6 +119,7 @@ class ActorCritic(nn.Module):
     hidden: tuple[int, ...] = (256, 256)
     normalize_state: bool = False
     action_head: str = "gaussian"
+    critic_trains_encoder: bool = True
 
     def features(self, obs: dict[str, jax.Array]) -> jax.Array:
         agent = self.agent
@@ -137,7 +139,8 @@ class ActorCritic(nn.Module):
         log_std = self.param("log_std", nn.initializers.zeros, (self.action_size,))
         if self.action_head == "sigmoid":
             mean, log_std = 2.0 * nn.sigmoid(mean) - 1.0, jnp.maximum(log_std, jnp.log(SIGMOID_MIN_STD))
-        value = MLP((*self.hidden, 1), out_scale=1.0, name="critic")(z)[..., 0]
+        critic_in = z if self.critic_trains_encoder else jax.lax.stop_gradient(z)
+        value = MLP((*self.hidden, 1), out_scale=1.0, name="critic")(critic_in)[..., 0]
         return mean, log_std, value
 
 

@@ -63,6 +63,11 @@ class PPOConfig:
     # order: the first update already learns on normalised states) rather than after (ours: the
     # rollout and the learning on it see the same statistics).
     normalize_before_learning: bool = False
+    # Whether the critic's loss trains the features it shares with the actor (the encoder and the
+    # hint's conditioning; the paper's agent: true). false: the critic reads them through a
+    # stop-gradient, so only the policy's loss moves them (the ant's KL storms,
+    # experiments/results/locomotion_ppo_stability.md).
+    critic_trains_encoder: bool = True
 
     @property
     def rollout_length(self) -> int:
