@@ -66,7 +66,8 @@ def _run(values: dict[str, Any]) -> int:
     except Exception as e:  # noqa: BLE001  the boundary: a bug, not bad input
         return report_bug(e)
     cfg, run_dir = asked.cfg, asked.run_dir
-    if (note := rounded_budget(cfg)) and devices.is_main():
+    named = any((values.get("ppo") or {}).get(k) is not None for k in ("total_env_steps", "batch_size"))
+    if named and (note := rounded_budget(cfg)) and devices.is_main():  # an env's own budget is not the user's to round
         print(note, file=sys.stderr)
     compilation_cache.enable(compilation_cache.folder(values.get("compilation_cache")))
     existed = paths.existing_part(asked.out_dir)  # what stays if the run goes again before its first update

@@ -108,7 +108,8 @@ def test_names_and_folders_are_strings_whatever_yaml_makes_of_them():
 
 def test_a_budget_that_is_not_whole_updates_says_what_it_was_rounded_to(tmp_path, monkeypatch, capsys):
     """`ppo.total_env_steps=300` with batches of 64: one line saying it trains 4 updates, 256 env
-    steps a seed (it did so without a word); a whole number of updates says nothing."""
+    steps a seed (it did so without a word); a whole number of updates says nothing, and neither
+    does an env's own budget (the ant's 5 M in batches of 1024: the design's command)."""
     from hintsjax.settings.layers import run_config
 
     values = {k: v for k, v in tiny_values(ppo={**tiny_values()["ppo"], "total_env_steps": 300}).items() if k != "out_dir"}
@@ -119,6 +120,10 @@ def test_a_budget_that_is_not_whole_updates_says_what_it_was_rounded_to(tmp_path
     monkeypatch.setattr(run, "train", lambda *args, **kwargs: None)
     assert run.main_from_values(tiny_values(out_dir=str(tmp_path), ppo={**tiny_values()["ppo"], "total_env_steps": 300})) == 0
     assert capsys.readouterr().err.strip().splitlines() == [request.rounded_budget(cfg)]
+    ant = {"env": "ant", "hint": "speed", "scheme": "fc", "out_dir": str(tmp_path / "ant")}
+    assert request.rounded_budget(run_config({k: v for k, v in ant.items() if k != "out_dir"})) is not None
+    assert run.main_from_values(ant) == 0
+    assert "note:" not in capsys.readouterr().err
 
 
 def parsed(text: str):
