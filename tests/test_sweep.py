@@ -754,3 +754,31 @@ def test_physics_learning_pools_the_seeds_of_several_runs_and_compares_training_
     lines = physics_learning.report(runs)
     assert any(line.startswith("| ant | - | - | - | 904.5 [") for line in lines)
     assert not any(line.startswith("- ant, evaluation") for line in lines)
+
+
+def test_kl_storms_are_counted_per_seed_and_kept_in_the_archive(tmp_path, monkeypatch):
+    """A storm is STORM_UPDATES updates in a row with approx. KL above KL_ABOVE: seed 0 has one of 15
+    updates from update 101 (inf counts as above) and a burst of 6 later; seed 1 only bursts, so no
+    storm. archive_run keeps them in summary.json, which the archived run answers from."""
+    from hintsjax.settings import layers
+
+    monkeypatch.setattr(archive, "ARCHIVE", tmp_path / "archive")
+    runs = tmp_path / "runs"
+    write_run(runs, "ant", "hints", [evaluation(1.0, 0.0, [1.0, 1.0])], [[0.0] * 300, [0.0] * 300])
+    layers.save_run_config(runs / "ant" / "hints", layers.run_config({"env": "ant"}))
+    path = runs / "ant" / "hints" / "metrics.csv"
+    rows = list(csv.DictReader(path.open()))
+    for row in rows:
+        update, seed = int(row["update"]) + 1, int(row["seed"])  # write_run numbers updates from 0
+        hot = (seed == 0 and (101 <= update <= 115 or 200 <= update <= 205)) or (seed == 1 and update % 7 < 5)
+        row["approx_kl"] = ("inf" if update == 110 else 0.9) if hot else 0.01
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    expected = [{"first": 101, "longest": 15}, {"first": None, "longest": 5}]
+    assert archive.kl_storms(runs / "ant" / "hints") == expected
+    dest = archive.archive_run(runs, "ant", "hints")
+    assert json.loads((dest / "summary.json").read_text())["kl_storms"] == expected
+    assert archive.kl_storms(dest) == expected
+    assert archive.kl_storms(tmp_path / "nowhere") is None

@@ -28,6 +28,7 @@ SUMMARY_JSON = "summary.json"
 # them: what a collapsed seed's policy did (its std, its steps' KL, the critic's loss, the reward)
 DIAGNOSTICS = ("entropy", "approx_kl", "value_loss", "step_reward")
 KL_ABOVE = 0.5  # kl_share's (and kl_cell's) threshold: an update whose approx. KL exceeds it blew up
+STORM_UPDATES = 10  # kl_storms': a storm is this many updates in a row whose approx. KL exceeds KL_ABOVE
 
 
 def run_folder(runs: Path, env: str, label: str) -> Path:
@@ -110,6 +111,32 @@ def sweep_seconds(runs: Path, table: int | str) -> float:
     return total
 
 
+def kl_storms(folder: Path) -> list[dict] | None:
+    """Per seed, its KL storms (STORM_UPDATES or more updates in a row whose approx. KL exceeds
+    KL_ABOVE): {"first": the update the first one starts at, or None, "longest": the longest run
+    of such updates}. None when not run, not trained by PPO, or archived before they were kept."""
+    import numpy as np
+
+    from hintsjax.training.runlog import read_curves
+
+    if (kept := summary(folder)) is not None:
+        return kept.get("kl_storms")
+    try:
+        _, kl = read_curves(folder / "metrics.csv", "approx_kl")
+    except (OSError, KeyError):
+        return None
+    storms = []
+    for above in np.nan_to_num(kl, nan=0.0) > KL_ABOVE:
+        run, longest, first = 0, 0, None
+        for update, hot in enumerate(above, start=1):
+            run = run + 1 if hot else 0
+            longest = max(longest, run)
+            if run == STORM_UPDATES and first is None:
+                first = update - STORM_UPDATES + 1
+        storms.append({"first": first, "longest": longest})
+    return storms
+
+
 def archive_run(runs: Path, env: str, label: str) -> Path:
     """Copy what the tables need of the finished run runs/env/label into
     ARCHIVE/<runs' name>/env/label (see the module's docstring); returns that folder."""
@@ -124,9 +151,9 @@ def archive_run(runs: Path, env: str, label: str) -> Path:
         shutil.copyfile(src / name, dest / name)
     (dest / "metrics.csv").unlink(missing_ok=True)
     if not (src / "metrics.csv").exists():
-        (dest / SUMMARY_JSON).write_text(json.dumps({"training_return_seed_means": None, "kl_share": None}) + "\n")
+        (dest / SUMMARY_JSON).write_text(json.dumps({"training_return_seed_means": None, "kl_share": None, "kl_storms": None}) + "\n")
         return dest
-    kept = {"training_return_seed_means": training_seed_means(src), "kl_share": kl_share(src)}
+    kept = {"training_return_seed_means": training_seed_means(src), "kl_share": kl_share(src), "kl_storms": kl_storms(src)}
     with (src / "metrics.csv").open() as f:
         columns = csv.DictReader(f).fieldnames or ()
     logged = [c for c in DIAGNOSTICS if c in columns]
