@@ -123,3 +123,32 @@ def test_a_child_of_a_hintsjax_process_tells_its_parents_flags_from_the_users(tm
         dropped, child_flags = child.stdout.split("\n")[:2]
         assert dropped == str(not user), child_flags
         assert child_flags.split().count("--xla_cpu_enable_concurrency_optimized_scheduler=false") == 1
+
+
+def test_a_sweep_worker_drops_determinism_only_when_all_its_runs_get_warp(monkeypatch):
+    """A table script's worker (python -m hintsjax.reproduce.sweep --one env/label,...): physics=warp,
+    or auto where every run's env prefers Warp on an NVIDIA GPU, drops deterministic GPU ops before
+    its check starts JAX; a run that keeps JAX's solver keeps them for the whole worker."""
+    import argparse
+
+    from hintsjax.envs import physics
+    from hintsjax.reproduce import sweep_settings
+    from hintsjax.system import xla_flags
+
+    dropped = []
+    monkeypatch.setattr(xla_flags, "drop_determinism", lambda: dropped.append(True) or True)
+    monkeypatch.setattr(physics, "warp_installed", lambda: True)
+    monkeypatch.setattr(physics, "gpu_likely", lambda: True)
+    parser = argparse.ArgumentParser()
+
+    def worker(one: str, *settings: str) -> bool:
+        dropped.clear()
+        sweep_settings.worker_settings(parser, argparse.Namespace(settings=list(settings), one=one))
+        return bool(dropped)
+
+    assert worker("ant/hints-fc-speed,ant/ppo_rgb")
+    assert worker("pendulum/hints-fc-composite", "physics=warp")
+    assert not worker("ant/hints-fc-speed,pendulum/ppo_rgb")
+    assert not worker("ant/hints-fc-speed", "physics=jax")
+    monkeypatch.setattr(physics, "gpu_likely", lambda: False)
+    assert not worker("ant/hints-fc-speed")

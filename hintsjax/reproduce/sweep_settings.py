@@ -31,6 +31,12 @@ def parsed_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -
     return settings
 
 
+def _auto_warp(env: str) -> bool:
+    from hintsjax import envs  # jax imported, its backend not started
+
+    return envs.auto_likely_warp(env)
+
+
 def check_settings(parser: argparse.ArgumentParser, settings: dict) -> dict:
     """`settings`, or exit 2 in one line on one that RunConfig refuses (this starts JAX's backend:
     resolving the physics asks it for the platform)."""
@@ -50,11 +56,14 @@ def chosen_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -
 
 
 def worker_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict:
-    """A worker's --set settings, read and checked. Under physics=warp it trains without
+    """A worker's --set settings, read and checked. Where every run it trains gets MJX-Warp
+    (physics=warp, or auto for envs that prefer Warp on this machine's NVIDIA GPU) it trains without
     deterministic GPU ops (nothing repeats bit for bit under Warp's atomics), which it must say
     before the check starts JAX's backend."""
     settings = parsed_settings(parser, args)
-    if settings.get("physics") == "warp":
+    physics = settings.get("physics", "auto")
+    env_names = [run.split("/")[0] for run in getattr(args, "one", "").split(",") if run]
+    if physics == "warp" or (physics == "auto" and env_names and all(map(_auto_warp, env_names))):
         from hintsjax.system import xla_flags
 
         xla_flags.drop_determinism()
