@@ -258,3 +258,51 @@ def test_target_kl_stops_an_update_after_the_first_minibatch_whose_kl_exceeds_it
 def test_target_kl_must_be_positive():
     with pytest.raises(UsageError, match="target_kl"):
         layers.run_config(dict(env="cue", agent="hints_blind", ppo={**SMALL_PPO, "target_kl": 0.0}))
+
+
+def test_kl_adaptive_rates_follow_rsl_rls_band():
+    """kl_rate.adapted, by hand: divided by 1.5 above 2 x target (NaN and inf too), multiplied by 1.5
+    below 0.5 x target, unchanged between; never above 1 nor below MIN_SCALE."""
+    from hintsjax.algorithms import kl_rate
+
+    def after(scale, kl):
+        return float(kl_rate.adapted(jnp.float32(scale), jnp.float32(kl), jnp.float32(0.05)))
+
+    assert after(1.0, 0.2) == pytest.approx(1 / 1.5) and after(1.0, np.nan) == after(1.0, np.inf) == after(1.0, 0.2)
+    assert after(0.5, 0.01) == pytest.approx(0.75) and after(0.5, 0.05) == 0.5 and after(0.5, 0.1) == 0.5
+    assert after(1.0, 0.0) == 1.0 and after(0.01, 1.0) == pytest.approx(kl_rate.MIN_SCALE)
+
+
+def test_kl_adaptive_lr_shrinks_the_rates_an_update_carries_to_the_next():
+    """ppo.kl_adaptive_lr with a target no KL reaches gives the params of the fixed rates (to float32
+    rounding) at a scale of 1. With a tiny target, one update of 2 x 2 minibatches: the first
+    (the rollout policy's own KL, not read) steps at the full rate, the second's KL is too far, so
+    the rates shrink by 1.5 and the KL stop ends the update; the next update starts at that rate
+    and shrinks it again."""
+    from hintsjax.algorithms import kl_rate
+
+    def make(target_kl, adaptive):
+        return ppo.make_ppo(layers.run_config(dict(env="cue", agent="hints_blind", seeds=1,
+                                                   ppo={**SMALL_PPO, "target_kl": target_kl, "kl_adaptive_lr": adaptive})))
+
+    def one_update(parts, state, key):
+        state, traj, last_value = jax.jit(parts.rollout)(state, key)
+        return jax.jit(parts.learn)(state, traj, last_value, traj.reward, jax.random.key(2))
+
+    fixed, steered, tiny = make(1e9, False), make(1e9, True), make(1e-12, True)
+    (a, _), (b, metrics) = (one_update(p, jax.jit(p.init)(jax.random.key(0)), jax.random.key(1)) for p in (fixed, steered))
+    assert float(kl_rate.scale_of(b.opt_state)) == 1.0 and np.all(np.asarray(metrics["lr_scale"]) == 1.0)
+    for x, y in zip(jax.tree.leaves(a.params), jax.tree.leaves(b.params)):
+        np.testing.assert_allclose(x, y, atol=1e-6)
+    state, metrics = one_update(tiny, jax.jit(tiny.init)(jax.random.key(0)), jax.random.key(1))
+    assert set(adam_counts(state.opt_state)) == {1}
+    assert float(kl_rate.scale_of(state.opt_state)) == pytest.approx(1 / 1.5)
+    np.testing.assert_allclose(metrics["lr_scale"], (1 + 3 / 1.5) / 4, rtol=1e-6)  # mean over the 4 minibatches
+    state, _ = one_update(tiny, state, jax.random.key(3))
+    assert set(adam_counts(state.opt_state)) == {2}
+    assert float(kl_rate.scale_of(state.opt_state)) == pytest.approx(1 / 1.5**2)
+
+
+def test_kl_adaptive_lr_needs_a_target():
+    with pytest.raises(UsageError, match="kl_adaptive_lr needs ppo.target_kl"):
+        layers.run_config(dict(env="cue", agent="hints_blind", ppo={**SMALL_PPO, "kl_adaptive_lr": True}))

@@ -26,6 +26,7 @@ from hintsjax.settings.algorithm_settings import PPOConfig
 from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms.ppo_math import (Batch, Transition, clipped_surrogate_loss, gae, gaussian_entropy, gaussian_log_prob,
                                           gaussian_sample)
+from hintsjax.algorithms import kl_rate
 from hintsjax.algorithms.trainer import Trainer, episode_metrics, program_identity
 
 
@@ -103,7 +104,8 @@ def make_optimizer(hyper: Hyper, params: Any, ppo: PPOConfig) -> optax.GradientT
     normaliser's statistics, if any, are not trained). The rates may be traced arrays; the static
     choices come from `ppo`: `grad_clip` "global" clips the norm of all parts' gradients together,
     so a large critic loss shrinks the actor's step too, "per_part" clips each part's (encoder,
-    actor, critic) alone; `adam_eps` is Adam's epsilon."""
+    actor, critic) alone; `adam_eps` is Adam's epsilon; `kl_adaptive_lr` scales every rate by the
+    KL of the steps (hintsjax/algorithms/kl_rate.py), its scale kept in the optimiser's state."""
     rates = {"encoder": hyper.encoder_lr, "actor": hyper.actor_lr, "critic": hyper.critic_lr}
     per_part = ppo.grad_clip == "per_part"
 
@@ -115,7 +117,8 @@ def make_optimizer(hyper: Hyper, params: Any, ppo: PPOConfig) -> optax.GradientT
     if normalization.COLLECTION in params:  # only then: older checkpoints keep their optimiser state's shape
         groups["frozen"] = optax.set_to_zero()
     parts = optax.multi_transform(groups, lr_labels(params))
-    return parts if per_part else optax.chain(optax.clip_by_global_norm(hyper.max_grad_norm), parts)
+    optimizer = parts if per_part else optax.chain(optax.clip_by_global_norm(hyper.max_grad_norm), parts)
+    return optax.chain(optimizer, kl_rate.scale_by_kl_rate()) if ppo.kl_adaptive_lr else optimizer
 
 
 def pick_hint(obs: dict[str, jax.Array], hyper: Hyper) -> dict[str, jax.Array]:
@@ -256,24 +259,28 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
         optimizer = make_optimizer(hyper, state.params, ppo)
 
         def minibatch_step(carry, mb: Batch):
-            params, opt_state, stopped = carry
+            params, opt_state, stopped, *moved = carry  # moved: kl_adaptive_lr's, whether this update stepped yet
             (_, parts), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, mb, hyper)
+            if ppo.kl_adaptive_lr:  # this step's rate from the KL of the steps before it in this update
+                informative = moved[0] & ~stopped  # not the rollout policy's own KL of 0, not after a stop
+                opt_state = jax.tree.map(lambda old, new: jnp.where(informative, new, old), opt_state,
+                                         kl_rate.adapt(opt_state, parts["approx_kl"], hyper.target_kl))
+                parts = {**parts, "lr_scale": kl_rate.scale_of(opt_state)}
             updates, new_opt_state = optimizer.update(grads, opt_state, params)
             new = (optax.apply_updates(params, updates), new_opt_state)
             if ppo.target_kl is not None:  # KL early stop: no step from here to the update's end
                 stopped = stopped | ~(parts["approx_kl"] <= 1.5 * hyper.target_kl)  # NaN stops too
                 new = jax.tree.map(lambda old, step: jnp.where(stopped, old, step), (params, opt_state), new)
                 parts = {**parts, "kl_stopped": stopped.astype(jnp.float32)}
-            return (*new, stopped), parts
+            return (*new, stopped, *(jnp.ones((), bool) for _ in moved)), parts
 
         def epoch(carry, key):
             order = jax.random.permutation(key, T * N)
             shaped = lambda x: x[order].reshape((ppo.num_minibatches, ppo.minibatch_size) + x.shape[1:])  # noqa: E731
             return jax.lax.scan(minibatch_step, carry, jax.tree.map(shaped, batch))
 
-        (params, opt_state, _), parts = jax.lax.scan(
-            epoch, (state.params, state.opt_state, jnp.zeros((), bool)), jax.random.split(key, ppo.epochs)
-        )
+        start = (state.params, state.opt_state, jnp.zeros((), bool)) + ((jnp.zeros((), bool),) if ppo.kl_adaptive_lr else ())
+        (params, opt_state, *_), parts = jax.lax.scan(epoch, start, jax.random.split(key, ppo.epochs))
         if not ppo.normalize_before_learning:
             params = normalization.update(params, traj.obs)  # after learning: the next rollout's statistics
         metrics = {

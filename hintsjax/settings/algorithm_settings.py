@@ -68,6 +68,10 @@ class PPOConfig:
     # stop-gradient, so only the policy's loss moves them (the ant's KL storms,
     # experiments/results/locomotion_ppo_stability.md).
     critic_trains_encoder: bool = True
+    # Scale the learning rates by the KL of the steps, rsl_rl's adaptive schedule, shrink-only
+    # (hintsjax/algorithms/kl_rate.py): divided by 1.5 while a minibatch's approx. KL is above
+    # 2 x target_kl, multiplied by 1.5 (up to 1) while below 0.5 x; needs target_kl.
+    kl_adaptive_lr: bool = False
 
     @property
     def rollout_length(self) -> int:
@@ -108,6 +112,8 @@ class PPOConfig:
                              f"({self.rollout_length} = batch_size / num_envs)")
         if self.target_kl is not None and not self.target_kl > 0:
             raise UsageError(f"ppo.target_kl ({self.target_kl}) must be positive, or null for no KL early stop")
+        if self.kl_adaptive_lr and self.target_kl is None:
+            raise UsageError("ppo.kl_adaptive_lr needs ppo.target_kl (the KL it steers the rates to)")
 
 
 @dataclass(frozen=True)

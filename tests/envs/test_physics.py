@@ -67,7 +67,8 @@ def test_the_config_keeps_the_physics_a_run_is_stepped_with():
     locomotion envs), so config.yaml and eval.json say what stepped the run, and a
     resumed run keeps it; a config saved before the setting existed was stepped by JAX."""
     assert run_config({"env": "ant"}).physics == physics.resolve("auto", jax.default_backend(), Ant.warp_by_default)
-    assert run_config({"env": "ant"}).physics == "jax"
+    if jax.default_backend() == "cpu":
+        assert run_config({"env": "ant"}).physics == "jax"
     assert run_config({"env": "pendulum"}).physics == "jax"
     assert run_config({"env": "car_racing", "physics": "jax"}).physics == "jax"
     saved = {"env": "ant", "hint": "speed"}
