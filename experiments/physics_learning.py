@@ -12,7 +12,8 @@ started at seed=0 and seed=5. Writes per env:
 - the training return at equal env steps: each seed's mean over the training episodes logged in
   the last 10 % of the env steps that every run of the env reached (metrics.csv), compared the same
   way, so a run brought back before its end still counts;
-- the seeds that ended far below the others (hintsjax/evaluation/outliers.py), the seeds whose
+- the seeds that ended far below the others (hintsjax/evaluation/outliers.py), the seeds that had
+  a KL storm (hintsjax.reproduce.archive.kl_storms), the seeds whose
   policy's std (its logged entropy) ended above where it started: with actions clipped to the
   box, a std that grows saturates them, which costs a locomotion task's control cost in training
   but not its deterministic evaluation; and the training rate and compile seconds of each run.
@@ -30,6 +31,7 @@ import numpy as np
 
 from hintsjax.evaluation.outliers import far_below
 from hintsjax.reproduce import stats
+from hintsjax.reproduce.archive import kl_storms
 from hintsjax.training.runlog import read_curves
 
 HERE = Path(__file__).resolve().parent
@@ -85,6 +87,14 @@ class Arm:
             seeds += entropy.shape[0]
         return f"{grown} of {seeds}"
 
+    def storm_seeds(self) -> str:
+        """'k of S': the seeds that had a KL storm (hintsjax.reproduce.archive.kl_storms); '-' when a
+        run has no record of them (no approx_kl logged, or archived before they were kept)."""
+        storms = [kl_storms(f) for f in self.folders]
+        if any(s is None for s in storms):
+            return "-"
+        return f"{sum(s['first'] is not None for run in storms for s in run)} of {sum(len(run) for run in storms)}"
+
     def reached(self) -> float:
         """The env steps per seed that every run of the arm logged."""
         return min(float(steps[-1]) for steps, _ in self.curves)
@@ -130,8 +140,8 @@ def report(runs: Path) -> list[str]:
              f"`python experiments/physics_learning.py --runs {where}` from the runs in that folder.", "",
              "## The evaluation (deterministic policy, each seed's mean over its episodes)", "",
              "| env | env steps per seed | seeds, jax / warp | jax: IQM [95 % CI] | warp: IQM [95 % CI] | P(warp > jax) | "
-             "warp - jax, mean [95 % CI] | seeds far below, jax / warp |",
-             "|---|---|---|---|---|---|---|---|"]
+             "warp - jax, mean [95 % CI] | seeds far below, jax / warp | seeds with a KL storm, jax / warp |",
+             "|---|---|---|---|---|---|---|---|---|"]
     training = ["", "## The training return at equal env steps (sampled actions, each seed's mean over the episodes "
                 f"logged in the last {LAST:.0%} of the steps both physics reached)", "",
                 "| env | env steps per seed | seeds, jax / warp | jax: IQM [95 % CI] | warp: IQM [95 % CI] | P(warp > jax) | "
@@ -148,11 +158,11 @@ def report(runs: Path) -> list[str]:
             poi, diff, verdict = comparison(wp, jx)
             lines.append(f"| {env} | {', '.join(f'{s:,}' for s in sorted(steps)) or '-'} | {len(jx)} / {len(wp)} | "
                          f"{stats.iqm_cell(jx)} | {stats.iqm_cell(wp)} | {poi} | {diff} | "
-                         f"{outliers_text(jx)} / {outliers_text(wp)} |")
+                         f"{outliers_text(jx)} / {outliers_text(wp)} | {arms['jax'].storm_seeds()} / {arms['warp'].storm_seeds()} |")
             verdicts.append(f"- {env}, evaluation: {verdict}")
         else:
             lines.append(f"| {env} | - | - | {'-' if jx is None else stats.iqm_cell(jx)} | "
-                         f"{'-' if wp is None else stats.iqm_cell(wp)} | - | - | - |")
+                         f"{'-' if wp is None else stats.iqm_cell(wp)} | - | - | - | - |")
         up_to = min(arms[p].reached() for p in PHYSICS)
         tj, tw = arms["jax"].training_means(up_to), arms["warp"].training_means(up_to)
         poi, diff, verdict = comparison(tw, tj)

@@ -737,6 +737,7 @@ def test_physics_learning_pools_the_seeds_of_several_runs_and_compares_training_
         "arms": {"ant": {"jax": ["ant/jax-s0", "ant/jax-s5"], "warp": ["ant/warp"]}}}))
     lines = physics_learning.report(runs)
     evaluation_row = next(line for line in lines if line.startswith("| ant |") and "10 / 10" in line and "none / none" in line)
+    assert evaluation_row.endswith("| - / - |")  # no approx_kl logged: no record of storms
     assert "1004.5 [" in evaluation_row and "904.5 [" in evaluation_row and "0.00 [0.00, 0.00]" in evaluation_row
     assert "- ant, evaluation: decided: warp scores below jax (the difference's interval excludes 0)" in lines
     training_row = next(line for line in lines if line.startswith("| ant | 10,240 |"))
