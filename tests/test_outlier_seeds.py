@@ -77,3 +77,34 @@ def test_a_runs_end_names_the_seed_in_eval_json_and_one_line(tmp_path, capsys):
     named = [line for line in capsys.readouterr().out.splitlines() if "far below" in line]
     assert named == [f"pendulum/swingup {cfg.label}: seed 3 ended far below the others (-3006 against a median "
                      f"of 997, more than 3 x 997 short): one episode: python -m hintsjax.video {tmp_path} --seed 3"]
+
+
+def test_a_runs_end_says_which_collapsed_seed_had_a_kl_storm(tmp_path, capsys):
+    """With a metrics.csv whose seed 3 blew up for 12 updates from update 5 (and seed 0 for 12
+    from update 2, but it did not collapse), eval.json keeps every seed's storms and one more line
+    names the collapsed seed's; without a KL column there is neither."""
+    import csv
+
+    cfg = run_config({"env": "pendulum", "seeds": 5})
+    returns = np.asarray(ISSUE_59)[:, None] + np.array([[-1.0, 1.0]])
+    collapsed = variant_summary(cfg, None, False, EvalResult(returns, np.full((5, 2), 1000)))
+    compiled = SimpleNamespace(seconds=1.0, trace_seconds=0.5, loaded=False, layout=SimpleNamespace(count=1))
+    training = SimpleNamespace(compiled=compiled, seconds=2.0, before=0.0, done=1, first=0, arrivals=())
+    with (tmp_path / "metrics.csv").open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["update", "seed", "env_steps", "episode_return", "approx_kl"])
+        for update in range(1, 31):
+            for seed in range(5):
+                hot = (seed == 3 and 5 <= update < 17) or (seed == 0 and 2 <= update < 14)
+                writer.writerow([update, seed, 64 * update, 0.0, 0.9 if hot else 0.01])
+    finish(cfg, tmp_path, training, [collapsed], 0.1)
+    storms = json.loads((tmp_path / EVAL_JSON).read_text())["kl_storms"]
+    assert storms == [{"first": 2, "longest": 12}, *[{"first": None, "longest": 0}] * 2, {"first": 5, "longest": 12},
+                      {"first": None, "longest": 0}]
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[-1] == (f"pendulum/swingup {cfg.label}: KL storm (seed 3 from update 5 on: approx. KL above 0.5 for "
+                         "10 or more updates in a row): PPO's steps blew up")
+    (tmp_path / "metrics.csv").unlink()
+    finish(cfg, tmp_path, training, [collapsed], 0.1)
+    assert json.loads((tmp_path / EVAL_JSON).read_text())["kl_storms"] is None
+    assert "KL storm" not in capsys.readouterr().out

@@ -19,6 +19,8 @@ import shutil
 import time
 from pathlib import Path
 
+from hintsjax.training.runlog import KL_ABOVE, STORM_UPDATES  # noqa: F401  kl_share's and kl_storms' thresholds
+
 # The checkout's experiments/results/runs: the tables and their archive live beside the table
 # scripts, in a checkout (an editable install) rather than in an installed package.
 ARCHIVE = Path(__file__).resolve().parents[2] / "experiments" / "results" / "runs"
@@ -27,8 +29,6 @@ SUMMARY_JSON = "summary.json"
 # metrics.csv columns an archived run keeps beside the return (binned as it), where the run logged
 # them: what a collapsed seed's policy did (its std, its steps' KL, the critic's loss, the reward)
 DIAGNOSTICS = ("entropy", "approx_kl", "value_loss", "step_reward")
-KL_ABOVE = 0.5  # kl_share's (and kl_cell's) threshold: an update whose approx. KL exceeds it blew up
-STORM_UPDATES = 10  # kl_storms': a storm is this many updates in a row whose approx. KL exceeds KL_ABOVE
 
 
 def run_folder(runs: Path, env: str, label: str) -> Path:
@@ -112,29 +112,14 @@ def sweep_seconds(runs: Path, table: int | str) -> float:
 
 
 def kl_storms(folder: Path) -> list[dict] | None:
-    """Per seed, its KL storms (STORM_UPDATES or more updates in a row whose approx. KL exceeds
-    KL_ABOVE): {"first": the update the first one starts at, or None, "longest": the longest run
-    of such updates}. None when not run, not trained by PPO, or archived before they were kept."""
-    import numpy as np
-
-    from hintsjax.training.runlog import read_curves
+    """Per seed, its KL storms (hintsjax.training.runlog.kl_storms), from an archived run's
+    summary.json or a run's metrics.csv; None when not run, not trained by PPO, or archived before
+    they were kept."""
+    from hintsjax.training import runlog
 
     if (kept := summary(folder)) is not None:
         return kept.get("kl_storms")
-    try:
-        _, kl = read_curves(folder / "metrics.csv", "approx_kl")
-    except (OSError, KeyError):
-        return None
-    storms = []
-    for above in np.nan_to_num(kl, nan=0.0) > KL_ABOVE:
-        run, longest, first = 0, 0, None
-        for update, hot in enumerate(above, start=1):
-            run = run + 1 if hot else 0
-            longest = max(longest, run)
-            if run == STORM_UPDATES and first is None:
-                first = update - STORM_UPDATES + 1
-        storms.append({"first": first, "longest": longest})
-    return storms
+    return runlog.kl_storms(folder / "metrics.csv")
 
 
 def archive_run(runs: Path, env: str, label: str) -> Path:

@@ -13,9 +13,9 @@ import jax
 from hintsjax.system import devices, xla_flags
 from hintsjax.settings.config import RunConfig
 from hintsjax.evaluation.evaluator import metrics_text
-from hintsjax.evaluation.outliers import far_below_text
+from hintsjax.evaluation.outliers import far_below_text, storms_text
 from hintsjax.training.loop import Training, chunks_rate
-from hintsjax.training.runlog import CURVE_PNG, METRICS_CSV, fresh_folder, plot_curves, read_curves
+from hintsjax.training.runlog import CURVE_PNG, METRICS_CSV, fresh_folder, kl_storms, plot_curves, read_curves
 
 
 EVAL_JSON = "eval.json"
@@ -28,8 +28,9 @@ def new_run_dir(out_dir: str, name: str | None, cfg: RunConfig) -> Path:
 
 def finish(cfg: RunConfig, run_dir: Path, training: Training, evaluations: list[dict], eval_compile: float,
            extra: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Write a run's eval.json (its evaluations and timings) and learning curve; print the results,
-    and a line naming any seeds that ended far below the others."""
+    """Write a run's eval.json (its evaluations, timings and each seed's KL storms) and learning
+    curve; print the results, a line naming any seeds that ended far below the others, and one
+    saying which of them had a KL storm."""
     compiled = training.compiled
     results = {"label": cfg.label, "env": cfg.env, "train_seconds_this_call": training.seconds,
                "train_seconds": training.before + training.seconds,
@@ -44,6 +45,7 @@ def finish(cfg: RunConfig, run_dir: Path, training: Training, evaluations: list[
                "evaluations": evaluations}
     if not devices.is_main():  # process 0 writes the run folder
         return results
+    results["kl_storms"] = storms = kl_storms(run_dir / METRICS_CSV)  # per seed; None where PPO logged no KL
     (run_dir / EVAL_JSON).write_text(json.dumps(results, indent=1))
     if (run_dir / METRICS_CSV).exists():
         plot_curves({cfg.label: read_curves(run_dir / METRICS_CSV)}, run_dir / CURVE_PNG, f"{cfg.env}: {cfg.label}")
@@ -52,4 +54,6 @@ def finish(cfg: RunConfig, run_dir: Path, training: Training, evaluations: list[
               f"({ev['seeds']} seeds x {ev['episodes_per_seed']} episodes)  -> {run_dir}")
         if outliers := far_below_text(ev, run_dir):
             print(f"{cfg.env}/{ev['variant']} {cfg.label}: {outliers}")
+            if storm := storms_text(ev["outlier_seeds"], storms):
+                print(f"{cfg.env}/{ev['variant']} {cfg.label}: {storm}")
     return results

@@ -14,6 +14,8 @@ from hintsjax.system.errors import UsageError
 METRICS_CSV = "metrics.csv"
 CURVE_PNG = "learning_curve.png"
 CURVE_POINTS = 250  # points per seed of a plotted (and an archived) learning curve
+KL_ABOVE = 0.5  # an update whose approx. KL from its rollout policy exceeds this blew up
+STORM_UPDATES = 10  # a KL storm: this many updates in a row that blew up
 
 
 def fresh_folder(base: Path) -> Path:
@@ -119,6 +121,26 @@ def read_curves(path: Path, metric: str = "episode_return") -> tuple[np.ndarray,
             if np.isnan(values[s, i]):
                 values[s, i] = values[s, i - 1]
     return steps, values
+
+
+def kl_storms(path: Path) -> list[dict] | None:
+    """Per seed of a metrics.csv, its KL storms (STORM_UPDATES or more updates in a row whose approx.
+    KL exceeds KL_ABOVE): {"first": the update the first one starts at, or None, "longest": the
+    longest run of such updates}; None without the file or an approx_kl column (not PPO)."""
+    try:
+        _, kl = read_curves(path, "approx_kl")
+    except (OSError, KeyError):
+        return None
+    storms = []
+    for above in np.nan_to_num(kl, nan=0.0) > KL_ABOVE:  # inf (an overflowed ratio) blew up too
+        run, longest, first = 0, 0, None
+        for update, hot in enumerate(above, start=1):
+            run = run + 1 if hot else 0
+            longest = max(longest, run)
+            if run == STORM_UPDATES and first is None:
+                first = update - STORM_UPDATES + 1
+        storms.append({"first": first, "longest": longest})
+    return storms
 
 
 def bin_means(steps: np.ndarray, values: np.ndarray, points: int = CURVE_POINTS) -> tuple[np.ndarray, np.ndarray]:
