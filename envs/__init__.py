@@ -154,15 +154,17 @@ def resolve_physics(name: str, physics: str = AUTO) -> str:
         if physics == WARP:
             raise PhysicsUnavailable(f"{name} has no MuJoCo model; physics=warp is for {', '.join(mjx_env_names())}")
         return JAX
-    return _physics.resolve(physics, jax.default_backend(), cls.warp_by_default)
+    return _physics.resolve(physics, jax.default_backend(), cls.warp_by_default, jax.device_count())
 
 
 def auto_likely_warp(name: str) -> bool:
     """Whether physics=auto will step env `name` with MJX-Warp on this machine, read without
-    starting JAX (`gpu_likely`): what a command decides its XLA flags by."""
-    entry = REGISTRY.get(name)
-    return (entry is not None and issubclass(entry.cls, MjxEnv) and entry.cls.warp_by_default
-            and _physics.warp_installed() and _physics.gpu_likely())
+    starting JAX (`gpu_likely`): what a command decides its XLA flags by. An adapted env
+    (`source:name`) or an unknown name: False, without looking it up (its check says what is wrong)."""
+    if ":" in name or name not in env_names():
+        return False
+    cls = REGISTRY[name].cls
+    return issubclass(cls, MjxEnv) and cls.warp_by_default and _physics.warp_installed() and _physics.gpu_likely()
 
 
 def variant_names(name: str) -> list[str]:

@@ -42,7 +42,7 @@ class MjxEnv(Env):
                  warp_capacity: float = DEFAULT_CAPACITY, image_size: int | None = None):
         super().__init__(hint, observe, image_size)
         self.mj_model = self.make_mj_model()
-        impl = resolve(physics, jax.default_backend(), self.warp_by_default)
+        impl = resolve(physics, jax.default_backend(), self.warp_by_default, jax.device_count())
         key = PhysicsKey(impl, float(warp_capacity) if impl == WARP else 0.0)
         if (type(self), key) not in _PER_CLASS:  # the model depends on the class alone (its MJCF and options)
             _PER_CLASS[type(self), key] = make_physics(self.mj_model, key)

@@ -115,10 +115,11 @@ def warp_installed() -> bool:
 
 
 def gpu_likely() -> bool:
-    """Whether JAX will start on an NVIDIA GPU, read without starting it (XLA's flags are read
-    once, when it starts): JAX_PLATFORMS allows one, a CUDA plugin of jax is installed and the
-    driver's device node exists. A guess for choosing flags early; a run's config resolves `auto`
-    from the backend JAX really started."""
+    """Whether JAX will start on one NVIDIA GPU (what `auto` gives Warp), read without starting it
+    (XLA's flags are read once, when it starts): JAX_PLATFORMS allows one, a CUDA plugin of jax is
+    installed, and one GPU is visible (the driver's device nodes, or CUDA_VISIBLE_DEVICES). A guess
+    for choosing flags early; a run's config resolves `auto` from the backend JAX really started."""
+    import glob
     from importlib import metadata
 
     platforms = {p.strip() for p in os.environ.get("JAX_PLATFORMS", "").lower().split(",") if p.strip()}
@@ -126,18 +127,22 @@ def gpu_likely() -> bool:
         return False
     plugin = any((d.metadata["Name"] or "").lower().replace("_", "-").startswith("jax-cuda")
                  for d in metadata.distributions())
-    return plugin and os.path.exists("/dev/nvidiactl")
+    visible = os.environ.get("CUDA_VISIBLE_DEVICES")
+    count = len([d for d in visible.split(",") if d.strip()]) if visible is not None else len(glob.glob("/dev/nvidia[0-9]*"))
+    return plugin and os.path.exists("/dev/nvidiactl") and count == 1
 
 
-def resolve(choice: str, platform: str, warp_by_default: bool = True) -> str:
-    """`jax` or `warp` for a run on `platform` (jax.default_backend(): cpu, gpu, tpu).
+def resolve(choice: str, platform: str, warp_by_default: bool = True, devices: int = 1) -> str:
+    """`jax` or `warp` for a run on `platform` (jax.default_backend(): cpu, gpu, tpu) with `devices`
+    devices (jax.device_count(), every process's).
 
-    auto: Warp on an NVIDIA GPU with warp-lang installed (for an env that prefers it), else JAX,
-    so CPU runs, the tests and CPU sweeps stay bit-reproducible. warp: on a GPU or a CPU (Warp's
+    auto: Warp on one NVIDIA GPU with warp-lang installed (for an env that prefers it), else JAX,
+    so CPU runs, the tests and CPU sweeps stay bit-reproducible, and a run on several GPUs or
+    processes spreads its seeds over them (physics=warp runs on one). warp: on a GPU or a CPU (Warp's
     CPU path, for tests: slow), with warp-lang installed; PhysicsUnavailable otherwise."""
     choose("physics", choice, dict.fromkeys(CHOICES))
     if choice == AUTO:
-        return WARP if warp_by_default and platform == "gpu" and warp_installed() else JAX
+        return WARP if warp_by_default and platform == "gpu" and devices == 1 and warp_installed() else JAX
     if choice == WARP:
         if not warp_installed():
             raise PhysicsUnavailable("physics=warp needs warp-lang: pip install -e '.[gpu]' (make setup-gpu); "

@@ -28,7 +28,7 @@ def row(folder: Path) -> str:
         return f"| {folder.name} | - | - | - | - | {means} | {below or 'none'} |"
     hit = [(seed, s) for seed, s in enumerate(storms) if s["first"] is not None]
     starts = ", ".join(f"{seed}: {s['first']}" for seed, s in hit) or "-"
-    longest = max(s["longest"] for s in storms)
+    longest = max((s["longest"] for s in storms), default=0)
     return f"| {folder.name} | {len(storms)} | {len(hit)} | {starts} | {longest} | {means} | {below or 'none'} |"
 
 

@@ -91,6 +91,7 @@ def test_a_command_asks_only_for_warp_when_every_job_does(tmp_path, monkeypatch)
     assert not asks_only_for_warp(["env=ant", "physics=jax"])
     assert not asks_only_for_warp(["-m", "env=ant,pendulum"])  # the pendulum keeps JAX's solver
     assert not asks_only_for_warp(["env=playground:CartpoleSwingup"])
+    assert not asks_only_for_warp(["env=playground:Nope"]) and not asks_only_for_warp(["env=nope"])  # run's check names these
     monkeypatch.setattr(physics, "warp_installed", lambda: False)
     assert not asks_only_for_warp(["env=ant"])
 
@@ -105,7 +106,9 @@ def test_a_gpu_is_guessed_only_where_jax_may_use_one(monkeypatch):
     monkeypatch.setenv("JAX_PLATFORMS", "cuda,cpu")
     import jax
 
-    assert physics.gpu_likely() == (jax.default_backend() == "gpu")
+    assert physics.gpu_likely() == (jax.default_backend() == "gpu" and jax.device_count() == 1)
+    monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "0,1")  # two GPUs: auto keeps JAX, which spreads the seeds
+    assert not physics.gpu_likely()
 
 
 def test_a_child_of_a_hintsjax_process_tells_its_parents_flags_from_the_users(tmp_path):

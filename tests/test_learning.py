@@ -261,15 +261,16 @@ def test_target_kl_must_be_positive():
 
 
 def test_kl_adaptive_rates_follow_rsl_rls_band():
-    """kl_rate.adapted, by hand: divided by 1.5 above 2 x target (NaN and inf too), multiplied by 1.5
-    below 0.5 x target, unchanged between; never above 1 nor below MIN_SCALE."""
+    """kl_rate.adapted, by hand: divided by 1.5 above 1.5 x target (the KL stop's bound; NaN and inf
+    too), multiplied by 1.5 below 0.5 x target, unchanged between; never above 1 nor below MIN_SCALE."""
     from hintsjax.algorithms import kl_rate
 
     def after(scale, kl):
         return float(kl_rate.adapted(jnp.float32(scale), jnp.float32(kl), jnp.float32(0.05)))
 
     assert after(1.0, 0.2) == pytest.approx(1 / 1.5) and after(1.0, np.nan) == after(1.0, np.inf) == after(1.0, 0.2)
-    assert after(0.5, 0.01) == pytest.approx(0.75) and after(0.5, 0.05) == 0.5 and after(0.5, 0.1) == 0.5
+    assert after(0.5, 0.01) == pytest.approx(0.75) and after(0.5, 0.05) == 0.5 and after(0.5, 0.075) == 0.5
+    assert after(0.5, 0.08) == pytest.approx(0.5 / 1.5)
     assert after(1.0, 0.0) == 1.0 and after(0.01, 1.0) == pytest.approx(kl_rate.MIN_SCALE)
 
 

@@ -777,9 +777,24 @@ def test_kl_storms_are_counted_per_seed_and_kept_in_the_archive(tmp_path, monkey
         writer = csv.DictWriter(f, list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
+    rows = list(csv.DictReader(path.open()))
+    rows[300 + 11]["approx_kl"] = "nan"  # seed 1, update 12, after a burst of 5: a NaN KL is not a blown-up update
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
     expected = [{"first": 101, "longest": 15}, {"first": None, "longest": 5}]
     assert archive.kl_storms(runs / "ant" / "hints") == expected
     dest = archive.archive_run(runs, "ant", "hints")
     assert json.loads((dest / "summary.json").read_text())["kl_storms"] == expected
     assert archive.kl_storms(dest) == expected
     assert archive.kl_storms(tmp_path / "nowhere") is None
+
+
+def test_a_resumed_sweep_run_keeps_the_physics_it_began_with(tmp_path):
+    """sweep.saved_physics: what a run folder's config.yaml trained with (jax where it predates the
+    setting), so a sweep resumed after auto changed its mind goes on as it began; no folder: the default."""
+    assert sweep.saved_physics(tmp_path / "nowhere", "auto") == "auto"
+    for saved, physics in (("physics: jax\n", "jax"), ("physics: warp\n", "warp"), ("env: ant\n", "jax")):
+        (tmp_path / "config.yaml").write_text(saved)
+        assert sweep.saved_physics(tmp_path, "auto") == physics

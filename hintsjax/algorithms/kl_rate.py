@@ -1,6 +1,6 @@
 """PPO's learning rates scaled by the KL of its steps (`ppo.kl_adaptive_lr`): the adaptive schedule of
 rsl_rl's PPO (legged_gym, Isaac Lab), shrink-only. Before each minibatch step the update's approx. KL
-from the rollout policy is read; above TOO_FAR x target_kl the rates are divided by STEP, below
+from the rollout policy is read; above TOO_FAR x target_kl (the KL stop's bound) the rates are divided by STEP, below
 TOO_CLOSE x target_kl they are multiplied by it, never above the configured rates nor below
 MIN_SCALE of them. The scale is kept in the optimiser's state, so it carries from one update to the
 next: an update's first step, which no KL stop can stop (it meets the rollout policy itself), is
@@ -16,7 +16,9 @@ import jax.numpy as jnp
 import optax
 
 STEP = 1.5  # rsl_rl's factor
-TOO_FAR, TOO_CLOSE = 2.0, 0.5  # rsl_rl's band around the desired KL (here ppo.target_kl)
+# rsl_rl's band around the desired KL (here ppo.target_kl) is 2 and 0.5; the upper edge here is
+# the KL stop's 1.5 (ppo.py), so every step the stop ends also shrinks the rate
+TOO_FAR, TOO_CLOSE = 1.5, 0.5
 MIN_SCALE = 0.01  # rsl_rl keeps its rate in [1e-5, 1e-2] around 1e-3; the floor here is the same ratio
 
 

@@ -68,6 +68,17 @@ def run_values(env: str, label: str, seeds: int, smoke: bool = False, experts: P
     return {**values, "agent": "hints", "scheme": scheme, "hint": hint}
 
 
+def saved_physics(run: Path, default: str | None) -> str | None:
+    """The physics a run folder's config.yaml was trained with (jax for one saved before the
+    setting existed), or `default` where it has none."""
+    import yaml
+
+    path = run / "config.yaml"
+    if not path.exists():
+        return default
+    return (yaml.safe_load(path.read_text()) or {}).get("physics") or "jax"
+
+
 def job_folder(runs: Path, run_ids: list[str]) -> Path:
     """Where a job keeps its checkpoints and train.log: a single run's own folder, or its group's."""
     return runs / run_ids[0] if len(run_ids) == 1 else group_folder(runs, run_ids)
@@ -92,18 +103,21 @@ def train_one(runs: Path, run_ids: list[str], seeds: int, smoke: bool, experts: 
     from hintsjax.algorithms import experts
     from hintsjax.training import compilation, loop, pipeline
 
-    cfgs = []
-    for run_id in run_ids:
-        env, label = run_id.split("/")
-        cfg = run_config(run_values(env, label, seeds, smoke, experts, settings))
-        assert cfg.label == label, (cfg.label, label)
-        cfgs.append(cfg)
-        (runs / run_id).mkdir(parents=True, exist_ok=True)
-        save_run_config(runs / run_id, cfg)
     folder = job_folder(runs, run_ids)
     # An interrupted run (killed by a time limit) goes on from its newest checkpoint; its
     # wall-clock counts the kept work of earlier calls, not what was lost after their last checkpoint.
     resume = checkpoint.latest_update(folder) is not None
+    cfgs = []
+    for run_id in run_ids:
+        env, label = run_id.split("/")
+        values = run_values(env, label, seeds, smoke, experts, settings)
+        if resume:  # it goes on with the physics it began with, whatever auto resolves to today
+            values["physics"] = saved_physics(runs / run_id, values.get("physics"))
+        cfg = run_config(values)
+        assert cfg.label == label, (cfg.label, label)
+        cfgs.append(cfg)
+        (runs / run_id).mkdir(parents=True, exist_ok=True)
+        save_run_config(runs / run_id, cfg)
     before, t = loop.seconds_trained(folder) if resume else 0.0, time.time()
     if resume:
         print(f"resuming {', '.join(run_ids)} from update {checkpoint.latest_update(folder)}", flush=True)

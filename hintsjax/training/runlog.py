@@ -128,11 +128,18 @@ def kl_storms(path: Path) -> list[dict] | None:
     KL exceeds KL_ABOVE): {"first": the update the first one starts at, or None, "longest": the
     longest run of such updates}; None without the file or an approx_kl column (not PPO)."""
     try:
-        _, kl = read_curves(path, "approx_kl")
-    except (OSError, KeyError):
+        with Path(path).open() as f:
+            reader = csv.DictReader(f)
+            if "approx_kl" not in (reader.fieldnames or ()):
+                return None
+            rows = sorted(((int(r["seed"]), int(r["update"]), float(r["approx_kl"])) for r in reader))
+    except OSError:
         return None
+    per_seed: dict[int, list[float]] = {}
+    for seed, _, kl in rows:  # each seed's updates in order, as logged (no value carried over)
+        per_seed.setdefault(seed, []).append(kl)
     storms = []
-    for above in np.nan_to_num(kl, nan=0.0) > KL_ABOVE:  # inf (an overflowed ratio) blew up too
+    for above in (np.asarray(per_seed[s]) > KL_ABOVE for s in sorted(per_seed)):  # inf blew up too; NaN did not
         run, longest, first = 0, 0, None
         for update, hot in enumerate(above, start=1):
             run = run + 1 if hot else 0

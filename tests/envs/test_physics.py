@@ -37,15 +37,21 @@ def test_auto_picks_warp_only_on_an_nvidia_gpu_with_warp_lang(monkeypatch):
 
 
 def test_auto_gives_warp_to_the_locomotion_envs_on_an_nvidia_gpu(monkeypatch):
-    """On an NVIDIA GPU with warp-lang, auto steps the locomotion envs with MJX-Warp
+    """On one NVIDIA GPU with warp-lang, auto steps the locomotion envs with MJX-Warp
     (envs/locomotion.py `warp_by_default`) and keeps JAX's solver for the classic-control models
-    and every env without a MuJoCo model; physics=warp asks for Warp on any MJCF env."""
+    and every env without a MuJoCo model; on several GPUs (or processes) it keeps JAX, which spreads
+    the seeds over them; physics=warp asks for Warp on any MJCF env."""
     monkeypatch.setattr(physics, "warp_installed", lambda: True)
     monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    monkeypatch.setattr(jax, "device_count", lambda: 1)
     warp = {name for name in envs.env_names() if envs.resolve_physics(name) == "warp"}
     assert warp == {"halfcheetah", "ant", "ant_fast", "humanoid"}
     assert {envs.resolve_physics(name, "warp") for name in envs.mjx_env_names()} == {"warp"}
     assert set(envs.mjx_env_names()) == {"pendulum", "acrobot", "idp", "halfcheetah", "ant", "ant_fast", "humanoid"}
+    monkeypatch.setattr(jax, "device_count", lambda: 2)  # several GPUs (or processes): JAX spreads the seeds
+    assert {envs.resolve_physics(name) for name in envs.env_names()} == {"jax"}
+    assert envs.resolve_physics("ant", "warp") == "warp"
+    monkeypatch.setattr(jax, "device_count", lambda: 1)
     monkeypatch.setattr(jax, "default_backend", lambda: "cpu")
     assert {envs.resolve_physics(name) for name in envs.env_names()} == {"jax"}  # CPU runs stay reproducible
 
