@@ -22,6 +22,7 @@ loop stops with one line naming the setting to raise).
 from __future__ import annotations
 
 import contextlib
+import functools
 import importlib.util
 import io
 import math
@@ -120,16 +121,23 @@ def gpu_likely() -> bool:
     installed, and one GPU is visible (the driver's device nodes, or CUDA_VISIBLE_DEVICES). A guess
     for choosing flags early; a run's config resolves `auto` from the backend JAX really started."""
     import glob
-    from importlib import metadata
 
     platforms = {p.strip() for p in os.environ.get("JAX_PLATFORMS", "").lower().split(",") if p.strip()}
     if platforms and not platforms & {"cuda", "gpu"}:
         return False
-    plugin = any((d.metadata["Name"] or "").lower().replace("_", "-").startswith("jax-cuda")
-                 for d in metadata.distributions())
     visible = os.environ.get("CUDA_VISIBLE_DEVICES")
     count = len([d for d in visible.split(",") if d.strip()]) if visible is not None else len(glob.glob("/dev/nvidia[0-9]*"))
-    return plugin and os.path.exists("/dev/nvidiactl") and count == 1
+    return _cuda_plugin_installed() and os.path.exists("/dev/nvidiactl") and count == 1
+
+
+@functools.cache
+def _cuda_plugin_installed() -> bool:
+    """Whether a CUDA plugin of jax is installed (a scan of every distribution: once a process,
+    not once for each job of a sweep that gpu_likely is asked about)."""
+    from importlib import metadata
+
+    return any((d.metadata["Name"] or "").lower().replace("_", "-").startswith("jax-cuda")
+               for d in metadata.distributions())
 
 
 def resolve(choice: str, platform: str, warp_by_default: bool = True, devices: int = 1) -> str:

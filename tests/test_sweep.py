@@ -795,6 +795,6 @@ def test_a_resumed_sweep_run_keeps_the_physics_it_began_with(tmp_path):
     """sweep.saved_physics: what a run folder's config.yaml trained with (jax where it predates the
     setting), so a sweep resumed after auto changed its mind goes on as it began; no folder: the default."""
     assert sweep.saved_physics(tmp_path / "nowhere", "auto") == "auto"
-    for saved, physics in (("physics: jax\n", "jax"), ("physics: warp\n", "warp"), ("env: ant\n", "jax")):
+    for saved, physics in (("physics: jax\n", "jax"), ("physics: warp\n", "warp"), ("env: pendulum\n", "jax")):
         (tmp_path / "config.yaml").write_text(saved)
         assert sweep.saved_physics(tmp_path, "auto") == physics

@@ -16,9 +16,10 @@ import jax.numpy as jnp
 import optax
 
 STEP = 1.5  # rsl_rl's factor
+STOP = 1.5  # the KL early stop's bound, x ppo.target_kl (ppo.py: no step once a minibatch's KL is past it)
 # rsl_rl's band around the desired KL (here ppo.target_kl) is 2 and 0.5; the upper edge here is
-# the KL stop's 1.5 (ppo.py), so every step the stop ends also shrinks the rate
-TOO_FAR, TOO_CLOSE = 1.5, 0.5
+# the stop's, so every step the stop ends also shrinks the rate
+TOO_FAR, TOO_CLOSE = STOP, 0.5
 MIN_SCALE = 0.01  # rsl_rl keeps its rate in [1e-5, 1e-2] around 1e-3; the floor here is the same ratio
 
 

@@ -269,7 +269,7 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
             updates, new_opt_state = optimizer.update(grads, opt_state, params)
             new = (optax.apply_updates(params, updates), new_opt_state)
             if ppo.target_kl is not None:  # KL early stop: no step from here to the update's end
-                stopped = stopped | ~(parts["approx_kl"] <= 1.5 * hyper.target_kl)  # NaN stops too
+                stopped = stopped | ~(parts["approx_kl"] <= kl_rate.STOP * hyper.target_kl)  # NaN stops too
                 new = jax.tree.map(lambda old, step: jnp.where(stopped, old, step), (params, opt_state), new)
                 parts = {**parts, "kl_stopped": stopped.astype(jnp.float32)}
             return (*new, stopped, *(jnp.ones((), bool) for _ in moved)), parts

@@ -56,14 +56,3 @@ def far_below_text(summary: dict[str, Any], run: str | Path) -> str:
     return (f"{which} ended far below the others ({means} against a median of {median:.0f}, more than "
             f"{K:g} x {width:.0f} short): one episode: python -m hintsjax.video {run} --seed {seeds[0]}")
 
-
-def storms_text(seeds: Sequence[int], storms: Sequence[dict] | None) -> str:
-    """'seed 1 had a KL storm from update 4548 on: ...' for the seeds of `seeds` that had one
-    (`storms`: hintsjax.training.runlog.kl_storms of the run); '' for none. What a collapsed seed's
-    training did: its PPO updates blew up, which is PPO's doing, not the physics'
-    (experiments/results/locomotion_ppo_stability.md)."""
-    hit = [(s, storms[s]["first"]) for s in seeds if storms and s < len(storms) and storms[s]["first"] is not None]
-    if not hit:
-        return ""
-    which = ", ".join(f"seed {s} from update {u}" for s, u in hit)
-    return f"KL storm ({which} on: approx. KL above 0.5 for 10 or more updates in a row): PPO's steps blew up"

@@ -69,14 +69,11 @@ def run_values(env: str, label: str, seeds: int, smoke: bool = False, experts: P
 
 
 def saved_physics(run: Path, default: str | None) -> str | None:
-    """The physics a run folder's config.yaml was trained with (jax for one saved before the
-    setting existed), or `default` where it has none."""
-    import yaml
+    """The physics a run folder's config.yaml was trained with (layers.load_run_config: jax for one
+    saved before the setting existed), or `default` where it has none."""
+    from hintsjax.settings.layers import CONFIG_YAML, load_run_config
 
-    path = run / "config.yaml"
-    if not path.exists():
-        return default
-    return (yaml.safe_load(path.read_text()) or {}).get("physics") or "jax"
+    return load_run_config(run).physics if (run / CONFIG_YAML).exists() else default
 
 
 def job_folder(runs: Path, run_ids: list[str]) -> Path:

@@ -13,9 +13,9 @@ import jax
 from hintsjax.system import devices, xla_flags
 from hintsjax.settings.config import RunConfig
 from hintsjax.evaluation.evaluator import metrics_text
-from hintsjax.evaluation.outliers import far_below_text, storms_text
+from hintsjax.evaluation.outliers import far_below_text
 from hintsjax.training.loop import Training, chunks_rate
-from hintsjax.training.runlog import CURVE_PNG, METRICS_CSV, fresh_folder, kl_storms, plot_curves, read_curves
+from hintsjax.training.runlog import CURVE_PNG, METRICS_CSV, fresh_folder, kl_storms, plot_curves, read_curves, storms_text
 
 
 EVAL_JSON = "eval.json"

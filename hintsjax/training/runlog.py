@@ -150,6 +150,19 @@ def kl_storms(path: Path) -> list[dict] | None:
     return storms
 
 
+def storms_text(seeds: list[int], storms: list[dict] | None) -> str:
+    """'KL storm (seed 1 from update 4548 on: ...)' for the seeds of `seeds` (a run's collapsed
+    ones) that had one (`storms`: `kl_storms` of the run); '' for none. What a collapsed seed's
+    training did: its PPO updates blew up, which is PPO's doing, not the physics'
+    (experiments/results/locomotion_ppo_stability.md)."""
+    hit = [(s, storms[s]["first"]) for s in seeds if storms and s < len(storms) and storms[s]["first"] is not None]
+    if not hit:
+        return ""
+    which = ", ".join(f"seed {s} from update {u}" for s, u in hit)
+    return (f"KL storm ({which} on: approx. KL above {KL_ABOVE:g} for {STORM_UPDATES} or more updates in a row): "
+            "PPO's steps blew up")
+
+
 def bin_means(steps: np.ndarray, values: np.ndarray, points: int = CURVE_POINTS) -> tuple[np.ndarray, np.ndarray]:
     """A curve averaged over at most `points` runs of consecutive updates: (the env steps of each
     bin's last update [B], each seed's mean over the bin [S, B]). NaNs are left out of the means;
