@@ -2,11 +2,17 @@
 first began and how long the longest lasted (experiments/results/locomotion_ppo_stability.md).
 
     python experiments/kl_storms.py RUN [RUN ...] [--out FILE.md]
+    python experiments/kl_storms.py --at N --arm NAME=RUN[,RUN ...] --arm ... [--out FILE.md]
 
 RUN: a run folder (its metrics.csv and eval.json) or an archived one (the storms kept in its
 summary.json by hintsjax.reproduce.archive). A storm is archive.STORM_UPDATES or more updates in
 a row whose approx. KL (the mean over the update's minibatch steps) exceeds archive.KL_ABOVE: with
 the KL early stop on, each of them is the update's first minibatch step alone.
+
+With --at N, arms (each the seeds of its runs pooled) are compared as far as update N, so that a
+run cut short stands beside full ones at equal steps: the seeds whose first storm had begun by
+N (beside the first arm's, with Fisher's exact one-sided p that the arm has no more storms by
+chance), and each seed's training return over updates N-99..N, IQM [95% CI] and P(arm > first arm).
 """
 
 from __future__ import annotations
@@ -15,7 +21,15 @@ import argparse
 import json
 from pathlib import Path
 
+import csv
+import math
+
+import numpy as np
+
 from hintsjax.reproduce.archive import KL_ABOVE, STORM_UPDATES, kl_storms
+from hintsjax.reproduce.stats import iqm_cell, ordering_text, poi_ci
+
+SPAN = 100  # updates before --at whose training episodes give a seed's return there
 
 
 def row(folder: Path) -> str:
@@ -42,12 +56,75 @@ def report(folders: list[Path]) -> list[str]:
     ]
 
 
+def stormed_by(folder: Path, at: int) -> list[bool]:
+    """Per seed, whether its first KL storm had begun by update `at` (its STORM_UPDATES-th update)."""
+    storms = kl_storms(folder)
+    if storms is None:
+        raise SystemExit(f"error: {folder} has no PPO log (metrics.csv with approx_kl, or an archived summary.json)")
+    return [s["first"] is not None and s["first"] + STORM_UPDATES - 1 <= at for s in storms]
+
+
+def returns_by(folder: Path, at: int) -> list[float]:
+    """Per seed, the mean return of the training episodes logged in updates at-SPAN+1..at (an
+    archived log's bins are numbered by their last update)."""
+    per_seed: dict[int, list[float]] = {}
+    last = 0
+    with (folder / "metrics.csv").open() as f:
+        for r in csv.DictReader(f):
+            update = int(float(r["update"]))
+            last = max(last, update)
+            if at - SPAN < update <= at and r["episode_return"] not in ("", "nan"):
+                per_seed.setdefault(int(r["seed"]), []).append(float(r["episode_return"]))
+    if last < at:
+        raise SystemExit(f"error: {folder}'s log ends at update {last}, before --at {at}")
+    return [float(np.mean(per_seed[s])) for s in sorted(per_seed)]
+
+
+def fisher_fewer(hits: int, n: int, base_hits: int, base_n: int) -> float:
+    """One-sided Fisher exact p: the chance of `hits` or fewer storms among an arm's n seeds when the
+    hits + base_hits storms fell at random among all n + base_n seeds (hypergeometric)."""
+    total, drawn = hits + base_hits, n + base_n
+    return sum(math.comb(n, k) * math.comb(base_n, total - k) for k in range(0, hits + 1)
+               if total - k <= base_n) / math.comb(drawn, total)
+
+
+def arms_report(arms: dict[str, list[Path]], at: int) -> list[str]:
+    """The arms' pooled seeds as far as update `at`, the first arm the base."""
+    pooled = {name: ([x for f in fs for x in stormed_by(f, at)], [x for f in fs for x in returns_by(f, at)])
+              for name, fs in arms.items()}
+    base_name, (base_storms, base_returns) = next(iter(pooled.items()))
+    lines = [f"As far as update {at}: seeds whose first KL storm ({STORM_UPDATES} or more updates in a row with approx. KL "
+             f"above {KL_ABOVE}) had begun, and each seed's training return over updates {at - SPAN + 1}-{at}.",
+             "", f"| arm | runs | seeds | seeds with a storm by {at} | Fisher p (fewer than {base_name} by chance) "
+             f"| training return, IQM [95% CI] | P(arm > {base_name}) |", "|---|---|---|---|---|---|---|"]
+    for name, (storms, returns) in pooled.items():
+        if name == base_name:
+            p, poi = "-", "-"
+        else:
+            p = f"{fisher_fewer(sum(storms), len(storms), sum(base_storms), len(base_storms)):.3g}"
+            poi = ordering_text(name, base_name, poi_ci(returns, base_returns))
+        lines.append(f"| {name} | {', '.join(f.name for f in arms[name])} | {len(storms)} | {sum(storms)} | {p} "
+                     f"| {iqm_cell(returns, digits=0)} | {poi} |")
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("runs", type=Path, nargs="+", help="run folders, live or archived")
+    parser.add_argument("runs", type=Path, nargs="*", help="run folders, live or archived")
+    parser.add_argument("--at", type=int, help="compare --arm's arms as far as this update")
+    parser.add_argument("--arm", action="append", default=[], metavar="NAME=RUN[,RUN...]",
+                        help="with --at: an arm's runs, pooled (the first arm is the base)")
     parser.add_argument("--out", type=Path, help="a markdown file to write the table to")
     args = parser.parse_args()
-    text = "\n".join(report(args.runs)) + "\n"
+    if args.at is not None or args.arm:
+        if args.at is None or args.at < 1 or len(args.arm) < 2 or args.runs or not all("=" in a for a in args.arm):
+            parser.error("--at N (N >= 1) takes two or more --arm NAME=RUN[,RUN...] and no other runs")
+        arms = {a.split("=", 1)[0]: [Path(r) for r in a.split("=", 1)[1].split(",")] for a in args.arm}
+        text = "\n".join(arms_report(arms, args.at)) + "\n"
+    elif args.runs:
+        text = "\n".join(report(args.runs)) + "\n"
+    else:
+        parser.error("name run folders, or --at N with --arm's")
     if args.out:
         args.out.write_text(text)
     print(text, end="")

@@ -789,6 +789,44 @@ def test_kl_storms_are_counted_per_seed_and_kept_in_the_archive(tmp_path, monkey
     assert json.loads((dest / "summary.json").read_text())["kl_storms"] == expected
     assert archive.kl_storms(dest) == expected
     assert archive.kl_storms(tmp_path / "nowhere") is None
+    (runs / "ant" / "hints" / "eval.json").unlink()  # a run cut short keeps its log and storms, and no evaluation
+    dest = archive.archive_run(runs, "ant", "hints")
+    assert not (dest / "eval.json").exists() and archive.kl_storms(dest) == expected
+
+
+def test_kl_storms_compares_arms_at_equal_updates(tmp_path, capsys, monkeypatch):
+    """experiments/kl_storms.py --at N: a storm counts once its STORM_UPDATES-th update is logged by
+    N; each seed's return is its episodes' mean over updates N-99..N; Fisher's one-sided p is the
+    hypergeometric tail (scipy's fisher_exact the oracle); a log that ends before N is refused."""
+    import kl_storms
+    from scipy.stats import fisher_exact
+
+    def run(name, kl, returns):  # kl [seeds][updates], one episode_return a seed (updates from 1)
+        folder = tmp_path / name
+        folder.mkdir()
+        with (folder / "metrics.csv").open("w", newline="") as f:
+            writer = csv.writer(f)
+            writer.writerow(["update", "seed", "env_steps", "episode_return", "approx_kl"])
+            writer.writerows([u + 1, s, 1024 * (u + 1), returns[s](u + 1), kl[s][u]] for s in range(len(kl)) for u in range(200))
+        return folder
+
+    hot = [0.9 if 101 <= u <= 130 else 0.01 for u in range(1, 201)]
+    base = run("base", [hot, [0.01] * 200], [lambda u: float(u), lambda u: "nan" if u % 2 else 7.0])
+    calm = run("calm", [[0.01] * 200] * 2, [lambda u: 1000.0, lambda u: 2000.0])
+    assert kl_storms.stormed_by(base, 109) == [False, False] and kl_storms.stormed_by(base, 110) == [True, False]
+    assert kl_storms.returns_by(base, 150) == [np.mean(np.arange(51, 151)), 7.0]
+    lines = kl_storms.arms_report({"base": [base], "calm": [calm]}, 150)
+    assert lines[-2].startswith("| base | base | 2 | 1 | - | ")
+    assert lines[-1].startswith("| calm | calm | 2 | 0 | 0.5 | 1500 [1000, 2000] | P(calm > base) = 1.00 ")
+    for hits, n, base_hits, base_n in ((0, 10, 8, 20), (2, 10, 8, 20), (3, 5, 1, 7), (0, 1, 0, 3)):
+        oracle = fisher_exact([[hits, n - hits], [base_hits, base_n - base_hits]], alternative="less")[1]
+        assert kl_storms.fisher_fewer(hits, n, base_hits, base_n) == pytest.approx(oracle)
+    with pytest.raises(SystemExit, match="ends at update 200, before --at 201"):
+        kl_storms.returns_by(base, 201)
+    monkeypatch.setattr(sys, "argv", ["kl_storms.py", "--at", "150", "--arm", f"base={base}"])
+    with pytest.raises(SystemExit):
+        kl_storms.main()
+    assert "two or more --arm" in capsys.readouterr().err
 
 
 def test_a_resumed_sweep_run_keeps_the_physics_it_began_with(tmp_path):

@@ -27,8 +27,9 @@ ARCHIVE = Path(__file__).resolve().parents[2] / "experiments" / "results" / "run
 ABOUT_JSON = "about.json"  # in an archive folder, beside its runs: how they were made
 SUMMARY_JSON = "summary.json"
 # metrics.csv columns an archived run keeps beside the return (binned as it), where the run logged
-# them: what a collapsed seed's policy did (its std, its steps' KL, the critic's loss, the reward)
-DIAGNOSTICS = ("entropy", "approx_kl", "value_loss", "step_reward")
+# them: what a collapsed seed's policy did (its std, its steps' KL, the critic's loss, the reward,
+# and the adaptive rate's scale where ppo.kl_adaptive_lr chose one)
+DIAGNOSTICS = ("entropy", "approx_kl", "value_loss", "step_reward", "lr_scale")
 
 
 def run_folder(runs: Path, env: str, label: str) -> Path:
@@ -124,7 +125,8 @@ def kl_storms(folder: Path) -> list[dict] | None:
 
 def archive_run(runs: Path, env: str, label: str) -> Path:
     """Copy what the tables need of the finished run runs/env/label into
-    ARCHIVE/<runs' name>/env/label (see the module's docstring); returns that folder."""
+    ARCHIVE/<runs' name>/env/label (see the module's docstring); returns that folder. A run cut
+    short (no eval.json: its machine went away) keeps its config and its log as far as it went."""
     import numpy as np
 
     from hintsjax.settings.layers import CONFIG_YAML
@@ -132,9 +134,11 @@ def archive_run(runs: Path, env: str, label: str) -> Path:
 
     src, dest = runs / env / label, ARCHIVE / runs.name / env / label
     dest.mkdir(parents=True, exist_ok=True)
+    for name in ("eval.json", "metrics.csv"):
+        (dest / name).unlink(missing_ok=True)  # the archive mirrors the run as it stands
     for name in ("eval.json", CONFIG_YAML):
-        shutil.copyfile(src / name, dest / name)
-    (dest / "metrics.csv").unlink(missing_ok=True)
+        if name == CONFIG_YAML or (src / name).exists():
+            shutil.copyfile(src / name, dest / name)
     if not (src / "metrics.csv").exists():
         (dest / SUMMARY_JSON).write_text(json.dumps({"training_return_seed_means": None, "kl_share": None, "kl_storms": None}) + "\n")
         return dest
