@@ -11,7 +11,7 @@ the value of the state it was cut off in (the env's `final_obs`) and a terminate
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -163,6 +163,14 @@ def start_runner(key: jax.Array, env: Any, env_params: Any, network: ActorCritic
     return RunnerState(params, init_opt(params), ts.state, ts.obs, k_run, jnp.zeros((), jnp.int32), hyper)
 
 
+class StepCarry(NamedTuple):
+    """What one minibatch step hands the next, through an update's epochs."""
+    params: Any
+    opt_state: Any
+    stopped: jax.Array  # bool: the KL early stop has ended this update's steps
+    stepped: jax.Array  # bool: a step came before this one in this update (its KL is informative)
+
+
 @dataclass(frozen=True)
 class PPO:
     """PPO's pure pieces for one configuration; `make_trainer` joins them into PPO's update, and
@@ -258,11 +266,11 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
         batch = jax.tree.map(flat, Batch(traj.obs, traj.action, traj.log_prob, advantage, target))
         optimizer = make_optimizer(hyper, state.params, ppo)
 
-        def minibatch_step(carry, mb: Batch):
-            params, opt_state, stopped, *moved = carry  # moved: kl_adaptive_lr's, whether this update stepped yet
+        def minibatch_step(carry: StepCarry, mb: Batch):
+            params, opt_state, stopped, stepped = carry
             (_, parts), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, mb, hyper)
             if ppo.kl_adaptive_lr:  # this step's rate from the KL of the steps before it in this update
-                informative = moved[0] & ~stopped  # not the rollout policy's own KL of 0, not after a stop
+                informative = stepped & ~stopped  # not the rollout policy's own KL of 0, not after a stop
                 opt_state = jax.tree.map(lambda old, new: jnp.where(informative, new, old), opt_state,
                                          kl_rate.adapt(opt_state, parts["approx_kl"], hyper.target_kl))
                 parts = {**parts, "lr_scale": kl_rate.scale_of(opt_state)}
@@ -272,15 +280,15 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
                 stopped = stopped | ~(parts["approx_kl"] <= kl_rate.STOP * hyper.target_kl)  # NaN stops too
                 new = jax.tree.map(lambda old, step: jnp.where(stopped, old, step), (params, opt_state), new)
                 parts = {**parts, "kl_stopped": stopped.astype(jnp.float32)}
-            return (*new, stopped, *(jnp.ones((), bool) for _ in moved)), parts
+            return StepCarry(*new, stopped, jnp.ones((), bool)), parts
 
         def epoch(carry, key):
             order = jax.random.permutation(key, T * N)
             shaped = lambda x: x[order].reshape((ppo.num_minibatches, ppo.minibatch_size) + x.shape[1:])  # noqa: E731
             return jax.lax.scan(minibatch_step, carry, jax.tree.map(shaped, batch))
 
-        start = (state.params, state.opt_state, jnp.zeros((), bool)) + ((jnp.zeros((), bool),) if ppo.kl_adaptive_lr else ())
-        (params, opt_state, *_), parts = jax.lax.scan(epoch, start, jax.random.split(key, ppo.epochs))
+        start = StepCarry(state.params, state.opt_state, jnp.zeros((), bool), jnp.zeros((), bool))
+        (params, opt_state, _, _), parts = jax.lax.scan(epoch, start, jax.random.split(key, ppo.epochs))
         if not ppo.normalize_before_learning:
             params = normalization.update(params, traj.obs)  # after learning: the next rollout's statistics
         metrics = {
