@@ -177,6 +177,7 @@ def bench_train(name: str, seeds: int, updates: int, overrides: dict, agent: str
     env_steps = seeds * updates * cfg.ppo.batch_size
     return {
         "env": name, "agent": agent, "seeds": seeds, "updates": updates,
+        "physics": results["physics"],  # what `physics` (auto by default) resolved to, as the run's eval.json says
         "ppo": {k: getattr(cfg.ppo, k) for k in ("num_envs", "batch_size", "epochs", "minibatch_size")},
         "env_steps_per_s": results["train_env_steps_per_s"],
         "chunks_env_steps_per_s": results["chunks_env_steps_per_s"],

@@ -1,4 +1,5 @@
-"""experiments/bench.py's command-line parsing of physics options (its timings run on the GPU)."""
+"""experiments/bench.py: its command-line parsing of physics options, and (slow tier) one training row
+at a toy size on CPU (its measured timings run on the GPU)."""
 
 from __future__ import annotations
 
@@ -20,3 +21,13 @@ def test_model_options_parse_enums_by_name_and_numbers():
 def test_bad_model_options_name_the_valid_ones(item, names):
     with pytest.raises(ValueError, match=names):
         bench.model_options([item])
+
+
+@pytest.mark.slow
+def test_a_training_row_says_which_physics_the_run_got():
+    """bench_train end to end on CPU, at a toy size: its row records the physics that `auto`
+    resolved to (the run's own eval.json value), and rates from both of its timings."""
+    row = bench.bench_train("pendulum", 2, 2, {"num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1})
+    assert row["physics"] == "jax" and row["updates"] == 2
+    assert row["env_steps_per_s"] > 0 and row["scan_env_steps_per_s"] > 0
+    assert set(row["update_parts_s"]) >= {"rollout", "learn"}
