@@ -51,15 +51,20 @@ def summary(folder: Path) -> dict | None:
 def training_seed_means(folder: Path, last: float = 0.1) -> list[float] | None:
     """Per seed, the mean return of the training episodes (sampled actions) that ended in the
     last `last` of a run's updates; None when not run or no episode ended."""
-    import numpy as np
-
     from hintsjax.training.runlog import read_curves
 
     if (kept := summary(folder)) is not None:
         return kept["training_return_seed_means"]
     if not (folder / "metrics.csv").exists():
         return None
-    _, values = read_curves(folder / "metrics.csv")
+    return _tail_means(read_curves(folder / "metrics.csv")[1], last)
+
+
+def _tail_means(values, last: float = 0.1) -> list[float] | None:
+    """[S, U] returns, NaNs carried forward -> per seed, the mean over the last `last` of the
+    updates; None when no episode ended there."""
+    import numpy as np
+
     tail = values[:, -max(1, int(last * values.shape[1])):]
     if np.isnan(tail).all():
         return None
@@ -70,7 +75,7 @@ def kl_share(folder: Path, above: float = KL_ABOVE) -> float | None:
     """The share of a run's PPO updates (all seeds) whose approx. KL from the rollout policy (the
     mean over the update's minibatch steps, as logged) exceeds `above`; None when not run or
     not trained by PPO (or, for an archived run, `above` is not KL_ABOVE)."""
-    import numpy as np
+    from hintsjax.training.runlog import read_log
 
     if (kept := summary(folder)) is not None:
         return kept["kl_share"] if above == KL_ABOVE else None
@@ -78,10 +83,14 @@ def kl_share(folder: Path, above: float = KL_ABOVE) -> float | None:
     if not path.exists():
         return None
     with path.open() as f:
-        reader = csv.DictReader(f)
-        if "approx_kl" not in (reader.fieldnames or ()):
+        if "approx_kl" not in (csv.DictReader(f).fieldnames or ()):
             return None
-        kl = np.array([float(row["approx_kl"]) for row in reader])
+    return _share_above(read_log(path, ("approx_kl",)).columns["approx_kl"], above)
+
+
+def _share_above(kl, above: float = KL_ABOVE) -> float:
+    import numpy as np
+
     return float(np.mean(kl > above))
 
 
@@ -130,7 +139,7 @@ def archive_run(runs: Path, env: str, label: str) -> Path:
     import numpy as np
 
     from hintsjax.settings.layers import CONFIG_YAML
-    from hintsjax.training.runlog import bin_means, read_curves
+    from hintsjax.training.runlog import bin_means, carried, read_log, storms_of
 
     src, dest = runs / env / label, ARCHIVE / runs.name / env / label
     dest.mkdir(parents=True, exist_ok=True)
@@ -142,16 +151,17 @@ def archive_run(runs: Path, env: str, label: str) -> Path:
     if not (src / "metrics.csv").exists():
         (dest / SUMMARY_JSON).write_text(json.dumps({"training_return_seed_means": None, "kl_share": None, "kl_storms": None}) + "\n")
         return dest
-    kept = {"training_return_seed_means": training_seed_means(src), "kl_share": kl_share(src), "kl_storms": kl_storms(src)}
-    with (src / "metrics.csv").open() as f:
-        columns = csv.DictReader(f).fieldnames or ()
-    logged = [c for c in DIAGNOSTICS if c in columns]
-    steps, values = read_curves(src / "metrics.csv")
-    extra = [bin_means(steps, read_curves(src / "metrics.csv", c)[1])[1] for c in logged]
+    log = read_log(src / "metrics.csv")  # the one pass over the run's full log
+    returns = carried(log.columns["episode_return"])
+    kl = log.columns.get("approx_kl")
+    kept = {"training_return_seed_means": _tail_means(returns), "kl_share": None if kl is None else _share_above(kl),
+            "kl_storms": storms_of(log)}
+    logged = [c for c in DIAGNOSTICS if c in log.columns]
+    extra = [bin_means(log.steps, carried(log.columns[c]))[1] for c in logged]
     # metrics.csv's updates count from 1 without gaps (a resumed run goes on from its checkpoint);
     # each archived row is a bin of them, numbered by its last update
-    updates, _ = bin_means(np.arange(1, len(steps) + 1), values)
-    steps, values = bin_means(steps, values)
+    updates, _ = bin_means(np.arange(1, len(log.steps) + 1), returns)
+    steps, values = bin_means(log.steps, returns)
     with (dest / "metrics.csv").open("w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(["update", "seed", "env_steps", "episode_return", *logged])

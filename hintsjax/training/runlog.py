@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import csv
-from collections.abc import Iterable
 import warnings
+from collections.abc import Iterable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -103,43 +104,72 @@ class RunLog:
         self.tb.close()
 
 
-def read_curves(path: Path, metric: str = "episode_return") -> tuple[np.ndarray, np.ndarray]:
-    """(env_steps [U], values [S, U]) from a metrics.csv, NaNs carried forward per seed."""
+@dataclass(frozen=True)
+class Log:
+    """A metrics.csv read once: its updates and env steps [U], and each logged column [S, U] as
+    logged (NaN where a seed has no row)."""
+
+    updates: np.ndarray
+    steps: np.ndarray
+    columns: dict[str, np.ndarray]
+
+
+def read_log(path: Path, names: Iterable[str] | None = None) -> Log:
+    """A metrics.csv's `names` columns (all but update, seed and env_steps when None), one pass."""
     with Path(path).open() as f:
-        rows = list(csv.DictReader(f))
+        reader = csv.DictReader(f)
+        fields = reader.fieldnames or ()
+        rows = list(reader)
+    names = [c for c in fields if c not in ("update", "seed", "env_steps")] if names is None else list(names)
     updates = sorted({int(r["update"]) for r in rows})
     seeds = sorted({int(r["seed"]) for r in rows})
     index = {u: i for i, u in enumerate(updates)}
     steps = np.zeros(len(updates))
-    values = np.full((len(seeds), len(updates)), np.nan)
+    columns = {c: np.full((len(seeds), len(updates)), np.nan) for c in names}
     for r in rows:
-        i = index[int(r["update"])]
+        i, seed = index[int(r["update"])], int(r["seed"])
         steps[i] = float(r["env_steps"])
-        values[int(r["seed"]), i] = float(r[metric])
-    for s in range(len(seeds)):
-        for i in range(1, len(updates)):
+        for c in names:
+            columns[c][seed, i] = float(r[c])
+    return Log(np.asarray(updates), steps, columns)
+
+
+def carried(values: np.ndarray) -> np.ndarray:
+    """[S, U] -> a copy with each seed's NaNs carried forward from its last value."""
+    values = np.array(values)
+    for s in range(values.shape[0]):
+        for i in range(1, values.shape[1]):
             if np.isnan(values[s, i]):
                 values[s, i] = values[s, i - 1]
-    return steps, values
+    return values
+
+
+def read_curves(path: Path, metric: str = "episode_return") -> tuple[np.ndarray, np.ndarray]:
+    """(env_steps [U], values [S, U]) from a metrics.csv, NaNs carried forward per seed."""
+    log = read_log(path, (metric,))
+    return log.steps, carried(log.columns[metric])
 
 
 def kl_storms(path: Path) -> list[dict] | None:
-    """Per seed of a metrics.csv, its KL storms (STORM_UPDATES or more updates in a row whose approx.
-    KL exceeds KL_ABOVE): {"first": the update the first one starts at, or None, "longest": the
-    longest run of such updates}; None without the file or an approx_kl column (not PPO)."""
+    """Per seed of a metrics.csv, its KL storms (`storms_of`); None without the file or an
+    approx_kl column (not PPO)."""
     try:
         with Path(path).open() as f:
-            reader = csv.DictReader(f)
-            if "approx_kl" not in (reader.fieldnames or ()):
+            if "approx_kl" not in (csv.DictReader(f).fieldnames or ()):
                 return None
-            rows = sorted(((int(r["seed"]), int(r["update"]), float(r["approx_kl"])) for r in reader))
+        return storms_of(read_log(path, ("approx_kl",)))
     except OSError:
         return None
-    per_seed: dict[int, list[float]] = {}
-    for seed, _, kl in rows:  # each seed's updates in order, as logged (no value carried over)
-        per_seed.setdefault(seed, []).append(kl)
+
+
+def storms_of(log: Log) -> list[dict] | None:
+    """Per seed, its KL storms (STORM_UPDATES or more updates in a row whose approx. KL exceeds
+    KL_ABOVE): {"first": the update the first one starts at, or None, "longest": the longest run
+    of such updates}; None for a log with no approx_kl column (not PPO)."""
+    if "approx_kl" not in log.columns:
+        return None
     storms = []
-    for above in (np.asarray(per_seed[s]) > KL_ABOVE for s in sorted(per_seed)):  # inf blew up too; NaN did not
+    for above in log.columns["approx_kl"] > KL_ABOVE:  # each seed's updates as logged; inf blew up too, NaN did not
         run, longest, first = 0, 0, None
         for update, hot in enumerate(above, start=1):
             run = run + 1 if hot else 0
