@@ -21,13 +21,13 @@ import argparse
 import json
 from pathlib import Path
 
-import csv
 import math
 
 import numpy as np
 
 from hintsjax.reproduce.archive import KL_ABOVE, STORM_UPDATES, kl_storms
 from hintsjax.reproduce.stats import iqm_cell, ordering_text, poi_ci
+from hintsjax.training.runlog import read_log
 
 SPAN = 100  # updates before --at whose training episodes give a seed's return there
 
@@ -67,17 +67,11 @@ def stormed_by(folder: Path, at: int) -> list[bool]:
 def returns_by(folder: Path, at: int) -> list[float]:
     """Per seed, the mean return of the training episodes logged in updates at-SPAN+1..at (an
     archived log's bins are numbered by their last update)."""
-    per_seed: dict[int, list[float]] = {}
-    last = 0
-    with (folder / "metrics.csv").open() as f:
-        for r in csv.DictReader(f):
-            update = int(float(r["update"]))
-            last = max(last, update)
-            if at - SPAN < update <= at and r["episode_return"] not in ("", "nan"):
-                per_seed.setdefault(int(r["seed"]), []).append(float(r["episode_return"]))
-    if last < at:
-        raise SystemExit(f"error: {folder}'s log ends at update {last}, before --at {at}")
-    return [float(np.mean(per_seed[s])) for s in sorted(per_seed)]
+    log = read_log(folder / "metrics.csv", ("episode_return",))
+    if log.updates[-1] < at:
+        raise SystemExit(f"error: {folder}'s log ends at update {log.updates[-1]}, before --at {at}")
+    window = (log.updates > at - SPAN) & (log.updates <= at)
+    return [float(x) for x in np.nanmean(log.columns["episode_return"][:, window], axis=1)]
 
 
 def fisher_fewer(hits: int, n: int, base_hits: int, base_n: int) -> float:
