@@ -89,6 +89,7 @@ def kl_share(folder: Path, above: float = KL_ABOVE) -> float | None:
 
 
 def _share_above(kl, above: float = KL_ABOVE) -> float:
+    """[S, U] approx. KL as logged -> the share of its entries above `above` (NaN is not)."""
     import numpy as np
 
     return float(np.mean(kl > above))
