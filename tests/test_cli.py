@@ -406,6 +406,10 @@ def test_run_folder_holds_everything(finished_run):
     assert config["agent"] == "ppo_state" and config["ppo"]["total_env_steps"] == 256
     results = json.loads((finished_run / "eval.json").read_text())
     assert results["deterministic"] is True and results["physics"] == "jax"  # on a CPU every op repeats
+    split = results["wall_split_seconds"]  # where the call's wall-clock went, stage by stage
+    assert list(split) == ["startup", "before_training", "training", "evaluation"] and all(v >= 0 for v in split.values())
+    assert split["before_training"] >= results["compile_seconds"]["train"]  # the compile is part of it
+    assert split["training"] >= results["train_seconds_this_call"]
     variants = [e["variant"] for e in results["evaluations"]]
     assert variants == ["swingup", "swingto"]  # the training task, then pendulum's deploy variant
     for e in results["evaluations"]:

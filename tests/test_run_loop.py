@@ -7,6 +7,7 @@ import dataclasses
 import json
 import subprocess
 import sys
+import time
 
 import jax
 import numpy as np
@@ -203,3 +204,20 @@ def test_a_learning_rate_that_blows_up_is_caught_by_the_same_check(tmp_path, cap
     err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
     assert len(err) == 1 and "is not finite after update 1" in err[0] and "last good checkpoint: none" in err[0], err
     assert checkpoint.latest_update(tmp_path / "nan") is None
+
+
+def test_process_age_counts_from_the_process_start():
+    """hintsjax.system.wall.process_age in a process that waited 0.5 s before asking: at least
+    that, and less than the whole subprocess took; Laps name each stage by its end."""
+    code = "import time; time.sleep(0.5); from hintsjax.system.wall import process_age; print(process_age())"
+    t = time.perf_counter()
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert 0.5 <= float(out) <= time.perf_counter() - t
+    from hintsjax.system.wall import Laps
+
+    laps = Laps()
+    time.sleep(0.05)
+    laps.mark("first")
+    laps.mark("second")
+    assert list(laps.seconds) == ["startup", "first", "second"] and laps.seconds["first"] >= 0.05 > laps.seconds["second"]
+

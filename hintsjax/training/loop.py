@@ -95,6 +95,7 @@ def start(trainer: Trainer, cfg: RunConfig, run_dir: Path, resume: bool, label: 
         state = layout.pad(state)
     else:
         state, done = compiled.init(keys), 0
+    jax.block_until_ready(state)  # the first state's work (MuJoCo Warp's kernel builds too) counted before training
     spread = f" ({layout.per_device} a device{f', {layout.padded - cfg.seeds} of them padding' if layout.padded > cfg.seeds else ''})"
     stepped_by = f", {cfg.physics} physics" if cfg.env in envs.mjx_env_names() else ""  # what auto chose, too
     print(f"{cfg.env} {label}: {cfg.seeds} seeds x {total} updates of {cfg.ppo.batch_size} env steps "

@@ -15,6 +15,7 @@ from hintsjax.envs import physics
 from hintsjax.system import checkpoint, devices
 from hintsjax.system.devices import SeedLayout
 from hintsjax.system.errors import sized_by
+from hintsjax.system.wall import Laps
 from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms.group import cell_state, make_group, make_group_trainer
 from hintsjax.algorithms.registry import make_trainer
@@ -66,6 +67,7 @@ def params_shapes(trainer: Trainer, layout: SeedLayout) -> Any:
 
 def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = True) -> dict[str, Any]:
     """Train all seeds (in chunks, with checkpoints: see `advance`), evaluate, plot; returns eval results."""
+    laps = Laps()  # eval.json's wall_split_seconds: where this call's wall-clock went
     trainer, layout = make_trainer(cfg), seed_layout(cfg)
     variants = (cfg.variant, *cfg.eval_variants)
     # The evaluation program needs only the params' shapes, so it compiles on the host in a
@@ -80,18 +82,21 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
                 evaluator.result()
         with sized_by(TRAINING_SIZES):
             training = start(trainer, cfg, run_dir, resume, cfg.label)
+            laps.mark("before_training")  # compiles, the first state (and MuJoCo Warp's kernel builds), a restore
             log = run_log(run_dir, training.done)
             try:
                 training = advance(training, cfg, run_dir, log.write, progress, cfg.label)
             finally:
                 log.close()
+            laps.mark("training")  # the chunks, logs and checkpoints, the last one written
         with sized_by(EVALUATION_SIZES):
             compiled = evaluator.result()
     with sized_by(EVALUATION_SIZES):
         evaluations, eval_compile = evaluate_variants(cfg, training.state.params, variants, cfg.eval_episodes,
                                                       cfg.stochastic_eval, compiled, training.compiled.layout)
+    laps.mark("evaluation")  # waiting on its compile, if still going, and the episodes
     check_physics(cfg, cfg.label)
-    return finish(cfg, run_dir, training, evaluations, eval_compile)
+    return finish(cfg, run_dir, training, evaluations, eval_compile, {"wall_split_seconds": laps.seconds})
 
 
 def train_group(group_cfgs: list[RunConfig], group_dir: Path, cell_dirs: list[Path], resume: bool = False,
@@ -101,10 +106,12 @@ def train_group(group_cfgs: list[RunConfig], group_dir: Path, cell_dirs: list[Pa
     then gets what its own run would have written in its folder (cell_dirs, each holding its
     config.yaml): metrics.csv, its final state as a checkpoint, eval.json, learning_curve.png.
     GroupTooBig if the group's program would not fit on the device (before anything is written)."""
+    laps = Laps()
     group = make_group(group_cfgs)
     cfg = group.cfgs[0]
     label = f"group of {len(group.cfgs)} ({', '.join(c.label for c in group.cfgs)})"
     training = start(make_group_trainer(group), cfg, group_dir, resume, label, check_memory=len(group.cfgs) > 1)
+    laps.mark("before_training")
     logs = [run_log(d, training.done) for d in cell_dirs]
 
     def write(metrics: dict[str, np.ndarray], after: int) -> None:  # [S, n, K]: one log per member
@@ -119,8 +126,11 @@ def train_group(group_cfgs: list[RunConfig], group_dir: Path, cell_dirs: list[Pa
     for k, cell_dir in enumerate(cell_dirs):
         if checkpoint.latest_update(cell_dir) != training.done:
             checkpoint.save(cell_dir, cell_state(group, training.compiled.layout.crop(training.state), k), training.done)
+    laps.mark("training")  # with each member's final state saved in its folder
     evaluations, eval_compile = evaluate_group(group, training.state, training.compiled.layout)
+    laps.mark("evaluation")
     rate = (training.done - training.first) * cfg.ppo.batch_size * cfg.seeds * len(group.cfgs) / max(training.seconds, 1e-9)
-    extra = {"group": [c.label for c in group.cfgs], "group_dir": str(group_dir), "group_env_steps_per_s": rate}
+    extra = {"group": [c.label for c in group.cfgs], "group_dir": str(group_dir), "group_env_steps_per_s": rate,
+             "wall_split_seconds": laps.seconds}
     return [finish(member, cell_dir, training, member_evaluations, eval_compile, extra)
             for member, cell_dir, member_evaluations in zip(group.cfgs, cell_dirs, evaluations)]
