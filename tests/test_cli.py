@@ -727,6 +727,8 @@ def test_seeds_sharded_over_two_devices_give_the_single_device_result(finished_r
                          capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert "on 2 cpu device(s) (1 a device), jax physics, compiled in" in out.stdout  # the pendulum's MJX physics: auto on a CPU
+    # the first line comes before anything compiles (and the cache is on, as the command line turns it on)
+    assert out.stdout.splitlines()[0].endswith(": compiling its programs (later runs on this machine load most of them from the cache)")
     sharded = json.loads((tmp_path / "runs" / "sharded" / "eval.json").read_text())["evaluations"]
     single = json.loads((finished_run / "eval.json").read_text())["evaluations"]
     for a, b in zip(sharded, single):

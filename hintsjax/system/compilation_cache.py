@@ -52,3 +52,10 @@ def enable(folder: str | os.PathLike | None, min_compile_seconds: float = MIN_CO
     jax.config.update("jax_persistent_cache_min_compile_time_secs", min_compile_seconds)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     return path
+
+
+def in_use() -> Path | None:
+    """The folder the persistent cache writes to in this process, or None when it is off."""
+    folder = jax.config.jax_compilation_cache_dir
+    return Path(folder) if folder else None
+

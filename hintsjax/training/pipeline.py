@@ -12,7 +12,7 @@ import jax
 import numpy as np
 
 from hintsjax.envs import physics
-from hintsjax.system import checkpoint, devices
+from hintsjax.system import checkpoint, compilation_cache, devices
 from hintsjax.system.devices import SeedLayout
 from hintsjax.system.errors import sized_by
 from hintsjax.system.wall import Laps
@@ -37,6 +37,13 @@ def evaluation_compiles_first(cfg: RunConfig) -> bool:
     earlier "Warp CUDA error 904", in 3 of 4 runs beside, none of 3 first
     (experiments/results/warp_det_off_h100.json)."""
     return cfg.physics == physics.WARP
+
+
+def say_compiling(cfg: RunConfig, label: str) -> None:
+    """The run's first line, before its programs compile (the longest silence of a first run on a
+    fresh machine: a minute or more for the ant under Warp, its kernel builds included)."""
+    cached = " (later runs on this machine load most of them from the cache)" if compilation_cache.in_use() else ""
+    print(f"{cfg.env} {label}: compiling its programs{cached}", flush=True)
 
 
 # The settings that size evaluation, named where an allocation fails (hintsjax.system.errors.sized_by);
@@ -68,6 +75,7 @@ def params_shapes(trainer: Trainer, layout: SeedLayout) -> Any:
 def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = True) -> dict[str, Any]:
     """Train all seeds (in chunks, with checkpoints: see `advance`), evaluate, plot; returns eval results."""
     laps = Laps()  # eval.json's wall_split_seconds: where this call's wall-clock went
+    say_compiling(cfg, cfg.label)
     trainer, layout = make_trainer(cfg), seed_layout(cfg)
     variants = (cfg.variant, *cfg.eval_variants)
     # The evaluation program needs only the params' shapes, so it compiles on the host in a
@@ -110,6 +118,7 @@ def train_group(group_cfgs: list[RunConfig], group_dir: Path, cell_dirs: list[Pa
     group = make_group(group_cfgs)
     cfg = group.cfgs[0]
     label = f"group of {len(group.cfgs)} ({', '.join(c.label for c in group.cfgs)})"
+    say_compiling(cfg, label)
     training = start(make_group_trainer(group), cfg, group_dir, resume, label, check_memory=len(group.cfgs) > 1)
     laps.mark("before_training")
     logs = [run_log(d, training.done) for d in cell_dirs]
