@@ -82,10 +82,8 @@ def kl_share(folder: Path, above: float = KL_ABOVE) -> float | None:
     path = folder / "metrics.csv"
     if not path.exists():
         return None
-    with path.open() as f:
-        if "approx_kl" not in (csv.DictReader(f).fieldnames or ()):
-            return None
-    return _share_above(read_log(path, ("approx_kl",)).columns["approx_kl"], above)
+    kl = read_log(path, ("approx_kl",)).columns.get("approx_kl")
+    return None if kl is None else _share_above(kl, above)
 
 
 def _share_above(kl, above: float = KL_ABOVE) -> float:
@@ -146,9 +144,9 @@ def archive_run(runs: Path, env: str, label: str) -> Path:
     dest.mkdir(parents=True, exist_ok=True)
     for name in ("eval.json", "metrics.csv"):
         (dest / name).unlink(missing_ok=True)  # the archive mirrors the run as it stands
-    for name in ("eval.json", CONFIG_YAML):
-        if name == CONFIG_YAML or (src / name).exists():
-            shutil.copyfile(src / name, dest / name)
+    shutil.copyfile(src / CONFIG_YAML, dest / CONFIG_YAML)
+    if (src / "eval.json").exists():
+        shutil.copyfile(src / "eval.json", dest / "eval.json")
     if not (src / "metrics.csv").exists():
         (dest / SUMMARY_JSON).write_text(json.dumps({"training_return_seed_means": None, "kl_share": None, "kl_storms": None}) + "\n")
         return dest

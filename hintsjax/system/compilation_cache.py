@@ -58,4 +58,3 @@ def in_use() -> Path | None:
     """The folder the persistent cache writes to in this process, or None when it is off."""
     folder = jax.config.jax_compilation_cache_dir
     return Path(folder) if folder else None
-

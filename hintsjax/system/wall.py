@@ -1,6 +1,7 @@
 """Where a run's wall-clock went: `Laps` marks the stages of `pipeline.train` (eval.json's
 `wall_split_seconds`), and `process_age` is how long the process had run before the first mark
-(the interpreter, the imports, the config), read from Linux's /proc.
+(the interpreter, the imports, the config; in a process that trains several runs, a sweep
+worker's, the runs before too), read from Linux's /proc.
 """
 
 from __future__ import annotations

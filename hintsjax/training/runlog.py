@@ -115,12 +115,13 @@ class Log:
 
 
 def read_log(path: Path, names: Iterable[str] | None = None) -> Log:
-    """A metrics.csv's `names` columns (all but update, seed and env_steps when None), one pass."""
+    """A metrics.csv's `names` columns (all but update, seed and env_steps when None), one pass; a
+    name the file does not log is left out of `columns`."""
     with Path(path).open() as f:
         reader = csv.DictReader(f)
         fields = reader.fieldnames or ()
         rows = list(reader)
-    names = [c for c in fields if c not in ("update", "seed", "env_steps")] if names is None else list(names)
+    names = [c for c in fields if c not in ("update", "seed", "env_steps")] if names is None else [c for c in names if c in fields]
     updates = sorted({int(r["update"]) for r in rows})
     seeds = sorted({int(r["seed"]) for r in rows})
     index = {u: i for i, u in enumerate(updates)}
@@ -154,9 +155,6 @@ def kl_storms(path: Path) -> list[dict] | None:
     """Per seed of a metrics.csv, its KL storms (`storms_of`); None without the file or an
     approx_kl column (not PPO)."""
     try:
-        with Path(path).open() as f:
-            if "approx_kl" not in (csv.DictReader(f).fieldnames or ()):
-                return None
         return storms_of(read_log(path, ("approx_kl",)))
     except OSError:
         return None
