@@ -13,6 +13,8 @@ With --at N, arms (each the seeds of its runs pooled) are compared as far as upd
 run cut short stands beside full ones at equal steps: the seeds whose first storm had begun by
 N (beside the first arm's, with Fisher's exact one-sided p that the arm has no more storms by
 chance), and each seed's training return over updates N-99..N, IQM [95% CI] and P(arm > first arm).
+Where N is every run's last update and each was evaluated (eval.json), the final evaluation's seed
+means are compared too; an arm with a run cut short shows '-' there.
 """
 
 from __future__ import annotations
@@ -73,6 +75,15 @@ def returns_by(folder: Path, at: int) -> list[float]:
     return [float(x) for x in np.nanmean(log.columns["episode_return"][:, window], axis=1)]
 
 
+def evaluation_by(folder: Path, at: int) -> list[float] | None:
+    """Per seed, the final evaluation's mean return (the first evaluated variant) where the run
+    trained to update `at` and was evaluated; None otherwise (cut short, or --at before its end)."""
+    path = folder / "eval.json"
+    if not path.exists() or read_log(folder / "metrics.csv", ("episode_return",)).updates[-1] != at:
+        return None
+    return [float(m) for m in json.loads(path.read_text())["evaluations"][0]["seed_means"]]
+
+
 def fisher_fewer(hits: int, n: int, base_hits: int, base_n: int) -> float:
     """One-sided Fisher exact p: the chance of `hits` or fewer storms among an arm's n seeds when the
     hits + base_hits storms fell at random among all n + base_n seeds (hypergeometric)."""
@@ -83,21 +94,30 @@ def fisher_fewer(hits: int, n: int, base_hits: int, base_n: int) -> float:
 
 def arms_report(arms: dict[str, list[Path]], at: int) -> list[str]:
     """The arms' pooled seeds as far as update `at`, the first arm the base."""
-    pooled = {name: ([x for f in fs for x in stormed_by(f, at)], [x for f in fs for x in returns_by(f, at)])
+    def evaluated(fs: list[Path]) -> list[float] | None:
+        means = [evaluation_by(f, at) for f in fs]
+        return None if None in means else [x for m in means for x in m]
+
+    pooled = {name: ([x for f in fs for x in stormed_by(f, at)], [x for f in fs for x in returns_by(f, at)], evaluated(fs))
               for name, fs in arms.items()}
-    base_name, (base_storms, base_returns) = next(iter(pooled.items()))
+    base_name, (base_storms, base_returns, base_evals) = next(iter(pooled.items()))
     lines = [f"As far as update {at}: seeds whose first KL storm ({STORM_UPDATES} or more updates in a row with approx. KL "
-             f"above {KL_ABOVE}) had begun, and each seed's training return over updates {at - SPAN + 1}-{at}.",
+             f"above {KL_ABOVE}) had begun, each seed's training return over updates {at - SPAN + 1}-{at}, and where every "
+             "run of an arm ended there, its final evaluation (each seed's mean).",
              "", f"| arm | runs | seeds | seeds with a storm by {at} | Fisher p (fewer than {base_name} by chance) "
-             f"| training return, IQM [95% CI] | P(arm > {base_name}) |", "|---|---|---|---|---|---|---|"]
-    for name, (storms, returns) in pooled.items():
+             f"| training return, IQM [95% CI] | P(arm > {base_name}) | evaluation, IQM [95% CI] "
+             f"| P(arm > {base_name}), evaluation |", "|---|---|---|---|---|---|---|---|---|"]
+    for name, (storms, returns, evals) in pooled.items():
         if name == base_name:
             p, poi = "-", "-"
         else:
             p = f"{fisher_fewer(sum(storms), len(storms), sum(base_storms), len(base_storms)):.3g}"
             poi = ordering_text(name, base_name, poi_ci(returns, base_returns))
+        eval_poi = "-" if name == base_name or evals is None or base_evals is None else \
+            ordering_text(name, base_name, poi_ci(evals, base_evals))
         lines.append(f"| {name} | {', '.join(f.name for f in arms[name])} | {len(storms)} | {sum(storms)} | {p} "
-                     f"| {iqm_cell(returns, digits=0)} | {poi} |")
+                     f"| {iqm_cell(returns, digits=0)} | {poi} | {'-' if evals is None else iqm_cell(evals, digits=0)} "
+                     f"| {eval_poi} |")
     return lines
 
 

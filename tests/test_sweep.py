@@ -185,19 +185,24 @@ def test_locomotion_report_states_the_settings_each_row_was_trained_with(tmp_pat
     labels = ["ppo_rgb", "hints-fc-speed", "ppo_state"]
     assert locomotion.settings_lines(tmp_path, "ant", labels) == [  # none run yet: today's defaults
         "PPO: 256 envs per seed, batches of 1024, 4 epochs of minibatches of 256, learning rates encoder 0.0003, "
-        "actor 0.0003, critic 0.001, KL early stop at 0.05 (not run yet; config.ENV_DEFAULTS)."]
+        "actor 0.0003, critic 0.001, KL early stop at 0.05 with the learning rates adapted to the KL (not run yet; "
+        "config.ENV_DEFAULTS)."]
     for label, values in (("ppo_rgb", {"agent": "ppo_rgb"}),
-                          ("hints-fc-speed", {"ppo": {"encoder_lr": 1e-3, "epochs": 8, "target_kl": 0.1}})):
+                          ("hints-fc-speed", {"ppo": {"encoder_lr": 1e-3, "epochs": 8, "target_kl": 0.1,
+                                                      "kl_adaptive_lr": False, "critic_trains_encoder": False}})):
         write_run(tmp_path, "ant", label, [evaluation(1.0, 0.0, [1.0])])
         layers.save_run_config(tmp_path / "ant" / label, layers.run_config({"env": "ant", **values}))
     assert locomotion.settings_lines(tmp_path, "ant", labels) == [
         "PPO, as each row was trained:", "",
         "- ppo_rgb: 256 envs per seed, batches of 1024, 4 epochs of minibatches of 256, learning rates "
-        "encoder 0.0003, actor 0.0003, critic 0.001, KL early stop at 0.05 (config.ENV_DEFAULTS).",
+        "encoder 0.0003, actor 0.0003, critic 0.001, KL early stop at 0.05 with the learning rates adapted to the KL "
+        "(config.ENV_DEFAULTS).",
         "- hints-fc-speed: 256 envs per seed, batches of 1024, 8 epochs of minibatches of 256, learning rates "
-        "encoder 0.001, actor 0.0003, critic 0.001, KL early stop at 0.1 (not today's config.ENV_DEFAULTS).",
+        "encoder 0.001, actor 0.0003, critic 0.001, KL early stop at 0.1, the encoder trained by the actor alone "
+        "(not today's config.ENV_DEFAULTS).",
         "- ppo_state: 256 envs per seed, batches of 1024, 4 epochs of minibatches of 256, learning rates "
-        "encoder 0.0003, actor 0.0003, critic 0.001, KL early stop at 0.05 (not run yet; config.ENV_DEFAULTS)."]
+        "encoder 0.0003, actor 0.0003, critic 0.001, KL early stop at 0.05 with the learning rates adapted to the KL "
+        "(not run yet; config.ENV_DEFAULTS)."]
 
 
 def test_kl_cell_is_the_share_of_blown_up_updates(tmp_path):
@@ -823,6 +828,17 @@ def test_kl_storms_compares_arms_at_equal_updates(tmp_path, capsys, monkeypatch)
         assert kl_storms.fisher_fewer(hits, n, base_hits, base_n) == pytest.approx(oracle)
     with pytest.raises(SystemExit, match="ends at update 200, before --at 201"):
         kl_storms.returns_by(base, 201)
+    # the final evaluation, where every run of the arms ended at N and was evaluated; '-' otherwise
+    for folder, means in ((base, [10.0, 20.0]), (calm, [1000.0, 3000.0])):
+        (folder / "eval.json").write_text(json.dumps({"evaluations": [{"seed_means": means}]}))
+    assert kl_storms.evaluation_by(calm, 200) == [1000.0, 3000.0] and kl_storms.evaluation_by(calm, 150) is None
+    assert lines[-1].endswith("| - | - |")
+    lines = kl_storms.arms_report({"base": [base], "calm": [calm]}, 200)
+    assert lines[-2].endswith("| 15 [10, 20] | - |")
+    assert "| 2000 [1000, 3000] | P(calm > base) = 1.00 " in lines[-1]
+    (base / "eval.json").unlink()  # one arm cut short: neither arm's evaluation is compared
+    lines = kl_storms.arms_report({"base": [base], "calm": [calm]}, 200)
+    assert lines[-2].endswith("| - | - |") and lines[-1].endswith("| 2000 [1000, 3000] | - |")
     monkeypatch.setattr(sys, "argv", ["kl_storms.py", "--at", "150", "--arm", f"base={base}"])
     with pytest.raises(SystemExit):
         kl_storms.main()

@@ -88,6 +88,8 @@ def ppo_text(ppo) -> str:
     return (f"{ppo.num_envs} envs per seed, batches of {ppo.batch_size}, {ppo.epochs} epochs of minibatches of "
             f"{ppo.minibatch_size}, learning rates encoder {ppo.encoder_lr:g}, actor {ppo.actor_lr:g}, critic {ppo.critic_lr:g}"
             + (f", KL early stop at {ppo.target_kl:g}" if ppo.target_kl else "")
+            + (" with the learning rates adapted to the KL" if ppo.kl_adaptive_lr else "")
+            + (", the encoder trained by the actor alone" if not ppo.critic_trains_encoder else "")
             + (f", rewards x {ppo.reward_scale:g}" if ppo.reward_scale != 1.0 else "")
             + (", the state normalised" if ppo.normalize_state else ""))
 
