@@ -422,16 +422,19 @@ def test_run_folder_holds_everything(finished_run):
 
 
 def test_a_saved_config_reads_back_as_trained_whatever_todays_env_defaults(tmp_path):
-    # The ant's learners take a KL early stop by default, its references do not; a run trained
-    # without the stop (null in its config.yaml) must read back without it, not with today's default.
+    # The ant's learners take a KL early stop and rates adapted to the KL by default, its references
+    # neither; a run trained without them (null and false in its config.yaml) must read back
+    # without them, not with today's defaults.
     from dataclasses import replace
 
     from hintsjax.settings.layers import load_run_config, run_config, save_run_config
 
     assert run_config({"env": "ant", "agent": "hints"}).ppo.target_kl == 0.05
+    assert run_config({"env": "ant", "agent": "hints"}).ppo.kl_adaptive_lr
     assert run_config({"env": "ant", "agent": "expert_ppo"}).ppo.target_kl is None
+    assert not run_config({"env": "ant", "agent": "expert_ppo"}).ppo.kl_adaptive_lr
     cfg = run_config({"env": "ant", "agent": "hints"})
-    old = replace(cfg, ppo=replace(cfg.ppo, target_kl=None))
+    old = replace(cfg, ppo=replace(cfg.ppo, target_kl=None, kl_adaptive_lr=False))
     save_run_config(tmp_path, old)
     assert load_run_config(tmp_path) == old
     save_run_config(tmp_path, cfg)

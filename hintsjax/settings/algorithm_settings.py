@@ -113,7 +113,8 @@ class PPOConfig:
         if self.target_kl is not None and not self.target_kl > 0:
             raise UsageError(f"ppo.target_kl ({self.target_kl}) must be positive, or null for no KL early stop")
         if self.kl_adaptive_lr and self.target_kl is None:
-            raise UsageError("ppo.kl_adaptive_lr needs ppo.target_kl (the KL it steers the rates to)")
+            raise UsageError("ppo.kl_adaptive_lr needs ppo.target_kl (the KL it steers the rates to): set ppo.target_kl, "
+                             "or ppo.kl_adaptive_lr=false")
 
 
 @dataclass(frozen=True)
