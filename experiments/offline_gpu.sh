@@ -1,0 +1,68 @@
+#!/usr/bin/env bash
+# hintsjax on a GPU machine that has jax (CUDA) but no internet, as docs/gpu.md describes: carry
+# the missing packages as wheels, install them beside the machine's own, run, and watch a run
+# started detached. Python 3.12, x86-64 (the wheels' tags; change PY and PLATFORMS for others).
+#
+#   bash experiments/offline_gpu.sh wheels            # here, with internet: .whl2/ (mujoco, mjx, hydra, this
+#                                                     #   project...) and .wp/warp.part.0[0-3] (warp-lang in 4 parts)
+#   bash experiments/offline_gpu.sh install [DIR]     # there, in the repo root: DIR's wheels (.whl2) into /tmp/site
+#   bash experiments/offline_gpu.sh warp              # there: keep the .wp parts carried so far; all 4 in: install
+#   bash experiments/offline_gpu.sh poll SECONDS MARK # there: wait up to SECONDS or until /tmp/MARK exists, show
+#                                                     #   the logs' last lines (/tmp/logs/*.log) and pack the runs'
+#                                                     #   small files (/tmp/r: csv, json, yaml) into $OUT/runs.tgz
+# Then run with PYTHONPATH=/tmp/site from a folder outside the repo (the installed hintsjax, not the source tree):
+#   cd /tmp && PYTHONPATH=/tmp/site python3 -m hintsjax.run env=ant hint=speed scheme=fc out_dir=/tmp/r/ant
+# Transfers of at most 64 MiB at a time are why warp-lang (149 MB) travels in parts and brax/pyopengl stay out
+# of .whl2 (an ant run needs neither: mujoco imports its OpenGL parts only when asked to).
+set -euo pipefail
+PY=3.12
+PLATFORMS="manylinux_2_28_x86_64 manylinux_2_27_x86_64 manylinux_2_17_x86_64 manylinux2014_x86_64 manylinux1_x86_64 any"
+WARP=warp_lang-1.18.0-py3-none-manylinux_2_28_x86_64.whl
+WARP_MD5=47fc34ed07880e32d2964187ad4de4cd
+# What the GPU image lacks among the project's pins (pyproject.toml) and their needs
+CARRIED="mujoco==3.17.0 mujoco-mjx==3.17.0 hydra-core==1.3.2 omegaconf==2.3.0 tensorboardX==2.6.5 trimesh websockets>=13"
+
+download() {  # download DEST SPEC...: binary wheels for PY on PLATFORMS, without their dependencies
+    local dest=$1; shift
+    local flags=(--no-deps --only-binary=:all: --python-version "$PY" --implementation cp -d "$dest")
+    for p in $PLATFORMS; do flags+=(--platform "$p"); done
+    python3 -m pip download -q "${flags[@]}" "$@"
+}
+
+case "${1:-}" in
+wheels)
+    mkdir -p .whl2 .wp
+    download .whl2 $CARRIED
+    python3 -m pip wheel -q --no-deps -w .whl2 antlr4-python3-runtime==4.9.3  # hydra's parser: an sdist only
+    python3 -m pip wheel -q --no-deps -w .whl2 .                              # this project, as it stands here
+    tmp=$(mktemp -d) && download "$tmp" warp-lang==1.18.0
+    echo "$WARP_MD5  $tmp/$WARP" | md5sum -c -
+    (cd .wp && split -n 4 -d "$tmp/$WARP" warp.part.) && rm -r "$tmp"
+    du -sh .whl2 .wp ;;
+install)
+    python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site "${2:-.whl2}"/*.whl
+    cd /tmp && PYTHONPATH=/tmp/site python3 -c "import jax, mujoco, hintsjax.envs; print('jax', jax.__version__, 'mujoco', mujoco.__version__, jax.devices())" ;;
+warp)
+    mkdir -p /tmp/wparts && cp .wp/warp.part.* /tmp/wparts/ 2>/dev/null || true
+    ls /tmp/wparts
+    if [ "$(ls /tmp/wparts | wc -l)" -eq 4 ]; then
+        cat /tmp/wparts/warp.part.0? > "/tmp/$WARP"
+        echo "$WARP_MD5  /tmp/$WARP" | md5sum -c -
+        python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --target /tmp/site "/tmp/$WARP"
+        cd /tmp && PYTHONPATH=/tmp/site python3 -c "import warp; print('warp', warp.__version__)"
+    fi ;;
+poll)
+    end=$((SECONDS + ${2:?seconds}))
+    while [ $SECONDS -lt $end ] && [ ! -e "/tmp/${3:?marker}" ]; do sleep 5; done
+    date; nvidia-smi --query-gpu=index,utilization.gpu,memory.used --format=csv,noheader || true
+    for f in /tmp/logs/*.log; do
+        [ -e "$f" ] || continue
+        echo "== $f"; tail -c 1500 "$f" | tr '\r' '\n' | grep -v '^\s*$' | tail -5
+    done
+    if [ -d /tmp/r ]; then
+        (cd /tmp && find r logs -type f -size -20M \( -name '*.csv' -o -name '*.json' -o -name '*.yaml' -o -name '*.log' \) \
+            -print0 | tar czf "${OUT:-/tmp}/runs.tgz" --null -T -)
+    fi ;;
+*)
+    sed -n '2,16p' "$0"; exit 2 ;;
+esac
