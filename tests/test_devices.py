@@ -196,3 +196,34 @@ def test_under_warp_the_evaluation_compiles_before_training_not_beside_it(monkey
                   "out_dir": str(tmp_path), "name": f"first-{first}"}
         assert run.main_from_values(values) == 0
         assert events == (["compiled", "training"] if first else ["training", "compiled"])
+
+
+def test_a_runs_first_state_waits_for_warp_kernels_built_beside_its_compiles(monkeypatch, tmp_path):
+    """pipeline.train starts the child that builds MuJoCo Warp's kernels (envs/warp_kernels.py)
+    before anything compiles, with the run's env, physics and capacity, and waits for it before
+    the first state, not after training began; the child is ended on the way out."""
+    from hintsjax.envs import warp_kernels
+
+    events = []
+
+    class Build(warp_kernels.KernelBuild):
+        def wait(self):
+            events.append("kernels")
+
+        def __exit__(self, *exc):
+            events.append("ended")
+
+    def started(env, physics_choice, capacity, backend):
+        events.append(("start", env, physics_choice, capacity, backend))
+        return Build(None)
+
+    advance = pipeline.advance
+    monkeypatch.setattr(pipeline.warp_kernels, "start", started)
+    monkeypatch.setattr(pipeline, "advance", lambda *a, **k: (events.append("training"), advance(*a, **k))[1])
+    values = {"env": "linear", "agent": "ppo_state", "seeds": 2, "eval_episodes": 2, "checkpoint_every": 2,
+              "warp_capacity": 3.0, "ppo": {"total_env_steps": 128, "num_envs": 4, "batch_size": 64,
+                                            "minibatch_size": 32, "epochs": 1},
+              "out_dir": str(tmp_path), "name": "kernels"}
+    assert run.main_from_values(values) == 0
+    assert events[0] == ("start", "linear", "jax", 3.0, "cpu")
+    assert events.index("kernels") < events.index("training") < events.index("ended")

@@ -79,8 +79,10 @@ def seed_layout(cfg: RunConfig) -> SeedLayout:
     return SeedLayout.of(cfg.seeds, jax.local_devices()[:1])
 
 
-def start(trainer: Trainer, cfg: RunConfig, run_dir: Path, resume: bool, label: str, check_memory: bool = False) -> Training:
-    """Compile `trainer`'s programs for cfg's seeds, then a fresh state or the newest checkpoint of run_dir."""
+def start(trainer: Trainer, cfg: RunConfig, run_dir: Path, resume: bool, label: str, check_memory: bool = False,
+          before_first_state: Callable[[], None] = lambda: None) -> Training:
+    """Compile `trainer`'s programs for cfg's seeds, then (after `before_first_state()`: MuJoCo
+    Warp's kernel builds begun beside the compiles) a fresh state or the newest checkpoint of run_dir."""
     layout = seed_layout(cfg)
     keys = layout.pad(cfg.seed_keys())
     physics.clear_overflow()
@@ -90,6 +92,7 @@ def start(trainer: Trainer, cfg: RunConfig, run_dir: Path, resume: bool, label: 
         check_fits(compiled.run_chunk, label)
     else:
         check_run_fits(compiled.run_chunk, cfg)
+    before_first_state()
     if resume:  # a checkpoint holds the run's own seeds, restored onto one device: padded and placed as at the start
         state, done = checkpoint.restore_latest(run_dir, trainer.abstract_state(), set_aside=True)
         state = layout.pad(state)

@@ -11,7 +11,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from hintsjax.envs import physics
+from hintsjax.envs import physics, warp_kernels
 from hintsjax.system import checkpoint, compilation_cache, devices
 from hintsjax.system.devices import SeedLayout
 from hintsjax.system.errors import sized_by
@@ -81,15 +81,18 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
     # The evaluation program needs only the params' shapes, so it compiles on the host in a
     # thread from the start: beside the training program's compile (mostly one core's work) and
     # then while the device trains, adding nothing to the wall-clock of a run that trains longer.
-    # Under physics=warp it compiles first, alone (`evaluation_compiles_first`).
-    with ThreadPoolExecutor(max_workers=1) as pool:
+    # Under physics=warp it compiles first, alone (`evaluation_compiles_first`), while a child
+    # process builds MuJoCo Warp's kernels (hintsjax/envs/warp_kernels.py), waited for before the
+    # first state.
+    with ThreadPoolExecutor(max_workers=1) as pool, \
+            warp_kernels.start(cfg.env, cfg.physics, cfg.warp_capacity, jax.default_backend()) as kernels:
         evaluator = pool.submit(lambda: compile_evaluator(cfg, params_shapes(trainer, layout), variants[0],
                                                           cfg.eval_episodes, layout=layout))
         with sized_by(EVALUATION_SIZES):
             if evaluation_compiles_first(cfg):
                 evaluator.result()
         with sized_by(TRAINING_SIZES):
-            training = start(trainer, cfg, run_dir, resume, cfg.label)
+            training = start(trainer, cfg, run_dir, resume, cfg.label, before_first_state=kernels.wait)
             laps.mark("before_training")  # compiles, the first state (and MuJoCo Warp's kernel builds), a restore
             log = run_log(run_dir, training.done)
             try:
