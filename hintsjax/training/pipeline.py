@@ -82,7 +82,7 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
     # thread from the start: beside the training program's compile (mostly one core's work) and
     # then while the device trains, adding nothing to the wall-clock of a run that trains longer.
     # Under physics=warp it compiles first, alone (`evaluation_compiles_first`), while a child
-    # process builds MuJoCo Warp's kernels (hintsjax/envs/warp_kernels.py), waited for before the
+    # process builds MuJoCo Warp's kernels (envs/warp_kernels.py), waited for before the
     # first state.
     with ThreadPoolExecutor(max_workers=1) as pool, \
             warp_kernels.start(cfg.env, cfg.physics, cfg.warp_capacity, jax.default_backend()) as kernels:

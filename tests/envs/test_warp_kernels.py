@@ -36,6 +36,12 @@ def test_a_build_starts_only_for_a_warp_run_of_an_mjx_env(monkeypatch):
     assert cpu_args[-3:] == ["idp", "2.0", "cpu"]
     assert gpu_env["JAX_PLATFORMS"] == "cpu"  # the child takes no GPU memory for JAX
 
+    def refused(args, **kwargs):
+        raise OSError(11, "Resource temporarily unavailable")
+
+    monkeypatch.setattr(warp_kernels.subprocess, "Popen", refused)  # no child: the run goes on without one
+    assert warp_kernels.start("ant", physics.WARP, 2.0, "gpu").process is None
+
 
 def test_a_child_still_building_when_the_run_stops_is_ended():
     child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])
