@@ -221,6 +221,13 @@ def capacities(mj_model: mujoco.MjModel) -> tuple[int, int]:
     return int(data._impl.contact.dist.shape[0]), int(data._impl.efc_J.shape[0])
 
 
+def per_world(mj_model: mujoco.MjModel, capacity: float) -> tuple[int, int]:
+    """(contacts, constraint rows) MuJoCo Warp gets per world at `capacity` (warp_capacity) times
+    the model's `capacities`: naconmax per world and njmax, which its kernels are built for."""
+    contacts, rows = capacities(mj_model)
+    return max(1, math.ceil(capacity * contacts)), max(1, math.ceil(capacity * rows))
+
+
 # MuJoCo Warp's overflow bits (mujoco_warp OverflowType) that mean lost contacts or constraints.
 # The solver's iteration limits (bits 9 and 10) are not among them: the suite caps Newton's
 # iterations on purpose (envs/locomotion.py).
@@ -290,9 +297,7 @@ class WarpPhysics:
         if not capacity >= 1:
             raise ValueError(f"warp_capacity must be 1 or more, got {capacity}")
         self.mj_model, self.capacity, self.report_overflow = mj_model, capacity, report_overflow
-        contacts, rows = capacities(mj_model)
-        self.contacts_per_world = max(1, math.ceil(capacity * contacts))
-        self.rows_per_world = max(1, math.ceil(capacity * rows))
+        self.contacts_per_world, self.rows_per_world = per_world(mj_model, capacity)
         mode = None if graph_mode is None else warp.JaxCallableGraphMode[graph_mode.upper()]
         with quiet():
             model = mjx.put_model(mj_model, impl="warp", graph_mode=mode)

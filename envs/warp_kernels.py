@@ -19,7 +19,6 @@ context and one world's buffers.
 
 from __future__ import annotations
 
-import math
 import os
 import subprocess
 import sys
@@ -28,6 +27,9 @@ from dataclasses import dataclass
 
 import mujoco
 
+from hintsjax import envs
+from hintsjax.envs import physics
+
 JAX_ON_CPU = {"JAX_PLATFORMS": "cpu"}  # the child's JAX: no GPU memory taken beside the run's
 
 
@@ -35,19 +37,16 @@ def build(mj_model: mujoco.MjModel, capacity: float, device: str) -> float:
     """Build (or load from the kernel cache) the kernels that `physics.WarpPhysics` launches for
     `mj_model` at `capacity`, on Warp device `device`: one world's forward pass with contact
     forces, a step without them and one with them. The seconds it took."""
-    from hintsjax.envs import physics
-
     physics.enable_warp()
     import warp
     from mujoco.mjx.third_party import mujoco_warp
 
     start = time.perf_counter()
-    contacts, rows = physics.capacities(mj_model)
+    contacts, rows = physics.per_world(mj_model, capacity)
     with warp.ScopedDevice(device), physics.quiet():
         model = mujoco_warp.put_model(mj_model)
         model.opt.warn_overflow = 0  # as WarpPhysics: warn_overflow is built into the solver's kernels
-        data = mujoco_warp.make_data(mj_model, nworld=1, naconmax=max(1, math.ceil(capacity * contacts)),
-                                     njmax=max(1, math.ceil(capacity * rows)))
+        data = mujoco_warp.make_data(mj_model, nworld=1, naconmax=contacts, njmax=rows)
         model.opt.run_rne_postconstraint = True
         mujoco_warp.forward(model, data)  # an env's reset: a forward pass with contact forces
         model.opt.run_rne_postconstraint = False
@@ -82,9 +81,6 @@ class KernelBuild:
 def start(env: str, physics_choice: str, capacity: float, backend: str) -> KernelBuild:
     """Start building `env`'s Warp kernels in a child process, when the run steps `env` with
     MJX-Warp (`physics_choice` as resolved); its output is kept only under HINTSJAX_DEBUG."""
-    from hintsjax import envs
-    from hintsjax.envs import physics
-
     if physics_choice != physics.WARP or env not in envs.mjx_env_names():
         return KernelBuild(None)
     device = "cuda:0" if backend == "gpu" else "cpu"
@@ -98,8 +94,6 @@ def start(env: str, physics_choice: str, capacity: float, backend: str) -> Kerne
 
 
 def main() -> None:
-    from hintsjax import envs
-
     env, capacity, device = sys.argv[1], float(sys.argv[2]), sys.argv[3]
     seconds = build(envs.REGISTRY[env].cls.make_mj_model(), capacity, device)
     print(f"{env}: MuJoCo Warp's kernels built or loaded on {device} in {seconds:.1f} s", flush=True)
