@@ -744,6 +744,8 @@ def test_a_launcher_whose_plugin_is_missing_is_one_line(monkeypatch):
         overrides.check_overrides(["-m", "hydra/launcher=submitit_slurm", "scheme=lc,fc"])
 
 
+# 32 s on 2 cores: in the slow tier beside the requeue test, to keep `make test` within its minutes
+@pytest.mark.slow
 def test_a_sweep_runs_through_hydras_submitit_launcher(tmp_path):
     """`-m hydra/launcher=submitit_local`: submitit starts each job of the sweep as a process of
     its own (as submitit_slurm submits it to SLURM), and each writes its own run folder, though

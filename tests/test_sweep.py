@@ -438,6 +438,8 @@ def test_plan_jobs_groups_the_classic_table_by_shape():
     assert sorted(r for job in capped for r in job) == sorted(ids)
 
 
+# 34 s on 2 cores: in the slow tier, to keep `make test` within its minutes (plan_jobs' splits stay above)
+@pytest.mark.slow
 def test_a_group_trains_into_each_runs_folder_and_splits_when_too_big(tmp_path, monkeypatch):
     """A sweep's group job writes each run's eval.json (with the group and the sweep's fields)
     and keeps its checkpoints in the group's folder; a group that does not fit is split in halves."""
