@@ -11,13 +11,14 @@
 #   bash experiments/offline_gpu.sh warp              # there: keep the .wp parts carried so far; all 4 in: install
 #   bash experiments/offline_gpu.sh poll SECONDS MARK # there: wait up to SECONDS or until /tmp/MARK exists, show
 #                                                     #   the logs' last lines (/tmp/logs/*.log) and pack the runs'
-#                                                     #   small files (/tmp/r: csv, json, yaml) into $OUT/runs.tgz
+#                                                     #   small files (/tmp/r: csv, json, jsonl, yaml) into $OUT/runs.tgz
 # Then run with PYTHONPATH=/tmp/site from a folder outside the repo (the installed hintsjax, not the source tree):
 #   cd /tmp && PYTHONPATH=/tmp/site python3 -m hintsjax.run env=ant hint=speed scheme=fc out_dir=/tmp/r/ant
 # Transfers of at most 64 MiB at a time are why warp-lang (149 MB) travels in parts, Playground's wheels in
 # .whl3 and pyopengl not at all (mujoco imports its OpenGL parts only when asked to).
 # A poll's files come back only when it returns: keep SECONDS under the device time left (the lease's
-# budget_left_s, which a 1-GPU machine can count in full), or a cut call brings back nothing.
+# budget_left_s, which a 1-GPU machine can count in full), or a cut call brings back nothing. And keep a
+# call in flight: a machine idle for idle_release_s (30 s, `status`) goes back, and its detached runs with it.
 set -euo pipefail
 PY=3.12
 PLATFORMS="manylinux_2_28_x86_64 manylinux_2_27_x86_64 manylinux_2_17_x86_64 manylinux2014_x86_64 manylinux1_x86_64 any"
@@ -68,7 +69,7 @@ poll)
         echo "== $f"; tail -c 1500 "$f" | tr '\r' '\n' | grep -v '^\s*$' | tail -5
     done
     if [ -d /tmp/r ]; then
-        (cd /tmp && find r logs -type f -size -20M \( -name '*.csv' -o -name '*.json' -o -name '*.yaml' -o -name '*.log' \) \
+        (cd /tmp && find r logs -type f -size -20M \( -name '*.csv' -o -name '*.json' -o -name '*.jsonl' -o -name '*.yaml' -o -name '*.log' \) \
             -print0 | tar czf "${OUT:-/tmp}/runs.tgz" --null -T -)
     fi ;;
 *)

@@ -1,7 +1,7 @@
 """HINTs on MuJoCo Playground's DeepMind Control tasks from pixels, and hintsjax's PPO beside Brax's (issue 48).
 
     python experiments/playground.py [--envs playground:CartpoleSwingup] [--workers 2]   # item 5: the sweep
-    python experiments/playground.py --versus-brax [--steps 60000000]                     # item 6: the side by side
+    python experiments/playground.py --versus-brax [--steps 60000000] [--side brax]       # item 6: the side by side
     python experiments/playground.py --report      # experiments/results/playground.md
     python experiments/playground.py --smoke --runs /tmp/pg --versus-brax && python experiments/playground.py --smoke --runs /tmp/pg --report
 
@@ -11,15 +11,17 @@ with one natural hint each (the table's), 5 seeds vmapped in one call, at the ta
 env steps), 50 evaluation episodes per seed; the report gives each row's IQM [95 % CI] over seeds
 and P(HINTS > PPO-RGB) (hintsjax.reproduce.stats). Finished folders are skipped (hintsjax/reproduce/sweep.py).
 
-Item 6: CartpoleSwingup from its state vector, one process on one device, the same env-step
-budget and seeds: hintsjax's `ppo_state` (its seeds vmapped in one program) with Playground's
-published Brax PPO settings mapped onto hintsjax's (`hintsjax_values`), then Brax's own
-`brax.training.agents.ppo.train` with those settings (mujoco_playground.config.dm_control_suite_params),
-one seed after another, as Brax trains. Both step the task with MJX's JAX physics (impl=jax: the
+Item 6: CartpoleSwingup from its state vector, the same seeds and the same whole number of
+updates (training steps) of the same batch on both sides: hintsjax's `ppo_state` (its seeds
+vmapped in one program) with Playground's published Brax PPO settings mapped onto hintsjax's
+(`hintsjax_values`), and Brax's own `brax.training.agents.ppo.train` with those settings
+(mujoco_playground.config.dm_control_suite_params), one seed after another as Brax trains, held to
+the same updates (`brax_schedule`). Both step the task with MJX's JAX physics (impl=jax: the
 adapter's; Playground's default is MuJoCo Warp). Each side's wall-clock runs from the call to the
-trained policy, compilation included; its final return is the mean return of its last evaluation
-per seed (hintsjax: 50 deterministic episodes; Brax: its own final evaluation, 128 episodes).
-The record is runs/<runs>/versus_brax.json; --report adds it to the results.
+trained policies, compilation included; each seed's final policy is then evaluated on 128 fresh
+episodes, deterministic and stochastic, by the side's own evaluator. `--side hintsjax|brax` runs
+one side (say, each on a GPU of its own); the record is runs/<runs>/versus_brax.json, which each
+side fills in, with the settings it ran; --report adds it to the results.
 """
 
 from __future__ import annotations
@@ -27,11 +29,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import sys
 import time
-from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from hintsjax.reproduce.archive import ARCHIVE, about_lines, read_about
 from hintsjax.reproduce.markdown import markdown_table, write_report
 from hintsjax.reproduce.report import footer, iqm_cell, load, ordering, sweep_hardware, wall_clock
 from hintsjax.reproduce.sweep import hints_run
@@ -58,21 +61,10 @@ def run_ids(names) -> list[str]:
 
 # -- item 6: hintsjax's ppo_state beside Brax's PPO ---------------------------------------------
 
-
-@dataclass(frozen=True)
-class SideResult:
-    """One trainer's run of the side by side: its per-seed final returns, its wall-clock from
-    the call to the trained policies (compilation included) and the env steps it took in all."""
-
-    trainer: str
-    seed_returns: list[float]
-    seconds: float
-    env_steps: int
-    settings: dict
-
-    @property
-    def steps_per_second(self) -> float:
-        return self.env_steps / self.seconds
+SIDES = ("hintsjax", "brax")
+TRAINERS = {"hintsjax": "hintsjax ppo_state", "brax": "brax.training ppo"}
+MODES = ("deterministic", "stochastic")  # how each side's final policy is evaluated: mean action, or sampled
+EVAL_EPISODES = 128  # fresh episodes per seed and mode, on both sides: Brax's num_eval_envs
 
 
 def brax_settings(smoke: bool) -> dict:
@@ -86,6 +78,20 @@ def brax_settings(smoke: bool) -> dict:
     return settings
 
 
+def steps_per_update(brax: dict) -> int:
+    """Env steps of one Brax training step (one hintsjax update): batch_size x num_minibatches x unroll_length."""
+    return brax["batch_size"] * brax["num_minibatches"] * brax["unroll_length"]
+
+
+def brax_schedule(updates: int) -> dict:
+    """num_evals and num_resets_per_eval that make Brax's `train` take exactly `updates` training
+    steps, each followed by a reset of every env, as Playground's settings give on the GPU (one
+    training step per epoch). Playground's own (num_evals 10, num_resets_per_eval 10) round any
+    budget up to whole evaluation epochs: 9 x 10 training steps, 88.5 M env steps for 60 M."""
+    evals = next(e for e in (5, 4, 3, 2) if updates % (e - 1) == 0)
+    return {"num_evals": evals, "num_resets_per_eval": updates // (evals - 1)}
+
+
 def hintsjax_values(brax: dict, seeds: int, steps: int, smoke: bool) -> dict:
     """hintsjax's run config with Brax's settings mapped where hintsjax has the same knob: its
     update collects num_envs rollouts of batch_size * num_minibatches * unroll_length / num_envs
@@ -94,7 +100,7 @@ def hintsjax_values(brax: dict, seeds: int, steps: int, smoke: bool) -> dict:
     observation normalisation, updated before learning as Brax's is. Left at hintsjax's: the networks ((256, 256) beside Brax's
     policy (32,)x4 and value (256,)x5), GAE over the whole rollout (Brax's over each unroll) and
     the clipping (0.2 and 0.5 beside Brax's 0.3 and 1.0)."""
-    batch = brax["batch_size"] * brax["num_minibatches"] * brax["unroll_length"]
+    batch = steps_per_update(brax)
     ppo = {"total_env_steps": steps, "num_envs": brax["num_envs"], "batch_size": batch,
            "minibatch_size": batch // brax["num_minibatches"], "epochs": brax["num_updates_per_batch"],
            "gamma": brax["discounting"], "actor_lr": brax["learning_rate"], "critic_lr": brax["learning_rate"],
@@ -107,23 +113,44 @@ def hintsjax_values(brax: dict, seeds: int, steps: int, smoke: bool) -> dict:
             "checkpoint_every": 10 ** 9, "ppo": ppo}
 
 
-def train_hintsjax(runs: Path, brax: dict, seeds: int, steps: int, smoke: bool) -> SideResult:
+def train_hintsjax(brax: dict, seeds: int, updates: int, overrides: dict | None = None,
+                   episodes: int = EVAL_EPISODES) -> dict:
+    """hintsjax's ppo_state with Brax's settings (`hintsjax_values`, plus `overrides` of its ppo
+    section), its seeds vmapped in one program, exactly `updates` updates; the seconds run from the
+    call to the trained policies (compilation included, evaluation not); then each seed's final
+    policy on `episodes` fresh episodes, both MODES. `curve`: each seed's training return after
+    every `every` updates (NaN where no episode ended in them); `kl_curve`: their largest update KL."""
+    import jax
+    import numpy as np
+
+    from hintsjax.algorithms.registry import make_trainer
+    from hintsjax.evaluation.evaluator import compile_evaluator, evaluate_variants
     from hintsjax.settings.layers import run_config, to_dict
-    from hintsjax.training import pipeline
 
-    cfg = run_config(hintsjax_values(brax, seeds, steps, smoke))
-    folder = runs / "versus_brax" / "hintsjax"
-    if folder.exists():
-        import shutil
-
-        shutil.rmtree(folder)
-    folder.mkdir(parents=True)
+    values = hintsjax_values(brax, seeds, updates * steps_per_update(brax), False)
+    values["ppo"].update(overrides or {})
+    values["eval_episodes"] = episodes
+    cfg = run_config(values)
+    trainer = make_trainer(cfg)
+    every = max(d for d in range(1, 9) if updates % d == 0)  # updates between progress lines: one compiled chunk
     t = time.time()
-    result = pipeline.train(cfg, folder, progress=False)
+    state = jax.jit(jax.vmap(trainer.init))(cfg.seed_keys())
+    chunk = jax.jit(jax.vmap(lambda s: trainer.run(s, every)))
+    curve, kl_curve = [], []
+    for _ in range(updates // every):
+        state, metrics = chunk(state)
+        curve.append(np.asarray(metrics["episode_return"])[:, -1].round(1).tolist())
+        kl_curve.append(np.asarray(metrics["approx_kl"]).max(axis=1).round(4).tolist())  # the chunk's largest update KL
+        print(f"update {int(np.asarray(state.update)[0])}: training return per seed {curve[-1]}, "
+              f"largest KL {kl_curve[-1]}", flush=True)
+    assert int(np.asarray(state.update)[0]) == updates
     seconds = time.time() - t
-    evaluation = result["evaluations"][0]
-    return SideResult("hintsjax ppo_state", list(evaluation["seed_means"]), seconds,
-                      cfg.seeds * cfg.ppo.num_updates * cfg.ppo.batch_size, to_dict(cfg)["ppo"])
+    compiled = compile_evaluator(cfg, state.params, None, episodes)
+    evals = {mode: evaluate_variants(cfg, state.params, (None,), episodes, mode == "stochastic", compiled)[0][0]
+             for mode in MODES}
+    return {"env_steps_per_seed": updates * cfg.ppo.batch_size, "seconds": seconds,
+            **{mode: [float(x) for x in evals[mode]["seed_means"]] for mode in MODES},
+            "curve": curve, "kl_curve": kl_curve, "every": every, "settings": to_dict(cfg)["ppo"]}
 
 
 def mend_brax_for_this_jax() -> None:
@@ -145,79 +172,139 @@ def mend_brax_for_this_jax() -> None:
     jax.device_put_replicated = device_put_replicated
 
 
-def train_brax(brax: dict, seeds: int, steps: int) -> SideResult:
-    """Brax's PPO on Playground's task, as Playground's notebooks call it, one seed after another."""
+def train_brax(brax: dict, seeds: int, updates: int, episodes: int = EVAL_EPISODES) -> dict:
+    """Brax's PPO on Playground's task, as Playground's notebooks call it, one seed after another,
+    held to exactly `updates` training steps (`brax_schedule`); the seconds run from the first call
+    to the last trained policy (compilation and Brax's own evaluations included, ours not); then
+    each seed's final policy on `episodes` fresh episodes by Brax's Evaluator, both MODES."""
     import functools
 
+    import jax
+    from brax.training import acting
     from brax.training.agents.ppo import networks as ppo_networks
     from brax.training.agents.ppo import train as ppo
     from mujoco_playground import registry, wrapper
 
     mend_brax_for_this_jax()
-    settings = {**brax, "num_timesteps": steps}
+    run = {**brax, **brax_schedule(updates), "num_timesteps": updates * steps_per_update(brax), "num_eval_envs": episodes}
     factory = ppo_networks.make_ppo_networks
-    if "network_factory" in settings:
-        factory = functools.partial(ppo_networks.make_ppo_networks, **settings.pop("network_factory"))
-    returns, taken = [], 0
-    t = time.time()
+    if "network_factory" in run:
+        factory = functools.partial(ppo_networks.make_ppo_networks, **run.pop("network_factory"))
+    out: dict = {"brax_final_eval": [], "env_steps_per_seed": [], "curve": [], **{mode: [] for mode in MODES}}
+    trained, seconds = [], 0.0
     for seed in range(seeds):
         env = registry.load(VERSUS_TASK, config_overrides={"impl": "jax"})
-        evals: list[float] = []
-        steps_seen: list[int] = []
+        seen: list = []
 
-        def progress(step, metrics, evals=evals, steps_seen=steps_seen):
+        def progress(step, metrics, seen=seen, seed=seed):
             if "eval/episode_reward" in metrics:
-                evals.append(float(metrics["eval/episode_reward"]))
-                steps_seen.append(int(step))
+                seen.append((int(step), round(float(metrics["eval/episode_reward"]), 1)))
+                print(f"seed {seed} step {step}: eval return {seen[-1][1]}", flush=True)
 
-        ppo.train(environment=env, wrap_env_fn=wrapper.wrap_for_brax_training, network_factory=factory,
-                  progress_fn=progress, seed=seed, **settings)
-        returns.append(evals[-1])
-        taken += steps_seen[-1]
-    return SideResult("brax.training ppo", returns, time.time() - t, taken, {k: v for k, v in brax.items() if k != "network_factory"})
+        t = time.time()
+        make_policy, params, _ = ppo.train(environment=env, wrap_env_fn=wrapper.wrap_for_brax_training,
+                                           network_factory=factory, progress_fn=progress, seed=seed, **run)
+        seconds += time.time() - t
+        out["brax_final_eval"].append(seen[-1][1])
+        out["env_steps_per_seed"].append(seen[-1][0])
+        out["curve"].append(seen)
+        trained.append((env, make_policy, params))
+    for seed, (env, make_policy, params) in enumerate(trained):
+        eval_env = wrapper.wrap_for_brax_training(env, episode_length=brax["episode_length"], action_repeat=1)
+        for mode in MODES:
+            evaluator = acting.Evaluator(eval_env, functools.partial(make_policy, deterministic=mode == "deterministic"),
+                                         num_eval_envs=episodes, episode_length=brax["episode_length"],
+                                         action_repeat=1, key=jax.random.PRNGKey(1000 + seed))
+            out[mode].append(float(evaluator.run_evaluation(params, {})["eval/episode_reward"]))
+    return {**out, "seconds": seconds, "settings": run}
 
 
-def versus_brax(runs: Path, seeds: int, steps: int | None, smoke: bool) -> None:
-    """Item 6: both trainers in this process, one after the other; the record to runs/versus_brax.json."""
+def versus_brax(runs: Path, seeds: int, steps: int | None, smoke: bool, sides: tuple[str, ...] = SIDES) -> None:
+    """Item 6: each side of `sides` in this process, one after the other, at the same whole number
+    of updates (`steps` // the update's env steps), into the record runs/versus_brax.json. Each side
+    reads the record again when it ends and replaces its own entry only, so the two sides can run
+    at once (on two devices); a record of another budget or seed count is started afresh."""
     import jax
 
     brax = brax_settings(smoke)
-    steps = steps or brax["num_timesteps"]
-    results = [train_hintsjax(runs, brax, seeds, steps, smoke), train_brax(brax, seeds, steps)]
-    record = {"task": VERSUS_TASK, "seeds": seeds, "env_steps_per_seed": steps, "smoke": smoke,
-              "device": jax.devices()[0].device_kind, "date": time.strftime("%Y-%m-%d"),
-              "command": " ".join(["python", *sys.argv]),
-              "results": [{**asdict(r), "steps_per_second": r.steps_per_second} for r in results]}
-    runs.mkdir(parents=True, exist_ok=True)
-    (runs / VERSUS_JSON).write_text(json.dumps(record, indent=1))
-    for r in results:
-        print(f"{r.trainer}: {r.env_steps} env steps in {r.seconds:.0f} s ({r.steps_per_second:,.0f} steps/s); "
-              f"final returns {[round(x, 1) for x in r.seed_returns]}", flush=True)
+    updates = max((steps or brax["num_timesteps"]) // steps_per_update(brax), 1)
+    episodes = 4 if smoke else EVAL_EPISODES
+    path = runs / VERSUS_JSON
+    budget = {"task": VERSUS_TASK, "seeds": seeds, "updates": updates,
+              "env_steps_per_seed": updates * steps_per_update(brax), "smoke": smoke}
+    for side in sides:
+        print(f"{TRAINERS[side]}: {seeds} seeds x {updates} updates of {steps_per_update(brax):,} env steps", flush=True)
+        result = (train_hintsjax(brax, seeds, updates, episodes=episodes) if side == "hintsjax"
+                  else train_brax(brax, seeds, updates, episodes))
+        record = json.loads(path.read_text()) if path.exists() else {}
+        if {k: record.get(k) for k in budget} != budget:
+            record = {**budget, "results": {}}
+        record["results"][side] = {"trainer": TRAINERS[side], **result, "eval_episodes": episodes,
+                                   "device": jax.devices()[0].device_kind, "date": time.strftime("%Y-%m-%d %H:%M"),
+                                   "command": " ".join(["python", f"experiments/{Path(sys.argv[0]).name}", *sys.argv[1:]])}
+        runs.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(record, indent=1))
+        print(f"{TRAINERS[side]}: {result['seconds']:.0f} s; final returns (deterministic) "
+              f"{[round(x, 1) for x in result['deterministic']]}", flush=True)
+
+
+def env_steps(result: dict) -> int:
+    """All seeds' env steps, as the side's record says it took them."""
+    steps = result["env_steps_per_seed"]
+    return sum(steps) if isinstance(steps, list) else steps * len(result["deterministic"])
 
 
 # -- the report ----------------------------------------------------------------------------------
 
 
+def versus_record(runs: Path, keep: bool = False) -> Path:
+    """The side by side's record: runs/versus_brax.json where it ran here, else its archived copy
+    (experiments/results/runs/<runs' name>/); `keep` archives the first (the report does, not a smoke run's)."""
+    path, archived = runs / VERSUS_JSON, ARCHIVE / runs.name / VERSUS_JSON
+    if keep and path.exists():
+        archived.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(path, archived)
+    return path if path.exists() else archived
+
+
 def versus_lines(runs: Path) -> list[str]:
     from hintsjax.reproduce import stats
 
-    path = runs / VERSUS_JSON
+    path = versus_record(runs)
     lines = ["## hintsjax's ppo_state beside Brax's PPO (item 6)", ""]
     if not path.exists():
         return lines + [f"Not run yet (`python experiments/playground.py --versus-brax`: {VERSUS_JSON}).", ""]
     record = json.loads(path.read_text())
-    rows = [[r["trainer"], stats.iqm_cell(r["seed_returns"]), f"{r['env_steps']:,}", f"{r['seconds']:.0f}",
-             f"{r['steps_per_second']:,.0f}"] for r in record["results"]]
-    lines += [f"{record['task']} from its state, {record['seeds']} seeds x {record['env_steps_per_seed']:,} env steps "
-              f"each, on one {record['device']} ({record['date']}){' (smoke: the numbers mean nothing)' if record['smoke'] else ''}; "
-              f"command: `{record['command']}`.", ""]
-    lines += markdown_table(["trainer", "final return, IQM [95% CI]", "env steps", "wall-clock (s)", "env steps/s"], rows)
-    first, second = record["results"]
-    lines += ["", stats.ordering_text(first["trainer"], second["trainer"], stats.poi_ci(first["seed_returns"], second["seed_returns"])), ""]
-    return lines
+    results = record["results"]
+    rows = []
+    for side in SIDES:
+        if side not in results:
+            rows.append([TRAINERS[side], "-", "-", "-", "-", "-", "not run yet"])
+            continue
+        r = results[side]
+        steps = r["env_steps_per_seed"]
+        rows.append([r["trainer"], "/".join(f"{s:,}" for s in sorted(set(steps))) if isinstance(steps, list) else f"{steps:,}",
+                     stats.iqm_cell(r["deterministic"]), stats.iqm_cell(r["stochastic"]), f"{r['seconds']:.0f}",
+                     f"{env_steps(r) / r['seconds']:,.0f}", f"{r['device']}, {r['date']}: `{r['command']}`"])
+    lines += [f"{record['task']} from its state, {record['seeds']} seeds x {record['updates']} updates of "
+              f"{record['env_steps_per_seed'] // record['updates']:,} env steps ({record['env_steps_per_seed']:,} a seed) "
+              f"on each side{' (smoke: the numbers mean nothing)' if record['smoke'] else ''}. Final return: each seed's "
+              f"final policy on {max(r['eval_episodes'] for r in results.values()) if results else EVAL_EPISODES} fresh episodes, deterministic (mean action) and stochastic; wall-clock: "
+              "from the call to the last trained policy, compilation included (Brax's seeds one after another, "
+              "hintsjax's vmapped in one program).", ""]
+    lines += markdown_table(["trainer", "env steps a seed", "final return, deterministic: IQM [95% CI]",
+                             "stochastic", "wall-clock (s)", "env steps/s", "GPU, date, command"], rows)
+    if all(side in results for side in SIDES):
+        first, second = (results[side] for side in SIDES)
+        lines.append("")
+        for mode in MODES:
+            lines.append(f"- {mode}: " + stats.ordering_text(first["trainer"], second["trainer"],
+                                                              stats.poi_ci(first[mode], second[mode])))
+    return lines + [""]
 
 
 def report(runs: Path, force: bool = False, out: Path | None = None) -> None:
+    versus_record(runs, keep=out is None)
     hardware = sweep_hardware(runs, TABLE, run_ids(ENVS))
     lines = [
         "# HINTs on MuJoCo Playground's DeepMind Control tasks (issue 48)", "",
@@ -237,14 +324,16 @@ def report(runs: Path, force: bool = False, out: Path | None = None) -> None:
         rows.append([env.split(":", 1)[1], HINTS[env], iqm_cell(rgb), iqm_cell(hinted),
                      ordering("HINTS", hinted, "PPO-RGB", rgb) or "-", f"{wall_clock(rgb)} / {wall_clock(hinted)}"])
     lines += markdown_table(["task", "hint", "PPO-RGB", "HINTS-FC", "P(HINTS > PPO-RGB)", "wall-clock (s)"], rows)
-    lines += ["", *versus_lines(runs), footer(runs, TABLE, run_ids(ENVS))]
+    lines += ["", *versus_lines(runs), *about_lines(read_about(ARCHIVE / runs.name)), footer(runs, TABLE, run_ids(ENVS))]
     write_report(out or RESULTS / REPORT, lines, force)
 
 
 def extra_arguments(parser: argparse.ArgumentParser) -> None:
-    """--versus-brax and its --steps."""
+    """--versus-brax and its --steps and --side."""
     parser.add_argument("--versus-brax", action="store_true", help="item 6: hintsjax's ppo_state beside Brax's PPO")
-    parser.add_argument("--steps", type=int, default=None, help="--versus-brax: env steps per seed (default Playground's)")
+    parser.add_argument("--steps", type=int, default=None,
+                        help="--versus-brax: env steps per seed, in whole updates (default Playground's: 60 M, 61 updates)")
+    parser.add_argument("--side", choices=SIDES, default=None, help="--versus-brax: one side only (default both)")
 
 
 def extra_mode(parser: argparse.ArgumentParser, args: argparse.Namespace) -> bool:
@@ -252,7 +341,7 @@ def extra_mode(parser: argparse.ArgumentParser, args: argparse.Namespace) -> boo
     report beside the runs. False for the other calls (the sweep of item 5, its report)."""
     if args.versus_brax:
         chosen_envs(parser, args, ENVS)  # checks --seeds
-        versus_brax(args.runs, args.seeds, args.steps, args.smoke)
+        versus_brax(args.runs, args.seeds, args.steps, args.smoke, (args.side,) if args.side else SIDES)
         return True
     if args.report and args.smoke:
         os.environ["JAX_PLATFORMS"] = "cpu"  # as table_main's reports: the parent only reads

@@ -28,13 +28,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # experiments/playgrou
 import playground  # noqa: E402
 
 ROWS = Path("runs/versus_brax_knobs/rows.jsonl")
-EVAL_EPISODES = 128  # Brax's num_eval_envs
+EVAL_EPISODES = playground.EVAL_EPISODES  # 128, Brax's num_eval_envs
 # Playground's settings scaled to 2 CPU cores, in two regimes. Both have 64 envs, each of which
 # collects 16 unrolls of 30 steps per update (480 steps, as 2048 envs do on the GPU):
 #   many: 96 updates of 16 minibatches of 64 unrolls, 4 epochs (not 16), 2.95 M env steps per seed;
 #   few:  20 updates of 32 minibatches of 32 unrolls, 16 epochs: the GPU run's 20 updates of 512
 #         gradient steps each, with minibatches 32 times smaller, 614,400 env steps per seed.
-REGIMES = {
+REGIMES = {  # and gpu: Playground's settings as they are (2048 envs), 61 updates (60 M env steps), on a GPU
+    "gpu": (61, {}),
     "many": (96, dict(num_envs=64, batch_size=64, num_minibatches=16, unroll_length=30, num_updates_per_batch=4)),
     "few": (20, dict(num_envs=64, batch_size=32, num_minibatches=32, unroll_length=30, num_updates_per_batch=16)),
 }
@@ -44,18 +45,6 @@ def settings(regime: str) -> dict:
     brax = playground.brax_settings(False)
     brax.update(REGIMES[regime][1])
     return brax
-
-
-def steps_per_update(brax: dict) -> int:
-    return brax["batch_size"] * brax["num_minibatches"] * brax["unroll_length"]
-
-
-def brax_schedule(updates: int) -> dict:
-    """num_evals and num_resets_per_eval that make Brax's train take exactly `updates` training
-    steps, each followed by a reset of every env (as Playground's settings give on the GPU: one
-    training step per epoch, num_resets_per_eval epochs between evaluations)."""
-    evals = next(e for e in (5, 4, 3, 2) if updates % (e - 1) == 0)
-    return {"num_evals": evals, "num_resets_per_eval": updates // (evals - 1)}
 
 
 def parse_overrides(pairs: list[str]) -> dict:
@@ -70,79 +59,11 @@ def parse_overrides(pairs: list[str]) -> dict:
 
 
 def train_hintsjax(regime: str, seeds: int, updates: int, overrides: dict) -> dict:
-    import jax
-    import numpy as np
-
-    from hintsjax.algorithms.registry import make_trainer
-    from hintsjax.evaluation.evaluator import compile_evaluator, evaluate_variants
-    from hintsjax.settings.layers import run_config
-
-    brax = settings(regime)
-    values = playground.hintsjax_values(brax, seeds, updates * steps_per_update(brax), False)
-    values["ppo"].update(overrides)
-    values["eval_episodes"] = EVAL_EPISODES
-    cfg = run_config(values)
-    trainer = make_trainer(cfg)
-    t = time.time()
-    state = jax.jit(jax.vmap(trainer.init))(cfg.seed_keys())
-    every = 4 if updates % 8 else 8
-    chunk = jax.jit(jax.vmap(lambda s: trainer.run(s, every)))
-    curve = []
-    for _ in range(updates // every):
-        state, metrics = chunk(state)
-        curve.append(np.asarray(metrics["episode_return"])[:, -1].round(1).tolist())
-        print(f"update {int(np.asarray(state.update)[0])}: training return per seed {curve[-1]}", flush=True)
-    assert int(np.asarray(state.update)[0]) == updates
-    seconds = time.time() - t
-    compiled = compile_evaluator(cfg, state.params, None, EVAL_EPISODES)
-    evals = {mode: evaluate_variants(cfg, state.params, (None,), EVAL_EPISODES, mode == "stochastic", compiled)[0][0]
-             for mode in ("deterministic", "stochastic")}
-    from hintsjax.settings.layers import to_dict
-
-    return {"env_steps_per_seed": int(np.asarray(state.update)[0]) * cfg.ppo.batch_size, "seconds": seconds,
-            "deterministic": [float(x) for x in evals["deterministic"]["seed_means"]],
-            "stochastic": [float(x) for x in evals["stochastic"]["seed_means"]],
-            "curve": curve, "ppo": to_dict(cfg)["ppo"]}
+    return playground.train_hintsjax(settings(regime), seeds, updates, overrides, EVAL_EPISODES)
 
 
 def train_brax(regime: str, seeds: int, updates: int) -> dict:
-    import functools
-
-    import jax
-    from brax.training import acting
-    from brax.training.agents.ppo import networks as ppo_networks
-    from brax.training.agents.ppo import train as ppo
-    from mujoco_playground import registry, wrapper
-
-    playground.mend_brax_for_this_jax()
-    brax = settings(regime)
-    run = {**brax, **brax_schedule(updates), "num_timesteps": updates * steps_per_update(brax), "num_eval_envs": EVAL_EPISODES}
-    out = {"deterministic": [], "stochastic": [], "brax_final_eval": [], "env_steps_per_seed": [], "curve": []}
-    t = time.time()
-    for seed in range(seeds):
-        env = registry.load(playground.VERSUS_TASK, config_overrides={"impl": "jax"})
-        seen = []
-
-        def progress(step, metrics, seen=seen):
-            if "eval/episode_reward" in metrics:
-                seen.append((int(step), round(float(metrics["eval/episode_reward"]), 1)))
-                print(f"seed {seed} step {step}: eval return {seen[-1][1]}", flush=True)
-
-        make_policy, params, _ = ppo.train(environment=env, wrap_env_fn=wrapper.wrap_for_brax_training,
-                                           network_factory=ppo_networks.make_ppo_networks, progress_fn=progress,
-                                           seed=seed, **run)
-        out["brax_final_eval"].append(seen[-1][1])
-        out["env_steps_per_seed"].append(seen[-1][0])
-        out["curve"].append(seen)
-        eval_env = wrapper.wrap_for_brax_training(env, episode_length=brax["episode_length"], action_repeat=1)
-        for mode in ("deterministic", "stochastic"):
-            evaluator = acting.Evaluator(eval_env, functools.partial(make_policy, deterministic=mode == "deterministic"),
-                                         num_eval_envs=EVAL_EPISODES, episode_length=brax["episode_length"],
-                                         action_repeat=1, key=jax.random.PRNGKey(1000 + seed))
-            out[mode].append(float(evaluator.run_evaluation(params, {})["eval/episode_reward"]))
-    out["seconds"] = time.time() - t
-    out["settings"] = {k: v for k, v in run.items() if k != "network_factory"}
-    return out
+    return playground.train_brax(settings(regime), seeds, updates, EVAL_EPISODES)
 
 
 def table() -> None:

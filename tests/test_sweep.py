@@ -628,6 +628,34 @@ def test_the_playground_side_by_side_gives_hintsjax_brax_s_settings_and_the_repo
     assert "| 100.0 [" in row and "| 300.0 [" in row and "P(HINTS > PPO-RGB) = 1.00 [1.00, 1.00]: decided" in row
 
 
+def test_the_side_by_side_holds_brax_to_the_same_updates_and_reports_both_sides(tmp_path):
+    """Brax's `train` runs num_evals_after_init x max(num_resets_per_eval, 1) x ceil(num_timesteps /
+    (that product x env steps per training step)) training steps (brax/training/agents/ppo/train.py):
+    `brax_schedule` makes that exactly the updates hintsjax takes, for any count (Playground's own 10
+    and 10 gave 90 for 61); and the report puts both sides' returns, steps and rates in one table."""
+    import math
+
+    import playground
+
+    for updates in range(1, 130):
+        s = playground.brax_schedule(updates)
+        after_init, resets = max(s["num_evals"] - 1, 1), max(s["num_resets_per_eval"], 1)
+        assert after_init * resets * math.ceil(updates / (after_init * resets)) == updates, (updates, s)
+    assert playground.brax_schedule(61) == {"num_evals": 2, "num_resets_per_eval": 61}
+    side = lambda trainer, steps, det, seconds: {  # noqa: E731
+        "trainer": trainer, "env_steps_per_seed": steps, "deterministic": det, "stochastic": det, "seconds": seconds,
+        "eval_episodes": 128, "device": "NVIDIA H200", "date": "2026-11-28 21:40", "command": "python x"}
+    record = {"task": "CartpoleSwingup", "seeds": 3, "updates": 2, "env_steps_per_seed": 2000, "smoke": False, "results": {
+        "hintsjax": side("hintsjax ppo_state", 2000, [800.0, 810.0, 820.0], 10.0),
+        "brax": side("brax.training ppo", [2000, 2000, 2000], [500.0, 510.0, 520.0], 60.0)}}
+    (tmp_path / playground.VERSUS_JSON).write_text(json.dumps(record))
+    text = "\n".join(playground.versus_lines(tmp_path))
+    assert "3 seeds x 2 updates of 1,000 env steps (2,000 a seed)" in text
+    assert "| hintsjax ppo_state | 2,000 | 810.0 [" in text and "| 10 | 600 |" in text  # 6,000 steps in 10 s
+    assert "| brax.training ppo | 2,000 | 510.0 [" in text and "| 60 | 100 |" in text
+    assert text.count("P(hintsjax ppo_state > brax.training ppo) = 1.00 [1.00, 1.00]: decided") == 2
+
+
 def test_locomotion_learners_report_gives_each_ordering_its_verdict(tmp_path, monkeypatch):
     """Table 3 at any seed count (`--learners-report`), on hand-written halfcheetah runs of 6 seeds:
     the state hint's seeds all lie above PPO-RGB's (O1 decided for) and all below PPO on the state

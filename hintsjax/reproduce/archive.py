@@ -191,5 +191,16 @@ def read_about(folder: Path) -> dict:
 
 
 def about_lines(about: dict) -> list[str]:
-    """A report's closing section from `read_about`'s entries; [] when there are none."""
-    return ["## Where these numbers come from", "", *(f"- {k}: {v}" for k, v in about.items()), ""] if about else []
+    """A report's closing section from `read_about`'s entries, a bullet each (a list's items and a
+    mapping's entries as bullets under it, a mapping's values as code); [] when there are none."""
+    if not about:
+        return []
+    lines = ["## Where these numbers come from", ""]
+    for key, value in about.items():
+        if isinstance(value, dict):
+            lines += [f"- {key}:", *(f"  - {k}: `{v}`" for k, v in value.items())]
+        elif isinstance(value, list):
+            lines += [f"- {key}:", *(f"  - {v}" for v in value)]
+        else:
+            lines.append(f"- {key}: {value}")
+    return lines + [""]
