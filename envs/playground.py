@@ -44,7 +44,11 @@ PIXEL_PPO = dict(total_env_steps=1_000_000, num_envs=128, encoder_lr=3e-4, epoch
 FALLBACK = TaskDefaults(ppo=PIXEL_PPO)
 DEFAULTS: dict[str, TaskDefaults] = {
     "CartpoleSwingup": TaskDefaults("fixed", "pole_angle", PIXEL_PPO),
-    "CheetahRun": TaskDefaults(TRACK, "torso_velocity", PIXEL_PPO),
+    # The cheetah's reset settles it with 200 physics steps (130.8 ms for 16 envs on 2 CPU cores,
+    # a step 1.6 ms), and an env's next start is drawn at every step unless drawn once a rollout:
+    # an adapted step took 178.8 ms with it, 13.2 ms without (+ one draw a rollout of 8 steps);
+    # drawn every step, CheetahRun took 6.5 s an update on an H200 (2026-11-28, playground.md)
+    "CheetahRun": TaskDefaults(TRACK, "torso_velocity", {**PIXEL_PPO, "starts_per_rollout": True}),
     "WalkerWalk": TaskDefaults(TRACK, "torso_height_velocity", PIXEL_PPO),
     "ReacherEasy": TaskDefaults("fixed", "fingertip_to_target", PIXEL_PPO),
 }
