@@ -248,10 +248,11 @@ def versus_brax(runs: Path, seeds: int, steps: int | None, smoke: bool, sides: t
               f"{[round(x, 1) for x in result['deterministic']]}", flush=True)
 
 
-def env_steps(result: dict) -> int:
-    """All seeds' env steps, as the side's record says it took them."""
+def seed_steps(result: dict) -> list[int]:
+    """Each seed's env steps, as the side's record says it took them (Brax's side lists them;
+    hintsjax's gives the one count all its seeds took)."""
     steps = result["env_steps_per_seed"]
-    return sum(steps) if isinstance(steps, list) else steps * len(result["deterministic"])
+    return steps if isinstance(steps, list) else [steps] * len(result["deterministic"])
 
 
 # -- the report ----------------------------------------------------------------------------------
@@ -282,10 +283,10 @@ def versus_lines(runs: Path) -> list[str]:
             rows.append([TRAINERS[side], "-", "-", "-", "-", "-", "not run yet"])
             continue
         r = results[side]
-        steps = r["env_steps_per_seed"]
-        rows.append([r["trainer"], "/".join(f"{s:,}" for s in sorted(set(steps))) if isinstance(steps, list) else f"{steps:,}",
+        steps = seed_steps(r)
+        rows.append([r["trainer"], "/".join(f"{s:,}" for s in sorted(set(steps))),
                      stats.iqm_cell(r["deterministic"]), stats.iqm_cell(r["stochastic"]), f"{r['seconds']:.0f}",
-                     f"{env_steps(r) / r['seconds']:,.0f}", f"{r['device']}, {r['date']}: `{r['command']}`"])
+                     f"{sum(steps) / r['seconds']:,.0f}", f"{r['device']}, {r['date']}: `{r['command']}`"])
     lines += [f"{record['task']} from its state, {record['seeds']} seeds x {record['updates']} updates of "
               f"{record['env_steps_per_seed'] // record['updates']:,} env steps ({record['env_steps_per_seed']:,} a seed) "
               f"on each side{' (smoke: the numbers mean nothing)' if record['smoke'] else ''}. Final return: each seed's "
