@@ -65,6 +65,7 @@ SIDES = ("hintsjax", "brax")
 TRAINERS = {"hintsjax": "hintsjax ppo_state", "brax": "brax.training ppo"}
 MODES = ("deterministic", "stochastic")  # how each side's final policy is evaluated: mean action, or sampled
 EVAL_EPISODES = 128  # fresh episodes per seed and mode, on both sides: Brax's num_eval_envs
+NO_CLIP = 1e9  # hintsjax's max_grad_norm for Brax's None (no clipping): it clips only a gradient whose norm passes 1e9
 
 
 def brax_settings(smoke: bool) -> dict:
@@ -97,14 +98,18 @@ def hintsjax_values(brax: dict, seeds: int, steps: int, smoke: bool) -> dict:
     update collects num_envs rollouts of batch_size * num_minibatches * unroll_length / num_envs
     steps, and takes num_updates_per_batch epochs of num_minibatches minibatches; the discount,
     one learning rate for actor and critic, the entropy cost, the reward scale and the running
-    observation normalisation, updated before learning as Brax's is. Left at hintsjax's: the networks ((256, 256) beside Brax's
-    policy (32,)x4 and value (256,)x5), GAE over the whole rollout (Brax's over each unroll) and
-    the clipping (0.2 and 0.5 beside Brax's 0.3 and 1.0)."""
+    observation normalisation, updated before learning as Brax's is, and Brax's gradient clipping:
+    none unless its settings name a max_grad_norm (`NO_CLIP`; hintsjax's own 0.5 over the actor's and
+    critic's gradients together made every seed collapse at 60 M, versus_brax_knobs.md). Left at
+    hintsjax's: the networks ((256, 256) beside Brax's policy (32,)x4 and value (256,)x5), GAE over
+    the whole rollout (Brax's over each unroll), the ratio clip (0.2 beside Brax's 0.3) and the
+    episodes running on across updates (Brax resets every env after each: ppo.reset_every_update)."""
     batch = steps_per_update(brax)
     ppo = {"total_env_steps": steps, "num_envs": brax["num_envs"], "batch_size": batch,
            "minibatch_size": batch // brax["num_minibatches"], "epochs": brax["num_updates_per_batch"],
            "gamma": brax["discounting"], "actor_lr": brax["learning_rate"], "critic_lr": brax["learning_rate"],
            "ent_coef": brax["entropy_cost"], "reward_scale": brax["reward_scaling"],
+           "max_grad_norm": brax.get("max_grad_norm") or NO_CLIP,
            "normalize_state": brax["normalize_observations"],
            # Brax's order: a rollout's states join the statistics before learning on it (issue 61:
            # after it, at 20 updates, cost CartpoleSwingup more than half its return on a CPU)

@@ -304,6 +304,26 @@ def test_kl_adaptive_lr_shrinks_the_rates_an_update_carries_to_the_next():
     assert float(kl_rate.scale_of(state.opt_state)) == pytest.approx(1 / 1.5**2)
 
 
+def test_reset_every_update_starts_each_rollout_with_fresh_episodes():
+    """ppo.reset_every_update (Brax's resets as Playground sets them): every episode of a rollout
+    begins at its first step, so an env's running episode return is the cumulative sum of the
+    rollout's own rewards (the pendulum's 200-step episodes do not end in 8 steps); without it the
+    second rollout carries the first one's episodes on, returns and all."""
+
+    def second_rollout(reset):
+        parts = ppo.make_ppo(layers.run_config(dict(env="pendulum", agent="ppo_state", seeds=1,
+                                                     ppo={**SMALL_PPO, "reset_every_update": reset})))
+        state = jax.jit(parts.init)(jax.random.key(0))
+        state, _, _ = jax.jit(parts.rollout)(state, jax.random.key(1))
+        return jax.jit(parts.rollout)(state, jax.random.key(2))[1]
+
+    for reset in (True, False):
+        traj = second_rollout(reset)
+        assert not np.any(traj.terminated | traj.truncated)
+        own = np.allclose(traj.episode_return, np.cumsum(traj.reward, axis=0), atol=1e-5)
+        assert own == reset
+
+
 def test_kl_adaptive_lr_needs_a_target():
     with pytest.raises(UsageError, match="kl_adaptive_lr needs ppo.target_kl"):
         layers.run_config(dict(env="cue", agent="hints_blind", ppo={**SMALL_PPO, "kl_adaptive_lr": True}))

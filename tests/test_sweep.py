@@ -618,6 +618,10 @@ def test_the_playground_side_by_side_gives_hintsjax_brax_s_settings_and_the_repo
         (983_040, 2048, 480, 30_720, 16)
     assert (cfg.ppo.gamma, cfg.ppo.actor_lr, cfg.ppo.reward_scale, cfg.ppo.normalize_state) == (0.995, 1e-3, 10.0, True)
     assert cfg.agent == "ppo_state" and cfg.ppo.num_updates == 61  # 60 M steps in whole updates of 983,040
+    # Brax clips no gradient unless told to (its max_grad_norm None; Playground's DM Control settings name none)
+    assert "max_grad_norm" not in playground.brax_settings(smoke=False) and cfg.ppo.max_grad_norm == playground.NO_CLIP
+    assert run_config(playground.hintsjax_values({**playground.brax_settings(False), "max_grad_norm": 1.0}, 5, 60_000_000,
+                                                 False)).ppo.max_grad_norm == 1.0
     runs = tmp_path / "playground"
     env = "playground:CartpoleSwingup"
     write_run(runs, env, "ppo_rgb", [evaluation(100.0, 10.0, [90.0, 95.0, 100.0, 105.0, 110.0])])

@@ -32,7 +32,7 @@ from hintsjax.algorithms.trainer import Trainer, program_identity
 # members of a group agree on these; every other PPO number is a Hyper leaf and may differ.
 SHAPES = ("total_env_steps", "num_envs", "batch_size", "epochs", "minibatch_size", "hint_width", "hidden",
           "starts_per_rollout", "normalize_state", "action_head", "grad_clip", "adam_eps", "gae_segment",
-          "normalize_before_learning", "critic_trains_encoder", "kl_adaptive_lr")
+          "normalize_before_learning", "critic_trains_encoder", "kl_adaptive_lr", "reset_every_update")
 
 
 def signature(cfg: RunConfig) -> dict[str, Any]:

@@ -138,6 +138,7 @@ def observe(obs: dict[str, jax.Array], key: jax.Array, hyper: Hyper) -> dict[str
 
 
 STARTS_TAG = 0x57A7  # folded into a rollout's key for its per-rollout starts (leaves the step keys as they were)
+RESET_TAG = 0x5E7A  # folded into a rollout's key for its fresh episodes (ppo.reset_every_update)
 
 
 def start_envs(key: jax.Array, env: Any, env_params: Any, num_envs: int) -> tuple[jax.Array, jax.Array, envs.Timestep]:
@@ -201,6 +202,9 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
         return start_runner(key, env, env_params, network, N, lambda params: make_optimizer(hyper, params, ppo).init(params), hyper)
 
     def rollout(state: RunnerState, key: jax.Array) -> tuple[RunnerState, Transition, jax.Array]:
+        if ppo.reset_every_update:  # every env begins a fresh episode here (its own key)
+            fresh = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(jax.random.fold_in(key, RESET_TAG), N), env_params)
+            state = state.replace(env_state=fresh.state, obs=fresh.obs)
         starts = None
         if ppo.starts_per_rollout:  # one next start per env for the whole rollout (its own key)
             k_starts = jax.random.fold_in(key, STARTS_TAG)

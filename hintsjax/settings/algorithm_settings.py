@@ -72,6 +72,10 @@ class PPOConfig:
     # (hintsjax/algorithms/kl_rate.py): divided by 1.5 while a minibatch's approx. KL is above
     # 2 x target_kl, multiplied by 1.5 (up to 1) while below 0.5 x; needs target_kl.
     kl_adaptive_lr: bool = False
+    # Start every env afresh at each rollout's start (Brax's num_resets_per_eval as Playground's
+    # DM Control settings give it: a batch then holds its episodes' first T steps only; an episode
+    # cut by the rollout's end is bootstrapped from its value, as any continuing one).
+    reset_every_update: bool = False
 
     @property
     def rollout_length(self) -> int:

@@ -145,7 +145,8 @@ def save_run_config(run_dir: Path, cfg: RunConfig) -> None:
 # hints_from had no hint file; before image_size, the env's own pictures; before the PPO knobs of the
 # Brax side by side, the one order and clip there were), so a saved config without them is complete.
 OPTIONAL_IN_SAVED = {"hints_from", "image_size", "ppo.grad_clip", "ppo.adam_eps", "ppo.gae_segment",
-                     "ppo.normalize_before_learning", "ppo.critic_trains_encoder", "ppo.kl_adaptive_lr"}
+                     "ppo.normalize_before_learning", "ppo.critic_trains_encoder", "ppo.kl_adaptive_lr",
+                     "ppo.reset_every_update"}
 
 
 def missing_keys(values: Mapping[str, Any]) -> list[str]:
