@@ -1,9 +1,12 @@
 """Settings for the whole test suite.
 
 The traced-program cache (hintsjax/system/program_cache.py) is off: several tests replace a function at
-run time (a poisoned trainer, a patched env metric), which no key of that cache can see, and a
-test must never run a program traced for another test. tests/test_program_cache.py turns it on
-in folders of its own. Subprocesses that the tests start inherit the setting.
+run time (a poisoned trainer, a patched env metric), which no key of that cache can see, and such
+a test must never run a program traced for another test. tests/test_program_cache.py turns it on
+in folders of its own; tests/test_cli.py and tests/test_group.py for their own runs, which replace
+no function inside a traced program (their repeated and resumed runs of one tiny config load what
+the first traced; no other test writes or reads an entry). Subprocesses that the tests start
+inherit the setting.
 
 HINTSJAX_DEBUG is on: a bug that a test meets raises with its traceback instead of the commands'
 one-line report (tests/test_cli.py turns it off to test that report).

@@ -19,7 +19,7 @@ import pytest
 import yaml
 
 import command_runs
-from hintsjax.system import checkpoint, errors
+from hintsjax.system import checkpoint, errors, program_cache
 from hintsjax.system.errors import UsageError
 from hintsjax.settings import layers
 from hintsjax.cli import overrides
@@ -44,6 +44,20 @@ def tiny_values(**extra) -> dict:
             key = key[4:]
         target[key] = int(value) if value.isdigit() else value
     return {**values, **extra}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def traced_programs_kept():
+    """The traced-program cache on (hintsjax/system/program_cache.py; tests/conftest.py turns it
+    off for the suite) for this file's runs, in-process and in the processes they start, as a
+    user's commands run: nothing here replaces a function inside a traced program (only
+    checkpoint.save, loop.check_physics and run.train, outside them), so the first run of the tiny
+    config traces its programs and the later ones load them, several seconds a run on 2 cores.
+    The cache's key digests the source of every loaded module, so this process, killed_run.py's
+    processes and the command's each share their entries among themselves."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv(program_cache.ENV_VAR, "on")
+        yield
 
 
 def cli(*args: str, cwd: Path, module: str = "hintsjax.run") -> subprocess.CompletedProcess:
@@ -688,16 +702,20 @@ def test_a_config_that_is_not_utf8_is_one_line(finished_run, tmp_path):
         layers.load_run_config(copy)
 
 
-def test_a_resumed_run_trains_longer_to_the_longer_runs_end_bit_for_bit(finished_run, tmp_path):
-    """A run of 2 updates, resumed with the 4-update budget of `finished_run`, ends with its
-    state bit for bit and its logged returns; its config.yaml says the new budget. A smaller
-    budget is one line and leaves the folder alone."""
+def test_a_resumed_run_trains_longer_to_the_longer_runs_end_bit_for_bit(finished_run, tmp_path, capsys):
+    """A run of 2 updates, resumed through the command line with the 4-update budget of
+    `finished_run`, ends with its state bit for bit and its logged returns; its config.yaml says
+    the new budget. A smaller budget is one line and leaves the folder alone (in-process: the
+    command line's parse of the same two settings is the longer resume's)."""
     short = tmp_path / "short"
     assert run.main_from_values(tiny_values(out_dir=str(tmp_path), name="short", ppo={**tiny_values()["ppo"], "total_env_steps": 128})) == 0
     assert checkpoint.latest_update(short) == 2
-    shorter = cli(f"resume={short}", "ppo.total_env_steps=64", cwd=tmp_path)
-    assert shorter.returncode == 2 and shorter.stderr.strip().splitlines() == [
+    capsys.readouterr()
+    before = sorted((p.relative_to(short), p.stat().st_mtime_ns) for p in short.rglob("*"))
+    assert run.main_from_values({"resume": str(short), "ppo": {"total_env_steps": 64}}) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
         "error: a resumed run can train longer, not shorter: ppo.total_env_steps must be at least 128 (its budget), got 64"]
+    assert sorted((p.relative_to(short), p.stat().st_mtime_ns) for p in short.rglob("*")) == before
     longer = cli(f"resume={short}", "ppo.total_env_steps=256", cwd=tmp_path)
     assert longer.returncode == 0, longer.stderr[-2000:]
     assert layers.load_run_config(short) == layers.load_run_config(finished_run)
@@ -705,20 +723,36 @@ def test_a_resumed_run_trains_longer_to_the_longer_runs_end_bit_for_bit(finished
     assert json.loads((short / "eval.json").read_text())["evaluations"] == json.loads((finished_run / "eval.json").read_text())["evaluations"]
 
 
-@pytest.mark.parametrize("cut", ["ppo.clip_eps", "eval_episodes", "gail"])
-def test_a_config_that_lacks_a_setting_is_not_resumed(cut, finished_run, tmp_path):
+CUTS = ("ppo.clip_eps", "eval_episodes", "gail")
+
+
+@pytest.fixture(scope="module")
+def cut_resumes(finished_run, tmp_path_factory) -> dict[str, tuple[int, str, Path, list[Path]]]:
+    """`python -m hintsjax.run resume=<copy>` on a copy of `finished_run` whose config.yaml lacks
+    each of CUTS, one interpreter start for the three (tests/command_runs.py): (exit status,
+    stderr, the copy, its files before)."""
+    root = tmp_path_factory.mktemp("cut")
+    copies, befores = [], []
+    for k, cut in enumerate(CUTS):
+        copy = root / f"cut{k}"
+        shutil.copytree(finished_run, copy)
+        values = yaml.safe_load((copy / "config.yaml").read_text())
+        section, _, key = cut.rpartition(".")
+        del (values[section] if section else values)[key]
+        (copy / "config.yaml").write_text(yaml.safe_dump(values))
+        copies.append(copy)
+        befores.append(sorted(p.relative_to(copy) for p in copy.rglob("*")))
+    done = command_runs.outcomes("hintsjax.run", [[f"resume={copy}"] for copy in copies], root)
+    return {cut: (status, err, copy, before) for cut, (status, _, err, _), copy, before in zip(CUTS, done, copies, befores, strict=True)}
+
+
+@pytest.mark.parametrize("cut", CUTS)
+def test_a_config_that_lacks_a_setting_is_not_resumed(cut, cut_resumes):
     """A config.yaml cut short (or from an older version) resumes under no guessed defaults: one
     line naming what it lacks, exit 2, the run folder as it was."""
-    copy = tmp_path / "cut"
-    shutil.copytree(finished_run, copy)
-    values = yaml.safe_load((copy / "config.yaml").read_text())
-    section, _, key = cut.rpartition(".")
-    del (values[section] if section else values)[key]
-    (copy / "config.yaml").write_text(yaml.safe_dump(values))
-    before = sorted(p.relative_to(copy) for p in copy.rglob("*"))
-    out = subprocess.run([sys.executable, "-m", "hintsjax.run", f"resume={copy}"], capture_output=True, text=True, timeout=120)
-    assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1, out.stderr
-    assert "lacks " + (cut if cut != "gail" else "gail.") in out.stderr
+    returncode, stderr, copy, before = cut_resumes[cut]
+    assert returncode == 2 and len(stderr.strip().splitlines()) == 1, stderr
+    assert "lacks " + (cut if cut != "gail" else "gail.") in stderr
     assert sorted(p.relative_to(copy) for p in copy.rglob("*")) == before
     assert layers.load_run_config(copy).env == "pendulum"  # reports still read it
 
@@ -951,13 +985,14 @@ def test_an_env_registered_at_run_time_takes_one_call():
 
 
 def test_a_config_saved_before_the_brax_knobs_resumes_under_their_defaults(tmp_path):
-    """Runs saved before ppo.grad_clip, adam_eps, gae_segment, normalize_before_learning and
-    critic_trains_encoder existed trained as their defaults do, so a config.yaml without them is
-    complete; without clip_eps it is not."""
+    """Runs saved before ppo.grad_clip, adam_eps, gae_segment, normalize_before_learning,
+    critic_trains_encoder, kl_adaptive_lr and reset_every_update existed trained as their defaults
+    do, so a config.yaml without them is complete; without clip_eps it is not."""
     cfg = layers.run_config({k: v for k, v in tiny_values().items() if k != "out_dir"})
     layers.save_run_config(tmp_path, cfg)
     values = yaml.safe_load((tmp_path / "config.yaml").read_text())
-    for key in ("grad_clip", "adam_eps", "gae_segment", "normalize_before_learning", "critic_trains_encoder"):
+    for key in ("grad_clip", "adam_eps", "gae_segment", "normalize_before_learning", "critic_trains_encoder",
+                "kl_adaptive_lr", "reset_every_update"):
         del values["ppo"][key]
     (tmp_path / "config.yaml").write_text(yaml.safe_dump(values))
     assert layers.load_run_config(tmp_path, complete=True) == cfg

@@ -25,6 +25,25 @@ from hintsjax.settings.layers import run_config
 
 warp_lang = pytest.mark.skipif(not physics.warp_installed(), reason="warp-lang not installed (pip install -e '.[gpu]')")
 
+# The default tier's programs compile at LLVM's cheapest level (tests/conftest.py); Warp's CPU kernels
+# here too (warp.config.optimization_level 0, not Warp's -O2): with Warp's kernel cache cold, the file
+# took 118 s at -O2 and 96 s at 0, alone (2026-11-29, 2 cores). The slow tier keeps Warp's -O2.
+KERNELS_AT_O0 = ("--xla_backend_optimization_level=0" in os.environ.get("XLA_FLAGS", "").split()
+                 and jax.default_backend() == "cpu")
+
+
+@pytest.fixture(scope="module", autouse=True)
+def warp_kernels_at_o0():
+    """Warp's CPU kernels at -O0 while this file runs in the default tier (its subprocess sets the same)."""
+    if not (KERNELS_AT_O0 and physics.warp_installed()):
+        yield
+        return
+    import warp
+
+    before, warp.config.optimization_level = warp.config.optimization_level, 0
+    yield
+    warp.config.optimization_level = before
+
 
 def test_auto_picks_warp_only_on_an_nvidia_gpu_with_warp_lang(monkeypatch):
     monkeypatch.setattr(physics, "warp_installed", lambda: True)
@@ -168,7 +187,8 @@ def test_warp_equals_jax_and_its_nested_vmap_equals_a_loop():
 
 
 # one idp step through MJX-Warp in a fresh process, where Warp initialises and loads its kernels
-_ONE_WARP_STEP = """
+# (the default tier's, at -O0: those the test above compiled)
+_ONE_WARP_STEP = ("import warp; warp.config.optimization_level = 0\n" if KERNELS_AT_O0 else "") + """
 import jax, jax.numpy as jnp
 from hintsjax.envs import physics
 from hintsjax.envs.idp import InvertedDoublePendulum
