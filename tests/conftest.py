@@ -37,6 +37,8 @@ import os
 import shutil
 import tempfile
 
+import pytest
+
 from hintsjax.system import compilation_cache, errors, program_cache
 
 os.environ[program_cache.ENV_VAR] = "off"
@@ -66,3 +68,15 @@ def pytest_unconfigure(config):
     """The process that made the cache folder (xdist's controller, or pytest alone) removes it."""
     if not hasattr(config, "workerinput") and os.environ.get(MADE_CACHE):
         shutil.rmtree(os.environ.pop(MADE_CACHE), ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def traced_programs_kept():
+    """The traced-program cache on for a module's runs, in-process and in the processes they start
+    (`pytestmark = pytest.mark.usefixtures("traced_programs_kept")`): for files that replace no
+    function inside a traced program (tests/test_cli.py, tests/test_group.py), whose repeated and
+    resumed runs of one tiny config then load what the first traced instead of tracing it again. The
+    cache's key digests the source of every loaded module."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv(program_cache.ENV_VAR, "on")
+        yield

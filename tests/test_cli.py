@@ -19,7 +19,7 @@ import pytest
 import yaml
 
 import command_runs
-from hintsjax.system import checkpoint, errors, program_cache
+from hintsjax.system import checkpoint, errors
 from hintsjax.system.errors import UsageError
 from hintsjax.settings import layers
 from hintsjax.cli import overrides
@@ -27,6 +27,10 @@ from hintsjax.algorithms.registry import make_trainer
 from hintsjax.training import loop, pipeline, request
 from hintsjax import run
 from hintsjax.evaluate import main as evaluate_main
+
+# The traced-program cache on for this file's runs and the commands they start (tests/conftest.py): nothing here
+# replaces a function inside a traced program (only checkpoint.save, loop.check_physics and run.train, outside them).
+pytestmark = pytest.mark.usefixtures("traced_programs_kept")
 
 TINY = [
     "agent=ppo_state", "seeds=2", "eval_episodes=3", "checkpoint_every=2", "checkpoint_seconds=0",
@@ -44,20 +48,6 @@ def tiny_values(**extra) -> dict:
             key = key[4:]
         target[key] = int(value) if value.isdigit() else value
     return {**values, **extra}
-
-
-@pytest.fixture(scope="module", autouse=True)
-def traced_programs_kept():
-    """The traced-program cache on (hintsjax/system/program_cache.py; tests/conftest.py turns it
-    off for the suite) for this file's runs, in-process and in the processes they start, as a
-    user's commands run: nothing here replaces a function inside a traced program (only
-    checkpoint.save, loop.check_physics and run.train, outside them), so the first run of the tiny
-    config traces its programs and the later ones load them, several seconds a run on 2 cores.
-    The cache's key digests the source of every loaded module, so this process, killed_run.py's
-    processes and the command's each share their entries among themselves."""
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setenv(program_cache.ENV_VAR, "on")
-        yield
 
 
 def cli(*args: str, cwd: Path, module: str = "hintsjax.run") -> subprocess.CompletedProcess:

@@ -17,28 +17,20 @@ import pytest
 
 import cue_env  # noqa: F401  (registers the test env "cue" and its hints cue [1] and cue_pair [2])
 import linear_env  # noqa: F401  (registers the test env "linear")
-from hintsjax.system import checkpoint, program_cache
+from hintsjax.system import checkpoint
 from hintsjax.system.errors import UsageError
 from hintsjax.settings.layers import run_config, save_run_config
 from hintsjax.algorithms import group, ppo
 from hintsjax.algorithms.registry import make_trainer
 from hintsjax.training import outputs, pipeline
 
+# The traced-program cache on for this file's runs (tests/conftest.py): nothing here replaces a function, so
+# the group resumed after its SIGKILL, and the finished group resumed to evaluate, load what `whole_group` traced.
+pytestmark = pytest.mark.usefixtures("traced_programs_kept")
+
 UPDATES = 3
 TINY_PPO = {"total_env_steps": 3 * 64, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 2}
 SEEDS = 2
-
-
-@pytest.fixture(scope="module", autouse=True)
-def traced_programs_kept():
-    """The traced-program cache on (hintsjax/system/program_cache.py; tests/conftest.py turns it
-    off for the suite) for this file's runs through pipeline.train_group, here and in
-    killed_run.py's process: nothing here replaces a function, so the group resumed after its
-    SIGKILL, and the finished group resumed to evaluate, load the programs that the uninterrupted
-    group traced (`whole_group`) instead of tracing them again."""
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setenv(program_cache.ENV_VAR, "on")
-        yield
 
 
 def cue_cfg(hint: str, scheme: str = "fc", **ppo_values) -> object:
