@@ -15,6 +15,7 @@ import logging
 import sys
 import time
 import types
+import warnings
 from pathlib import Path
 
 import jax
@@ -43,6 +44,18 @@ def _orbax_read(obj) -> bool:
     the reads of the others are dropped unawaited and each printed "Exception ignored in:
     <coroutine _read_array_index_and_device_put>" with its traceback (up to 45 of them)."""
     return isinstance(obj, types.CoroutineType) and "orbax" in obj.cr_code.co_filename
+
+
+# orbax's per-array write coroutine, as Python names it when one is dropped unawaited
+_UNAWAITED_WRITE = r"coroutine '[\w.<>]*write_fragment' was never awaited"
+
+
+def _drop_unawaited_writes() -> None:
+    """For the rest of the process, drop the RuntimeWarning "coroutine '...write_fragment' was
+    never awaited" (and its tracemalloc hint): when a background write fails (a full disk), orbax
+    may shut its event loop before the writes of a checkpoint's other arrays start, and each is
+    reported when it is collected, which can be after `writing` is left (at exit)."""
+    warnings.filterwarnings("ignore", message=_UNAWAITED_WRITE, category=RuntimeWarning)
 
 
 def _closed_loop(value: BaseException | None) -> bool:
@@ -95,8 +108,10 @@ def writing(run_dir: Path):
     """Within this block `save(run_dir, ...)` writes in the background; leaving it waits for the
     writes to finish (CheckpointWriteError if one failed), also when the block is left by an
     exception, so an interrupted run keeps the checkpoint it was writing. Meanwhile a failed write's
-    "Event loop is closed" noise is dropped (`_quiet_closed_loops`)."""
+    "Event loop is closed" noise is dropped (`_quiet_closed_loops`), and from then on its unawaited
+    writes (`_drop_unawaited_writes`)."""
     _WRITERS[Path(run_dir).absolute()] = _manager(run_dir, create=True, background=True)
+    _drop_unawaited_writes()
     previous = sys.unraisablehook
     sys.unraisablehook = _quiet_closed_loops(previous)
     try:
