@@ -21,7 +21,7 @@ import jax
 from hintsjax.envs import physics as _physics  # first: imports mujoco.mjx without its Warp backend (envs/physics.py)
 from hintsjax.envs import acrobot, adapter, ant, car_racing, halfcheetah, humanoid, idp, pendulum  # noqa: E402
 from hintsjax.envs.adapter import EnvUnavailable
-from hintsjax.envs.core import OBS_KEYS, AutoReset, Env, SquashedActions, Step, Timestep
+from hintsjax.envs.core import OBS_KEYS, AutoReset, Env, SquashedActions, Step, Timestep, fresh_episodes
 from hintsjax.envs.errors import ChoiceError, choose
 from hintsjax.envs.hints import (NO_HINT, Hint, HintFileError, check_hint_shapes, hint_names, load_hints, make_hint,
                                   register_composite, register_hint)
@@ -180,7 +180,7 @@ def make_params(name: str, variant: str | None = None) -> Any:
 __all__ = [
     "ADAPTERS", "AUTO", "DEFAULT_CAPACITY", "JAX", "OBS_KEYS", "WARP", "Adapter", "AutoReset", "ChoiceError", "Env", "EnvEntry",
     "EnvRegistry", "EnvUnavailable", "Hint", "HintFileError", "MjxEnv", "NO_HINT", "PhysicsUnavailable", "REGISTRY",
-    "check_drawable", "check_hint_shapes", "load_hints", "SquashedActions", "Step", "Timestep", "choose", "env_names", "hint_names",
-    "make", "make_hint", "make_params", "mjx_env_names", "register_composite", "register_hint", "resolve_physics",
-    "variant_names",
+    "check_drawable", "check_hint_shapes", "load_hints", "SquashedActions", "Step", "Timestep", "choose", "env_names", "fresh_episodes",
+    "hint_names", "make", "make_hint", "make_params", "mjx_env_names", "register_composite", "register_hint",
+    "resolve_physics", "variant_names",
 ]

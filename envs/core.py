@@ -155,6 +155,12 @@ class Env:
         )
 
 
+def fresh_episodes(key: jax.Array, env: Any, params: Any, n: int) -> Timestep:
+    """`n` fresh episodes of `env` (any env or wrapper with `reset`), one key of `key`'s split each:
+    the batch a run, a rollout or an evaluation starts from."""
+    return jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(key, n), params)
+
+
 @struct.dataclass
 class EpisodeState:
     """AutoReset's state: the env's state plus the running episode statistics."""

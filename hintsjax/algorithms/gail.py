@@ -22,12 +22,13 @@ import jax.numpy as jnp
 import optax
 from flax import struct
 
+from hintsjax import envs
 from hintsjax.models.networks import MLP
 from hintsjax.models.normalization import normalize
 from hintsjax.settings.algorithm_settings import GailConfig
 from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms import experts
-from hintsjax.algorithms.ppo import RunnerState, fresh_episodes, make_ppo
+from hintsjax.algorithms.ppo import RunnerState, make_ppo
 from hintsjax.algorithms.trainer import Trainer
 
 
@@ -70,7 +71,7 @@ class GailState:
 def demonstrate(env: Any, env_params: Any, expert: Any, key: jax.Array, episodes: int) -> Demonstrations:
     """Roll the expert out for `episodes` whole episodes of a plain (not auto-resetting) env."""
     k_reset, k_run = jax.random.split(key)
-    ts = fresh_episodes(k_reset, env, env_params, episodes)
+    ts = envs.fresh_episodes(k_reset, env, env_params, episodes)
 
     def step(carry, key):
         env_state, obs, alive, ret = carry

@@ -141,15 +141,10 @@ STARTS_TAG = 0x57A7  # folded into a rollout's key for its per-rollout starts (l
 RESET_TAG = 0x5E7A  # folded into a rollout's key for its fresh episodes (ppo.reset_every_update)
 
 
-def fresh_episodes(key: jax.Array, env: Any, env_params: Any, num_envs: int) -> envs.Timestep:
-    """`num_envs` fresh episodes, one key of `key`'s split each."""
-    return jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(key, num_envs), env_params)
-
-
 def start_envs(key: jax.Array, env: Any, env_params: Any, num_envs: int) -> tuple[jax.Array, jax.Array, envs.Timestep]:
     """A run's start from its seed key: (network key, run key, `num_envs` fresh episodes)."""
     k_net, k_env, k_run = jax.random.split(key, 3)
-    return k_net, k_run, fresh_episodes(k_env, env, env_params, num_envs)
+    return k_net, k_run, envs.fresh_episodes(k_env, env, env_params, num_envs)
 
 
 def start_params(k_net: jax.Array, network: ActorCritic, obs: dict[str, jax.Array], hyper: Hyper, width: int) -> Any:
@@ -208,7 +203,7 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
 
     def rollout(state: RunnerState, key: jax.Array) -> tuple[RunnerState, Transition, jax.Array]:
         if ppo.reset_every_update:  # every env begins a fresh episode here (its own key)
-            fresh = fresh_episodes(jax.random.fold_in(key, RESET_TAG), env, env_params, N)
+            fresh = envs.fresh_episodes(jax.random.fold_in(key, RESET_TAG), env, env_params, N)
             state = state.replace(env_state=fresh.state, obs=fresh.obs)
         starts = None
         if ppo.starts_per_rollout:  # one next start per env for the whole rollout (its own key)

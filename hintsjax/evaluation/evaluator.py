@@ -54,7 +54,7 @@ def make_task_evaluator(cfg: RunConfig, num_episodes: int, hint: str | None = No
     def evaluate(params: Any, key: jax.Array, task_params: Any, stochastic: bool | jax.Array,
                  pick: Hyper | None = None) -> EvalResult:
         k_reset, k_run = jax.random.split(key)
-        ts = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_reset, num_episodes), task_params)
+        ts = envs.fresh_episodes(k_reset, env, task_params, num_episodes)
         see = (lambda obs: obs) if pick is None else (lambda obs: pick_hint(obs, pick))  # noqa: E731
 
         def step(carry):

@@ -9,6 +9,8 @@ from typing import Any, Callable
 import jax
 import jax.numpy as jnp
 
+from hintsjax import envs
+
 
 def observed(expert: Any) -> tuple[str, ...]:
     """The observation keys a rollout needs: pictures and hints, and the state an expert acts on."""
@@ -22,7 +24,7 @@ def rollout(env: Any, params: Any, key: jax.Array, num_envs: int, steps: int, re
     `record(state, obs, action, ts)` of every step (the state and observation the action was taken
     in, the Timestep it led to), stacked [steps, ...]."""
     k_reset, k_run = jax.random.split(key)
-    ts = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_reset, num_envs), params)
+    ts = envs.fresh_episodes(k_reset, env, params, num_envs)
     by_expert = jnp.arange(num_envs) < driven
 
     def step(carry, key):
