@@ -3,7 +3,8 @@
 A table script of experiments/ (classic_control.py, locomotion.py, car_racing.py, playground.py)
 declares its runs, the tables they make and its reports, and calls `table_main`, which trains the
 runs of --envs (hintsjax.reproduce.sweep), or with --report archives the finished runs and then
-writes the tables (with report.py's readers), or --archive only archives them; where the script
+writes the tables (with report.py's readers), or --archive only archives them, or --pool pools a
+row's seed parts (pool.py); where the script
 has them, --learners-report FILE and a mode of its own.
 """
 
@@ -16,6 +17,7 @@ from pathlib import Path
 from typing import Callable
 
 from hintsjax.reproduce.archive import ARCHIVE, archive_runs
+from hintsjax.reproduce.pool import PoolError, pool_runs
 from hintsjax.reproduce.sweep import sweep
 from hintsjax.reproduce.sweep_settings import add_settings, chosen_settings
 
@@ -109,6 +111,10 @@ def table_main(script: TableScript) -> None:
     parser.add_argument("--archive", action="store_true",
                         help="only copy what the reports need of the finished runs into experiments/results/runs "
                              "(a few hundred KB a run: what a GPU machine sends back)")
+    parser.add_argument("--pool", type=lambda s: [Path(x) for x in s.split(",") if x], default=None, metavar="DIRS",
+                        help="comma-separated --runs folders, each a part of the rows' seeds (trained with --set seed=K): "
+                             "only pool each run finished in all of them into one archived run of all their seeds, "
+                             "under --runs' name in experiments/results/runs (hintsjax/reproduce/pool.py)")
     if script.extra_arguments is not None:
         script.extra_arguments(parser)
     args = parser.parse_args()
@@ -118,6 +124,14 @@ def table_main(script: TableScript) -> None:
     if args.archive:
         done = archive_runs(args.runs, script.run_ids())
         print(f"archived {len(done)} finished run(s) of {args.runs} in {ARCHIVE / args.runs.name}: {', '.join(done)}")
+        return
+    if args.pool is not None:
+        try:
+            done = pool_runs(args.pool, args.runs, script.run_ids())
+        except PoolError as e:
+            parser.exit(2, f"error: {e}\n")
+        print(f"pooled {len(done)} run(s) finished in every part of {', '.join(map(str, args.pool))} into "
+              f"{ARCHIVE / args.runs.name}: {', '.join(done) or 'none'}")
         return
     if getattr(args, "learners_report", None):
         archive_runs(args.runs, script.run_ids())
