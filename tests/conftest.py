@@ -38,14 +38,13 @@ import shutil
 import tempfile
 
 import pytest
+import xla_tier  # tests/xla_tier.py
 
 from hintsjax.system import compilation_cache, errors, program_cache
 
 os.environ[program_cache.ENV_VAR] = "off"
 os.environ[errors.DEBUG] = "1"
 
-OPTIMIZATION = "--xla_backend_optimization_level"
-LOOP_EMITTERS = "--xla_cpu_use_fusion_emitters=false"
 
 MADE_CACHE = "HINTSJAX_TEST_XLA_CACHE_MADE"  # the folder this run made (set by the first process: xdist's controller)
 if os.environ.get("HINTSJAX_TEST_XLA_CACHE", "on") != "off":
@@ -60,8 +59,8 @@ def pytest_configure(config):
     test module is imported yet, and xdist's workers start later and inherit it). The slow tier
     alone (`-m slow`, `make test-slow`) keeps XLA's default: its drives run for minutes, which -O0
     made several times longer (the humanoid's 2x10^5-step drive took 1296 s on a core)."""
-    if config.option.markexpr.strip() != "slow" and OPTIMIZATION not in os.environ.get("XLA_FLAGS", ""):
-        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {OPTIMIZATION}=0 {LOOP_EMITTERS}".strip()
+    if config.option.markexpr.strip() != "slow" and xla_tier.OPTIMIZATION not in os.environ.get("XLA_FLAGS", ""):
+        os.environ["XLA_FLAGS"] = xla_tier.default_tier_flags()
 
 
 def pytest_unconfigure(config):

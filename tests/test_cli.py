@@ -59,11 +59,6 @@ def with_xla_flag(flag: str) -> str:
     return f"{os.environ.get('XLA_FLAGS', '')} {flag}".strip()
 
 
-def without_optimisation_level() -> str:
-    """The suite's XLA_FLAGS without its LLVM level, for a subprocess that runs at XLA's default."""
-    return " ".join(f for f in os.environ.get("XLA_FLAGS", "").split() if not f.startswith("--xla_backend_optimization_level"))
-
-
 BAD = yaml.safe_load((Path(__file__).parent / "data" / "bad_inputs.yaml").read_text())  # every command's bad input
 BAD_RUN_ARGS = BAD["run_command_line"]  # through the real command line
 

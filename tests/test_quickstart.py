@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from test_cli import without_optimisation_level
+from xla_tier import without_optimisation_level
 
 ROOT = Path(__file__).resolve().parents[1]
 PROMISE = 500  # the README: "at least 500 better than the random policy" (16 seeds on two CPU kinds: 995 to 1130)

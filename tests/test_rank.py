@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import cue_env  # noqa: F401  (registers the test env "cue": hints cue (the right action) and distractor (noise))
-from test_cli import without_optimisation_level
+from xla_tier import without_optimisation_level
 from hintsjax.hints import ranking
 from hintsjax import envs
 

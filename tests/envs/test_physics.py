@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import xla_tier  # tests/xla_tier.py
 
 from gym_parity import KEY, Compiled, parity  # tests/envs/gym_parity.py
 from hintsjax import envs
@@ -28,8 +29,7 @@ warp_lang = pytest.mark.skipif(not physics.warp_installed(), reason="warp-lang n
 # The default tier's programs compile at LLVM's cheapest level (tests/conftest.py); Warp's CPU kernels
 # here too (warp.config.optimization_level 0, not Warp's -O2): with Warp's kernel cache cold, the file
 # took 118 s at -O2 and 96 s at 0, alone (2026-11-29, 2 cores). The slow tier keeps Warp's -O2.
-KERNELS_AT_O0 = ("--xla_backend_optimization_level=0" in os.environ.get("XLA_FLAGS", "").split()
-                 and jax.default_backend() == "cpu")
+KERNELS_AT_O0 = xla_tier.at_o0() and jax.default_backend() == "cpu"
 
 
 @pytest.fixture(scope="module", autouse=True)
