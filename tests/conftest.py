@@ -45,7 +45,6 @@ from hintsjax.system import compilation_cache, errors, program_cache
 os.environ[program_cache.ENV_VAR] = "off"
 os.environ[errors.DEBUG] = "1"
 
-
 MADE_CACHE = "HINTSJAX_TEST_XLA_CACHE_MADE"  # the folder this run made (set by the first process: xdist's controller)
 if os.environ.get("HINTSJAX_TEST_XLA_CACHE", "on") != "off":
     if MADE_CACHE not in os.environ:

@@ -99,22 +99,21 @@ def eval_keys(cfg: RunConfig) -> jax.Array:
     return jax.vmap(jax.random.fold_in, in_axes=(0, None))(cfg.seed_keys(), EVAL_TAG)
 
 
+def return_summary(returns: np.ndarray) -> dict[str, Any]:
+    """[S, E] episode returns -> their mean and std over all seeds x episodes, per seed, and the seeds
+    that ended far below the others (`summarize`'s keys of the returns; reproduce/pool.py pools with it)."""
+    seed_means = returns.mean(axis=1)
+    return {"mean": float(returns.mean()), "std": float(returns.std()), "seed_means": seed_means.tolist(),
+            "seed_std": float(seed_means.std()), "outlier_seeds": far_below(seed_means), "seeds": int(returns.shape[0]),
+            "episodes_per_seed": int(returns.shape[1])}
+
+
 def summarize(result: EvalResult) -> dict[str, Any]:
     """Mean and std over all seeds x episodes, and per seed, as plain JSON-able values, with the
     seeds that ended far below the others (`outlier_seeds`, hintsjax/evaluation/outliers.py); for
     each env metric (e.g. progress) `<name>_mean`, `<name>_std` and `<name>_seed_means`."""
     returns = np.asarray(result.episode_return, dtype=np.float64)
-    seed_means = returns.mean(axis=1)
-    summary = {
-        "mean": float(returns.mean()),
-        "std": float(returns.std()),
-        "seed_means": seed_means.tolist(),
-        "seed_std": float(seed_means.std()),
-        "outlier_seeds": far_below(seed_means),
-        "seeds": int(returns.shape[0]),
-        "episodes_per_seed": int(returns.shape[1]),
-        "mean_length": float(np.asarray(result.episode_length).mean()),
-    }
+    summary = {**return_summary(returns), "mean_length": float(np.asarray(result.episode_length).mean())}
     for name, value in sorted(result.metrics.items()):
         value = np.asarray(value, dtype=np.float64)
         summary.update({f"{name}_mean": float(value.mean()), f"{name}_std": float(value.std()),

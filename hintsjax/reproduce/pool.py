@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from hintsjax.evaluation.outliers import far_below
+from hintsjax.evaluation.evaluator import return_summary
 from hintsjax.reproduce import archive
 from hintsjax.reproduce.archive import SUMMARY_JSON, archive_runs, unique_lines
 from hintsjax.settings.layers import CONFIG_YAML
@@ -124,11 +124,8 @@ def pooled_evaluation(parts: list[dict]) -> dict:
         if any(part.get(k) != v for k, v in fixed.items()):
             raise PoolError(f"evaluations of other kinds cannot be pooled: {first.get('variant')} against {part.get('variant')}")
     returns = np.concatenate([np.asarray(p["returns"], np.float64) for p in parts])
-    seed_means = returns.mean(axis=1)
     seeds = np.array([p["seeds"] for p in parts])
-    out = {**fixed, "mean": float(returns.mean()), "std": float(returns.std()), "seed_means": seed_means.tolist(),
-           "seed_std": float(seed_means.std()), "outlier_seeds": far_below(seed_means), "seeds": int(seeds.sum()),
-           "mean_length": float(np.average([p["mean_length"] for p in parts], weights=seeds))}
+    out = {**fixed, **return_summary(returns), "mean_length": float(np.average([p["mean_length"] for p in parts], weights=seeds))}
     for name in (k[: -len("_seed_means")] for k in first if k.endswith("_seed_means")):
         means, stds = (np.array([p[f"{name}_{s}"] for p in parts]) for s in ("mean", "std"))
         mean = float(np.average(means, weights=seeds))
