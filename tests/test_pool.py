@@ -17,6 +17,7 @@ import yaml
 from hintsjax.evaluation.evaluator import EvalResult, summarize
 from hintsjax.reproduce import archive, report
 from hintsjax.settings import layers
+from hintsjax.training import runlog
 from hintsjax.training.runlog import KL_ABOVE, STORM_UPDATES
 
 SEEDS, UPDATES, EPISODES = 6, 300, 8
@@ -47,14 +48,16 @@ def write_run(runs: Path, data: dict, seed: int, seeds: int, wall: float, device
     evaluations = [{"variant": variant, "stochastic": True,
                     **summarize(EvalResult(e.episode_return[part], e.episode_length[part], {k: v[part] for k, v in e.metrics.items()}))}
                    for variant, e in zip(("standard", "hairpin"), data["episodes"])]
-    (folder / "eval.json").write_text(json.dumps({
-        "label": "ppo_rgb", "env": "car_racing", "train_seconds": wall - 20, "wall_seconds": wall, "device": device,
-        "train_env_steps_per_s": 1e6 / wall, "env_steps": 1024 * UPDATES, "deterministic": True, "evaluations": evaluations}))
     with (folder / "metrics.csv").open("w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(["update", "seed", "env_steps", "episode_return", "approx_kl"])
         writer.writerows([u + 1, s, 1024 * (u + 1), data["returns"][seed + s, u], data["kl"][seed + s, u]]
                          for u in range(UPDATES) for s in range(seeds))
+    (folder / "eval.json").write_text(json.dumps({  # with each seed's KL storms, as training.outputs writes them
+        "label": "ppo_rgb", "env": "car_racing", "train_seconds": wall - 20, "wall_seconds": wall, "device": device,
+        "train_env_steps_per_s": 1e6 / wall, "env_steps": 1024 * UPDATES, "deterministic": True, "evaluations": evaluations,
+        "kl_storms": runlog.kl_storms(folder / "metrics.csv"),
+        "group": ["ppo_rgb"], "group_dir": f"{runs.name}/car_racing/_groups/0a", "group_env_steps_per_s": 2e6 / wall}))  # trained in a group
     (runs / "sweeps.jsonl").write_text(json.dumps({"table": "3-car", "seconds": wall, "finished": f"2026-11-29 0{seed % 10}:00:00"}) + "\n")
 
 
@@ -102,10 +105,12 @@ def test_parts_pool_into_what_archiving_the_whole_row_gives(parts, capsys):
                 assert e[key] == value, key
             else:  # float statistics: pooled from the parts' own
                 np.testing.assert_allclose(e[key], value, rtol=1e-12, err_msg=key)
+    assert got["kl_storms"] == expected["kl_storms"] and len(got["kl_storms"]) == SEEDS and got["kl_storms"][5]["first"] == 101
     assert got["wall_seconds"] == 500.0 and got["device"] == "NVIDIA H200 + NVIDIA H100"
     assert [(p["folder"], p["seed"], p["seeds"], p["train_env_steps_per_s"]) for p in got["parts"]] == \
         [("part0/car_racing/ppo_rgb", 0, 4, 1e6 / 300), ("part4/car_racing/ppo_rgb", 4, 2, 1e6 / 200)]
-    assert "train_env_steps_per_s" not in got  # a part's own rate, not the pooled run's
+    assert [p["group_dir"] for p in got["parts"]] == ["part0/car_racing/_groups/0a", "part4/car_racing/_groups/0a"]
+    assert "train_env_steps_per_s" not in got and "group_dir" not in got  # a part's own, not the pooled run's
     cells = [report.cell, report.iqm_cell, lambda r: report.metric_cell(r, "progress", 1, percent=True)]
     pooled_result, whole_result = (report.load(parts / n, "car_racing", "ppo_rgb") for n in ("pooled", "whole"))
     assert [c(pooled_result) for c in cells] == [c(whole_result) for c in cells]

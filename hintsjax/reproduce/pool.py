@@ -11,7 +11,8 @@ config.yaml (`seed` the first part's, `seeds` the sum), the binned metrics.csv w
 seeds numbered after the parts before it, and summary.json. Every report then reads it as a row
 trained whole. The parts' other settings must be the same and their seeds must follow on without
 gap or overlap; a pooled eval.json lists its parts (folder, seeds, device, seconds), and its
-`train_seconds` and `wall_seconds` are the parts' sums, its `device` theirs joined by " + ".
+`train_seconds` and `wall_seconds` are the parts' sums, its `device` theirs joined by " + ", its
+per-seed lists (`kl_storms`) theirs joined in seed order.
 """
 
 from __future__ import annotations
@@ -31,7 +32,9 @@ from hintsjax.settings.layers import CONFIG_YAML
 
 SUMMED = ("train_seconds", "wall_seconds")  # an eval.json's seconds: the parts' total
 PER_PART = ("train_seconds_this_call", "compile_seconds", "trace_seconds", "traced_programs_loaded", "train_env_steps_per_s",
-            "chunks_env_steps_per_s", "wall_split_seconds", "device", "devices", "parts")  # each part's own: in "parts"
+            "chunks_env_steps_per_s", "wall_split_seconds", "device", "devices", "parts",
+            "group_dir", "group_env_steps_per_s")  # each part's own: in "parts" (group_*: a run trained in a group)
+PER_SEED = ("kl_storms",)  # an eval.json's lists of one entry a seed: the parts' joined in seed order
 POOLED_EVAL = ("mean", "std", "seed_means", "seed_std", "outlier_seeds", "seeds", "mean_length", "returns")
 
 
@@ -99,7 +102,7 @@ def pool_run(folders: list[Path]) -> dict[str, str]:
 def pooled_eval(results: list[dict], folders: list[Path], configs: list[dict]) -> dict:
     """One eval.json of the parts' results (in seed order)."""
     first = results[0]
-    shared = {k: v for k, v in first.items() if k not in (*SUMMED, *PER_PART, "evaluations")}
+    shared = {k: v for k, v in first.items() if k not in (*SUMMED, *PER_PART, *PER_SEED, "evaluations")}
     for folder, result in zip(folders[1:], results[1:]):
         other = [k for k in shared if result.get(k) != shared[k]]
         if other or len(result["evaluations"]) != len(first["evaluations"]):
@@ -109,9 +112,15 @@ def pooled_eval(results: list[dict], folders: list[Path], configs: list[dict]) -
     devices = list(dict.fromkeys(r["device"] for r in results if "device" in r))
     return {**shared, **{k: sum(r[k] for r in results) for k in SUMMED if all(k in r for r in results)},
             **({"device": " + ".join(devices)} if devices else {}),
+            **{k: joined([r.get(k) for r in results]) for k in PER_SEED if k in first},
             "evaluations": [pooled_evaluation([r["evaluations"][i] for r in results])
                             for i in range(len(first["evaluations"]))],
             "parts": parts}
+
+
+def joined(lists: list[list | None]) -> list | None:
+    """The parts' per-seed lists as one, in seed order; None when a part has none (None)."""
+    return None if any(x is None for x in lists) else [x for part in lists for x in part]
 
 
 def pooled_evaluation(parts: list[dict]) -> dict:
@@ -167,8 +176,7 @@ def pooled_summary(paths: list[Path], seeds: list[int]) -> dict:
     kept = [json.loads(p.read_text()) for p in paths]
     tails = [k["training_return_seed_means"] for k in kept]
     shares = [k["kl_share"] for k in kept]
-    storms = [k.get("kl_storms") for k in kept]
-    return {"training_return_seed_means": None if None in tails else [x for t in tails for x in t],
+    return {"training_return_seed_means": joined(tails),
             "kl_share": None if None in shares else float(np.average(shares, weights=seeds)),
-            "kl_storms": None if None in storms else [x for s in storms for x in s]}
+            "kl_storms": joined([k.get("kl_storms") for k in kept])}
 
