@@ -77,7 +77,7 @@ def findings(runs: Path, env: str) -> str:
     verdict = "decided" if stats.difference_decided(d) else "undecided"
     return (f"Hairpin progress (O3): HINTS-MC composite {100 * np.mean(composite):.0f}% ({len(composite)} seeds), "
             f"PPO-RGB {100 * np.mean(rgb):.0f}% ({len(rgb)} seeds); paper 78% against 46%. Composite minus vision "
-            f"only: {100 * d.point:+.0f} points [{100 * d.low:+.0f}, {100 * d.high:+.0f}] (95% bootstrap interval "
+            f"only: {100 * d.point:+.1f} points [{100 * d.low:+.1f}, {100 * d.high:+.1f}] (95% bootstrap interval "
             f"over seeds): {verdict}.")
 
 

@@ -165,7 +165,7 @@ def test_car_findings_decide_o3_by_the_interval_of_the_difference_in_hairpin_pro
     apart = runs([0.40, 0.45, 0.50, 0.42, 0.48], [0.75, 0.80, 0.78, 0.82, 0.76])
     text = car_racing.findings(apart, "car_racing")
     assert text.startswith("Hairpin progress (O3): HINTS-MC composite 78% (5 seeds), PPO-RGB 45% (5 seeds); paper 78% "
-                           "against 46%. Composite minus vision only: +33 points [+")
+                           "against 46%. Composite minus vision only: +33.2 points [+")
     assert text.endswith(": decided.")
     mixed = runs([0.10, 0.60, 0.20, 0.50, 0.30], [0.15, 0.55, 0.25, 0.45, 0.40])
     assert car_racing.findings(mixed, "car_racing").endswith(": undecided.")
@@ -729,7 +729,7 @@ def test_car_learners_report_gives_o1_and_o3_their_verdicts_beside_the_locomotio
             "decided for") in section
     assert ("- O3 (composite hints carry the car round hairpins; hairpin tracks): P(hints-mc-composite > ppo_rgb) = "
             "0.00 [0.00, 0.00]: decided against") in section
-    assert "Composite minus vision only: -20 points" in section and ": decided." in section
+    assert "Composite minus vision only: -20.0 points" in section and ": decided." in section
     assert "| hints-mc-curvature | - | - | - | - | - | - |" in section  # not trained
     assert "| hints-mc-on_track | 425.0 [" in section and "| 1.00 [1.00, 1.00] | - | " in section
     locomotion.learners_report(runs, ["halfcheetah"], path)
