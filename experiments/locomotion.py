@@ -14,6 +14,7 @@ when it finishes; dagger and gail start only then.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 from hintsjax.reproduce.archive import ARCHIVE, about_lines, read_about, sweep_seconds
@@ -119,8 +120,8 @@ def findings(runs: Path, env: str, kept: dict[tuple[str, str], list[str]]) -> st
 def settings_lines(runs: Path, env: str, labels: list[str],
                    kept: dict[tuple[str, str], list[str]] | None = None) -> list[str]:
     """The PPO settings the rows were trained with (each run's config.yaml), grouped when they
-    differ; rows not yet run are listed at today's defaults (config.ENV_DEFAULTS), as are kept
-    rows (the previous report listed them so)."""
+    differ, naming the fields where a row's are not today's defaults; rows not yet run are listed at
+    today's defaults (config.ENV_DEFAULTS), as are kept rows (the previous report listed them so)."""
     from hintsjax.settings.layers import run_config
 
     default, kept = run_config({"env": env}).ppo, kept or {}
@@ -129,11 +130,21 @@ def settings_lines(runs: Path, env: str, labels: list[str],
         ppo = trained_ppo(runs, env, label)
         note = (f"kept rows {KEPT}; config.ENV_DEFAULTS when last reported" if kept_row(runs, env, label, kept)
                 else "not run yet; config.ENV_DEFAULTS" if ppo is None else "config.ENV_DEFAULTS" if ppo == default
-                else "not today's config.ENV_DEFAULTS")
+                else f"not today's config.ENV_DEFAULTS: {differ(changed_fields(ppo, default))}")
         groups.setdefault(f"{ppo_text(ppo or default)} ({note})", []).append(label)
     if len(groups) == 1:
         return [f"PPO: {next(iter(groups))}."]
     return ["PPO, as each row was trained:", "", *(f"- {', '.join(rows)}: {text}." for text, rows in groups.items())]
+
+
+def changed_fields(ppo, default) -> list[str]:
+    """The PPOConfig fields in which `ppo` (a row's, as trained) differs from today's `default`."""
+    return [f.name for f in dataclasses.fields(ppo) if getattr(ppo, f.name) != getattr(default, f.name)]
+
+
+def differ(names: list[str]) -> str:
+    """'epochs, encoder_lr differ' / 'kl_adaptive_lr differs'."""
+    return f"{', '.join(names)} {'differs' if len(names) == 1 else 'differ'}"
 
 
 def report(runs: Path, force: bool = False) -> None:

@@ -199,7 +199,7 @@ def test_locomotion_report_states_the_settings_each_row_was_trained_with(tmp_pat
         "(config.ENV_DEFAULTS).",
         "- hints-fc-speed: 256 envs per seed, batches of 1024, 8 epochs of minibatches of 256, learning rates "
         "encoder 0.001, actor 0.0003, critic 0.001, KL early stop at 0.1, the encoder trained by the actor alone "
-        "(not today's config.ENV_DEFAULTS).",
+        "(not today's config.ENV_DEFAULTS: epochs, encoder_lr, target_kl, critic_trains_encoder, kl_adaptive_lr differ).",
         "- ppo_state: 256 envs per seed, batches of 1024, 4 epochs of minibatches of 256, learning rates "
         "encoder 0.0003, actor 0.0003, critic 0.001, KL early stop at 0.05 with the learning rates adapted to the KL "
         "(not run yet; config.ENV_DEFAULTS)."]
