@@ -28,6 +28,8 @@ from hintsjax.reproduce.markdown import markdown_table
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ARCHIVE = RESULTS / "runs" / "classic20"
+ENVS = ("pendulum", "acrobot", "idp", "halfcheetah")  # the envs scored; --report reports each one found
+SCORED = RESULTS / "runs"  # the committed scores: SCORED/<--runs' name>/<env>, what a fresh checkout reports
 TABLE_HINTS = {**TABLE2_HINTS, "halfcheetah": LOCOMOTION_HINTS["halfcheetah"]}
 TABLE_FILES = {**{env: "classic_table2.md" for env in TABLE2_HINTS},  # the 5-seed means, where no 20-seed archive is whole
                "halfcheetah": "locomotion_table3.md"}
@@ -103,6 +105,12 @@ def rho_interval(score: np.ndarray, rows: list[np.ndarray], rng: np.random.Gener
     return point, float(low), float(high)
 
 
+def scored(runs: Path, env: str) -> Path:
+    """The runs folder holding `env`'s scores: --runs where it was scored there, else the committed
+    copy of that folder (SCORED/<its name>), so --report on a fresh checkout rebuilds the file."""
+    return runs if (score_folder(runs, env) / "scores.json").is_file() else SCORED / runs.name
+
+
 def report(runs: Path, env_list: list[str], out: Path) -> None:
     from hintsjax.reproduce import stats
 
@@ -120,11 +128,12 @@ def report(runs: Path, env_list: list[str], out: Path) -> None:
     summary, per_env = [], []
     rhos: dict[str, list[float]] = {}
     for env in env_list:
-        path = score_folder(runs, env) / "scores.json"
+        root = scored(runs, env)
+        path = score_folder(root, env) / "scores.json"
         if not path.is_file():
             continue
         result = json.loads(path.read_text())
-        for folder in sorted(runs.glob(f"{env}-probe*")):  # the probe at other fractions of the budget
+        for folder in sorted(root.glob(f"{env}-probe*")):  # the probe at other fractions of the budget
             extra = json.loads((folder / "scores.json").read_text())
             label = f"probe {folder.name.split('-probe')[1]}"
             result["scores"][label] = extra["scores"]["probe"]
@@ -146,7 +155,7 @@ def report(runs: Path, env_list: list[str], out: Path) -> None:
                 cell.append(f"{mean:.3g} ± {std:.2g}")
             point, low, high = rho_interval(values, rows, rng)
             rhos.setdefault(name, []).append(point)
-            steps = _score_env_steps(name, result, score_folder(runs, env), len(hints))
+            steps = _score_env_steps(name, result, score_folder(root, env), len(hints))
             seconds = result["seconds"][name]
             full_steps = _table_env_steps(env, len(hints))
             summary.append([env, name, f"{point:.2f}" + ("" if np.isnan(low) else f" [{low:.2f}, {high:.2f}]"),
@@ -161,7 +170,8 @@ def report(runs: Path, env_list: list[str], out: Path) -> None:
               "angular velocity) are ordered differently by the resampled seeds than by the means. Mean rho over the envs: " + ", ".join(f"{n} {np.mean(v):.2f}" for n, v in rhos.items())
               + " (target: 0.7 at 10% of the cost).", ""]
     lines += per_env
-    about = json.loads((runs / "about.json").read_text()) if (runs / "about.json").is_file() else {}
+    about_path = next((p for p in (runs / "about.json", SCORED / runs.name / "about.json") if p.is_file()), None)
+    about = json.loads(about_path.read_text()) if about_path else {}
     lines += ["## Where these numbers come from", "", *(f"- {k}: {v}" for k, v in about.items()), ""]
     out.write_text("\n".join(lines))
     print(f"wrote {out}")
@@ -186,7 +196,8 @@ def _score_env_steps(name: str, result: dict, folder: Path, hints: int) -> int:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--envs", default="pendulum,acrobot,idp")
+    parser.add_argument("--envs", default=None, help="scoring: pendulum,acrobot,idp unless given; --report: all "
+                        f"of {','.join(ENVS)} that were scored")
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--probe-fraction", type=float, default=DEFAULT_FRACTION)
     parser.add_argument("--scores", default="information,probe")
@@ -194,7 +205,7 @@ def main() -> None:
     parser.add_argument("--report", action="store_true")
     parser.add_argument("--out", type=Path, default=RESULTS / "hint_ranking.md")
     args = parser.parse_args()
-    env_list = args.envs.split(",")
+    env_list = args.envs.split(",") if args.envs else list(ENVS if args.report else ENVS[:3])
     if args.report:
         report(args.runs, env_list, args.out)
         return

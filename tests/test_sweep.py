@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import csv
 import json
+import shutil
 import sys
 from pathlib import Path
 
@@ -251,6 +252,31 @@ def test_a_table_report_runs_end_to_end(script, tmp_path, monkeypatch):
     text = next((tmp_path / "results").glob("*.md")).read_text()
     assert "References (no budget limit): expert_ppo is PPO on the state" in text
     assert f"| ppo_rgb | {report.cell(report.load(tmp_path / 'runs', env, 'ppo_rgb'))} |" in text
+
+
+def test_hint_ranking_s_report_rebuilds_the_committed_file_on_a_fresh_checkout(tmp_path, monkeypatch):
+    """`python experiments/hint_ranking.py --report` where --runs (runs/hint_ranking) holds no
+    scores reads the committed ones (experiments/results/runs/hint_ranking): the pendulum's lines
+    (the first env, so the same bootstrap draws) are the committed file's. A runs folder of its own
+    is read before them."""
+    import hint_ranking
+
+    out, runs = tmp_path / "hint_ranking.md", tmp_path / "hint_ranking"
+    monkeypatch.setattr(sys, "argv", ["hint_ranking.py", "--report", "--envs", "pendulum", "--runs", str(runs), "--out", str(out)])
+    hint_ranking.main()
+    committed = (hint_ranking.RESULTS / "hint_ranking.md").read_text().splitlines()
+    pendulum = [line for line in out.read_text().splitlines() if line.startswith(("| pendulum |", "| angular_velocity |"))]
+    assert len(pendulum) == 4 and set(pendulum) <= set(committed)
+    assert "- hardware: one NVIDIA H100" in out.read_text()  # the committed about.json
+    shutil.copytree(hint_ranking.SCORED / "hint_ranking" / "idp", runs / "idp")
+    scores = json.loads((runs / "idp" / "scores.json").read_text())
+    scores["scores"]["information"] = [[-x for x in row] for row in scores["scores"]["information"]]  # ranked backwards
+    (runs / "idp" / "scores.json").write_text(json.dumps(scores))
+    monkeypatch.setattr(hint_ranking, "RESAMPLES", 20)
+    monkeypatch.setattr(sys, "argv", ["hint_ranking.py", "--report", "--envs", "idp", "--runs", str(runs), "--out", str(out)])
+    hint_ranking.main()
+    idp = next(line for line in out.read_text().splitlines() if line.startswith("| idp | information |"))
+    assert idp.split("|")[3].strip().startswith("-0.86")  # the committed rho, 0.86, the other way round
 
 
 def test_an_archived_run_reads_as_the_run_did(tmp_path, monkeypatch):
