@@ -114,6 +114,13 @@ def seed_means(path: Path) -> np.ndarray:
     return np.asarray(data["evaluations"][0]["seed_means"] if "evaluations" in data else data["seed_means"])
 
 
+def report_runs(runs: Path, cases: list[tuple[str, str]], frames: int) -> Path:
+    """The folder --report reads: --runs where a case finished there, else its committed copy
+    (experiments/results/runs/<its name>), so the report on a fresh checkout rebuilds the file."""
+    finished = any((runs / f"{env}-{hint}-learned-k{frames}" / "eval.json").is_file() for env, hint in cases)
+    return runs if finished else RESULTS / "runs" / runs.name
+
+
 def report(runs: Path, cases: list[tuple[str, str]], frames: int, out: Path) -> None:
     from hintsjax.reproduce import stats
 
@@ -220,10 +227,11 @@ def main() -> None:
     parts = tuple(x for x in args.parts.split(",") if x)
     if not parts or any(x not in PARTS for x in parts):
         parser.exit(2, f"error: unknown --parts {args.parts!r}; valid choices: {', '.join(PARTS)}\n")
-    args.runs.mkdir(parents=True, exist_ok=True)
     if args.report:
-        report(args.runs, cases, args.frames, args.out)
-    elif args.frames_sweep:
+        report(report_runs(args.runs, cases, args.frames), cases, args.frames, args.out)
+        return
+    args.runs.mkdir(parents=True, exist_ok=True)
+    if args.frames_sweep:
         frames_sweep(args.runs, cases, [int(k) for k in args.frames_sweep.split(",")], args.gen_seeds)
     else:
         for env, hint in cases:

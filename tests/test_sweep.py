@@ -279,6 +279,18 @@ def test_hint_ranking_s_report_rebuilds_the_committed_file_on_a_fresh_checkout(t
     assert idp.split("|")[3].strip().startswith("-0.86")  # the committed rho, 0.86, the other way round
 
 
+def test_learned_hints_report_rebuilds_the_committed_file_on_a_fresh_checkout(tmp_path, monkeypatch):
+    """`python experiments/learned_hints.py --report` where --runs holds no finished case reads the
+    committed runs (experiments/results/runs/learned_hints) and writes the committed file."""
+    import learned_hints
+
+    out = tmp_path / "learned_hints.md"
+    monkeypatch.setattr(sys, "argv", ["learned_hints.py", "--report", "--runs", str(tmp_path / "learned_hints"), "--out", str(out)])
+    learned_hints.main()
+    assert out.read_text() == (learned_hints.RESULTS / "learned_hints.md").read_text()
+    assert not (tmp_path / "learned_hints").exists()  # a report makes no runs folder
+
+
 def test_an_archived_run_reads_as_the_run_did(tmp_path, monkeypatch):
     """archive_runs keeps what the tables need; with the run folder gone, the readers fall back
     to the archive and give the same cells (the curve averaged into CURVE_POINTS bins)."""
