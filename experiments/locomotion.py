@@ -117,24 +117,49 @@ def findings(runs: Path, env: str, kept: dict[tuple[str, str], list[str]]) -> st
             "(Beyond: the means differ by more than the two stds of the per-seed means together.)")
 
 
-def settings_lines(runs: Path, env: str, labels: list[str],
-                   kept: dict[tuple[str, str], list[str]] | None = None) -> list[str]:
+def settings_lines(runs: Path, env: str, labels: list[str], kept: dict[tuple[str, str], list[str]] | None = None,
+                   reported: dict[tuple[str, str], str] | None = None) -> list[str]:
     """The PPO settings the rows were trained with (each run's config.yaml), grouped when they
     differ, naming the fields where a row's are not today's defaults; rows not yet run are listed at
-    today's defaults (config.ENV_DEFAULTS), as are kept rows (the previous report listed them so)."""
+    today's defaults (config.ENV_DEFAULTS); kept rows as the previous report listed them (`reported`,
+    else today's defaults)."""
     from hintsjax.settings.layers import run_config
 
-    default, kept = run_config({"env": env}).ppo, kept or {}
+    default, kept, reported = run_config({"env": env}).ppo, kept or {}, reported or {}
     groups: dict[str, list[str]] = {}
     for label in labels:
         ppo = trained_ppo(runs, env, label)
-        note = (f"kept rows {KEPT}; config.ENV_DEFAULTS when last reported" if kept_row(runs, env, label, kept)
-                else "not run yet; config.ENV_DEFAULTS" if ppo is None else "config.ENV_DEFAULTS" if ppo == default
+        if kept_row(runs, env, label, kept):
+            text = reported.get((env, label), reported.get((env, ""), ppo_text(default)))
+            groups.setdefault(f"{text} (kept rows {KEPT}; as last reported)", []).append(label)
+            continue
+        note = ("not run yet; config.ENV_DEFAULTS" if ppo is None else "config.ENV_DEFAULTS" if ppo == default
                 else f"not today's config.ENV_DEFAULTS: {differ(changed_fields(ppo, default))}")
         groups.setdefault(f"{ppo_text(ppo or default)} ({note})", []).append(label)
     if len(groups) == 1:
         return [f"PPO: {next(iter(groups))}."]
     return ["PPO, as each row was trained:", "", *(f"- {', '.join(rows)}: {text}." for text, rows in groups.items())]
+
+
+def reported_settings(path: Path) -> dict[tuple[str, str], str]:
+    """The PPO settings the report at `path` gave each row (settings_lines' lines, their notes
+    dropped), by (section, label); (section, "") for a section's one 'PPO: ...' line. A kept row
+    keeps them: today's defaults may have changed since it trained."""
+    found: dict[tuple[str, str], str] = {}
+    section, listing = "", False
+    for line in (path.read_text() if path.exists() else "").splitlines():
+        if line.startswith("## "):
+            section, listing = line[3:].split(" (")[0], False
+        elif line.startswith("PPO: "):
+            found[(section, "")] = line[len("PPO: "):].removesuffix(".").rsplit(" (", 1)[0]
+        elif line == "PPO, as each row was trained:":
+            listing = True
+        elif listing and line.startswith("- "):
+            rows, text = line[2:].split(": ", 1)
+            found.update({(section, label): text.removesuffix(".").rsplit(" (", 1)[0] for label in rows.split(", ")})
+        elif line:
+            listing = False
+    return found
 
 
 def changed_fields(ppo, default) -> list[str]:
@@ -150,7 +175,7 @@ def differ(names: list[str]) -> str:
 def report(runs: Path, force: bool = False) -> None:
     from hintsjax.settings.layers import run_config
 
-    kept = kept_rows(RESULTS / REPORT)
+    kept, reported = kept_rows(RESULTS / REPORT), reported_settings(RESULTS / REPORT)
     lines = [
         "# Locomotion: the paper's Table 3 (Ant, Cheetah, Humanoid rows), reproduced", "",
         "Each cell: mean ± std of the episode return over 5 training seeds x 50 evaluation episodes",
@@ -166,7 +191,7 @@ def report(runs: Path, force: bool = False) -> None:
     for env in ENVS:
         learners = [label for label in table_runs(env) if label not in REFERENCES]  # at the table's budget
         lines += [f"## {env} ({run_config({'env': env}).ppo.total_env_steps / 1e6:g} M env steps per seed)", "",
-                  *settings_lines(runs, env, learners, kept), ""]
+                  *settings_lines(runs, env, learners, kept, reported), ""]
         rows = []
         for label in table_runs(env):
             if (row := kept_row(runs, env, label, kept)) is not None:

@@ -347,6 +347,7 @@ def test_a_report_keeps_the_rows_of_runs_it_cannot_read(tmp_path, monkeypatch):
     (tmp_path / "results").mkdir()
     (tmp_path / "results" / locomotion.REPORT).write_text("\n".join([
         "## ant (5 M env steps per seed)", "",
+        "PPO: 64 envs per seed, as the kept row trained (kept rows †; config.ENV_DEFAULTS when last reported).", "",
         "| agent | ours | paper | training return, last 10% | updates with KL > 0.5 | wall-clock (s) |",
         "|---|---|---|---|---|---|",
         "| ppo_rgb | 1081.5 ± 175.9 (170.2) | 1015.49 ± 3.3 | 1049.8 ± 88.7 | 0.0% | 915 |",
@@ -360,6 +361,10 @@ def test_a_report_keeps_the_rows_of_runs_it_cannot_read(tmp_path, monkeypatch):
     assert "| ppo_state | 5.0 ± 1.0 (0.0) |" in text and "3764.1" not in text
     assert f"| hints-fc-speed {markdown.KEPT}" not in text and f"| dagger {markdown.KEPT}" not in text
     assert "PPO-RGB 1081.5" in text  # the kept row's mean counts in the findings
+    assert f"- ppo_rgb: 64 envs per seed, as the kept row trained (kept rows {markdown.KEPT}; as last reported)." in text
+    locomotion.report(tmp_path / "runs", force=True)  # and again from the report just written
+    assert f"- ppo_rgb: 64 envs per seed, as the kept row trained (kept rows {markdown.KEPT}; as last reported)." in \
+        (tmp_path / "results" / locomotion.REPORT).read_text()
     assert f"Rows marked {markdown.KEPT} are kept from the previous report" in text
 
 
