@@ -153,7 +153,7 @@ def ordering_lines(runs: Path, env: str) -> list[str]:
     return lines
 
 
-def learners_report(runs: Path, names: list[str], path: Path) -> None:
+def learners_report(runs: Path, names: list[str], path: Path, force: bool = False) -> None:
     """The car's learner rows of Table 3 (PPO-RGB and HINTS-MC with each hint column) from a runs
     folder at any seed count (the 20-seed table, issue 46): per row and track variant the IQM
     [95 % CI] of the per-seed mean returns, P(row > PPO-RGB) and the progress; O1 and O3; learning
@@ -193,7 +193,7 @@ def learners_report(runs: Path, names: list[str], path: Path) -> None:
                              f"{env} (standard tracks): Table 3 learners, {seeds} seeds")
     lines += references_lines(runs, env)
     about = {k: v for k, v in read_about(ARCHIVE / runs.name).items() if k.split()[0] in ENVS}  # and "<env> references"
-    write_section(path, GENERATED, [*lines, *about_lines(about)])
+    write_section(path, GENERATED, [*lines, *about_lines(about)], force)
 
 
 def references_lines(runs: Path, env: str) -> list[str]:

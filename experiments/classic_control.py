@@ -261,7 +261,7 @@ def report(runs: Path, force: bool = False) -> None:
             plot_curves(env_curves, RESULTS / f"classic_curves_{env}.png", f"{env}: Table 2 agents, 5 seeds")
 
 
-def learners_report(runs: Path, envs: list[str], path: Path) -> None:
+def learners_report(runs: Path, envs: list[str], path: Path, force: bool = False) -> None:
     """The learner rows of Table 2 (and of Table 4 where run) of `envs` from a runs folder at any
     seed count, with IQM [95% CI] and the orderings as probabilities of improvement."""
     lines = [f"# Classic control at more seeds: the learner rows of Tables 2 and 4 ({runs})", "",
@@ -294,7 +294,7 @@ def learners_report(runs: Path, envs: list[str], path: Path) -> None:
                       *scheme_table(runs, env, ROW_OURS, ROW_PAPER)]
             found = scheme_findings(runs, env)
             lines += ["", *([found, ""] if found else []), scheme_orderings(runs, env), ""]
-    write_report(path, lines, force=True)
+    write_report(path, lines, force)
 
 
 def scheme_orderings(runs: Path, env: str) -> str:

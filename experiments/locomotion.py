@@ -239,7 +239,7 @@ def ordering_lines(runs: Path, env: str) -> list[str]:
     return [ordering_line(*pair) for pair in pairs if pair[2] is not None and pair[4] is not None]
 
 
-def learners_report(runs: Path, names: list[str], path: Path) -> None:
+def learners_report(runs: Path, names: list[str], path: Path, force: bool = False) -> None:
     """The learner rows of Table 3 for `names` from a runs folder at any seed count (the 20-seed
     table, issue 46): per row mean ± std, IQM [95 % CI] and P(row > PPO-RGB); the orderings O1,
     O4 and O5; learning curves with bootstrap bands. Written as the section of `path` that
@@ -270,7 +270,7 @@ def learners_report(runs: Path, names: list[str], path: Path) -> None:
         lines += ["", ORDERINGS_ABOUT, "", *ordering_lines(runs, env), ""]
         lines += curve_lines(runs, env, list(trained), RESULTS / f"table3_seeds20_curves_{env}.png",
                              f"{env}: Table 3 learners, {', '.join(map(str, seeds))} seeds")
-    write_section(path, GENERATED, [*lines, *about_lines(about)])
+    write_section(path, GENERATED, [*lines, *about_lines(about)], force)
 
 
 GENERATED = generated_marker("locomotion.py")

@@ -389,6 +389,24 @@ def test_a_report_that_would_blank_committed_cells_is_refused(tmp_path, capsys):
     assert "-468.3" not in path.read_text()
 
 
+def test_a_learners_report_that_would_blank_committed_cells_is_refused(tmp_path, capsys):
+    """A learners report (write_section) refuses as write_report does, leaving the file as it was,
+    the hand-written text above its section too: classic_seeds20.md holds Table 4 rows whose runs
+    were lost, which `--learners-report` without --force used to drop."""
+    path, marker = tmp_path / "seeds20.md", markdown.generated_marker("classic_control.py")
+    committed = "\n".join(["# Plan", "", "Written by hand.", "", marker, "", "## pendulum (20 seeds per row)", "",
+                            "| agent | ours |", "|---|---|", "| ppo_rgb | -1277.8 ± 69.9 (15.1) |", ""])
+    path.write_text(committed)
+    with pytest.raises(SystemExit) as exit_info:
+        markdown.write_section(path, marker, ["## pendulum (20 seeds per row)", "", "| agent | ours |", "|---|---|",
+                                              "| ppo_rgb | - |"])
+    assert exit_info.value.code == 2 and "pendulum/ppo_rgb" in capsys.readouterr().err
+    assert path.read_text() == committed
+    markdown.write_section(path, marker, ["## pendulum (20 seeds per row)", "", "| agent | ours |", "|---|---|",
+                                          "| ppo_rgb | - |"], force=True)
+    assert "-1277.8" not in path.read_text() and path.read_text().startswith("# Plan\n\nWritten by hand.\n")
+
+
 def test_curves_beside_kept_rows_go_to_their_own_figure(tmp_path, monkeypatch):
     """While some rows are kept (no curves to draw), their committed figure stays as it was and
     the newer runs' curves get a sibling figure; with no kept rows the figure is redrawn."""

@@ -93,10 +93,11 @@ def generated_marker(script: str) -> str:
     return f"{GENERATED_OPENING}experiments/{script} --learners-report, down to the next such line -->"
 
 
-def write_section(path: Path, marker: str, lines: list[str]) -> None:
+def write_section(path: Path, marker: str, lines: list[str], force: bool = False) -> None:
     """Write `lines` as the section of `path` that `marker` opens, from the marker down to the
     next generated marker (or the end); the text above it and the other scripts' sections stay.
-    A file without the marker gets the section at its end."""
+    A file without the marker gets the section at its end. Refused as `refuse_lost_cells` says
+    unless `force`."""
     text = path.read_text() if path.exists() else ""
     before, after = text, ""
     if marker in text:
@@ -106,7 +107,7 @@ def write_section(path: Path, marker: str, lines: list[str]) -> None:
     while lines and not lines[-1]:  # one blank line between sections, none at the end
         lines = lines[:-1]
     rest = ["", *after.rstrip("\n").splitlines()] if after else []
-    write_report(path, [*before.rstrip("\n").splitlines(), "", marker, "", *lines, *rest], force=True)
+    write_report(path, [*before.rstrip("\n").splitlines(), "", marker, "", *lines, *rest], force=force)
 
 
 def write_report(path: Path, lines: list[str], force: bool = False) -> None:

@@ -34,7 +34,7 @@ class TableScript:
     envs: tuple[str, ...]  # --envs' choices; all of them by default
     tables: dict[int | str, Callable[[list[str]], list[str]]]
     report: Callable[[Path, bool], None]  # --report: (runs, --force)
-    learners_report: Callable[[Path, list[str], Path], None] | None = None  # --learners-report FILE: (runs, envs, FILE)
+    learners_report: Callable[[Path, list[str], Path, bool], None] | None = None  # --learners-report FILE: (runs, envs, FILE, --force)
     seeds: int = 5  # --seeds' default
     extra_arguments: Callable[[argparse.ArgumentParser], None] | None = None  # the script's own options
     # the script's own mode, tried first (before the parent keeps off the GPU); True when it ran
@@ -49,7 +49,8 @@ def add_arguments(parser: argparse.ArgumentParser, runs: str, envs: tuple[str, .
     """The options every sweep script takes (`runs`: the default runs folder; `seeds`: the default seeds per run)."""
     parser.add_argument("--report", action="store_true", help="only write the result tables and curves")
     parser.add_argument("--force", action="store_true",
-                        help="with --report: rewrite a table even where it would blank cells the committed one fills")
+                        help="with --report or --learners-report: rewrite a table even where it would blank cells "
+                             "the committed one fills")
     parser.add_argument("--envs", default=",".join(envs), help=f"comma-separated subset of {', '.join(envs)}")
     parser.add_argument("--runs", type=Path, default=Path(runs))
     parser.add_argument("--workers", type=int, default=1, help="configurations trained at once")
@@ -135,7 +136,7 @@ def table_main(script: TableScript) -> None:
         return
     if getattr(args, "learners_report", None):
         archive_runs(args.runs, script.run_ids())
-        script.learners_report(args.runs, chosen_envs(parser, args, script.envs), args.learners_report)
+        script.learners_report(args.runs, chosen_envs(parser, args, script.envs), args.learners_report, args.force)
         return
     if args.report:
         archive_runs(args.runs, script.run_ids())
