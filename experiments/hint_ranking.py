@@ -24,12 +24,12 @@ from pathlib import Path
 import numpy as np
 from classic_control import TABLE2_HINTS
 from locomotion import HINTS as LOCOMOTION_HINTS
+from hintsjax.reproduce import archive
 from hintsjax.reproduce.markdown import markdown_table
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ARCHIVE = RESULTS / "runs" / "classic20"
 ENVS = ("pendulum", "acrobot", "idp", "halfcheetah")  # the envs scored; --report reports each one found
-SCORED = RESULTS / "runs"  # the committed scores: SCORED/<--runs' name>/<env>, what a fresh checkout reports
 TABLE_HINTS = {**TABLE2_HINTS, "halfcheetah": LOCOMOTION_HINTS["halfcheetah"]}
 TABLE_FILES = {**{env: "classic_table2.md" for env in TABLE2_HINTS},  # the 5-seed means, where no 20-seed archive is whole
                "halfcheetah": "locomotion_table3.md"}
@@ -107,8 +107,8 @@ def rho_interval(score: np.ndarray, rows: list[np.ndarray], rng: np.random.Gener
 
 def scored(runs: Path, env: str) -> Path:
     """The runs folder holding `env`'s scores: --runs where it was scored there, else the committed
-    copy of that folder (SCORED/<its name>), so --report on a fresh checkout rebuilds the file."""
-    return runs if (score_folder(runs, env) / "scores.json").is_file() else SCORED / runs.name
+    copy of that folder (archive.ARCHIVE/<its name>), so --report on a fresh checkout rebuilds the file."""
+    return runs if (score_folder(runs, env) / "scores.json").is_file() else archive.ARCHIVE / runs.name
 
 
 def report(runs: Path, env_list: list[str], out: Path) -> None:
@@ -170,8 +170,7 @@ def report(runs: Path, env_list: list[str], out: Path) -> None:
               "angular velocity) are ordered differently by the resampled seeds than by the means. Mean rho over the envs: " + ", ".join(f"{n} {np.mean(v):.2f}" for n, v in rhos.items())
               + " (target: 0.7 at 10% of the cost).", ""]
     lines += per_env
-    about_path = next((p for p in (runs / "about.json", SCORED / runs.name / "about.json") if p.is_file()), None)
-    about = json.loads(about_path.read_text()) if about_path else {}
+    about = archive.read_about(runs) or archive.read_about(archive.ARCHIVE / runs.name)
     lines += ["## Where these numbers come from", "", *(f"- {k}: {v}" for k, v in about.items()), ""]
     out.write_text("\n".join(lines))
     print(f"wrote {out}")

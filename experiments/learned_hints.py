@@ -23,7 +23,7 @@ import json
 from pathlib import Path
 
 import numpy as np
-from hintsjax.reproduce.archive import about_lines, read_about
+from hintsjax.reproduce.archive import ARCHIVE, about_lines, read_about
 from hintsjax.reproduce.markdown import markdown_table
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -116,9 +116,9 @@ def seed_means(path: Path) -> np.ndarray:
 
 def report_runs(runs: Path, cases: list[tuple[str, str]], frames: int) -> Path:
     """The folder --report reads: --runs where a case finished there, else its committed copy
-    (experiments/results/runs/<its name>), so the report on a fresh checkout rebuilds the file."""
+    (archive.ARCHIVE/<its name>), so the report on a fresh checkout rebuilds the file."""
     finished = any((runs / f"{env}-{hint}-learned-k{frames}" / "eval.json").is_file() for env, hint in cases)
-    return runs if finished else RESULTS / "runs" / runs.name
+    return runs if finished else ARCHIVE / runs.name
 
 
 def report(runs: Path, cases: list[tuple[str, str]], frames: int, out: Path) -> None:

@@ -18,8 +18,8 @@ import dataclasses
 from pathlib import Path
 
 from hintsjax.reproduce.archive import ARCHIVE, about_lines, read_about, sweep_seconds
-from hintsjax.reproduce.markdown import (KEPT, apart_text, cell_stats, generated_marker, kept_rows, markdown_table, write_report,
-                    write_section)
+from hintsjax.reproduce.markdown import (KEPT, apart_text, cell_stats, generated_marker, kept_rows, markdown_table, section_name,
+                    write_report, write_section)
 from hintsjax.reproduce.report import (ORDERINGS_ABOUT, cell, curve_lines, footer, iqm_cell, kl_cell, load, metrics_path,
                     ordering_line, poi_cell, ppo_text, references_note, seed_means, trained_ppo, training_cell, wall_clock)
 from hintsjax.reproduce.sweep import hints_run
@@ -149,7 +149,7 @@ def reported_settings(path: Path) -> dict[tuple[str, str], str]:
     section, listing = "", False
     for line in (path.read_text() if path.exists() else "").splitlines():
         if line.startswith("## "):
-            section, listing = line[3:].split(" (")[0], False
+            section, listing = section_name(line), False
         elif line.startswith("PPO: "):
             found[(section, "")] = line[len("PPO: "):].removesuffix(".").rsplit(" (", 1)[0]
         elif line == "PPO, as each row was trained:":

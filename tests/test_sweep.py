@@ -268,7 +268,7 @@ def test_hint_ranking_s_report_rebuilds_the_committed_file_on_a_fresh_checkout(t
     pendulum = [line for line in out.read_text().splitlines() if line.startswith(("| pendulum |", "| angular_velocity |"))]
     assert len(pendulum) == 4 and set(pendulum) <= set(committed)
     assert "- hardware: one NVIDIA H100" in out.read_text()  # the committed about.json
-    shutil.copytree(hint_ranking.SCORED / "hint_ranking" / "idp", runs / "idp")
+    shutil.copytree(archive.ARCHIVE / "hint_ranking" / "idp", runs / "idp")
     scores = json.loads((runs / "idp" / "scores.json").read_text())
     scores["scores"]["information"] = [[-x for x in row] for row in scores["scores"]["information"]]  # ranked backwards
     (runs / "idp" / "scores.json").write_text(json.dumps(scores))

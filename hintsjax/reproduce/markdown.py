@@ -27,13 +27,18 @@ def markdown_table(header: list[str], rows: list[list[str]]) -> list[str]:
     return [table_line(header), "|" + "---|" * len(header), *map(table_line, rows)]
 
 
+def section_name(heading: str) -> str:
+    """A report section's name from its '## ' heading line: 'ant' of '## ant (5 M env steps per seed)'."""
+    return heading[3:].split(" (")[0]
+
+
 def table_rows(text: str):
     """(section heading, row label without KEPT, its cells) of every row of a report's markdown
     tables, header rows included."""
     section = ""
     for line in text.splitlines():
         if line.startswith("## "):
-            section = line[3:].split(" (")[0]
+            section = section_name(line)
         elif line.startswith("| ") and not line.startswith("|---"):
             label, *cells = [part.strip() for part in line.strip().strip("|").split("|")]
             yield section, label.removesuffix(KEPT).strip(), cells
