@@ -2,7 +2,7 @@
 subcommand per command module, each run exactly as `python -m hintsjax.<command>` runs it.
 
 Each command takes the arguments its kind expects, and `--help` lists them:
-  run                      Hydra's `key=value` overrides of conf/config.yaml (`-m` sweeps a comma list)
+  run                      Hydra's `key=value` settings (docs/settings.md) (`-m` sweeps a comma list)
   generator, rank          `key=value` settings of their own dataclass (hintsjax.cli.arguments)
   evaluate, video, expert, quickstart   a run folder and `--flags` (argparse), as tools on folders take
 """
@@ -64,8 +64,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def run_module(module: str, args: list[str]) -> int:
-    """`python -m <module> <args>` in this process: the module run as __main__ (so Hydra finds
-    run's conf/ beside its file) with sys.argv set as `python -m` sets it; its exit status."""
+    """`python -m <module> <args>` in this process: the module run as __main__ (as Hydra
+    expects of its entry) with sys.argv set as `python -m` sets it; its exit status."""
     saved = sys.argv
     sys.argv = [module, *args]  # runpy puts the module's file in sys.argv[0]
     try:

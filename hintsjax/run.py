@@ -17,11 +17,13 @@ from pathlib import Path
 from typing import Any
 
 import hydra
+from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
 
 from hintsjax.system import checkpoint, compilation_cache, devices, paths, requeue, xla_flags
 from hintsjax.system.errors import (INTERRUPTED, TERMINATED, Terminated, UsageError, command, fail, machines, report_bug,
                                     report_machine, sigterm_as_interrupt)
+from hintsjax.settings import schema
 from hintsjax.settings.config import RunConfig
 from hintsjax.settings.layers import CONFIG_YAML, load_run_config, save_run_config
 from hintsjax.cli import choices, overrides
@@ -117,7 +119,10 @@ def _run(values: dict[str, Any]) -> int:
     return 0
 
 
-@hydra.main(version_base=None, config_path="conf", config_name="config")
+ConfigStore.instance().store(name="config", node=overrides.hydra_config())  # the schema, read off the fields
+
+
+@hydra.main(version_base=None, config_path=None, config_name="config")
 def _hydra_main(cfg: DictConfig) -> None:
     status = main_from_values(OmegaConf.to_container(cfg, resolve=True))
     if status:
@@ -127,9 +132,9 @@ def _hydra_main(cfg: DictConfig) -> None:
 @command
 def checked_main() -> int:
     """The command line checked (every job of a sweep, before the first trains), then Hydra's run.
-    --help: the registries' choices, then Hydra's page of the settings."""
+    --help: the registries' choices, the settings with their help, then Hydra's page of the config."""
     if {"-h", "--help"} & set(sys.argv[1:]):
-        print(f"{__doc__.strip()}\n\n{choices.text()}\n")
+        print(f"{__doc__.strip()}\n\n{choices.text()}\n\n{schema.help_text()}\n")
     overrides.check_overrides(sys.argv[1:])
     if overrides.asks_only_for_warp(sys.argv[1:]):
         xla_flags.drop_determinism()  # nothing under MuJoCo Warp repeats bit for bit; they only cost speed

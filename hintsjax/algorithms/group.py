@@ -22,17 +22,19 @@ import jax.numpy as jnp
 
 from hintsjax import envs
 from hintsjax.system.errors import UsageError
+from hintsjax.settings import fields
+from hintsjax.settings.algorithm_settings import PPOConfig
 from hintsjax.settings.config import RunConfig
 from hintsjax.settings.hint_sources import PROGRAMMATIC
 from hintsjax.algorithms import ppo
 from hintsjax.algorithms.ppo import Hyper, RunnerState
 from hintsjax.algorithms.trainer import Trainer, program_identity
 
-# The PPO settings that fix the shapes of a run's arrays or the structure of its program: the
-# members of a group agree on these; every other PPO number is a Hyper leaf and may differ.
-SHAPES = ("total_env_steps", "num_envs", "batch_size", "epochs", "minibatch_size", "hint_width", "hidden",
-          "starts_per_rollout", "normalize_state", "action_head", "grad_clip", "adam_eps", "gae_segment",
-          "normalize_before_learning", "critic_trains_encoder", "kl_adaptive_lr", "reset_every_update")
+# The PPO settings that fix the shapes of a run's arrays or the structure of its program (those not
+# declared `traced`): the members of a group agree on these; every traced one is a Hyper leaf and may
+# differ, but whether an optional one is set at all (ppo.target_kl) is the program's structure too.
+SHAPES = fields.names(PPOConfig, traced=False)
+OPTIONAL_TRACED = tuple(f.name for f in fields.settings_of(PPOConfig) if f.metadata[fields.TRACED] and fields.allows_none(f))
 
 
 def signature(cfg: RunConfig) -> dict[str, Any]:
@@ -40,7 +42,8 @@ def signature(cfg: RunConfig) -> dict[str, Any]:
     spec = cfg.agent_spec
     return {"env": cfg.env, "variant": cfg.variant, "algorithm": spec.algorithm, "observe": spec.observe,
             "scheme": cfg.scheme if spec.conditioned else None, "seeds": cfg.seeds, "seed": cfg.seed,
-            **{f"ppo.{k}": getattr(cfg.ppo, k) for k in SHAPES}, "ppo.target_kl is set": cfg.ppo.target_kl is not None}
+            **{f"ppo.{k}": getattr(cfg.ppo, k) for k in SHAPES},
+            **{f"ppo.{k} is set": getattr(cfg.ppo, k) is not None for k in OPTIONAL_TRACED}}
 
 
 def groupable(cfg: RunConfig) -> bool:

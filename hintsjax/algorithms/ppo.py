@@ -22,6 +22,7 @@ from flax import struct
 from hintsjax import envs
 from hintsjax.models import normalization
 from hintsjax.models.networks import ActorCritic, lr_labels
+from hintsjax.settings import fields
 from hintsjax.settings.algorithm_settings import PPOConfig
 from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms.ppo_math import (Batch, Transition, clipped_surrogate_loss, gae, gaussian_entropy, gaussian_log_prob,
@@ -30,50 +31,59 @@ from hintsjax.algorithms import kl_rate
 from hintsjax.algorithms.trainer import Trainer, episode_metrics, program_identity
 
 
-@struct.dataclass
+TRACED = fields.names(PPOConfig, traced=True)  # the PPO settings that are Hyper leaves (`traced=True` on the field)
+
+
+@jax.tree_util.register_pytree_with_keys_class
 class Hyper:
     """A configuration's numbers, as arrays in its runner state rather than constants in the
     trace: configurations that differ only in these (and in their hint) train in one compiled
     program, vmapped over a group of them (hintsjax.algorithms.group), as rejax vmaps over its configs.
 
-    `hint_take` and `hint_keep` pick the agent's hint out of the env's: an env built for a group
-    computes every member's hint parts side by side (width U), and a member sees those at
-    `hint_take` where `hint_keep`, 0 elsewhere (its width padded to the group's). Trained alone,
-    a configuration takes its own hint's positions in order, all kept.
+    Its leaves, read as attributes (`hyper.clip_eps`): every PPO setting declared `traced` (TRACED;
+    an optional one is NaN where unset), the agent's `state_noise` (the std of N(0, s^2) on the state it
+    sees in training rollouts), and `hint_take` (int32[W]) and `hint_keep` (bool[W]), which pick the
+    agent's hint out of the env's: an env built for a group computes every member's hint parts side by
+    side, and a member sees those at `hint_take` where `hint_keep`, 0 elsewhere (its width padded to
+    the group's). Trained alone, a configuration takes its own hint's positions in order, all kept.
     """
 
-    encoder_lr: jax.Array
-    actor_lr: jax.Array
-    critic_lr: jax.Array
-    max_grad_norm: jax.Array
-    clip_eps: jax.Array
-    vf_coef: jax.Array
-    ent_coef: jax.Array
-    gamma: jax.Array
-    gae_lambda: jax.Array
-    reward_scale: jax.Array
-    target_kl: jax.Array  # read only where ppo.target_kl is set (a group's members agree on that)
-    state_noise: jax.Array  # std of N(0, s^2) on the state the agent sees in training rollouts
-    hint_take: jax.Array  # int32[W] (W >= 1: [0] and not kept for agents without a hint)
-    hint_keep: jax.Array  # bool[W]
+    __slots__ = ("_leaves",)
+
+    def __init__(self, leaves: dict[str, Any]):
+        object.__setattr__(self, "_leaves", dict(leaves))
+
+    def __getattr__(self, name: str) -> Any:
+        try:
+            return object.__getattribute__(self, "_leaves")[name]
+        except KeyError:
+            raise AttributeError(f"Hyper has no {name!r}; its leaves: {', '.join(self._leaves)}") from None
+
+    def __repr__(self) -> str:
+        return f"Hyper({', '.join(f'{k}={v!r}' for k, v in self._leaves.items())})"
+
+    def tree_flatten_with_keys(self):
+        """Leaves keyed by name, as a dataclass's fields are (checkpoints store them by these names)."""
+        return [(jax.tree_util.GetAttrKey(k), v) for k, v in self._leaves.items()], tuple(self._leaves)
+
+    @classmethod
+    def tree_unflatten(cls, names: tuple[str, ...], leaves: Any) -> "Hyper":
+        return cls(dict(zip(names, leaves)))
 
     @classmethod
     def of(cls, cfg: RunConfig, hint_take: Any = None, width: int | None = None) -> "Hyper":
         """`cfg`'s numbers; its hint at positions `hint_take` of the env's (default: the first d),
         padded to `width` (default: d, its own hint's width)."""
-        ppo, d = cfg.ppo, hint_width(cfg)
+        d = hint_width(cfg)
         take = list(range(d)) if hint_take is None else list(hint_take)
         width = max(d if width is None else width, 1)  # never empty: orbax stores no zero-size array
-        f32 = lambda x: np.asarray(x, np.float32)  # noqa: E731  (numpy: constants, also inside a trace)
-        return cls(
-            **{name: f32(getattr(ppo, name)) for name in (
-                "encoder_lr", "actor_lr", "critic_lr", "max_grad_norm", "clip_eps", "vf_coef", "ent_coef", "gamma",
-                "gae_lambda", "reward_scale")},
-            target_kl=f32(np.nan if ppo.target_kl is None else ppo.target_kl),
-            state_noise=f32(cfg.agent_spec.state_noise),
-            hint_take=np.asarray(take + [0] * (width - d), np.int32),
-            hint_keep=np.arange(width) < d,
-        )
+        f32 = lambda x: np.asarray(np.nan if x is None else x, np.float32)  # noqa: E731  (numpy: constants, also inside a trace)
+        return cls({
+            **{name: f32(getattr(cfg.ppo, name)) for name in TRACED},
+            "state_noise": f32(cfg.agent_spec.state_noise),
+            "hint_take": np.asarray(take + [0] * (width - d), np.int32),
+            "hint_keep": np.arange(width) < d,
+        })
 
 
 def hint_width(cfg: RunConfig) -> int:

@@ -2,7 +2,7 @@
 
 Hydra answers a bad argument with several lines and exit 1, and a sweep (`-m`) runs its jobs
 one after another, so a bad value in the third job fails after two have trained. Here every
-argument is read first: a key that config.yaml lacks, an override Hydra's grammar cannot read,
+argument is read first: a key that is no setting, an override Hydra's grammar cannot read,
 `+key` for a key that exists or `~key`, an unknown launcher; and a sweep is expanded into its
 jobs (Hydra's own basic sweeper's order), each job's values given to `check` before the first
 job starts. Each problem is a `UsageError` (one line, exit 2) and nothing is written.
@@ -22,6 +22,7 @@ from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import OverrideParseException
 
 from hintsjax.system.errors import UsageError
+from hintsjax.settings import schema
 
 # Hydra's own flags that take the next argument as their value.
 HYDRA_VALUE_FLAGS = {"--config-name", "-cn", "--config-path", "-cp", "--config-dir", "-cd", "--cfg", "-c",
@@ -36,16 +37,27 @@ LIST_KEYS = {"eval_variants", "ppo.hidden", "gail.disc_hidden"}  # settings whos
 TEXT_KEYS = {"name", "out_dir", "resume", "expert", "hints_from", "hint_source", "eval_hint_source"}  # names, paths
 
 
+# Hydra's own sections of the run command's config: no log files or output folders of its own (a run
+# makes its folder), a sweep's multirun.yaml in out_dir.
+HYDRA_SECTIONS = {
+    "defaults": ["_self_", {"override hydra/hydra_logging": "disabled"}, {"override hydra/job_logging": "disabled"}],
+    "hydra": {"output_subdir": None, "run": {"dir": "."}, "sweep": {"dir": "${out_dir}", "subdir": "."}},
+}
+
+
 def defaults() -> dict[str, Any]:
-    """conf/config.yaml's values, what Hydra hands over for every key the command line left alone."""
-    conf = yaml.safe_load((Path(__file__).parents[1] / "conf" / "config.yaml").read_text())
-    return {k: v for k, v in conf.items() if k not in ("defaults", "hydra")}  # not Hydra's own sections
+    """What Hydra hands over for every key the command line left alone (schema.command_line_defaults)."""
+    return schema.command_line_defaults()
+
+
+def hydra_config() -> dict[str, Any]:
+    """The run command's config as Hydra's ConfigStore holds it: the settings and Hydra's sections."""
+    return {**defaults(), **copy.deepcopy(HYDRA_SECTIONS)}
 
 
 def config_keys() -> list[str]:
-    """Every key the command line accepts (conf/config.yaml's, nested ones as section.key)."""
-    conf = defaults()
-    return [*conf, *(f"{section}.{k}" for section, values in conf.items() if isinstance(values, dict) for k in values)]
+    """Every key the command line accepts (nested ones as section.key)."""
+    return schema.keys()
 
 
 def check_launcher(name: str) -> None:
@@ -94,7 +106,7 @@ def check_overrides(argv: list[str]) -> None:
             close = difflib.get_close_matches(key, keys, n=1)
             hint = f"did you mean {close[0]!r}? " if close else ""
             raise UsageError(f"unknown config key {key!r}; {hint}valid: {', '.join(k for k in keys if '.' not in k)}, "
-                             "ppo.<key>, dagger.<key>, gail.<key> (hintsjax/conf/config.yaml)")
+                             "ppo.<key>, dagger.<key>, gail.<key> (docs/settings.md)")
     parsed = parse(overrides)
     if not MULTIRUN_FLAGS & set(argv):
         for arg, override in zip(overrides, parsed, strict=True):
@@ -148,7 +160,7 @@ def sweep_jobs(argv: list[str]) -> list[tuple[str, dict[str, Any]]]:
         return []
     overrides = [o for o in parse(overrides_of(argv)) if not _is_hydras(o.key_or_group)]
     swept = {o.key_or_group for o in overrides if o.is_sweep_override()}
-    base, jobs = defaults(), []  # config.yaml read once, copied for each job
+    base, jobs = defaults(), []  # copied for each job
     for batch in BasicSweeper.split_arguments(overrides, None):
         for job in batch:
             values, label = copy.deepcopy(base), []

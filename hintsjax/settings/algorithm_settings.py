@@ -8,6 +8,7 @@ import math
 from dataclasses import dataclass
 
 from hintsjax.system.errors import UsageError, require_positive, require_range
+from hintsjax.settings.fields import check_choices, setting
 
 
 # The policy's action distribution (`ppo.action_head`; the car's learning measurements, issue 26):
@@ -27,55 +28,52 @@ GRAD_CLIPS = ("global", "per_part")
 class PPOConfig:
     """PPO settings (SPEC section 5). The budget is counted in environment steps."""
 
-    total_env_steps: int = 200_000
-    num_envs: int = 16  # a speed choice: it does not change the budget (an env's TRAINING may set its own, which wins)
-    batch_size: int = 1024  # transitions per update: num_envs * rollout length
-    epochs: int = 8
-    minibatch_size: int = 256
-    gamma: float = 0.99
-    gae_lambda: float = 0.95
-    clip_eps: float = 0.2
-    vf_coef: float = 0.5
-    ent_coef: float = 0.01
-    max_grad_norm: float = 0.5
-    encoder_lr: float = 1e-3
-    actor_lr: float = 3e-4
-    critic_lr: float = 1e-3
-    hint_width: int = 64
-    hidden: tuple[int, ...] = (256, 256)
-    reward_scale: float = 1.0  # rewards are multiplied by this for learning (not for logging)
-    # Draw each env's next start once per rollout rather than on every step (AutoReset.step's
-    # `fresh`): for envs whose reset is dear (the car's track is 800 sequential trace steps).
-    starts_per_rollout: bool = False
-    # KL early stop (as Stable-Baselines3's target_kl): within an update, once a minibatch's approx.
-    # KL from the rollout policy exceeds 1.5 x target_kl, that minibatch and the rest of the
-    # update's epochs take no step. None: off (Table 5 has none).
-    target_kl: float | None = None
-    # State agents: normalise the state by its running mean and std (hintsjax.models.normalization).
-    normalize_state: bool = False
-    action_head: str = "gaussian"  # one of ACTION_HEADS
-    grad_clip: str = "global"  # one of GRAD_CLIPS
-    adam_eps: float = 1e-5  # Adam's epsilon (optax's default is 1e-8; CleanRL's PPO and ours 1e-5)
-    # GAE's horizon: 0 runs it over the whole rollout; L > 0 cuts the rollout into segments of L
-    # steps, each bootstrapped from the value after it, no advantage flowing across (Brax's unrolls).
-    gae_segment: int = 0
-    # normalize_state: merge each rollout's states into the statistics before learning on it (Brax's
-    # order: the first update already learns on normalised states) rather than after (ours: the
-    # rollout and the learning on it see the same statistics).
-    normalize_before_learning: bool = False
-    # Whether the critic's loss trains the features it shares with the actor (the encoder and the
-    # hint's conditioning; the paper's agent: true). false: the critic reads them through a
-    # stop-gradient, so only the policy's loss moves them (the ant's KL storms,
-    # experiments/results/locomotion_ppo_stability.md).
-    critic_trains_encoder: bool = True
-    # Scale the learning rates by the KL of the steps, rsl_rl's adaptive schedule, shrink-only
-    # (hintsjax/algorithms/kl_rate.py): divided by 1.5 while a minibatch's approx. KL is above
-    # 2 x target_kl, multiplied by 1.5 (up to 1) while below 0.5 x; needs target_kl.
-    kl_adaptive_lr: bool = False
-    # Start every env afresh at each rollout's start (Brax's num_resets_per_eval as Playground's
-    # DM Control settings give it: a batch then holds its episodes' first T steps only; an episode
-    # cut by the rollout's end is bootstrapped from its value, as any continuing one).
-    reset_every_update: bool = False
+    total_env_steps: int = setting(200_000, "the budget: env steps a seed")
+    num_envs: int = setting(16, "envs stepped side by side, a speed choice: it does not change the budget")
+    batch_size: int = setting(1024, "transitions an update: num_envs x the rollout's length")
+    epochs: int = setting(8, "passes over an update's batch")
+    minibatch_size: int = setting(256, "transitions a gradient step")
+    gamma: float = setting(0.99, "the discount", traced=True)
+    gae_lambda: float = setting(0.95, "GAE's lambda", traced=True)
+    clip_eps: float = setting(0.2, "the policy ratio's clip", traced=True)
+    vf_coef: float = setting(0.5, "the value loss's weight", traced=True)
+    ent_coef: float = setting(0.01, "the entropy bonus's weight", traced=True)
+    max_grad_norm: float = setting(0.5, "the gradient's norm is clipped to this (ppo.grad_clip says whose)", traced=True)
+    encoder_lr: float = setting(1e-3, "Adam's rate for the encoder and the hint's conditioning", traced=True)
+    actor_lr: float = setting(3e-4, "Adam's rate for the policy's head", traced=True)
+    critic_lr: float = setting(1e-3, "Adam's rate for the value head", traced=True)
+    hint_width: int = setting(64, "the width the hint is embedded to before it conditions the features")
+    hidden: tuple[int, ...] = setting((256, 256), "the actor's and critic's hidden layer widths")
+    reward_scale: float = setting(1.0, "rewards are multiplied by this for learning (not for logging)", traced=True)
+    # For envs whose reset is dear (the car's track is 800 sequential trace steps): AutoReset.step's `fresh`.
+    starts_per_rollout: bool = setting(False, "each env's next episode start is drawn once a rollout, not at every reset")
+    # As Stable-Baselines3's target_kl; None: off (Table 5 has none).
+    target_kl: float | None = setting(None, "KL early stop: no more steps in an update once a minibatch's approx. KL "
+                                            "from the rollout policy exceeds 1.5 x this (null: off)", traced=True)
+    normalize_state: bool = setting(False, "state agents: normalise the state by its running mean and std")
+    action_head: str = setting("gaussian", "the policy's action distribution: gaussian (clipped by the env), tanh "
+                                               "(squashed into the action range) or sigmoid (the authors')",
+                                   choices=ACTION_HEADS)
+    grad_clip: str = setting("global", "global: max_grad_norm over every part's gradient together; per_part: the "
+                                       "encoder's, actor's and critic's each alone", choices=GRAD_CLIPS, saved_may_lack=True)
+    adam_eps: float = setting(1e-5, "Adam's epsilon (optax's default is 1e-8; CleanRL's PPO and ours 1e-5)",
+                              saved_may_lack=True)
+    gae_segment: int = setting(0, "0: GAE over the whole rollout; L: over segments of L steps, each bootstrapped from "
+                                  "the value after it (Brax's unrolls)", saved_may_lack=True)
+    normalize_before_learning: bool = setting(False, "normalize_state: merge a rollout's states into the statistics "
+                                                     "before learning on it (Brax's order), not after", saved_may_lack=True)
+    # The ant's KL storms, experiments/results/locomotion_ppo_stability.md.
+    critic_trains_encoder: bool = setting(True, "false: the critic reads the features it shares with the actor "
+                                                "through a stop-gradient, so only the policy's loss moves them",
+                                          saved_may_lack=True)
+    # hintsjax/algorithms/kl_rate.py: divided by 1.5 while a minibatch's approx. KL is above 2 x target_kl,
+    # multiplied by 1.5 (up to 1) while below 0.5 x.
+    kl_adaptive_lr: bool = setting(False, "scale the learning rates by the steps' KL against target_kl (rsl_rl's "
+                                          "adaptive schedule, shrink-only; needs target_kl)", saved_may_lack=True)
+    # A batch then holds its episodes' first T steps only; an episode cut by the rollout's end is
+    # bootstrapped from its value, as any continuing one.
+    reset_every_update: bool = setting(False, "every env starts a fresh episode at each rollout's start (Brax's "
+                                              "resets as Playground's DM Control settings give them)", saved_may_lack=True)
 
     @property
     def rollout_length(self) -> int:
@@ -105,10 +103,7 @@ class PPOConfig:
                          "ppo.")
         require_range(self, {"gamma": (0.0, 1.0), "gae_lambda": (0.0, 1.0), "vf_coef": (0.0, math.inf),
                              "ent_coef": (0.0, math.inf)}, "ppo.")
-        if self.action_head not in ACTION_HEADS:
-            raise UsageError(f"unknown ppo.action_head {self.action_head!r}; valid: {', '.join(ACTION_HEADS)}")
-        if self.grad_clip not in GRAD_CLIPS:
-            raise UsageError(f"unknown ppo.grad_clip {self.grad_clip!r}; valid: {', '.join(GRAD_CLIPS)}")
+        check_choices(self, "ppo.")
         if not self.adam_eps > 0:
             raise UsageError(f"ppo.adam_eps ({self.adam_eps}) must be positive")
         if self.gae_segment < 0 or (self.gae_segment and self.rollout_length % self.gae_segment):
@@ -127,10 +122,10 @@ class DaggerConfig:
     with the beta-mixture of expert and student, labels every visited state with the expert's
     action, adds them to the aggregated dataset and regresses the student on it."""
 
-    beta_decay: float = 0.5  # beta_i = beta_decay ** i: round 0 acts as the expert alone
-    buffer_size: int = 200_000  # the aggregated dataset's capacity; the oldest rows go first when full
-    grad_steps: int = 32  # student minibatch steps per round (minibatches of ppo.minibatch_size)
-    lr: float = 1e-3
+    beta_decay: float = setting(0.5, "beta_i = beta_decay ** i: round 0 acts as the expert alone")
+    buffer_size: int = setting(200_000, "the aggregated dataset's capacity; the oldest rows go first when full")
+    grad_steps: int = setting(32, "student minibatch steps a round (minibatches of ppo.minibatch_size)")
+    lr: float = setting(1e-3, "the student's Adam rate")
 
     def validate(self) -> None:
         if not 0.0 <= self.beta_decay <= 1.0:
@@ -146,23 +141,21 @@ class GailConfig:
     """GAIL (Ho and Ermon 2016): PPO on the reward of a discriminator D(s, a) trained to tell
     the expert's (state, action) pairs from the policy's."""
 
-    demonstrations: int = 16  # expert episodes, rolled out once at the start of training
-    disc_hidden: tuple[int, ...] = (256, 256)
-    disc_lr: float = 3e-4
-    disc_steps: int = 4  # discriminator minibatch steps per PPO update (minibatches of ppo.minibatch_size)
-    # "logit": log D - log(1 - D), the log odds; mostly negative while the discriminator wins, so
-    # ending an episode early pays (idp's agents learn to fall).
-    # "original": -log(1 - D) > 0, Ho and Ermon's, which pays for every step alive (an agent
-    # then avoids a task's terminating goal, e.g. acrobot's).
-    reward: str = "logit"
-    # D reads the state standardised by the demonstrations' mean and variance (gail.py).
-    normalize_state: bool = False
-    grad_penalty: float = 0.0  # weight of D's R1 gradient penalty on the expert's pairs (gail.py)
+    demonstrations: int = setting(16, "expert episodes, rolled out once at the start of training")
+    disc_hidden: tuple[int, ...] = setting((256, 256), "the discriminator's hidden layer widths")
+    disc_lr: float = setting(3e-4, "the discriminator's Adam rate")
+    disc_steps: int = setting(4, "discriminator minibatch steps a PPO update (minibatches of ppo.minibatch_size)")
+    # "logit" is mostly negative while the discriminator wins, so ending an episode early pays (idp's
+    # agents learn to fall); "original" pays for every step alive (an agent then avoids a task's
+    # terminating goal, e.g. acrobot's).
+    reward: str = setting("logit", "the policy's reward: logit, log D - log(1 - D); original, -log(1 - D) (Ho and "
+                                   "Ermon's)", choices=GAIL_REWARDS)
+    normalize_state: bool = setting(False, "D reads the state standardised by the demonstrations' mean and variance")
+    grad_penalty: float = setting(0.0, "the weight of D's R1 gradient penalty on the expert's pairs")
 
     def validate(self) -> None:
         require_positive(self, ("demonstrations", "disc_steps", "disc_lr", "disc_hidden"), "gail.")
         if self.grad_penalty < 0:
             raise UsageError(f"gail.grad_penalty must be 0 or more, got {self.grad_penalty}")
-        if self.reward not in GAIL_REWARDS:
-            raise UsageError(f"unknown gail.reward {self.reward!r}; valid: {', '.join(GAIL_REWARDS)}")
+        check_choices(self, "gail.")
 

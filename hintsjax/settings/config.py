@@ -22,6 +22,7 @@ from hintsjax.models.conditioning import SCHEMES
 from hintsjax.models.networks import MIN_IMAGE_SIZE
 from hintsjax.settings.algorithm_settings import DaggerConfig, GailConfig, PPOConfig
 from hintsjax.settings.env_defaults import ENV_DEFAULTS
+from hintsjax.settings.fields import setting
 from hintsjax.settings.hint_sources import PROGRAMMATIC, check_matches, hinted_env, hinted_params
 
 MAX_IMAGE_SIZE = 256  # image_size's largest: 4x the default's 64, already 16x its pixels
@@ -39,27 +40,34 @@ def env_params(env: str, variant: str | None) -> Any:
 class RunConfig:
     """One training run: what to train, on what, for how many seeds, and how to evaluate it."""
 
-    env: str = "pendulum"
-    agent: str = "hints"
-    scheme: str = "fc"
-    hint: str = "composite"
-    variant: str | None = None  # training variant of the env (None: its default)
-    seeds: int = 5
-    seed: int = 0  # seed i of the run is PRNGKey(seed + i)
-    eval_episodes: int = 50
-    eval_variants: tuple[str, ...] = ()  # deploy variants evaluated after training
-    stochastic_eval: bool = False
-    checkpoint_every: int = 10  # updates between progress reports and checkpoints
-    checkpoint_seconds: float = 30.0  # at least this long between checkpoints (0: after every report)
-    expert: str | None = None  # dagger/gail: an exported expert folder (None: the env's packaged one)
-    hints_from: str | None = None  # a Python file or module whose register_hint calls add hints (docs/playground.md)
-    hint_source: str = "programmatic"  # where training's hint comes from: programmatic, or a generator folder
-    eval_hint_source: str | None = None  # the same at deploy (None: as hint_source)
-    # What steps an MJX env: auto (resolved when the config is built: Warp on an NVIDIA GPU with
-    # warp-lang, else JAX), jax (bit-reproducible) or warp (envs/physics.py)
-    physics: str = "auto"
-    warp_capacity: float = 2.0  # MJX-Warp's contact and constraint buffers: this many times the model's most per world
-    image_size: int | None = None  # the pictures' side in pixels (None: the env's own, 64 but for the car's 96)
+    env: str = setting("pendulum", "the task (the choices below)")
+    agent: str = setting("hints", "the learner and what it sees (the choices below)")
+    scheme: str = setting("fc", "how the hint conditions the picture's features: lc, ac, fc or mc")
+    hint: str = setting("composite", "a registered hint, a composite, or names joined by '+' (null: the env's)",
+                        per_env=True)
+    variant: str | None = setting(None, "the env's training variant (null: its default)")
+    seeds: int = setting(5, "seeds trained side by side")
+    seed: int = setting(0, "seed i of the run is PRNGKey(seed + i)")
+    eval_episodes: int = setting(50, "episodes a seed in the evaluation after training")
+    eval_variants: tuple[str, ...] = setting((), "deploy variants evaluated after training (null: the env's)",
+                                             per_env=True)
+    stochastic_eval: bool = setting(False, "sample actions in evaluation (null: the env's; the car samples)",
+                                    per_env=True)
+    checkpoint_every: int = setting(10, "updates between progress reports and checkpoints")
+    checkpoint_seconds: float = setting(30.0, "at least this long between checkpoints (0: at every report); the "
+                                              "last update is always saved")
+    expert: str | None = setting(None, "dagger and gail: an exported expert folder (null: the env's packaged one)")
+    hints_from: str | None = setting(None, "a Python file or module whose register_hint calls add hints",
+                                     saved_may_lack=True)
+    hint_source: str = setting("programmatic", "the hints in training: programmatic, or a generator folder")
+    eval_hint_source: str | None = setting(None, "the hints at deploy (evaluation, videos); null: as hint_source")
+    # Resolved when the config is built (layers.run_config), so a run folder keeps what it stepped with.
+    physics: str = setting("auto", "MJCF envs: auto (warp on an NVIDIA GPU with warp-lang, else jax), jax "
+                                   "(bit-reproducible) or warp")
+    warp_capacity: float = setting(2.0, "physics=warp: contact and constraint buffers, this many times the "
+                                        "model's most per world")
+    image_size: int | None = setting(None, "the pictures' side in pixels, 36 to 256 (null: the env's own, 64; the "
+                                           "car's 96)", saved_may_lack=True)
     ppo: PPOConfig = field(default_factory=PPOConfig)
     dagger: DaggerConfig = field(default_factory=DaggerConfig)
     gail: GailConfig = field(default_factory=GailConfig)
@@ -179,5 +187,17 @@ class RunConfig:
 
 
 SECTIONS = {"ppo": PPOConfig, "dagger": DaggerConfig, "gail": GailConfig}  # RunConfig's nested settings
+
+
+@dataclass(frozen=True)
+class CommandSettings:
+    """The run command's own settings: where its folder goes and the compile cache; not a run's
+    settings, so not saved in its config.yaml (hintsjax.training.request takes them out)."""
+
+    out_dir: str = setting("runs", "the folder run folders are made in")
+    name: str | None = setting(None, "the run folder's name (null: env-label-timestamp)")
+    resume: str | None = setting(None, "a run folder to go on with from its last checkpoint")
+    compilation_cache: bool | str = setting(True, "persistent XLA cache: $HINTSJAX_COMPILATION_CACHE or "
+                                                  "~/.cache/hintsjax/xla, a folder, or false")
 
 

@@ -17,6 +17,7 @@ from hintsjax.system import paths
 from hintsjax.system.errors import UsageError, require_int32
 from hintsjax.settings.config import RunConfig, SECTIONS
 from hintsjax.settings.env_defaults import ENV_DEFAULTS
+from hintsjax.settings import schema
 
 
 CONFIG_YAML = "config.yaml"  # a run folder's resolved config
@@ -73,6 +74,7 @@ def run_config(values: Mapping[str, Any], resolved: bool = False) -> RunConfig:
     if values.get("hints_from") is not None:
         values["hints_from"] = hint_file(str(values["hints_from"]))
     per_agent = defaults.pop("agents", {})
+    _check_env_layers(env, [defaults, *per_agent.values()])
     if resolved:
         merged = {k: dict(v) if k in SECTIONS and isinstance(v, Mapping) else v for k, v in values.items()}
         merged.setdefault("physics", envs.JAX)  # a run saved before the setting was stepped by MJX's JAX solver
@@ -95,6 +97,17 @@ def run_config(values: Mapping[str, Any], resolved: bool = False) -> RunConfig:
         raise UsageError(f"bad config value: {e}") from None
     cfg = cfg.validate()
     return dataclasses.replace(cfg, physics=envs.resolve_physics(cfg.env, cfg.physics))  # what the run steps with, kept
+
+
+def _check_env_layers(env: str, layers: list[Mapping[str, Any]]) -> None:
+    """TypeError where an env's TRAINING sets a top-level setting that the command line gives a
+    value (declare it `per_env` on its field): the command line's value would win over the env's there
+    but not in run_config, so the two would train differently."""
+    valued = {k for k, v in schema.command_line_defaults().items() if v is not None and k not in SECTIONS}
+    fixed = sorted({k for layer in layers for k in layer if k in valued})
+    if fixed:
+        raise TypeError(f"env {env}'s TRAINING sets {', '.join(fixed)}, which the command line gives a value; "
+                        "an env may set a section's settings and those declared per_env (hintsjax/settings/config.py)")
 
 
 def hint_file(source: str) -> str:
@@ -141,12 +154,9 @@ def save_run_config(run_dir: Path, cfg: RunConfig) -> None:
     paths.write_whole(Path(run_dir) / CONFIG_YAML, lambda part: part.write_text(text))
 
 
-# Settings added since runs were first saved whose absence means their default (a run saved before
-# hints_from had no hint file; before image_size, the env's own pictures; before the PPO knobs of the
-# Brax side by side, the one order and clip there were), so a saved config without them is complete.
-OPTIONAL_IN_SAVED = {"hints_from", "image_size", "ppo.grad_clip", "ppo.adam_eps", "ppo.gae_segment",
-                     "ppo.normalize_before_learning", "ppo.critic_trains_encoder", "ppo.kl_adaptive_lr",
-                     "ppo.reset_every_update"}
+# Settings added since runs were first saved whose absence means their default (`saved_may_lack` on
+# their fields), so a saved config without them is complete.
+OPTIONAL_IN_SAVED = schema.saved_may_lack()
 
 
 def missing_keys(values: Mapping[str, Any]) -> list[str]:
