@@ -175,9 +175,11 @@ def full_state(state: AcrobotState, params: AcrobotParams) -> jax.Array:
     return observation(state)
 
 
-# Training defaults (hintsjax/settings/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
-# PPO settings of this env's agents, `learners`: PPO settings for every agent but the references,
-# `references`: the expert's budget and PPO settings (expert_ppo and gail), dagger's steps, gail's reward.
+# Training defaults, RunConfig layers over the dataclasses' (hintsjax/settings/env_defaults.py): the
+# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but the
+# converged references; `agents`, an agent's own layer (the references' budgets and settings).
 # 700 episodes of at most 500 steps (the paper's 700 episodes, counted at their length).
+EXPERT_PPO = dict(total_env_steps=1_000_000)
 TRAINING = dict(hint="composite", ppo=dict(total_env_steps=350_000, reward_scale=0.1),
-                references=dict(expert_steps=1_000_000))
+                agents=dict(expert_ppo=dict(ppo=EXPERT_PPO), gail=dict(ppo=EXPERT_PPO),
+                            dagger=dict(ppo=dict(total_env_steps=100_000), dagger=dict(buffer_size=100_000))))

@@ -116,9 +116,9 @@ class AntFast(Ant):
 share_hints(FAST_NAME, NAME)
 
 
-# Training defaults (hintsjax/settings/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
-# PPO settings of this env's agents, `learners`: PPO settings for every agent but the references,
-# `references`: the expert's budget and PPO settings (expert_ppo and gail), dagger's steps, gail's reward.
+# Training defaults, RunConfig layers over the dataclasses' (hintsjax/settings/env_defaults.py): the
+# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but the
+# converged references; `agents`, an agent's own layer (the references' budgets and settings).
 # Ant steps 256 envs per seed (rollouts of 4 steps per 1024-transition batch): each of its
 # steps is 5 RK4 substeps with 25 floor contacts, latency-bound at these sizes on a GPU, so
 # half the rollout length nearly halves a 5 M-step run (a speed choice, SPEC section 5).
@@ -140,10 +140,11 @@ share_hints(FAST_NAME, NAME)
 # epochs. Not tuned further: it scored 5694 (5 seeds x 50 episodes).
 # Ant and Humanoid episodes end when the robot falls, so their GAIL is paid Ho and Ermon's
 # -log(1 - D) > 0, as idp's is: with the signed log odds, falling early would pay.
+EXPERT_PPO = dict(total_env_steps=10_000_000, num_envs=1024, batch_size=8192, minibatch_size=1024, epochs=8)
 TRAINING = dict(hint="speed", ppo=dict(total_env_steps=5_000_000, num_envs=256, encoder_lr=3e-4, epochs=4),
-                learners=dict(target_kl=0.05, kl_adaptive_lr=True),
-                references=dict(expert_steps=10_000_000, dagger_steps=250_000, gail_reward="original", num_envs=1024,
-                                batch_size=8192, minibatch_size=1024, epochs=8))
+                learners=dict(ppo=dict(target_kl=0.05, kl_adaptive_lr=True)),
+                agents=dict(expert_ppo=dict(ppo=EXPERT_PPO), gail=dict(ppo=EXPERT_PPO, gail=dict(reward="original")),
+                            dagger=dict(ppo=dict(total_env_steps=250_000), dagger=dict(buffer_size=250_000))))
 # The fast-physics ant (AntFast) trains as the ant does, with each env's next start drawn once
 # per rollout (ppo.starts_per_rollout), as its throughput figure is measured.
 FAST_TRAINING = {**TRAINING, "ppo": {**TRAINING["ppo"], "starts_per_rollout": True}}

@@ -686,9 +686,9 @@ def full_state(state: CarRacingState, params: CarRacingParams) -> jax.Array:
 register_composite(NAME, "composite", ("on_track", "curvature"))
 
 
-# Training defaults (hintsjax/settings/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
-# PPO settings of this env's agents, `learners`: PPO settings for every agent but the references,
-# `references`: the expert's budget and PPO settings (expert_ppo and gail), dagger's steps, gail's reward.
+# Training defaults, RunConfig layers over the dataclasses' (hintsjax/settings/env_defaults.py): the
+# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but the
+# converged references; `agents`, an agent's own layer (the references' budgets and settings).
 # 1000 episodes of 1000 steps (SPEC section 5); trained on the standard track, deployed on
 # hairpins. The paper conditions the car with scheme mc (scheme=mc).
 # The car's references run on its state (state_observation: speeds, steering, the track's
@@ -704,5 +704,7 @@ register_composite(NAME, "composite", ("on_track", "curvature"))
 # on it, gas and brake below 0 being none.
 TRAINING = dict(hint="composite", eval_variants=("hairpin",), stochastic_eval=True,
                 ppo=dict(total_env_steps=1_000_000, num_envs=128, starts_per_rollout=True),
-                learners=dict(action_head="sigmoid"),
-                references=dict(expert_steps=2_000_000, dagger_steps=250_000, gail_reward="original"))
+                learners=dict(ppo=dict(action_head="sigmoid")),
+                agents=dict(expert_ppo=dict(ppo=dict(total_env_steps=2_000_000)),
+                            gail=dict(ppo=dict(total_env_steps=2_000_000), gail=dict(reward="original")),
+                            dagger=dict(ppo=dict(total_env_steps=250_000), dagger=dict(buffer_size=250_000))))

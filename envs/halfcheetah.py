@@ -71,9 +71,9 @@ def full_state(state: LocomotionState, params) -> jax.Array:
     return state.obs
 
 
-# Training defaults (hintsjax/settings/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
-# PPO settings of this env's agents, `learners`: PPO settings for every agent but the references,
-# `references`: the expert's budget and PPO settings (expert_ppo and gail), dagger's steps, gail's reward.
+# Training defaults, RunConfig layers over the dataclasses' (hintsjax/settings/env_defaults.py): the
+# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but the
+# converged references; `agents`, an agent's own layer (the references' budgets and settings).
 # Locomotion (SPEC section 5): 1k, 5k and 10k episodes, counted at their full 1000 steps
 # (early episodes end in a few dozen steps when the robot falls, as on idp).
 # HalfCheetah's pixel agents at Table 5's encoder rate 1e-3 and 8 epochs drifted from their
@@ -83,5 +83,7 @@ def full_state(state: LocomotionState, params) -> jax.Array:
 # A deviation from Table 5's encoder rate, for every cheetah agent alike.
 # Its expert: PPO on the state for 5 M steps, 512 envs per seed in batches of 4096 and 8
 # epochs; DAgger aggregates 250 K expert-labelled steps.
+EXPERT_PPO = dict(total_env_steps=5_000_000, num_envs=512, batch_size=4096, epochs=8)
 TRAINING = dict(hint="velocity", ppo=dict(total_env_steps=1_000_000, num_envs=128, encoder_lr=3e-4, epochs=4),
-                references=dict(expert_steps=5_000_000, dagger_steps=250_000, num_envs=512, batch_size=4096, epochs=8))
+                agents=dict(expert_ppo=dict(ppo=EXPERT_PPO), gail=dict(ppo=EXPERT_PPO),
+                            dagger=dict(ppo=dict(total_env_steps=250_000), dagger=dict(buffer_size=250_000))))

@@ -91,9 +91,9 @@ def full_state(state: LocomotionState, params) -> jax.Array:
     return state.obs
 
 
-# Training defaults (hintsjax/settings/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
-# PPO settings of this env's agents, `learners`: PPO settings for every agent but the references,
-# `references`: the expert's budget and PPO settings (expert_ppo and gail), dagger's steps, gail's reward.
+# Training defaults, RunConfig layers over the dataclasses' (hintsjax/settings/env_defaults.py): the
+# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but the
+# converged references; `agents`, an agent's own layer (the references' budgets and settings).
 # Humanoid's learners take the ant's KL early stop and its 256 envs per seed (rollouts of 4
 # steps: each update waits on 4 latency-bound MJX steps instead of 8). Its references follow
 # the ant's: the expert is PPO on the state for 20 M steps (2x the learners'), 1024 envs per
@@ -109,9 +109,10 @@ def full_state(state: LocomotionState, params) -> jax.Array:
 # normaliser 513 (460); without the bonus, the normaliser and the reward scale 124 (118).
 # The first 20 M run, with neither normaliser nor reward scale, was at 555 after 13.5 M
 # steps, its std grown to 38 (the actions are clipped to +-0.4).
+EXPERT_PPO = dict(total_env_steps=20_000_000, num_envs=1024, batch_size=8192, minibatch_size=1024, epochs=8)
 TRAINING = dict(hint="velocity", ppo=dict(total_env_steps=10_000_000, num_envs=256, encoder_lr=3e-4, epochs=4,
                                           reward_scale=0.1, normalize_state=True),
-                learners=dict(target_kl=0.05),
-                references=dict(expert_steps=20_000_000, dagger_steps=250_000, gail_reward="original",
-                                gail_normalize_state=True, gail_grad_penalty=10.0, num_envs=1024,
-                                batch_size=8192, minibatch_size=1024, epochs=8))
+                learners=dict(ppo=dict(target_kl=0.05)),
+                agents=dict(expert_ppo=dict(ppo=EXPERT_PPO),
+                            gail=dict(ppo=EXPERT_PPO, gail=dict(reward="original", normalize_state=True, grad_penalty=10.0)),
+                            dagger=dict(ppo=dict(total_env_steps=250_000), dagger=dict(buffer_size=250_000))))

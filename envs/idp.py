@@ -200,9 +200,9 @@ def full_state(state: IDPState, params: IDPParams) -> jax.Array:
     return observation(state)
 
 
-# Training defaults (hintsjax/settings/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
-# PPO settings of this env's agents, `learners`: PPO settings for every agent but the references,
-# `references`: the expert's budget and PPO settings (expert_ppo and gail), dagger's steps, gail's reward.
+# Training defaults, RunConfig layers over the dataclasses' (hintsjax/settings/env_defaults.py): the
+# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but the
+# converged references; `agents`, an agent's own layer (the references' budgets and settings).
 # Early IDP episodes last ~10 steps, so an episode count would be a tiny budget: we count
 # 200 full-length episodes (200 K steps), the pendulum's budget. 128 envs per seed (rollouts
 # of 8 steps per 1024-transition batch): MJX's RK4 with the rail's constraint solver is
@@ -211,5 +211,7 @@ def full_state(state: IDPState, params: IDPParams) -> jax.Array:
 # GAIL's reward is Ho and Ermon's -log(1 - D) > 0 here: with the signed log odds, mostly
 # negative at first, ending an episode early pays, and idp's episodes end by falling (GAIL
 # scored 71 that way; measured in experiments/results/classic_table2.md).
+EXPERT_PPO = dict(total_env_steps=1_000_000, num_envs=512, batch_size=4096)
 TRAINING = dict(hint="composite", ppo=dict(total_env_steps=200_000, num_envs=128, reward_scale=0.1),
-                references=dict(expert_steps=1_000_000, gail_reward="original", num_envs=512, batch_size=4096))
+                agents=dict(expert_ppo=dict(ppo=EXPERT_PPO), gail=dict(ppo=EXPERT_PPO, gail=dict(reward="original")),
+                            dagger=dict(ppo=dict(total_env_steps=100_000), dagger=dict(buffer_size=100_000))))

@@ -204,9 +204,9 @@ def full_state(state: PendulumState, params: PendulumParams) -> jax.Array:
 register_composite(NAME, "composite", ("angular_velocity", "goal_distance"))
 
 
-# Training defaults (hintsjax/settings/env_defaults.py turns them into ENV_DEFAULTS): the hint, deploy variants and
-# PPO settings of this env's agents, `learners`: PPO settings for every agent but the references,
-# `references`: the expert's budget and PPO settings (expert_ppo and gail), dagger's steps, gail's reward.
+# Training defaults, RunConfig layers over the dataclasses' (hintsjax/settings/env_defaults.py): the
+# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but the
+# converged references; `agents`, an agent's own layer (the references' budgets and settings).
 # The expert's (and GAIL's) PPO is tuned for the state pendulum. With 16 envs x 64 steps a
 # batch holds one phase of the 16 synchronised 200-step episodes (all swinging up, then all
 # balancing), and the greedy policy swung between good and failing from one evaluation to
@@ -217,10 +217,12 @@ register_composite(NAME, "composite", ("angular_velocity", "goal_distance"))
 # 1 M, the entropy bonus 0.01 holds up better: 5 seeds x 50 episodes -153 +- 83 against
 # -173 +- 101 without (one H100 run each; on CPU -168 +- 99 against -376 +- 461, where one
 # seed failed late), so the expert and GAIL keep it.
+EXPERT_PPO = dict(total_env_steps=1_000_000, num_envs=16, batch_size=3200, minibatch_size=200, epochs=10,
+                  gamma=0.95, ent_coef=0.01, actor_lr=3e-4)
 TRAINING = dict(
     hint="composite",
     eval_variants=("swingto",),
     ppo=dict(total_env_steps=200_000, actor_lr=1e-3, reward_scale=0.1),
-    references=dict(expert_steps=1_000_000, num_envs=16, batch_size=3200, minibatch_size=200, epochs=10,
-                    gamma=0.95, ent_coef=0.01, actor_lr=3e-4),
+    agents=dict(expert_ppo=dict(ppo=EXPERT_PPO), gail=dict(ppo=EXPERT_PPO),
+                dagger=dict(ppo=dict(total_env_steps=100_000), dagger=dict(buffer_size=100_000))),
 )

@@ -944,7 +944,7 @@ def test_each_env_carries_its_training_defaults_beside_it(name):
     assert training["hint"] in envs.hint_names(name)
     defaults = ENV_DEFAULTS[name]
     assert defaults["hint"] == training["hint"] and defaults["ppo"] == training["ppo"]
-    expert = training["references"]["expert_steps"]
+    expert = training["agents"]["expert_ppo"]["ppo"]["total_env_steps"]
     assert defaults["agents"]["expert_ppo"]["ppo"]["total_env_steps"] == expert
     assert set(defaults["agents"]) >= {"expert_ppo", "dagger", "gail"}
 
@@ -958,8 +958,8 @@ def test_an_env_registered_at_run_time_takes_one_call():
 
     entry = envs.REGISTRY["pendulum"]
     envs.REGISTRY["pendulum_copy"] = envs.EnvEntry(entry.cls, entry.variants,
-                                                   training=dict(ppo=dict(hidden=(8, 8)), learners=dict(epochs=3),
-                                                                 references=dict(expert_steps=1234)))
+                                                   training=dict(ppo=dict(hidden=(8, 8)), learners=dict(ppo=dict(epochs=3)),
+                                                                 agents=dict(expert_ppo=dict(ppo=dict(total_env_steps=1234)))))
     try:
         cfg = run_config({"env": "pendulum_copy", "agent": "ppo_rgb"})
         assert (cfg.ppo.hidden, cfg.ppo.epochs) == ((8, 8), 3)

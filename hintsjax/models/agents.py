@@ -51,6 +51,8 @@ class AgentSpec:
 
 
 EXPERT_AGENT = "expert_ppo"  # the agent whose trained policy is exported as an env's expert (hintsjax.expert)
+# The converged references (tier 3): an env's `learners` layer is every other agent's (env_defaults).
+REFERENCES = (EXPERT_AGENT, "dagger", "gail")
 AGENTS: dict[str, AgentSpec] = {
     "ppo_rgb": AgentSpec(pixels=True),
     "ppo_state": AgentSpec(state=True),
@@ -58,8 +60,8 @@ AGENTS: dict[str, AgentSpec] = {
     "hints_blind": AgentSpec(hint=True),
     "hints_state": AgentSpec(pixels=True, hint=True, hint_override="state"),
     "hints": AgentSpec(pixels=True, hint=True),
-    # The converged references (tier 3). expert_ppo is PPO on the state at the env's expert
-    # budget (env_defaults.ENV_DEFAULTS[env]["agents"]); dagger and gail learn from its exported policy.
+    # The references. expert_ppo is PPO on the state at the env's expert budget (its TRAINING's
+    # `agents` layer); dagger and gail learn from its exported policy.
     EXPERT_AGENT: AgentSpec(state=True),
     "dagger": AgentSpec(state=True, algorithm="dagger"),
     "gail": AgentSpec(state=True, algorithm="gail"),

@@ -1,44 +1,38 @@
 """Each env's training defaults as RunConfig layers (`ENV_DEFAULTS`), read from the `TRAINING`
 beside each env (envs/<env>.py, the registry's `training`), where the paper's budgets, Table 5's
 actor rates and the reasons for each deviation are written. A config value of `None` means "the
-env's default" (hintsjax.settings.layers.run_config stacks the layers)."""
+env's default" (hintsjax.settings.layers.run_config stacks the layers).
+
+A `TRAINING` is plain layers: its settings (every agent's), `learners` (a layer for every agent but
+the converged references, `agents.REFERENCES`) and `agents` (an agent's own layer)."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Mapping
 
 from hintsjax import envs
-from hintsjax.models.agents import AGENTS
+from hintsjax.models.agents import AGENTS, REFERENCES
 
 
-# "agents" holds per-agent overrides on top of an env's defaults, for the converged references
-# (tier 3): the expert trains PPO on the state for 5x the hint agents' budget; DAgger's rounds of
-# 1024 steps aggregate every visited state (buffer = budget); GAIL gets the expert's budget.
-def _references(expert_steps: int, dagger_steps: int = 100_000, gail_reward: str = "logit",
-                gail_normalize_state: bool = False, gail_grad_penalty: float = 0.0, **expert_ppo: Any) -> dict[str, Any]:
-    return {
-        "expert_ppo": dict(ppo=dict(total_env_steps=expert_steps, **expert_ppo)),
-        "dagger": dict(ppo=dict(total_env_steps=dagger_steps), dagger=dict(buffer_size=dagger_steps)),
-        "gail": dict(ppo=dict(total_env_steps=expert_steps, **expert_ppo),
-                     gail=dict(reward=gail_reward, normalize_state=gail_normalize_state,
-                               grad_penalty=gail_grad_penalty)),
-    }
+def _stack(*layers: Mapping[str, Any]) -> dict[str, Any]:
+    """Layers joined, later winning, a section's settings key by key."""
+    out: dict[str, Any] = {}
+    for layer in layers:
+        for k, v in layer.items():
+            out[k] = {**out.get(k, {}), **v} if isinstance(v, Mapping) else v
+    return out
 
 
-def _learners(**ppo: Any) -> dict[str, Any]:
-    """PPO settings for every agent but the converged references (which `_references` sets)."""
-    return {name: dict(ppo=ppo) for name in AGENTS if name not in _references(0)}
-
-
-def _env_defaults(training: dict[str, Any]) -> dict[str, Any]:
-    """An env's training defaults as RunConfig layers: its own settings, and per agent those of
-    `learners` (every agent but the references) and of `references` (`_references`' arguments)."""
+def _env_defaults(training: Mapping[str, Any]) -> dict[str, Any]:
+    """An env's training defaults as RunConfig layers: its own settings, and per agent its layer
+    (`learners` for every agent but the references, then the agent's own from `agents`)."""
     training = dict(training)
-    agents = _learners(**training.pop("learners")) if "learners" in training else {}
-    if "references" in training:
-        references = dict(training.pop("references"))
-        agents.update(_references(references.pop("expert_steps"), **references))
-    return {**training, "agents": agents}
+    learners, own = training.pop("learners", {}), dict(training.pop("agents", {}))
+    unknown = sorted(set(own) - set(AGENTS))
+    if unknown:
+        raise ValueError(f"TRAINING's agents names {', '.join(unknown)}; valid: {', '.join(AGENTS)}")
+    agents = {name: _stack(learners if name not in REFERENCES else {}, own.get(name, {})) for name in AGENTS}
+    return {**training, "agents": {name: layer for name, layer in agents.items() if layer}}
 
 
 class EnvDefaults(dict):
