@@ -255,3 +255,15 @@ def test_an_env_that_sets_a_setting_the_command_line_gives_a_value_is_refused(mo
             run_config({"env": "pendulum_seeds"})
     finally:
         dict.pop(ENV_DEFAULTS, "pendulum_seeds", None)  # added when first looked up
+
+
+def test_the_network_takes_its_ppo_settings_by_name():
+    """The network's fields named as PPO settings take their values (ppo.make_network names none of
+    them); renaming one side alone would drop the setting, so the known ones are listed."""
+    from hintsjax.algorithms import ppo
+
+    assert {"hint_width", "hidden", "normalize_state", "action_head", "critic_trains_encoder"} <= set(ppo.NETWORK_SETTINGS)
+    cfg = run_config({"agent": "ppo_state", "ppo": {"hidden": [8], "action_head": "sigmoid", "critic_trains_encoder": False}})
+    network = ppo.make_network(cfg, cfg.make_env())
+    assert all(getattr(network, name) == getattr(cfg.ppo, name) for name in ppo.NETWORK_SETTINGS)
+    assert (network.hidden, network.action_head, network.critic_trains_encoder) == ((8,), "sigmoid", False)

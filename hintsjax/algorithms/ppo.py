@@ -10,6 +10,7 @@ the value of the state it was cut off in (the env's `final_obs`) and a terminate
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any, Callable, NamedTuple
 
@@ -104,9 +105,15 @@ class RunnerState:
     hyper: Hyper
 
 
+# The network's fields that are PPO settings of the same name (ppo.hidden, ppo.action_head, ...): a
+# setting the network reads is a field on each side, and nothing between them names it.
+NETWORK_SETTINGS = tuple(f.name for f in dataclasses.fields(ActorCritic) if f.name in fields.names(PPOConfig))
+
+
 def make_network(cfg: RunConfig, env: envs.Env) -> ActorCritic:
-    return ActorCritic(cfg.agent_spec, cfg.scheme, env.action_size, cfg.ppo.hint_width, cfg.ppo.hidden,
-                       cfg.ppo.normalize_state, cfg.ppo.action_head, cfg.ppo.critic_trains_encoder)
+    """The policy's ActorCritic for `cfg`'s agent and `env`'s actions, with its PPO settings."""
+    return ActorCritic(cfg.agent_spec, cfg.scheme, env.action_size,
+                       **{name: getattr(cfg.ppo, name) for name in NETWORK_SETTINGS})
 
 
 def make_optimizer(hyper: Hyper, params: Any, ppo: PPOConfig) -> optax.GradientTransformation:
