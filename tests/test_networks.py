@@ -119,3 +119,17 @@ def test_a_critic_that_does_not_train_the_encoder_leaves_the_shared_features_to_
         assert nonzero(grads(shared, 2)[part]) and not nonzero(grads(own, 2)[part]), part
         assert nonzero(grads(own, 0)[part]), part  # the policy still trains them
     jax.tree.map(np.testing.assert_array_equal, grads(own, 2)["critic"], grads(shared, 2)["critic"])
+
+
+def test_a_log_std_floor_holds_the_std_up_and_leaves_it_alone_above():
+    """min_log_std (ppo.min_log_std): a log std below the floor is the floor, and its gradient is 0
+    there; one above is as learnt. Without a floor nothing changes."""
+    spec = AGENTS["ppo_state"]
+    obs = {"state": OBS["state"]}
+    free, floored = ActorCritic(spec, "fc", 2, hidden=(8,)), ActorCritic(spec, "fc", 2, hidden=(8,), min_log_std=-1.0)
+    params = free.init(jax.random.key(0), obs)
+    params = {**params, "params": {**params["params"], "log_std": jnp.array([-3.0, 0.5])}}
+    np.testing.assert_array_equal(free.apply(params, obs)[1], [-3.0, 0.5])
+    np.testing.assert_array_equal(floored.apply(params, obs)[1], [-1.0, 0.5])
+    grad = jax.grad(lambda p: floored.apply(p, obs)[1].sum())(params)["params"]["log_std"]
+    np.testing.assert_array_equal(grad, [0.0, 1.0])

@@ -120,6 +120,7 @@ class ActorCritic(nn.Module):
     normalize_state: bool = False
     action_head: str = "gaussian"
     critic_trains_encoder: bool = True
+    min_log_std: float | None = None  # a floor on the log std, after the head's own (None: none)
 
     def features(self, obs: dict[str, jax.Array]) -> jax.Array:
         agent = self.agent
@@ -139,6 +140,8 @@ class ActorCritic(nn.Module):
         log_std = self.param("log_std", nn.initializers.zeros, (self.action_size,))
         if self.action_head == "sigmoid":
             mean, log_std = 2.0 * nn.sigmoid(mean) - 1.0, jnp.maximum(log_std, jnp.log(SIGMOID_MIN_STD))
+        if self.min_log_std is not None:
+            log_std = jnp.maximum(log_std, self.min_log_std)
         critic_in = z if self.critic_trains_encoder else jax.lax.stop_gradient(z)
         value = MLP((*self.hidden, 1), out_scale=1.0, name="critic")(critic_in)[..., 0]
         return mean, log_std, value

@@ -74,6 +74,10 @@ class PPOConfig:
     # bootstrapped from its value, as any continuing one.
     reset_every_update: bool = setting(False, "every env starts a fresh episode at each rollout's start (Brax's "
                                               "resets as Playground's DM Control settings give them)", saved_may_lack=True)
+    # Bears on the KL storms of experiments/results/locomotion_ppo_stability.md: a std that collapses
+    # makes the ratio of the next update's steps explode.
+    min_log_std: float | None = setting(None, "a floor on the policy's log std (Brax's networks floor the std at "
+                                              "0.001, log -6.9); null: none", saved_may_lack=True)
 
     @property
     def rollout_length(self) -> int:
@@ -109,6 +113,8 @@ class PPOConfig:
         if self.gae_segment < 0 or (self.gae_segment and self.rollout_length % self.gae_segment):
             raise UsageError(f"ppo.gae_segment ({self.gae_segment}) must be 0 or divide the rollout length "
                              f"({self.rollout_length} = batch_size / num_envs)")
+        if self.min_log_std is not None and not math.isfinite(self.min_log_std):
+            raise UsageError(f"ppo.min_log_std must be a finite number, or null for no floor, got {self.min_log_std}")
         if self.target_kl is not None and not self.target_kl > 0:
             raise UsageError(f"ppo.target_kl ({self.target_kl}) must be positive, or null for no KL early stop")
         if self.kl_adaptive_lr and self.target_kl is None:
