@@ -947,3 +947,37 @@ def test_a_resumed_sweep_run_keeps_the_physics_it_began_with(tmp_path):
     for saved, physics in (("physics: jax\n", "jax"), ("physics: warp\n", "warp"), ("env: pendulum\n", "jax")):
         (tmp_path / "config.yaml").write_text(saved)
         assert sweep.saved_physics(tmp_path, "auto") == physics
+
+
+def test_the_privileged_baselines_report_sets_hints_fc_against_each_baseline(tmp_path, monkeypatch):
+    """privileged_baselines.py: an env's five rows (their labels parse back to their agents) and the
+    learned generator's row; P(HINTS-FC > row) with its verdict (hand values: every HINTS-FC seed beats
+    every PPO-RGB seed, P = 1 decided; asym_ac's seeds interleave with HINTS-FC's, P = 0.5, undecided);
+    what each row needs at deployment."""
+    import privileged_baselines as pb
+
+    from hintsjax.settings.layers import run_config
+
+    assert pb.labels("pendulum") == ["ppo_rgb", "asym_ac-composite", "pi_dropout-fc-composite", "hint_aux-composite",
+                                     "hints-fc-composite"]
+    for run_id in pb.run_ids(["pendulum", "ant"]):
+        env, label = run_id.split("/")
+        cfg = run_config(sweep.run_values(env, label, 2))
+        assert cfg.label == label and (label == "ppo_rgb" or cfg.hint == pb.SIGNAL[env]), run_id
+    runs = tmp_path / "privileged"
+    seeds = {"ppo_rgb": [-1300.0, -1200.0, -1250.0, -1400.0], "asym_ac-composite": [-260.0, -190.0, -310.0, -210.0],
+             "hints-fc-composite": [-250.0, -200.0, -300.0, -220.0]}
+    for label, means in seeds.items():
+        write_run(runs, "pendulum", label, [evaluation(float(np.mean(means)), 10.0, means)] * 2)
+    monkeypatch.setattr(pb, "OUT", tmp_path / "privileged_baselines.md")
+    monkeypatch.setattr(pb, "LEARNED", tmp_path / "learned")
+    write_run(tmp_path / "learned", ".", "pendulum-composite-learned-k2", [evaluation(-400.0, 10.0, [-400.0, -410.0])])
+    pb.report(runs)
+    text = (tmp_path / "privileged_baselines.md").read_text()
+    assert "| PPO-RGB | nothing | pictures | -1287.5 ± 74.0 |" in text and "| 1.00 [1.00, 1.00] decided for |" in text
+    asym = next(line for line in text.splitlines() if line.startswith("| asymmetric actor-critic |"))
+    assert "| 0.50 [" in asym and asym.endswith("undecided |")
+    assert "| PI dropout (FiLM) | the policy, dropped with p = ppo.hint_dropout | pictures | - |" in text
+    assert "| HINTS-FC | the policy and the critic | pictures + the hint |" in text
+    assert "| HINTS-FC, learned generator | " in text and "| -405.0 ± 5.0 |" in text
+    assert "## ant" not in text

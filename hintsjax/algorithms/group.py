@@ -41,6 +41,7 @@ def signature(cfg: RunConfig) -> dict[str, Any]:
     """What configurations must share to train in one group (a dict, to name what differs)."""
     spec = cfg.agent_spec
     return {"env": cfg.env, "variant": cfg.variant, "algorithm": spec.algorithm, "observe": spec.observe,
+            "hint_use": spec.hint_use, "drops_hint": spec.drops_hint,
             "scheme": cfg.scheme if spec.conditioned else None, "seeds": cfg.seeds, "seed": cfg.seed,
             **{f"ppo.{k}": getattr(cfg.ppo, k) for k in SHAPES},
             **{f"ppo.{k} is set": getattr(cfg.ppo, k) is not None for k in OPTIONAL_TRACED}}

@@ -22,6 +22,7 @@ from flax import struct
 
 from hintsjax import envs
 from hintsjax.models import normalization
+from hintsjax.models.agents import AgentSpec
 from hintsjax.models.networks import ActorCritic, lr_labels
 from hintsjax.settings import fields
 from hintsjax.settings.algorithm_settings import PPOConfig
@@ -145,13 +146,32 @@ def pick_hint(obs: dict[str, jax.Array], hyper: Hyper) -> dict[str, jax.Array]:
     return {**obs, "hint": jnp.where(hyper.hint_keep, obs["hint"][..., hyper.hint_take], 0.0)}
 
 
-def observe(obs: dict[str, jax.Array], key: jax.Array, hyper: Hyper) -> dict[str, jax.Array]:
-    """The agent's view of obs in training: its hint, and the state plus N(0, s^2) (s is 0 but for
-    PPO-x+N(0,1); adding 0 x noise leaves the state as it was)."""
+DROP_TAG = 0xD809  # folded into a step's noise key for its hint dropout (leaves the noise as it was)
+
+
+def observe(obs: dict[str, jax.Array], key: jax.Array, hyper: Hyper, drop: float | None = None) -> dict[str, jax.Array]:
+    """The agent's view of obs ([N, ...]) in training: its hint, each env's replaced by zeros with
+    probability `drop` (an agent that drops its hint; None: kept), and the state plus N(0, s^2) (s is 0
+    but for PPO-x+N(0,1); adding 0 x noise leaves the state as it was)."""
     obs = pick_hint(obs, hyper)
+    if drop is not None:
+        kept = jax.random.uniform(jax.random.fold_in(key, DROP_TAG), obs["hint"].shape[:-1]) >= drop
+        obs = {**obs, "hint": jnp.where(kept[..., None], obs["hint"], 0.0)}
     if "state" not in obs:
         return obs
     return {**obs, "state": obs["state"] + hyper.state_noise * jax.random.normal(key, obs["state"].shape)}
+
+
+def deploy_view(obs: dict[str, jax.Array], spec: AgentSpec) -> dict[str, jax.Array]:
+    """obs as the agent sees it at deployment: its privileged inputs (`spec.privileged`) are zeros."""
+    return {**obs, **{k: jnp.zeros_like(obs[k]) for k in spec.privileged if k in obs}}
+
+
+def hint_error(prediction: jax.Array, hint: jax.Array, keep: jax.Array) -> jax.Array:
+    """The mean squared error of a hint's prediction over its kept positions: prediction, hint
+    [M, W], keep bool[W] (a group's padding is no part of a member's hint, so its loss is as alone)."""
+    squared = jnp.where(keep, (prediction - hint) ** 2, 0.0)
+    return squared.sum() / (prediction.shape[0] * jnp.maximum(keep.sum(), 1))
 
 
 STARTS_TAG = 0x57A7  # folded into a rollout's key for its per-rollout starts (leaves the step keys as they were)
@@ -208,11 +228,12 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
     """PPO's pieces for a validated RunConfig. Every number a table varies is read from the
     state's `Hyper`, so the pieces serve any configuration of the same shapes; `hint` is the
     env's hint (default: cfg's; a group's env computes every member's, see hintsjax.algorithms.group)."""
-    ppo = cfg.ppo
+    ppo, spec = cfg.ppo, cfg.agent_spec
     env = envs.AutoReset(cfg.make_env(hint=hint))
     env_params = cfg.task_params(cfg.variant)
     network = make_network(cfg, env)
     T, N = ppo.rollout_length, ppo.num_envs
+    drop = ppo.hint_dropout if spec.drops_hint else None
 
     def init(key: jax.Array) -> RunnerState:
         hyper = Hyper.of(cfg)
@@ -230,11 +251,11 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
         def step(carry, key):
             env_state, obs = carry
             k_noise, k_act, k_env, k_final = jax.random.split(key, 4)
-            seen = observe(obs, k_noise, state.hyper)
+            seen = observe(obs, k_noise, state.hyper, drop)
             mean, log_std, value = network.apply(state.params, seen)
             action = gaussian_sample(k_act, mean, log_std)
             ts = jax.vmap(env.step, in_axes=(0, 0, 0, None, 0))(jax.random.split(k_env, N), env_state, action, env_params, starts)
-            final_value = network.apply(state.params, observe(ts.final_obs, k_final, state.hyper))[2]
+            final_value = network.apply(state.params, observe(ts.final_obs, k_final, state.hyper, drop))[2]
             transition = Transition(
                 seen,
                 action,
@@ -250,13 +271,14 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
 
         k_steps, k_last = jax.random.split(key)
         (env_state, obs), traj = jax.lax.scan(step, (state.env_state, state.obs), jax.random.split(k_steps, T))
-        last_value = network.apply(state.params, observe(obs, k_last, state.hyper))[2]
+        last_value = network.apply(state.params, observe(obs, k_last, state.hyper, drop))[2]
         return state.replace(env_state=env_state, obs=obs), traj, last_value
 
     def loss_fn(params, batch: Batch, hyper: Hyper):
-        mean, log_std, value = network.apply(params, batch.obs)
+        predicts = spec.hint_use == "target"
+        mean, log_std, value, *prediction = network.apply(params, batch.obs, predicts)
         advantage = (batch.advantage - batch.advantage.mean()) / (batch.advantage.std() + 1e-8)
-        return clipped_surrogate_loss(
+        loss, parts = clipped_surrogate_loss(
             gaussian_log_prob(batch.action, mean, log_std),
             batch.log_prob,
             advantage,
@@ -267,6 +289,10 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
             hyper.vf_coef,
             hyper.ent_coef,
         )
+        if not predicts:
+            return loss, parts
+        error = hint_error(prediction[0], batch.obs["hint"], hyper.hint_keep)
+        return loss + ppo.aux_coef * error, {**parts, "hint_loss": error}
 
     def learn(state: RunnerState, traj: Transition, last_value: jax.Array, reward: jax.Array, key: jax.Array):
         hyper = state.hyper

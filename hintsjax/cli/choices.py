@@ -24,6 +24,7 @@ def text() -> str:
     adapted = [name for name in envs.REGISTRY.keys() if ":" in name]
     lines = ["Choices (from the registries):",
              f"agent:  {', '.join(AGENTS)}",
+             *(f"  {name:<16}{spec.about}" for name, spec in AGENTS.items()),
              f"scheme: {', '.join(SCHEMES)}",
              f"env:    {', '.join(suite + adapted)}",
              "Each env's hints (hint=<name>, or names joined by '+'; none for no hint) and variants (variant=, eval_variants=):"]

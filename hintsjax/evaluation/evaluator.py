@@ -22,7 +22,7 @@ from hintsjax.system import program_cache
 from hintsjax.system.devices import SeedLayout
 from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms.group import cell_state
-from hintsjax.algorithms.ppo import Hyper, make_network, pick_hint
+from hintsjax.algorithms.ppo import Hyper, deploy_view, make_network, pick_hint
 from hintsjax.algorithms.ppo_math import gaussian_sample
 from hintsjax.algorithms.trainer import program_identity
 from hintsjax.evaluation.outliers import far_below
@@ -55,7 +55,8 @@ def make_task_evaluator(cfg: RunConfig, num_episodes: int, hint: str | None = No
                  pick: Hyper | None = None) -> EvalResult:
         k_reset, k_run = jax.random.split(key)
         ts = envs.fresh_episodes(k_reset, env, task_params, num_episodes)
-        see = (lambda obs: obs) if pick is None else (lambda obs: pick_hint(obs, pick))  # noqa: E731
+        picked = (lambda obs: obs) if pick is None else (lambda obs: pick_hint(obs, pick))  # noqa: E731
+        see = lambda obs: deploy_view(picked(obs), cfg.agent_spec)  # noqa: E731  (privileged inputs: zeros)
 
         def step(carry):
             t, state, obs, ret, length, metrics, alive = carry

@@ -20,7 +20,7 @@ from flax import struct
 
 from hintsjax import envs
 from hintsjax.settings.config import RunConfig
-from hintsjax.algorithms.ppo import make_network
+from hintsjax.algorithms.ppo import deploy_view, make_network
 from hintsjax.algorithms.ppo_math import gaussian_sample
 
 MAX_STEPS = 300  # the default --steps: the env's episode, capped here
@@ -89,7 +89,8 @@ def make_rollout(cfg: RunConfig, variant: str, steps: int) -> Callable[[Any, jax
         def step(carry, t):
             state, obs, alive = carry
             k_env = jax.random.fold_in(k_run, t)
-            action = policy_action(network, params, obs, jax.random.fold_in(k_env, 1) if cfg.stochastic_eval else None)
+            seen = deploy_view(obs, cfg.agent_spec)  # its privileged inputs (a baseline's hint) are zeros
+            action = policy_action(network, params, seen, jax.random.fold_in(k_env, 1) if cfg.stochastic_eval else None)
             ts = env.step(k_env, state, action, task_params)
             done = ts.terminated | ts.truncated
             record = Rollout(

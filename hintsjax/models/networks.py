@@ -107,8 +107,9 @@ class ActorCritic(nn.Module):
     SIGMOID_MIN_STD; "gaussian" and "tanh" leave both as they are (tanh squashes in the env:
     envs.SquashedActions). Without `critic_trains_encoder` the critic reads z' through a
     stop-gradient: its loss trains the critic's MLP alone.
-    Top-level parameter names ("encoder", "conditioning", "actor", "log_std", "critic") are the
-    optimiser's learning-rate groups. With `normalize_state` the state passes through the running
+    The hint's role is the agent's `hint_use`: the features' input (conditioned by the scheme), the
+    critic's alone (embedded beside z', "critic_hint"), or a target that z' predicts ("hint_head",
+    given by `predict_hint`). Top-level parameter names are the optimiser's learning-rate groups. With `normalize_state` the state passes through the running
     normaliser first (hintsjax.models.normalization; its statistics are the "obs_stats" collection).
     """
 
@@ -124,17 +125,17 @@ class ActorCritic(nn.Module):
 
     def features(self, obs: dict[str, jax.Array]) -> jax.Array:
         agent = self.agent
-        if agent.pixels and agent.hint:
+        if agent.conditioned:
             cond = SCHEMES[self.scheme](self.hint_width, name="conditioning")
             return cond(Encoder(name="encoder"), scale_pixels(obs["pixels"]), obs["hint"])
         if agent.pixels:
             return Encoder(name="encoder")(scale_pixels(obs["pixels"]))
-        if agent.hint:
+        if agent.hint and agent.hint_use == "input":
             return HintEmbedding(self.hint_width, name="conditioning")(obs["hint"])
         return StateNorm(name=normalization.NAME)(obs["state"]) if self.normalize_state else obs["state"]
 
     @nn.compact
-    def __call__(self, obs: dict[str, jax.Array]) -> tuple[jax.Array, jax.Array, jax.Array]:
+    def __call__(self, obs: dict[str, jax.Array], predict_hint: bool = False) -> tuple[jax.Array, ...]:
         z = self.features(obs)
         mean = MLP((*self.hidden, self.action_size), out_scale=0.01, name="actor")(z)
         log_std = self.param("log_std", nn.initializers.zeros, (self.action_size,))
@@ -143,13 +144,20 @@ class ActorCritic(nn.Module):
         if self.min_log_std is not None:
             log_std = jnp.maximum(log_std, self.min_log_std)
         critic_in = z if self.critic_trains_encoder else jax.lax.stop_gradient(z)
+        if self.agent.hint_use == "critic":  # the privileged hint beside the features, the critic's alone
+            critic_in = jnp.concatenate([critic_in, HintEmbedding(self.hint_width, name="critic_hint")(obs["hint"])], -1)
         value = MLP((*self.hidden, 1), out_scale=1.0, name="critic")(critic_in)[..., 0]
-        return mean, log_std, value
+        if self.agent.hint_use != "target":
+            return mean, log_std, value
+        # Built at every call (init included), returned when asked: the loss's prediction of the hint.
+        prediction = MLP((self.hidden[0], obs["hint"].shape[-1]), name="hint_head")(z)
+        return (mean, log_std, value, prediction) if predict_hint else (mean, log_std, value)
 
 
 # "frozen": the normaliser's statistics, which the optimiser leaves alone (normalization.update sets them).
+# The hint's head trains with the encoder it shapes; the critic's hint embedding with the critic.
 LR_GROUPS = {"encoder": "encoder", "conditioning": "encoder", "actor": "actor", "log_std": "actor", "critic": "critic",
-             normalization.NAME: "frozen"}
+             "critic_hint": "critic", "hint_head": "encoder", normalization.NAME: "frozen"}
 
 
 def lr_labels(params) -> dict:

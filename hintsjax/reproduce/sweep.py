@@ -62,10 +62,11 @@ def run_values(env: str, label: str, seeds: int, smoke: bool = False, experts: P
               **(SMOKE if smoke else {}), **(settings or {})}
     if label in AGENTS and AGENTS[label].imitates:
         return {**values, "agent": label, "expert": None if experts is None else str(experts / env)}
-    if label in AGENTS:
-        return {**values, "agent": label}
-    _, scheme, hint = label.split("-", 2)
-    return {**values, "agent": "hints", "scheme": scheme, "hint": hint}
+    agent, _, rest = label.partition("-")  # agent[-scheme][-hint]: agents' names have no '-'
+    if AGENTS[agent].conditioned:
+        scheme, _, rest = rest.partition("-")
+        values["scheme"] = scheme
+    return {**values, "agent": agent, **({"hint": rest} if rest else {})}
 
 
 def saved_physics(run: Path, default: str | None) -> str | None:

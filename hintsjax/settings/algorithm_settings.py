@@ -78,6 +78,12 @@ class PPOConfig:
     # makes the ratio of the next update's steps explode.
     min_log_std: float | None = setting(None, "a floor on the policy's log std (Brax's networks floor the std at "
                                               "0.001, log -6.9); null: none", saved_may_lack=True)
+    # The privileged-signal baselines (hintsjax/models/agents.py). Shapes, not traced: a Hyper leaf more
+    # would keep the checkpoints saved before it from restoring.
+    hint_dropout: float = setting(0.5, "pi_dropout: the chance that a training step's hint is replaced by zeros "
+                                       "(at deployment it always is)", saved_may_lack=True)
+    aux_coef: float = setting(1.0, "hint_aux: the weight of the hint's regression loss (mean squared error in the "
+                                   "hint's units)", saved_may_lack=True)
 
     @property
     def rollout_length(self) -> int:
@@ -106,7 +112,7 @@ class PPOConfig:
         require_positive(self, ("hidden", "encoder_lr", "actor_lr", "critic_lr", "max_grad_norm", "clip_eps", "reward_scale"),
                          "ppo.")
         require_range(self, {"gamma": (0.0, 1.0), "gae_lambda": (0.0, 1.0), "vf_coef": (0.0, math.inf),
-                             "ent_coef": (0.0, math.inf)}, "ppo.")
+                             "ent_coef": (0.0, math.inf), "hint_dropout": (0.0, 1.0), "aux_coef": (0.0, math.inf)}, "ppo.")
         check_choices(self, "ppo.")
         if not self.adam_eps > 0:
             raise UsageError(f"ppo.adam_eps ({self.adam_eps}) must be positive")

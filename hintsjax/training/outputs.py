@@ -32,7 +32,8 @@ def finish(cfg: RunConfig, run_dir: Path, training: Training, evaluations: list[
     curve; print the results, a line naming any seeds that ended far below the others, and one
     saying which of them had a KL storm."""
     compiled = training.compiled
-    results = {"label": cfg.label, "env": cfg.env, "train_seconds_this_call": training.seconds,
+    results = {"label": cfg.label, "env": cfg.env, "seen_at_deploy": list(cfg.agent_spec.deploy_sees),
+               "train_seconds_this_call": training.seconds,
                "train_seconds": training.before + training.seconds,
                "compile_seconds": {"train": compiled.seconds, "eval": eval_compile},
                "trace_seconds": {"train": compiled.trace_seconds}, "traced_programs_loaded": compiled.loaded,
