@@ -67,26 +67,30 @@ def env_lines(runs: Path, env: str) -> list[str]:
 
     results = [(label.split("-")[0], label, load(runs, env, label)) for label in labels(env)]
     results.append(("learned", "", learned_result(env)))
-    hints = results[4][2]
+    rgb, hints = results[0][2], results[4][2]
     if all(result is None for _, _, result in results[:5]):
         return []
+
+    def poi(x: dict | None, y: dict | None) -> str:
+        if x is None or y is None or x is y:
+            return "-"
+        ci = stats.poi_ci(seed_means(x), seed_means(y))
+        return f"{interval_text(ci)} {verdict(ci)}"
+
     rows = []
     for kind, label, result in results:
         name, sees, needs = ROWS[kind]
         if result is None:
-            rows.append([name, sees, needs, "-", "-", "-", "-"])
+            rows.append([name, sees, needs, "-", "-", "-", "-", "-"])
             continue
         x = np.asarray(seed_means(result), np.float64)
-        if kind == "hints" or hints is None:
-            poi = "-"
-        else:
-            ci = stats.poi_ci(seed_means(hints), x)
-            poi = f"{interval_text(ci)} {verdict(ci)}"
-        rows.append([name, sees, needs, f"{x.mean():.1f} ± {x.std():.1f}", stats.iqm_cell(x), str(len(x)), poi])
+        rows.append([name, sees, needs, f"{x.mean():.1f} ± {x.std():.1f}", stats.iqm_cell(x), str(len(x)),
+                     poi(hints, result), poi(result, rgb)])
     ppo = trained_ppo(runs, env, labels(env)[0])
     lines = [f"## {env}: the privileged signal is the {SIGNAL[env]} {'state' if SIGNAL[env] == 'state' else 'hint'}", "",
              *markdown_table(["agent", "what sees the privileged signal in training", "needs at deployment",
-                              "mean ± std over seeds", "IQM [95% CI]", "seeds", "P(HINTS-FC > row) [95% CI]"], rows), ""]
+                              "mean ± std over seeds", "IQM [95% CI]", "seeds", "P(HINTS-FC > row) [95% CI]",
+                              "P(row > PPO-RGB) [95% CI]"], rows), ""]
     if ppo is not None:
         lines += [f"PPO: {ppo_text(ppo)}.", ""]
     if results[5][2] is not None:
@@ -104,7 +108,8 @@ def report(runs: Path, force: bool = False) -> None:
              "baselines see the signal (the hint HINTS-FC gets, or the state) in training and act on pictures alone; "
              "HINTS-FC needs the hint at deployment. Returns: the mean over each seed's 50 deterministic episodes, "
              "then mean ± std over seeds and the IQM with its 95% bootstrap interval (hintsjax/reproduce/stats.py). "
-             "P(HINTS-FC > row): the probability that a seed of HINTS-FC beats a seed of the row.", "",
+             "P(HINTS-FC > row): the probability that a seed of HINTS-FC beats a seed of the row; P(row > PPO-RGB): "
+             "whether the row gains on pictures alone.", "",
              ORDERINGS_ABOUT.split(" The best hint")[0], ""]
     for env in names:
         lines += env_lines(runs, env)

@@ -964,7 +964,7 @@ def test_the_privileged_baselines_report_sets_hints_fc_against_each_baseline(tmp
         env, label = run_id.split("/")
         cfg = run_config(sweep.run_values(env, label, 2))
         assert cfg.label == label and (label == "ppo_rgb" or cfg.hint == pb.SIGNAL[env]), run_id
-    runs = tmp_path / "privileged"
+    runs = tmp_path / "privileged_handmade"  # a name the archive lacks: no row falls back to archived runs
     seeds = {"ppo_rgb": [-1300.0, -1200.0, -1250.0, -1400.0], "asym_ac-composite": [-260.0, -190.0, -310.0, -210.0],
              "hints-fc-composite": [-250.0, -200.0, -300.0, -220.0]}
     for label, means in seeds.items():
@@ -974,10 +974,23 @@ def test_the_privileged_baselines_report_sets_hints_fc_against_each_baseline(tmp
     write_run(tmp_path / "learned", ".", "pendulum-composite-learned-k2", [evaluation(-400.0, 10.0, [-400.0, -410.0])])
     pb.report(runs)
     text = (tmp_path / "privileged_baselines.md").read_text()
-    assert "| PPO-RGB | nothing | pictures | -1287.5 ± 74.0 |" in text and "| 1.00 [1.00, 1.00] decided for |" in text
+    assert "| PPO-RGB | nothing | pictures | -1287.5 ± 74.0 |" in text and "| 1.00 [1.00, 1.00] decided for | - |" in text
     asym = next(line for line in text.splitlines() if line.startswith("| asymmetric actor-critic |"))
-    assert "| 0.50 [" in asym and asym.endswith("undecided |")
+    assert "| 0.50 [" in asym and asym.endswith("undecided | 1.00 [1.00, 1.00] decided for |")
     assert "| PI dropout (FiLM) | the policy, dropped with p = ppo.hint_dropout | pictures | - |" in text
-    assert "| HINTS-FC | the policy and the critic | pictures + the hint |" in text
+    hints_row = next(line for line in text.splitlines() if line.startswith("| HINTS-FC | the policy and the critic |"))
+    assert hints_row.endswith("| 4 | - | 1.00 [1.00, 1.00] decided for |")
     assert "| HINTS-FC, learned generator | " in text and "| -405.0 ± 5.0 |" in text
     assert "## ant" not in text
+
+
+def test_the_privileged_baselines_report_rebuilds_the_committed_file_on_a_fresh_checkout(tmp_path, monkeypatch):
+    """`python experiments/privileged_baselines.py --report` with no runs/privileged reads the archived
+    runs (experiments/results/runs/privileged) and writes the committed file, byte for byte."""
+    import privileged_baselines as pb
+
+    committed = pb.OUT.read_text()
+    monkeypatch.setattr(pb, "OUT", tmp_path / "privileged_baselines.md")
+    monkeypatch.chdir(tmp_path)
+    pb.report(Path("runs/privileged"))
+    assert (tmp_path / "privileged_baselines.md").read_text() == committed
