@@ -2,8 +2,8 @@
 
 Solver override (`locomotion.SOLVER`): Newton with at most 8 iterations and 16 line-search steps
 instead of MuJoCo's 100 and 50 (MJX runs every iteration for every env under vmap). From the
-expert's running states this steps as MuJoCo C does to 1e-4; 4 iterations, the cap until
-2026-11-26, missed by 0.011. The model is otherwise Gymnasium's file unchanged (RK4, dt 0.01,
+expert's running states this steps as MuJoCo C does to 1e-4; 4 iterations, the earlier
+cap, missed by 0.011. The model is otherwise Gymnasium's file unchanged (RK4, dt 0.01,
 frame skip 5: 0.05 s per step). What remains is MJX's: from states with legs on the floor under
 random or saturated actions, MJX (its JAX solver and MJX-Warp alike) misses MuJoCo C by up to 1.5
 in a velocity (0.07 on average), whatever the iterations, because it orients the friction pyramid
@@ -11,9 +11,7 @@ of a plane contact differently. Elliptic cones, where MJX matches MuJoCo C, woul
 model from Gymnasium's: MuJoCo C with them misses the shipped Ant-v5 by up to 2.2 (0.17 on
 average) and by 2.6 from the expert's states (experiments/fidelity.py; docs/environments.md).
 
-Reward (v5): x velocity of the torso over the step + 1 while healthy - 0.5 |a|^2
-- 5e-4 |clip(cfrc_ext, -1, 1)|^2; healthy while the torso's height is in [0.2, 1] and the state
-is finite; unhealthy terminates. Observation (105): qpos[2:], qvel, clip(cfrc_ext[1:], -1, 1).
+More of what it owns and why: docs/design.md, "Module notes", envs/ant.py.
 """
 
 from __future__ import annotations

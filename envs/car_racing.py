@@ -1,67 +1,11 @@
 """Car racing in pure JAX: Gymnasium `CarRacing-v3`'s tracks and reward, a car of our own, 96x96.
 
-Track: Gymnasium's generator, fixed-shape. Twelve checkpoints around a circle (radius TRACK_RAD/3
-to TRACK_RAD; the first and last at 1.5 TRACK_RAD); a trace walks TRACK_DETAIL_STEP per step,
-turning towards the current checkpoint by at most TRACK_TURN_RATE; the track is the lap between
-two passes of the start angle -pi/12, kept if head and tail glue within a step. Tile i is the quad
-from centre point i-1 to point i, TRACK_WIDTH either side; tile 0 closes the loop (about two steps
-long, as in Gymnasium). From Gymnasium's checkpoints, our trace's 5th lap is its track to 3e-4 u.
-Deviations from Gymnasium:
-- the trace is a `lax.scan` of TRACE_STEPS steps whose 2nd lap we keep; Gymnasium traces 5 laps
-  and keeps the 5th. The trace settles on a limit cycle by lap 2, which has Gymnasium's tile count
-  in 9 of 10 tracks (1-2 tiles off otherwise) at 2/5 of the sequential cost;
-- instead of Gymnasium's retry loop, CANDIDATES (3) tracks are traced in parallel and the first
-  valid one kept (valid: two passes of the start angle, 50..MAX_TILES tiles, glued). Each is
-  valid with probability 0.93, so about 3 resets in 10^4 keep the first, imperfectly glued one;
-- tracks are padded to MAX_TILES points, with `n_tiles` the count; longer ones count as invalid;
-- kerb flags use heading differences wrapped to [-pi, pi) and spread over exactly four tiles
-  (Gymnasium's loop spreads a little further across the joint: 2 tiles in 10^4 differ).
-Tile counts: 292.9 +- 22.2 (212..394) on 4000 tracks; Gymnasium's: 294.3 +- 22.6 (seeds 0..199).
-
-Deploy variant `hairpin`: checkpoint 11 moves in to radius TRACK_RAD/3..TRACK_RAD/2 and checkpoint
-1 to an angle of 5..15 degrees, so the lap starts on a straight out to checkpoint 0 (at 1.5
-TRACK_RAD), where the track must turn back towards the centre. Its starts lie on diagonals, where
-Gymnasium's glue measure sqrt((cos b dx)^2 + (sin b dy)^2) rejects a third of good tracks, so the
-hairpin variant measures the joint's perpendicular offset. `first_corner_angle` measures the first
-corner: at most 45 degrees on 99.35% of hairpin tracks and 18.8% of standard ones (4000 each).
-Hairpin tracks have 294.5 +- 26.1 tiles.
-
-Car: Gymnasium's car (car_dynamics.py) without Box2D. One rigid body (the hull's and wheels' mass
-and inertia, turning about their centre of mass, MASS_BEHIND the hull's origin) on four WHEELS at
-Gymnasium's places. Each wheel's force is proportional to its slip velocity (rim speed minus
-ground speed along the wheel, and the sideways ground speed), scaled down onto a friction circle
-of FRICTION_LIMIT, times the grass grip (0.6) while the wheel touches no tile: each wheel grips by
-the surface under it, as Box2D's per-wheel friction limit does, so a car with two wheels on the
-grass yaws towards them and can spin. The engine feeds each rear wheel's spin with Gymnasium's
-power law; brakes slow every wheel's spin (>= 0.9 locks them); gas rises by at most 0.1 per step;
-the front wheels turn at 3 rad/s towards the target, to at most STEER_LIMIT (Box2D's 0.4 rad joint
-limit and its slop), as in Gymnasium (steer +1 turns right). Full gas spins the rear wheels,
-whose force then goes mostly lengthwise: the rear loses side grip and the car oversteers. A frame
-is one step as Gymnasium's (`Car.step`, then `world.Step`): forces from the frame's start, then
-velocities, then positions (semi-implicit Euler); finite at rest. No drag: Box2D caps a body at 2
-u per step, 100 u/s. Stepped beside Gymnasium's Box2D car under the same actions
-(test_the_car_steps_beside_box2ds_car): 0 to 45.5 u/s in 1 s and 87.6 in 2 s in both (0.01
-apart); a coasting full-lock corner 0.08 apart in speed and yaw rate; the full-gas spin and a
-spin on the grass within 1 u/s and 0.5 rad/s. Until issue 50 (2026-11-26) the grip was per axle,
-forces were recomputed over 4 substeps and the turn was about the hull's origin: that car did not
-spin on a skidpad where Box2D's does (experiments/results/car_skidpad.md). 1 u is a track unit
-(the car is 5 u long).
-
-Reward and episode, as Gymnasium: +1000/N for each tile first visited, -0.1 per frame; leaving
-the +-PLAYFIELD square pays -100 and ends the episode. A tile is visited when a wheel touches it:
-Gymnasium's FrictionDetector counts a tile when a wheel's box begins to overlap its quad; here
-when a corner of a wheel's box (the front pair steered) lies inside the quad (`wheel_contact`), so
-a car touches 2 or 3 tiles at once. Replayed along Gymnasium's own driven trajectories (10 tracks
-at 30, 60, 90 u/s), our count of visited tiles is within 0.09-0.26 tiles of Gymnasium's on
-average and at most 3 apart; the car's centre, the rule until issue 50, counted 1.5-3.6 fewer on
-average and up to 11 (experiments/results/car_driver.md). The lap ends the episode when tile 0 is
-first touched while more than 95% of the tiles are visited (Gymnasium's new_lap; its start
-touches tile 0, so in practice when all are visited), or when all are visited. At most 1000 steps.
-
-Picture: Gymnasium's 96x96 state view without its indicator bar or first-second zoom-in. Its
-1000x800 window at 16.2 px/u is shrunk to 96x96, so 1.56 px/u across and 1.94 px/u along; the car
-points up at column 48, row 72. Grass with lighter squares, grey tiles (unvisited ones in
-Gymnasium's three shades), red and white kerbs, black beyond the playfield, the hull and wheels.
+The track is Gymnasium's generator in fixed shapes (a `lax.scan` trace, CANDIDATES traced at once,
+padded to MAX_TILES); the deploy variant `hairpin` bends the first corner back towards the centre.
+The car is Gymnasium's car (car_dynamics.py) stepped without Box2D: one rigid body on four WHEELS,
+each gripping by the surface under it. Reward, lap and episode are Gymnasium's; the picture is its
+96x96 state view without the indicator bar. Each part, its deviations from Gymnasium and how far
+they are measured to go: docs/environments.md, "Car racing in detail".
 """
 
 from __future__ import annotations
@@ -120,7 +64,7 @@ DRIVEN = np.array([0.0, 0.0, 1.0, 1.0], np.float32)
 MAX_TILES = 400
 TRACE_STEPS = 800
 # Trace steps per loop iteration. 8 runs 2.5x slower on XLA:CPU; on a GPU the trace is latency-bound
-# (11-13 ms per reset batch of 256 to 4096 on an H100 at 1) and unrolling is untried.
+# (docs/throughput.md) and unrolling is untried.
 TRACE_UNROLL = 1
 CANDIDATES = 3
 LOOKAHEAD = 10  # tiles (35 u) ahead for the curvature hint
@@ -460,7 +404,7 @@ VIEW_CENTRE = np.array([0.0, 200 / ZOOM], np.float32)
 # the VIEW_TILES nearest the view's centre: 16 tile tests per pixel. Against drawing every tile,
 # 0.4% of pictures differ, by a pixel or two (measured on 256 hairpin states off the centre line).
 BLOCKS, BLOCK_TILES, VIEW_TILES = 4, 16, 64
-RENDER_UNROLL = 4  # tiles per loop iteration: 1.7x faster than 1 on an H100 (4096 envs)
+RENDER_UNROLL = 4  # tiles per loop iteration: 1.7x faster than 1 on a GPU (docs/throughput.md)
 _B = SIZE // BLOCKS
 VIEW_BLOCKS = VIEW.reshape(BLOCKS, _B, BLOCKS, _B, 2).transpose(0, 2, 1, 3, 4).reshape(BLOCKS**2, _B, _B, 2)
 BLOCK_CENTRES = VIEW_BLOCKS.mean((1, 2))

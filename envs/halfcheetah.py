@@ -4,7 +4,7 @@ and observation).
 Solver override (`locomotion.SOLVER`): Newton with at most 8 iterations and 16 line-search steps
 instead of MuJoCo's 100 and 50 (MJX runs every iteration for every env under vmap). SPEC section
 10's 1 iteration is faster still but misses Gymnasium by up to 3.4 in a joint speed (2
-iterations: 1.6); 4, the cap until 2026-11-26, missed by up to 1.2 from some of the expert's
+iterations: 1.6); 4, the earlier cap, missed by up to 1.2 from some of the expert's
 running states (MuJoCo C at 4 alike), where 8 and more miss by 2e-3, float32 against float64
 (experiments/fidelity.py). The model is otherwise Gymnasium's file unchanged (Euler, dt 0.01,
 frame skip 5: 0.05 s per step).

@@ -1,25 +1,11 @@
 """Humanoid on MJX: Gymnasium `Humanoid-v5` (its `humanoid.xml`, frame skip 5, reward, health
 and observation).
 
-Two overrides of Gymnasium's file (`Humanoid.options`):
-- Solver: Gymnasium's file asks for PGS with 50 iterations, which MJX does not implement; we use
-  Newton with at most 4 iterations and 8 line-search steps. More (8 and 16, 16 and 32, 100 and
-  50) changed nothing that the integrator's difference does not swamp (experiments/fidelity.py).
-- Integrator: semi-implicit Euler instead of the file's RK4, for the GPU budget, not for MJX
-  (which has RK4). RK4 evaluates the whole forward pass, contacts included, four times a
-  substep; Euler once. Training with RK4 cost 1.74x (MJX-Warp) and 2.54x (MJX-JAX) the time
-  of Euler on an H100, beyond issue 50's 1.5x, so Euler stays, and with it the largest share
-  of the humanoid's distance from Gymnasium (docs/environments.md, "Fidelity"). On 2 CPU cores, 64 envs: 272 env steps/s with RK4, 1160 with Euler
-  (4.3x) in a first run; 326 and 803 (2.5x) in `experiments/humanoid_contacts.py`'s rerun (CPU
-  timings vary). A Table 3 row (5 seeds x 10 M steps) would take over an hour of GPU with RK4.
-  The parity tests measure both sides of this: against Gymnasium with the same integrator
-  (the solver's share of the difference) and against Humanoid-v5 as shipped (RK4).
-Otherwise the file is unchanged (dt 0.003, frame skip 5: 0.015 s per step; self-collisions on).
-Contacts are most of a step's cost: MJX computes all 138 candidates (111 between the robot's
-own geoms) in each forward pass. On 2 CPU cores a step without contacts ran 3.7x faster, with
-floor contacts alone 2.1x (an earlier run: 5.7x and 2.4x; both with RK4). Excluding the pairs
-that cannot touch would save little: sampled over the joint ranges, all but 19 of those 111
-pairs come within 1 cm. Both measured by `python experiments/humanoid_contacts.py`.
+Two overrides of Gymnasium's file (`Humanoid.options`): Newton with at most 4 iterations and 8
+line-search steps (the file's PGS is not in MJX), and semi-implicit Euler instead of its RK4, for
+the GPU budget. Otherwise the file is unchanged (dt 0.003, frame skip 5; self-collisions on). Why,
+and what each costs and leaves of the distance from Gymnasium: docs/environments.md, "Humanoid's
+overrides".
 
 Reward (v5): 1.25 x velocity of the centre of mass over the step + 5 while healthy
 - 0.1 |a|^2 - min(5e-7 |cfrc_ext|^2, 10); healthy while 1 < torso height < 2; unhealthy
@@ -103,7 +89,7 @@ def full_state(state: LocomotionState, params) -> jax.Array:
 # statistics (gail.normalize_state) and is held smooth by an R1 penalty of 10 on the expert's
 # pairs (gail.grad_penalty): without it D told the pairs apart perfectly within 200 updates, its
 # reward -log(1 - D) went flat near 0 and GAIL scored 447; with it, 7334 (5 seeds x 50
-# episodes, H200, 2026-11-23). The expert's PPO at 5 M steps, 2 seeds (H200; evaluation 2 x 10
+# episodes; docs/throughput.md). The expert's PPO at 5 M steps, 2 seeds (evaluation 2 x 10
 # episodes, in brackets the training return at the end): as listed 5617 (3897); without the
 # entropy bonus 4923 (4061), its approx. KL rising to 0.7; without the bonus and the
 # normaliser 513 (460); without the bonus, the normaliser and the reward scale 124 (118).

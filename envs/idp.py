@@ -1,20 +1,9 @@
 """InvertedDoublePendulum on MJX: Gymnasium `InvertedDoublePendulum-v5`, drawn at 64x64.
 
-The model is Gymnasium's own `inverted_double_pendulum.xml` (below, without its comments and the
-unused `frame_skip` numeric; one change: the constraint solver is Newton with at most 2
-iterations and 4 line-search steps instead of MuJoCo's 100 and 50, which MJX would otherwise
-run in full for every env under vmap; the rail limit is the only constraint and the parity test
-measured no difference from MuJoCo C's defaults, while 1 iteration missed by 0.05): a cart on a limited rail driven by a motor (gear
-500, control in [-1, 1]), two 0.6 m poles on hinges, RK4 with a 0.01 s timestep. One control step
-is 5 MuJoCo steps (v5's frame skip). Reward and termination are v5's:
-    r = 10 * alive - (0.01 x^2 + (y - 2)^2) - (1e-3 w1^2 + 5e-3 w2^2)
-with (x, y) the tip site and w1, w2 the hinge speeds; the episode ends when y <= 1 (alive = 0 on
-that step). As in MuJoCo C, the tip position and the constraint force that the reward and the
-observation read after a step are those MJX's last RK4 stage computed, so they match
-Gymnasium's `data.site_xpos` and `data.qfrc_constraint`, which have the same staleness.
+Gymnasium's own model (a cart on a rail, two poles, RK4, frame skip 5) with Newton capped at 2
+iterations; v5's reward and termination; angles from upright; a fixed side view.
 
-Angles are measured from upright: qpos = [cart x, phi1, phi2] with phi2 relative to the first
-pole. The picture is a fixed side view of the rail, the cart and the poles.
+More of what it owns and why: docs/design.md, "Module notes", envs/idp.py.
 """
 
 from __future__ import annotations

@@ -5,22 +5,10 @@ control step, followed, as Gymnasium does, by `mj_rnePostConstraint` so that the
 (contact) forces `cfrc_ext` are filled in. A task module supplies the model file, its solver
 overrides (each documented there), its params, what the forward reward differentiates, its
 reward and health rules and its observation; this module supplies the state, the step, the
-reset and the picture.
-
-Staleness, as in MuJoCo C: after a step, the kinematic quantities the reward and the
-observation read (body positions, `cinert`, `cvel`, `cfrc_ext`) are those the last physics
-stage computed, while `qpos` and `qvel` are the integrated ones. Gymnasium reads them the same
-way, so the forward reward's "position before" is the previous step's stale value (or, after a
-reset, a fresh one), and `LocomotionState.position` keeps it.
-
-Actions are clipped to the actuators' control range before they act and, by default, before the
-control cost is taken. Gymnasium charges the raw action (an agent that clips before stepping, as
-Stable-Baselines3's do, sees the same numbers as ours); `LocomotionParams.raw_action_ctrl_cost`
-charges it as Gymnasium does, for comparison with published returns (docs/environments.md gives
-the difference it makes to the experts).
-
-The picture is drawn by the shared ray caster `render3d` from a camera that follows the
-centre of mass in the ground plane at a fixed height, so that a fall shows as a fall.
+reset and the picture (the shared ray caster `render3d`, from a camera that follows the centre
+of mass at a fixed height, so that a fall shows as a fall). Which quantities are stale after a
+step, as in MuJoCo C and Gymnasium, and how actions are clipped and charged:
+docs/environments.md, "Locomotion in detail".
 """
 
 from __future__ import annotations
@@ -77,7 +65,7 @@ class LocomotionState:
 # The one change to Gymnasium's models: Newton capped at 8 iterations and 16 line-search steps
 # instead of MuJoCo's 100 and 50 (MJX runs every iteration for every env under vmap). From
 # Gymnasium's states, MuJoCo C at this cap steps as at 100 (to 1e-13) and MJX as closely as at 100;
-# at 4 and 8, used until 2026-11-26, the HalfCheetah's running states missed by up to 1.2 in a
+# at the earlier caps of 4 and 8 the HalfCheetah's running states missed by up to 1.2 in a
 # velocity and the Ant's by 0.011. 8 cost 1.09-1.46x the training time of 4 (docs/environments.md,
 # "Fidelity"; experiments/results/fidelity.json).
 SOLVER = dict(solver=mujoco.mjtSolver.mjSOL_NEWTON, iterations=8, ls_iterations=16)

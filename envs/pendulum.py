@@ -215,7 +215,7 @@ register_composite(NAME, "composite", ("angular_velocity", "goal_distance"))
 # reach, without the entropy bonus, -185, -177, -155, -163, -173 at 102,400 steps (5 seeds,
 # 20 greedy episodes each; tests/test_imitation.py's pendulum_expert_returns). Over the full
 # 1 M, the entropy bonus 0.01 holds up better: 5 seeds x 50 episodes -153 +- 83 against
-# -173 +- 101 without (one H100 run each; on CPU -168 +- 99 against -376 +- 461, where one
+# -173 +- 101 without (one GPU run each; on CPU -168 +- 99 against -376 +- 461, where one
 # seed failed late), so the expert and GAIL keep it.
 EXPERT_PPO = dict(total_env_steps=1_000_000, num_envs=16, batch_size=3200, minibatch_size=200, epochs=10,
                   gamma=0.95, ent_coef=0.01, actor_lr=3e-4)

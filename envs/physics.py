@@ -9,14 +9,7 @@ pass only), and, with `contact_forces`, the external forces `cfrc_ext` filled in
 `mj_rnePostConstraint` leaves them. What comes back is a `Readout`: the data fields the suite's
 tasks read, with MuJoCo C's staleness (kinematic fields from the last physics stage).
 
-MJX-Warp keeps its contacts in one buffer for all the worlds of a call (`naconmax`), so its
-size must follow the batch. `WarpPhysics.run` is therefore a `custom_vmap` that gathers every
-vmapped axis above it (seeds and envs) into one flat batch of N worlds before MJX sees it, and
-sizes the buffers for exactly those N: `capacity` times the most contacts (and constraint rows)
-the model's collision pairs can make, per world. MuJoCo Warp flags a world whose contacts or
-constraints did not fit (`overflow`); such a world's readout is NaN, so it can never be stepped
-on silently with contacts dropped, and `overflow_seen()` says which capacity overflowed (the run
-loop stops with one line naming the setting to raise).
+More of what it owns and why: docs/design.md, "Module notes", envs/physics.py.
 """
 
 from __future__ import annotations

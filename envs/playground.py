@@ -47,7 +47,7 @@ DEFAULTS: dict[str, TaskDefaults] = {
     # The cheetah's reset settles it with 200 physics steps (130.8 ms for 16 envs on 2 CPU cores,
     # a step 1.6 ms), and an env's next start is drawn at every step unless drawn once a rollout:
     # an adapted step took 178.8 ms with it, 13.2 ms without (+ one draw a rollout of 8 steps);
-    # drawn every step, CheetahRun took 6.5 s an update on an H200 (2026-11-28, playground.md)
+    # drawn every step, a CheetahRun update took several times as long on a GPU (docs/playground.md)
     "CheetahRun": TaskDefaults(TRACK, "torso_velocity", {**PIXEL_PPO, "starts_per_rollout": True}),
     "WalkerWalk": TaskDefaults(TRACK, "torso_height_velocity", PIXEL_PPO),
     "ReacherEasy": TaskDefaults("fixed", "fingertip_to_target", PIXEL_PPO),

@@ -10,12 +10,7 @@ one kernel with no [pixels, geoms] array in memory. Only each pixel's winner the
 normal, from the hit point in that geom's frame. Vectors are tuples of three arrays: [..., 3]
 arrays, with their stacks and slices, split XLA's fusions.
 
-Conventions are MuJoCo's: geom_size per type as in mjx/_src/ray.py; a plane is seen from its +z
-side only, bounded by size[0:2] where those are > 0; the colour is geom_rgba, or the material's
-rgba where geom_rgba is MJCF's default (0.5, 0.5, 0.5, 1), as MuJoCo's visualiser does. Unlike
-MuJoCo's ray, a camera inside a geom sees through it. Shading: the colour times ambient +
-Lambert (one directional light) + a headlight; planes checkered; the background where nothing
-is hit; optionally fog.
+More of what it owns and why: docs/design.md, "Module notes", envs/render3d.py.
 """
 
 from __future__ import annotations

@@ -2,19 +2,11 @@
 
     python -m hintsjax.quickstart [--updates 32] [--epochs 10] [--seed 0] [--out-dir runs]
 
-Trains the paper's main agent, pictures plus the composite hint with FiLM conditioning, on the
-pendulum, one seed, cheaper than the paper's runs in two ways that the README states:
-- pictures of 36x36 pixels, not 64x64 (the same encoder at the smallest side it takes; 5.8x
-  cheaper an update on a CPU core);
-- PPO settings for short runs (QUICK_PPO): each update one whole 200-step episode of 16 envs
-  (whose next starts are drawn once, at the rollout's end), discount 0.95, 6 epochs of minibatches
-  of 200, actor learning rate 3e-4. With the paper's settings (0.99, 1024-step batches, 8 epochs)
-  a run this short ended below or near the random policy at some seeds
-  (experiments/results/quickstart_spread.md).
-`--updates` updates of 3200 env steps: 32 is 102,400 env steps, half the paper's budget. Then it
-evaluates the agent on 20 swing-up episodes beside a random policy (the same agent before
-training, sampling its actions from N(0, 1)), writes a GIF of one episode with the hint drawn
-beside the picture, and prints where the run folder, learning curve and GIF are.
+The paper's main agent (pictures, the composite hint, FiLM) on the pendulum, one seed, at 36x36
+pictures and PPO settings for short runs (QUICK_PPO); then an evaluation beside a random policy,
+a GIF of one episode with its hint, and where the run folder is.
+
+More of what it owns and why: docs/design.md, "Module notes", hintsjax/quickstart.py.
 """
 
 from __future__ import annotations

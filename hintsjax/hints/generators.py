@@ -7,18 +7,7 @@ registered hint or `a+b` composite, trained by regression on rollouts of the jit
     python -m hintsjax.generator env=pendulum hint=composite seeds=5     # -> runs/generator-...
     python -m hintsjax.run env=pendulum hint=composite hint_source=runs/generator-...
 
-`hint_source` (training) and `eval_hint_source` (deploy; `python -m hintsjax.evaluate
---hint-source`) then make the agent see the generator's hints (its seed 0) in place of the
-programmatic ones. The network, the env that does it (`GeneratedHintEnv`) and a folder's loading
-are hint sources, below the settings (hintsjax/settings/hint_sources.py); this module trains and writes one
-(the command is hintsjax/generator.py).
-
-Training is one jitted `train(key)` vmapped over seeds: rollouts (random actions N(0, 1), the
-start of an untrained policy; optionally the packaged expert's in part of the envs, so the data
-covers the states a good policy visits), then Adam on the mean squared error of the hint
-normalised per dimension, then the held-out error and R^2 per dimension on rollouts of other
-envs. The folder holds config.yaml, metrics.csv (per seed and hint dimension), generator.json and
-the seed-batched params as an orbax checkpoint.
+More of what it owns and why: docs/design.md, "Module notes", hintsjax/hints/generators.py.
 """
 
 from __future__ import annotations

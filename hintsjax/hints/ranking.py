@@ -4,24 +4,12 @@
     python -m hintsjax.rank env=acrobot hints=joint,composite,angular_velocity_1+goal_distance
 
 Two scores, each one compiled call over every candidate and seed (the paper's Section 6 asks for
-such a metric; experiments/results/hint_ranking.md measures how far each agrees with the full
-tables):
-
-- `information`: how much the hint adds to what one picture shows about the return to come.
-  Rollouts (N(0, 1) actions, and the env's packaged expert in half the envs where it has one)
-  give pictures, every candidate's hint, the action taken and the discounted return that followed
-  (`info_gamma`). A probe (the agent's encoder on the picture, the hint and the action, into an
-  MLP) regresses that return; the score is its held-out R^2 with the hint minus its R^2 with the
-  hint zeroed (the same probe, data and seed): the information about what pays that the picture
-  lacks and the hint carries.
-- `probe`: every candidate trained as HINTS-<scheme> for `probe_fraction` of the env's budget,
-  all of them and their seeds one group (hintsjax.algorithms.group); the score is the area under the
-  learning curve (the mean training return over the updates; where a run saw no episode end, as
-  halfcheetah's 1000-step episodes at 10 % of its budget, every run's mean reward per step:
-  scores.json's `probe_measure` says which).
-
-The command (`python -m hintsjax.rank`, hintsjax/rank.py) writes them into a folder: config.yaml,
-scores.json (per score, candidate and seed), ranking.csv and ranking.png.
+such a metric): `information`, how much the hint adds to what one picture shows about the return
+to come (a probe's held-out R^2 with the hint minus without it), and `probe`, the area under the
+learning curve of every candidate trained as HINTS-<scheme> for `probe_fraction` of the env's
+budget, all in one group. How each is computed: docs/results.md, "Which hint is worth giving";
+how far each agrees with the full tables: experiments/results/hint_ranking.md. The command
+(hintsjax/rank.py) writes config.yaml, scores.json, ranking.csv and ranking.png into a folder.
 """
 
 from __future__ import annotations

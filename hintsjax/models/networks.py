@@ -48,8 +48,8 @@ class PatchConv(nn.Module):
 
     The same parameters (kernel [k, k, C, F], bias [F]) and result as `nn.Conv`; computed as
     a matmul because that stays fast where `nn.Conv` does not: with seed-vmapped weights (a
-    grouped convolution, 4x slower on an H100) and, on CPU, inside `scan` bodies whose weights
-    change each iteration (12x slower).
+    grouped convolution, 4x slower on a GPU) and, on CPU, inside `scan` bodies whose weights
+    change each iteration (12x slower; docs/throughput.md).
     """
 
     features: int

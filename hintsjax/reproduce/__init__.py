@@ -10,8 +10,5 @@
 - `markdown`: markdown tables, and writing a report (or one script's section of a shared one);
 - `flag_variants`: one measurement per XLA flag variant, each in a fresh process.
 
-It may import any of hintsjax (training, configs, statistics, the run log); nothing in hintsjax
-imports it. A table script in experiments/ declares its runs and rows and calls `table_main`.
-The archive is the checkout's experiments/results/runs, so these tools work in a checkout (an
-editable install, `make setup`).
+More of what it owns and why: docs/design.md, "Module notes", hintsjax/reproduce/__init__.py.
 """

@@ -230,7 +230,7 @@ def curve_lines(runs: Path, env: str, labels: list[str], out: Path, title: str, 
 
 
 def sweep_hardware(runs: Path, table: str, run_ids: list[str]) -> str:
-    """'NVIDIA H200; 6 runs at once over 2 GPUs' for the GPU sweeps of `table` (from sweeps.jsonl
+    """'<device>; 6 runs at once over 2 GPUs' for the GPU sweeps of `table` (from sweeps.jsonl
     and the runs' eval.json), or '' when none ran on a GPU."""
     records = sweep_records(runs, table)
     results = [result for r in run_ids if (result := load(runs, *r.split("/")))]

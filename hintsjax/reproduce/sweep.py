@@ -1,7 +1,7 @@
 """The machinery that the reproduction sweeps share (classic_control.py, locomotion.py, car_racing.py, playground.py).
 
-A run is named `env/label`, where the label is `RunConfig.label` (an agent's name, or
-hints-<scheme>-<hint>); its folder runs/<sweep>/env/label holds config.yaml, metrics.csv,
+A run is named `env/label`, where the label is `RunConfig.label` (agent[-scheme][-hint], e.g.
+hints-fc-composite or asym_ac-state); its folder runs/<sweep>/env/label holds config.yaml, metrics.csv,
 checkpoints and, once finished, eval.json. `sweep` groups the unfinished runs of a list that
 share a network's shapes (hintsjax.algorithms.group: e.g. HINTS-FC with every hint, or PPO-x with
 PPO-x+N(0,1)) and trains each group, all its runs and seeds in one compiled program,
@@ -10,11 +10,7 @@ PPO-x+N(0,1)) and trains each group, all its runs and seeds in one compiled prog
     python -m hintsjax.reproduce.sweep --runs runs/classic --seeds 20 --one idp/ppo_rgb [--smoke]
     python -m hintsjax.reproduce.sweep --runs runs/classic --seeds 20 --one pendulum/ppo_state,pendulum/ppo_noisy_state
 
-A group's checkpoints and train.log are in runs/<sweep>/env/_groups/<its runs' digest>; a group
-too big for the device's memory is split in halves until each part fits.
-
-A table script's command line, which calls `sweep`, is hintsjax.reproduce.table_script; --set's
-settings, which every run of a sweep gets, are read by hintsjax.reproduce.sweep_settings.
+More of what it owns and why: docs/design.md, "Module notes", hintsjax/reproduce/sweep.py.
 """
 
 from __future__ import annotations

@@ -140,7 +140,7 @@ class SeedLayout:
 
         One compiled program for the whole tree, not an eager slice a leaf: over several
         processes each eager op is a program that every process must run in step, and a
-        checkpoint's hundreds of them hung two processes on 2 cores in CI (2026-11-27)."""
+        checkpoint's hundreds of them hung two processes on 2 cores in CI."""
         if self.padded == self.seeds:
             return tree
         if self.sharding is None:
@@ -151,8 +151,8 @@ class SeedLayout:
         """`fn(*batched_args, *shared_args)`, a function of seed-batched arrays (and of `shared`
         arguments the same for every seed), compiled for the seed axis split over the devices:
         XLA's SPMD partitioner gives each device its share (the seeds never meet, so no device
-        talks to another). A shard_map of the same function crashed on 2 and 4 H100s (jax 0.11.2,
-        a segfault in the first chunk), so the partitioner does it."""
+        talks to another). A shard_map of the same function crashed on several GPUs (a segfault in
+        the first chunk; docs/gpu.md), so the partitioner does it."""
         if self.count == 1:
             return fn
         seeds = self.sharding

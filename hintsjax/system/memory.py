@@ -11,9 +11,7 @@ must be held at once:
   policy's widest layer of activations;
 - a video: its frames, upscaled, on the host.
 
-The programs hold more (activations, copies, the physics), so a size under a bound may still not
-fit; XLA's memory analysis of the compiled training program speaks for that before the first update
-(training.compilation.check_fits and check_run_fits).
+More of what it owns and why: docs/design.md, "Module notes", hintsjax/system/memory.py.
 """
 
 from __future__ import annotations

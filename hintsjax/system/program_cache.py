@@ -8,18 +8,7 @@ folder, and a later process that asks for the same program loads it instead of t
 compile of the loaded program then hits the persistent cache. Cold runs compile the same
 program through the same path, so both compute the same numbers (tests/test_program_cache.py).
 
-A program is found again only under a key that digests everything that can change it: the
-caller's description of it (its configuration), the shapes, dtypes and tree structure of its
-arguments, the source of every module loaded from outside the installed libraries (the package
-itself, and a script or test that registered an env or hint of its own), the versions of the
-libraries that trace it, the backend and device, `XLA_FLAGS` and the jax settings that change
-numerics. What no key can see is not cached: a program whose inputs are sharded over several
-devices, and (`trainer.program_identity`) agents whose programs close over files (an imitation
-agent's expert, a learned hint generator); so is every program when a registered env or hint
-has no source file (defined in a notebook). A code change that a source file does not show, such
-as a function replaced at run time, is invisible too: turn the cache off for such work with
-`HINTSJAX_TRACE_CACHE=off` (the test suite does) or `compilation_cache=false`. An entry that cannot
-be read is traced afresh, with one warning line, and rewritten.
+More of what it owns and why: docs/design.md, "Module notes", hintsjax/system/program_cache.py.
 """
 
 from __future__ import annotations

@@ -6,14 +6,7 @@ of a sweep under submitit. At a job's time limit, or when it is preempted, submi
 starts the job again under the same job id, the local executor runs it again. The requeued call is
 the same command line, which alone would start a new run in a new folder. So, inside a submitit job:
 
-- `preemption_as_interrupt`: the signal stops training as SIGTERM does (the newest state whose
-  metrics are logged is saved), and only then does submitit's own handler requeue the job
-  (`hand_over`);
-- `record`: a new run writes the job's id (with the executor and SLURM's cluster) into its folder (job.json);
-- `folders_of_this_job`: the folders in out_dir that this job made before it was requeued, which
-  the run command resumes (hintsjax/run.py, where the folder's config must also be the one asked for).
-
-Outside a submitit job (SUBMITIT_EXECUTOR unset) none of this does anything.
+More of what it owns and why: docs/design.md, "Module notes", hintsjax/system/requeue.py.
 """
 
 from __future__ import annotations

@@ -1,24 +1,10 @@
 """The XLA flags hintsjax sets before JAX starts its backend (hintsjax/__init__.py calls
-`set_defaults` on import; XLA reads XLA_FLAGS once, when the first backend starts).
+`set_defaults` on import; XLA reads XLA_FLAGS once, when the first backend starts): deterministic
+GPU ops unless XLA_FLAGS names the flag (`drop_determinism` takes them off for physics=warp, which
+cannot repeat anyway), a persisted autotune folder when they are off, and on a CPU the schedule
+that can deadlock MJX's batched LAPACK kernels turned off.
 
-- **Deterministic GPU ops** unless XLA_FLAGS names the flag already. Without it two processes
-  training the same seed on an H100 ended with different params (XLA autotunes GPU kernels per
-  compile; experiments/determinism.py). It costs 1.5-1.8x of the training speed
-  (experiments/results/bench_h100_determinism.txt, profile_update_h100.json).
-- **A persisted autotune folder** when they are off (`--xla_gpu_per_fusion_autotune_cache_dir`,
-  XLA's own remedy in its docs/determinism.md): the first compile on a machine tunes and writes
-  it, later ones read the same choices. The pendulum's training then gave the same params in
-  three processes, 1.52x faster than with deterministic ops; the ant's did not, since MJX sums
-  over the body tree with scatter-adds, float atomics without the flag. It sits beside the
-  compilation cache (HINTSJAX_COMPILATION_CACHE, or ~/.cache/hintsjax/xla; none when that is off).
-- **No deadlock on a CPU.** XLA's CPU runtime runs independent parts of a program at once on its
-  thread pool, and jaxlib's batched LAPACK kernels (MJX's Cholesky and triangular solves) split
-  their batch over that same pool and wait for the pieces: when every pool thread is such a
-  kernel, nothing is left to run the pieces (the ant's training program on 2 cores,
-  tests/test_cpu_deadlock.py). The schedule that puts them side by side is turned off.
-
-`drop_determinism` turns deterministic ops off for a command that cannot be reproducible anyway
-(physics=warp: MuJoCo Warp sums with atomics), where the user did not choose, before JAX starts.
+More of what it owns and why: docs/design.md, "Module notes", hintsjax/system/xla_flags.py.
 """
 
 from __future__ import annotations
