@@ -6,6 +6,8 @@
 
 Episodes carry `terminated` and `truncated` separately: GAE bootstraps a truncated episode from
 the value of the state it was cut off in (the env's `final_obs`) and a terminated one from 0.
+The privileged-signal baselines ride on the same pieces: the hint dropped in the training view
+(`observe`), its prediction's loss (`hint_error`) and what deployment sees (`deploy_view`).
 """
 
 from __future__ import annotations
