@@ -171,3 +171,39 @@ def test_a_baseline_trains_on_each_env(tmp_path, env, agent):
     hint = {"hint": "state"} if env in ("halfcheetah", "ant", "ant_fast", "humanoid") else {}
     results = train_through_the_command(tmp_path, env, agent, **hint)
     assert results["seen_at_deploy"] == ["pixels"] and np.isfinite(results["evaluations"][0]["mean"])
+
+
+# hint_aux is compared after 1 update: on the cue task's constant pictures its encoder and hint head
+# get gradients near 0, which Adam scales up to whole steps, so by update 3 the float rounding of the
+# group's padded sums reaches 9e-4 at the default tier's -O0 (none above 1e-7 at XLA's default level).
+@pytest.mark.parametrize("agent, updates", [("asym_ac", 3), ("hint_aux", 1)])
+def test_a_baseline_in_a_group_of_hint_widths_trains_as_it_does_alone(agent, updates):
+    """asym_ac's critic embedding and hint_aux's head take the group's padded hint: members of
+    hint widths 1 and 2 end with their lone runs' params to 1e-6 (the padded weights get zero
+    gradients; hint_aux's error counts its own positions only), another member's far off."""
+    from test_group import SEEDS, TINY_PPO, max_difference
+
+    cfgs = [layers.run_config({"env": "cue", "agent": agent, "hint": h, "seeds": SEEDS, "ppo": TINY_PPO})
+            for h in ("cue", "cue_pair")]
+    g = group.make_group(cfgs)
+
+    def trained(trainer, cfg):
+        return jax.jit(jax.vmap(lambda s: trainer.run(s, updates)[0]))(jax.jit(jax.vmap(trainer.init))(cfg.seed_keys()))
+
+    together = trained(group.make_group_trainer(g), cfgs[0])
+    alone = [trained(ppo.make_trainer(c), c) for c in cfgs]
+    for k in range(2):
+        member = group.cell_state(g, together, k)
+        assert max_difference(member.params, alone[k].params) < 1e-6, (agent, k)
+    assert max_difference(group.cell_state(g, together, 0).params["params"]["critic"],
+                          alone[1].params["params"]["critic"]) > 1e-3
+
+
+def test_the_hint_error_counts_a_members_own_positions_only():
+    """hint_error by hand: errors 1 and 3 on two rows of a width-1 hint, mean 5; padded to width 3
+    with any prediction in the padding, the same 5; all positions kept, the padding counts."""
+    prediction, hint = jnp.array([[1.0], [3.0]]), jnp.zeros((2, 1))
+    assert float(ppo.hint_error(prediction, hint, jnp.array([True]))) == 5.0
+    padded = jnp.concatenate([prediction, jnp.full((2, 2), 7.0)], axis=1)
+    assert float(ppo.hint_error(padded, jnp.zeros((2, 3)), jnp.array([True, False, False]))) == 5.0
+    assert float(ppo.hint_error(padded, jnp.zeros((2, 3)), jnp.ones(3, bool))) == pytest.approx((1 + 9 + 4 * 49) / 6)
