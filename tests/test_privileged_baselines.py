@@ -176,6 +176,7 @@ def test_a_baseline_trains_on_each_env(tmp_path, env, agent):
 # hint_aux is compared after 1 update: on the cue task's constant pictures its encoder and hint head
 # get gradients near 0, which Adam scales up to whole steps, so by update 3 the float rounding of the
 # group's padded sums reaches 9e-4 at the default tier's -O0 (none above 1e-7 at XLA's default level).
+@pytest.mark.slow  # 25 s each on 2 cores: the default tier is near its 10 minutes
 @pytest.mark.parametrize("agent, updates", [("asym_ac", 3), ("hint_aux", 1)])
 def test_a_baseline_in_a_group_of_hint_widths_trains_as_it_does_alone(agent, updates):
     """asym_ac's critic embedding and hint_aux's head take the group's padded hint: members of
