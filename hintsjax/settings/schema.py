@@ -5,6 +5,7 @@ docs/settings.md (`python -m hintsjax.settings.schema` rewrites it)."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -27,17 +28,21 @@ def command_line_defaults() -> dict[str, Any]:
     return {**top, **own, **{name: {f.name: None for f in settings_of(cls)} for name, cls in SECTIONS.items()}}
 
 
+def declared() -> list[tuple[str, dataclasses.Field]]:
+    """(key as the command line names it, its field) for every setting, in the command line's order:
+    a run's, the command's own, then each section's as section.key."""
+    top = [(f.name, f) for cls in (RunConfig, CommandSettings) for f in settings_of(cls)]
+    return top + [(f"{name}.{f.name}", f) for name, cls in SECTIONS.items() for f in settings_of(cls)]
+
+
 def keys() -> list[str]:
     """Every key the run command accepts, a section's as section.key."""
-    return [*(f.name for f in settings_of(RunConfig)), *(f.name for f in settings_of(CommandSettings)),
-            *(f"{name}.{f.name}" for name, cls in SECTIONS.items() for f in settings_of(cls))]
+    return [key for key, _ in declared()]
 
 
 def saved_may_lack() -> set[str]:
     """The settings (section.key for a section's) whose absence from a saved config means their default."""
-    found = {f.name for f in settings_of(RunConfig) if f.metadata[SAVED_MAY_LACK]}
-    return found | {f"{name}.{f.name}" for name, cls in SECTIONS.items() for f in settings_of(cls)
-                    if f.metadata[SAVED_MAY_LACK]}
+    return {key for key, f in declared() if f.metadata[SAVED_MAY_LACK]}
 
 
 def as_typed(value: Any) -> str:
@@ -49,16 +54,9 @@ def as_typed(value: Any) -> str:
     return str(_plain(value)).replace(" ", "").replace("'", "")
 
 
-def _rows(cls: type, prefix: str = "") -> list[tuple[str, str, str]]:
-    return [(prefix + f.name, as_typed(f.default), f.metadata[HELP]) for f in settings_of(cls)]
-
-
 def all_rows() -> list[tuple[str, str, str]]:
     """(key, the dataclass's default as the command line writes it, help) for every setting."""
-    rows = _rows(RunConfig) + _rows(CommandSettings)
-    for name, cls in SECTIONS.items():
-        rows += _rows(cls, f"{name}.")
-    return rows
+    return [(key, as_typed(f.default), f.metadata[HELP]) for key, f in declared()]
 
 
 def help_text() -> str:
@@ -81,9 +79,10 @@ def markdown() -> str:
              "hintsjax/settings/algorithm_settings.py); `tests/test_config_schema.py` fails when this page is stale.",
              "A default here is the dataclass's: an env's `TRAINING` (envs/<env>.py) sets its own over it, and",
              "`null` on the command line takes the env's. A resumed run keeps the settings it was started with.", "",
-             "## The run", "", *table(_rows(RunConfig) + _rows(CommandSettings))]
+             "## The run", "", *table([row for row in all_rows() if "." not in row[0]])]
     for name, cls in SECTIONS.items():
-        lines += ["", f"## `{name}.*`", "", (cls.__doc__ or "").strip().splitlines()[0], "", *table(_rows(cls, f"{name}."))]
+        rows = [row for row in all_rows() if row[0].startswith(f"{name}.")]
+        lines += ["", f"## `{name}.*`", "", (cls.__doc__ or "").strip().splitlines()[0], "", *table(rows)]
     return "\n".join(lines) + "\n"
 
 
