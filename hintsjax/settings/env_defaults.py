@@ -14,13 +14,19 @@ from hintsjax import envs
 from hintsjax.models.agents import AGENTS, REFERENCES
 
 
-def _stack(*layers: Mapping[str, Any]) -> dict[str, Any]:
-    """Layers joined, later winning, a section's settings key by key."""
-    out: dict[str, Any] = {}
+def stack_layers(*layers: Mapping[str, Any]) -> dict[str, Any]:
+    """Later layers override earlier ones, key by key and a section's (a mapping's) setting by
+    setting; None is no value (hintsjax.settings.layers.run_config stacks a run's layers with it too)."""
+    merged: dict[str, Any] = {}
     for layer in layers:
         for k, v in layer.items():
-            out[k] = {**out.get(k, {}), **v} if isinstance(v, Mapping) else v
-    return out
+            if v is None:
+                continue
+            if isinstance(v, Mapping):
+                merged[k] = {**merged.get(k, {}), **{sk: sv for sk, sv in v.items() if sv is not None}}
+            else:
+                merged[k] = v
+    return merged
 
 
 def _env_defaults(training: Mapping[str, Any]) -> dict[str, Any]:
@@ -31,7 +37,7 @@ def _env_defaults(training: Mapping[str, Any]) -> dict[str, Any]:
     unknown = sorted(set(own) - set(AGENTS))
     if unknown:
         raise ValueError(f"TRAINING's agents names {', '.join(unknown)}; valid: {', '.join(AGENTS)}")
-    agents = {name: _stack(learners if name not in REFERENCES else {}, own.get(name, {})) for name in AGENTS}
+    agents = {name: stack_layers(learners if name not in REFERENCES else {}, own.get(name, {})) for name in AGENTS}
     return {**training, "agents": {name: layer for name, layer in agents.items() if layer}}
 
 

@@ -16,7 +16,7 @@ from hintsjax.envs.errors import ChoiceError, choose
 from hintsjax.system import paths
 from hintsjax.system.errors import UsageError, require_int32
 from hintsjax.settings.config import RunConfig, SECTIONS
-from hintsjax.settings.env_defaults import ENV_DEFAULTS
+from hintsjax.settings.env_defaults import ENV_DEFAULTS, stack_layers
 from hintsjax.settings import schema
 
 
@@ -28,20 +28,6 @@ def _fields(cls) -> set[str]:
 
 
 TUPLES = {"hidden", "disc_hidden", "eval_variants"}  # list-valued keys (YAML and Hydra give lists)
-
-
-def _merge(*layers: Mapping[str, Any]) -> dict[str, Any]:
-    """Later layers override earlier ones, key by key and section by section; None is no value."""
-    merged: dict[str, Any] = {}
-    for layer in layers:
-        for k, v in layer.items():
-            if v is None:
-                continue
-            if k in SECTIONS:
-                merged[k] = {**merged.get(k, {}), **{sk: sv for sk, sv in dict(v).items() if sv is not None}}
-            else:
-                merged[k] = v
-    return merged
 
 
 def _as_tuple(key: str, value: Any) -> tuple:
@@ -79,7 +65,7 @@ def run_config(values: Mapping[str, Any], resolved: bool = False) -> RunConfig:
         merged = {k: dict(v) if k in SECTIONS and isinstance(v, Mapping) else v for k, v in values.items()}
         merged.setdefault("physics", envs.JAX)  # a run saved before the setting was stepped by MJX's JAX solver
     else:
-        merged = _merge(defaults, per_agent.get(values.get("agent") or RunConfig.agent, {}), values)
+        merged = stack_layers(defaults, per_agent.get(values.get("agent") or RunConfig.agent, {}), values)
     unknown = {k for k in merged if k not in SECTIONS} - _fields(RunConfig)
     unknown |= {f"{name}.{k}" for name, cls in SECTIONS.items() for k in merged.get(name, {}) if k not in _fields(cls)}
     if unknown:
@@ -99,12 +85,15 @@ def run_config(values: Mapping[str, Any], resolved: bool = False) -> RunConfig:
     return dataclasses.replace(cfg, physics=envs.resolve_physics(cfg.env, cfg.physics))  # what the run steps with, kept
 
 
+# The top-level settings the command line gives a value, not null (schema.command_line_defaults).
+VALUED_ON_THE_COMMAND_LINE = {k for k, v in schema.command_line_defaults().items() if v is not None and k not in SECTIONS}
+
+
 def _check_env_layers(env: str, layers: list[Mapping[str, Any]]) -> None:
     """TypeError where an env's TRAINING sets a top-level setting that the command line gives a
     value (declare it `per_env` on its field): the command line's value would win over the env's there
     but not in run_config, so the two would train differently."""
-    valued = {k for k, v in schema.command_line_defaults().items() if v is not None and k not in SECTIONS}
-    fixed = sorted({k for layer in layers for k in layer if k in valued})
+    fixed = sorted({k for layer in layers for k in layer if k in VALUED_ON_THE_COMMAND_LINE})
     if fixed:
         raise TypeError(f"env {env}'s TRAINING sets {', '.join(fixed)}, which the command line gives a value; "
                         "an env may set a section's settings and those declared per_env (hintsjax/settings/config.py)")
