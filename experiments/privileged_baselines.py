@@ -65,11 +65,12 @@ def env_lines(runs: Path, env: str) -> list[str]:
     """An env's section: its rows and, for each, P(HINTS-FC > it)."""
     from hintsjax.reproduce import stats
 
-    results = [(label.split("-")[0], label, load(runs, env, label)) for label in labels(env)]
-    results.append(("learned", "", learned_result(env)))
-    rgb, hints = results[0][2], results[4][2]
-    if all(result is None for _, _, result in results[:5]):
+    results = [(label.split("-")[0], load(runs, env, label)) for label in labels(env)]
+    if all(result is None for _, result in results):
         return []
+    learned = learned_result(env)
+    results.append(("learned", learned))
+    rgb, hints = dict(results)["ppo_rgb"], dict(results)["hints"]
 
     def poi(x: dict | None, y: dict | None) -> str:
         if x is None or y is None or x is y:
@@ -78,7 +79,7 @@ def env_lines(runs: Path, env: str) -> list[str]:
         return f"{interval_text(ci)} {verdict(ci)}"
 
     rows = []
-    for kind, label, result in results:
+    for kind, result in results:
         name, sees, needs = ROWS[kind]
         if result is None:
             rows.append([name, sees, needs, "-", "-", "-", "-", "-"])
@@ -93,7 +94,7 @@ def env_lines(runs: Path, env: str) -> list[str]:
                               "P(row > PPO-RGB) [95% CI]"], rows), ""]
     if ppo is not None:
         lines += [f"PPO: {ppo_text(ppo)}.", ""]
-    if results[5][2] is not None:
+    if learned is not None:
         lines += [f"The learned generator's row is learned_hints.py's archived run {env}-{SIGNAL[env]}-learned-"
                   f"k{LEARNED_FRAMES} (experiments/results/learned_hints.md), trained apart from this sweep.", ""]
     return lines
