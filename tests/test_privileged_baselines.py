@@ -18,7 +18,7 @@ import pytest
 from test_cli import SHIPPED_ENVS
 from test_learning import LAST, LEARN_PPO, policy_mean
 
-from hintsjax.models.agents import AGENTS
+from hintsjax.models.agents import AGENTS, AgentSpec
 from hintsjax.models.networks import ActorCritic
 from hintsjax.settings import layers
 from hintsjax.algorithms import group, ppo
@@ -131,6 +131,8 @@ def test_an_agent_says_what_it_sees_at_deployment():
     assert seen["hints"] == ("pixels", "hint") and seen["ppo_rgb"] == ("pixels",)
     assert seen["asym_ac"] == seen["pi_dropout"] == seen["hint_aux"] == ("pixels",)
     assert AGENTS["asym_ac"].privileged == ("hint",) and AGENTS["hints"].privileged == ()
+    with pytest.raises(ValueError, match="unknown hint_use 'critc'; valid: input, critic, target"):
+        AgentSpec(pixels=True, hint=True, hint_use="critc")
 
 
 TINY_PPO = dict(total_env_steps=128, num_envs=4, batch_size=64, minibatch_size=32, epochs=1, hidden=[16])

@@ -33,6 +33,10 @@ class AgentSpec:
     drops_hint: bool = False
     about: str = ""  # one line for --help
 
+    def __post_init__(self) -> None:
+        if self.hint_use not in HINT_USES:  # a misspelt one would quietly act as PPO-RGB
+            raise ValueError(f"unknown hint_use {self.hint_use!r}; valid: {', '.join(HINT_USES)}")
+
     @property
     def imitates(self) -> bool:
         """True when the agent learns from a trained expert (hintsjax.expert)."""
