@@ -109,9 +109,11 @@ def writing(run_dir: Path):
     writes to finish (CheckpointWriteError if one failed), also when the block is left by an
     exception, so an interrupted run keeps the checkpoint it was writing. Meanwhile a failed write's
     "Event loop is closed" noise is dropped (`_quiet_closed_loops`), and from then on its unawaited
-    writes (`_drop_unawaited_writes`)."""
+    writes (`_drop_unawaited_writes`) and the same error that tensorstore's threads print through
+    sys.excepthook, which can come after the block (`_drop_closed_loop_noise`, as a failed restore's)."""
     _WRITERS[Path(run_dir).absolute()] = _manager(run_dir, create=True, background=True)
     _drop_unawaited_writes()
+    _drop_closed_loop_noise()
     previous = sys.unraisablehook
     sys.unraisablehook = _quiet_closed_loops(previous)
     try:
