@@ -4,17 +4,17 @@
 # started detached. Python 3.12, x86-64 (the wheels' tags; change PY and PLATFORMS for others).
 #
 #   bash experiments/offline_gpu.sh wheels            # here, with internet: .whl2/ (mujoco, mjx, hydra, this
-#                                                     #   project...), .wp/warp.part.0[0-3] (warp-lang in 4 parts)
+#                                                     #   project...), .wp/warp.part.0[0-7] (warp-lang in 8 parts)
 #                                                     #   and .whl3/ (MuJoCo Playground and Brax, 14 MB)
 #   bash experiments/offline_gpu.sh install [DIR]     # there, in the repo root: DIR's wheels (.whl2) into /tmp/site;
 #                                                     #   for env=playground:* also `install .whl3` (its own call)
-#   bash experiments/offline_gpu.sh warp              # there: keep the .wp parts carried so far; all 4 in: install
+#   bash experiments/offline_gpu.sh warp              # there: keep the .wp parts carried so far; all 8 in: install
 #   bash experiments/offline_gpu.sh poll SECONDS MARK # there: wait up to SECONDS or until /tmp/MARK exists, show
 #                                                     #   the logs' last lines (/tmp/logs/*.log) and pack the runs'
 #                                                     #   small files (/tmp/r: csv, json, jsonl, yaml) into $OUT/runs.tgz
 # Then run with PYTHONPATH=/tmp/site from a folder outside the repo (the installed hintsjax, not the source tree):
 #   cd /tmp && PYTHONPATH=/tmp/site python3 -m hintsjax.run env=ant hint=speed scheme=fc out_dir=/tmp/r/ant
-# Transfers of at most 64 MiB at a time are why warp-lang (149 MB) travels in parts, Playground's wheels in
+# Transfers of at most 64 MiB at a time, the working tree included, are why warp-lang (149 MB) travels in parts, Playground's wheels in
 # .whl3 and pyopengl not at all (mujoco imports its OpenGL parts only when asked to).
 # A poll's files come back only when it returns: keep SECONDS under the device time left (the lease's
 # budget_left_s, which a 1-GPU machine can count in full), or a cut call brings back nothing. And keep a
@@ -24,6 +24,7 @@ PY=3.12
 PLATFORMS="manylinux_2_28_x86_64 manylinux_2_27_x86_64 manylinux_2_17_x86_64 manylinux2014_x86_64 manylinux1_x86_64 any"
 WARP=warp_lang-1.18.0-py3-none-manylinux_2_28_x86_64.whl
 WARP_MD5=47fc34ed07880e32d2964187ad4de4cd
+WARP_PARTS=8  # 19 MB each: one travels beside the working tree (33 MB) within a call's 64 MiB
 # What the GPU image lacks among the project's pins (pyproject.toml) and their needs
 CARRIED="mujoco==3.17.0 mujoco-mjx==3.17.0 hydra-core==1.3.2 omegaconf==2.3.0 tensorboardX==2.6.5 trimesh websockets>=13"
 # What env=playground:* and experiments/playground.py need beyond those (importing mujoco_playground and brax
@@ -46,7 +47,7 @@ wheels)
     python3 -m pip wheel -q --no-deps -w .whl2 .                              # this project, as it stands here
     tmp=$(mktemp -d) && download "$tmp" warp-lang==1.18.0
     echo "$WARP_MD5  $tmp/$WARP" | md5sum -c -
-    (cd .wp && split -n 4 -d "$tmp/$WARP" warp.part.) && rm -r "$tmp"
+    (cd .wp && rm -f warp.part.* && split -n "$WARP_PARTS" -d "$tmp/$WARP" warp.part.) && rm -r "$tmp"
     du -sh .whl2 .whl3 .wp ;;
 install)
     python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site "${2:-.whl2}"/*.whl
@@ -54,7 +55,7 @@ install)
 warp)
     mkdir -p /tmp/wparts && cp .wp/warp.part.* /tmp/wparts/ 2>/dev/null || true
     ls /tmp/wparts
-    if [ "$(ls /tmp/wparts | wc -l)" -eq 4 ]; then
+    if [ "$(ls /tmp/wparts | wc -l)" -eq "$WARP_PARTS" ]; then
         cat /tmp/wparts/warp.part.0? > "/tmp/$WARP"
         echo "$WARP_MD5  /tmp/$WARP" | md5sum -c -
         python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --target /tmp/site "/tmp/$WARP"
