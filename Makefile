@@ -1,7 +1,7 @@
 # make run   : set up (first time), train a first agent on CPU (pendulum, composite hint, FiLM) and show it
 # make setup-gpu : the same set-up on an NVIDIA GPU machine: jax's CUDA plugin and warp-lang (MJX-Warp physics) too
 # make test  : set up (first time) and run the test suite (slow tests: make test-slow)
-# make lint  : set up (first time) and run ruff (pinned in pyproject.toml) over the repository
+# make lint  : set up (first time) and run ruff's checks and its formatter's check (pinned in pyproject.toml)
 # make bench : environment and training throughput (meant for a GPU)
 PYTHON ?= python3
 VENV   := .venv
@@ -41,6 +41,7 @@ test-slow: setup
 
 lint: setup
 	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
 
 BENCH_ENVS ?= pendulum,acrobot,idp,halfcheetah,ant,ant_fast,humanoid,car_racing
 bench: setup

@@ -18,13 +18,31 @@ from typing import Any, Callable
 
 import jax
 
-from hintsjax.envs import physics as _physics  # first: imports mujoco.mjx without its Warp backend (envs/physics.py)
+# first: imports mujoco.mjx without its Warp backend (envs/physics.py)
+from hintsjax.envs import physics as _physics
 from hintsjax.envs import acrobot, adapter, ant, car_racing, halfcheetah, humanoid, idp, pendulum  # noqa: E402
 from hintsjax.envs.adapter import EnvUnavailable
-from hintsjax.envs.core import OBS_KEYS, AutoReset, Env, SquashedActions, Step, Timestep, fresh_episodes
+from hintsjax.envs.core import (
+    OBS_KEYS,
+    AutoReset,
+    Env,
+    SquashedActions,
+    Step,
+    Timestep,
+    fresh_episodes,
+)
 from hintsjax.envs.errors import ChoiceError, choose
-from hintsjax.envs.hints import (NO_HINT, Hint, HintFileError, check_hint_shapes, hint_names, load_hints, make_hint,
-                                  register_composite, register_hint)
+from hintsjax.envs.hints import (
+    NO_HINT,
+    Hint,
+    HintFileError,
+    check_hint_shapes,
+    hint_names,
+    load_hints,
+    make_hint,
+    register_composite,
+    register_hint,
+)
 from hintsjax.envs.mjx_env import MjxEnv
 from hintsjax.envs.physics import AUTO, DEFAULT_CAPACITY, JAX, WARP, PhysicsUnavailable
 
@@ -53,7 +71,8 @@ class Adapter:
 
 
 def _playground() -> Adapter:
-    from hintsjax.envs import playground  # imports only mujoco here; Playground itself when a task is loaded
+    # imports only mujoco here; Playground itself when a task is loaded
+    from hintsjax.envs import playground
 
     return Adapter(playground.load, playground.training, playground.register_task_hints)
 
@@ -96,28 +115,40 @@ class EnvRegistry(dict):
         loaded = made.load(task)
         adapter.register_generic_hints(loaded)
         made.hints(loaded)
-        self[str(name)] = EnvEntry(adapter.AdaptedEnv, adapter.variants(loaded), made.training(task), {"task": loaded})
+        self[str(name)] = EnvEntry(
+            adapter.AdaptedEnv, adapter.variants(loaded), made.training(task), {"task": loaded}
+        )
         return True
 
 
-REGISTRY: EnvRegistry = EnvRegistry({
-    "pendulum": EnvEntry(pendulum.Pendulum, pendulum.VARIANTS, pendulum.TRAINING),
-    "acrobot": EnvEntry(acrobot.Acrobot, acrobot.VARIANTS, acrobot.TRAINING),
-    "idp": EnvEntry(idp.InvertedDoublePendulum, idp.VARIANTS, idp.TRAINING),
-    "ant": EnvEntry(ant.Ant, ant.VARIANTS, ant.TRAINING),
-    "ant_fast": EnvEntry(ant.AntFast, ant.VARIANTS, ant.FAST_TRAINING),
-    "halfcheetah": EnvEntry(halfcheetah.HalfCheetah, halfcheetah.VARIANTS, halfcheetah.TRAINING),
-    "humanoid": EnvEntry(humanoid.Humanoid, humanoid.VARIANTS, humanoid.TRAINING),
-    "car_racing": EnvEntry(car_racing.CarRacing, car_racing.VARIANTS, car_racing.TRAINING),
-})
+REGISTRY: EnvRegistry = EnvRegistry(
+    {
+        "pendulum": EnvEntry(pendulum.Pendulum, pendulum.VARIANTS, pendulum.TRAINING),
+        "acrobot": EnvEntry(acrobot.Acrobot, acrobot.VARIANTS, acrobot.TRAINING),
+        "idp": EnvEntry(idp.InvertedDoublePendulum, idp.VARIANTS, idp.TRAINING),
+        "ant": EnvEntry(ant.Ant, ant.VARIANTS, ant.TRAINING),
+        "ant_fast": EnvEntry(ant.AntFast, ant.VARIANTS, ant.FAST_TRAINING),
+        "halfcheetah": EnvEntry(
+            halfcheetah.HalfCheetah, halfcheetah.VARIANTS, halfcheetah.TRAINING
+        ),
+        "humanoid": EnvEntry(humanoid.Humanoid, humanoid.VARIANTS, humanoid.TRAINING),
+        "car_racing": EnvEntry(car_racing.CarRacing, car_racing.VARIANTS, car_racing.TRAINING),
+    }
+)
 
 
 def env_names() -> list[str]:
     return sorted(REGISTRY)
 
 
-def make(name: str, hint: str = NO_HINT, observe: tuple[str, ...] = OBS_KEYS, physics: str = AUTO,
-         warp_capacity: float = DEFAULT_CAPACITY, image_size: int | None = None) -> Env:
+def make(
+    name: str,
+    hint: str = NO_HINT,
+    observe: tuple[str, ...] = OBS_KEYS,
+    physics: str = AUTO,
+    warp_capacity: float = DEFAULT_CAPACITY,
+    image_size: int | None = None,
+) -> Env:
     """The env `name` observing `observe`, with hint `hint` (see `hints.make_hint`); an MJX env
     stepped by `physics` (`resolve_physics`; Warp's buffers `warp_capacity` times the model's
     most contacts per world); its pictures `image_size` pixels a side (None: the env's own)."""
@@ -149,10 +180,14 @@ def resolve_physics(name: str, physics: str = AUTO) -> str:
     if not issubclass(cls, MjxEnv):
         choose("physics", physics, dict.fromkeys(_physics.CHOICES))
         if physics == WARP and cls is adapter.AdaptedEnv:
-            raise PhysicsUnavailable(f"{name} steps with its own MJX physics (JAX); physics=warp is for "
-                                     f"{', '.join(mjx_env_names())}")
+            raise PhysicsUnavailable(
+                f"{name} steps with its own MJX physics (JAX); physics=warp is for "
+                f"{', '.join(mjx_env_names())}"
+            )
         if physics == WARP:
-            raise PhysicsUnavailable(f"{name} has no MuJoCo model; physics=warp is for {', '.join(mjx_env_names())}")
+            raise PhysicsUnavailable(
+                f"{name} has no MuJoCo model; physics=warp is for {', '.join(mjx_env_names())}"
+            )
         return JAX
     return _physics.resolve(physics, jax.default_backend(), cls.warp_by_default, jax.device_count())
 
@@ -164,7 +199,12 @@ def auto_likely_warp(name: str) -> bool:
     if ":" in name or name not in env_names():
         return False
     cls = REGISTRY[name].cls
-    return issubclass(cls, MjxEnv) and cls.warp_by_default and _physics.warp_installed() and _physics.gpu_likely()
+    return (
+        issubclass(cls, MjxEnv)
+        and cls.warp_by_default
+        and _physics.warp_installed()
+        and _physics.gpu_likely()
+    )
 
 
 def variant_names(name: str) -> list[str]:
@@ -174,13 +214,49 @@ def variant_names(name: str) -> list[str]:
 def make_params(name: str, variant: str | None = None) -> Any:
     """The params pytree of `name`'s variant (its default variant if None)."""
     variants = choose("env", name, REGISTRY).variants
-    return variants[next(iter(variants))] if variant is None else choose("variant", variant, variants, name)
+    return (
+        variants[next(iter(variants))]
+        if variant is None
+        else choose("variant", variant, variants, name)
+    )
 
 
 __all__ = [
-    "ADAPTERS", "AUTO", "DEFAULT_CAPACITY", "JAX", "OBS_KEYS", "WARP", "Adapter", "AutoReset", "ChoiceError", "Env", "EnvEntry",
-    "EnvRegistry", "EnvUnavailable", "Hint", "HintFileError", "MjxEnv", "NO_HINT", "PhysicsUnavailable", "REGISTRY",
-    "check_drawable", "check_hint_shapes", "load_hints", "SquashedActions", "Step", "Timestep", "choose", "env_names", "fresh_episodes",
-    "hint_names", "make", "make_hint", "make_params", "mjx_env_names", "register_composite", "register_hint",
-    "resolve_physics", "variant_names",
+    "ADAPTERS",
+    "AUTO",
+    "DEFAULT_CAPACITY",
+    "JAX",
+    "OBS_KEYS",
+    "WARP",
+    "Adapter",
+    "AutoReset",
+    "ChoiceError",
+    "Env",
+    "EnvEntry",
+    "EnvRegistry",
+    "EnvUnavailable",
+    "Hint",
+    "HintFileError",
+    "MjxEnv",
+    "NO_HINT",
+    "PhysicsUnavailable",
+    "REGISTRY",
+    "check_drawable",
+    "check_hint_shapes",
+    "load_hints",
+    "SquashedActions",
+    "Step",
+    "Timestep",
+    "choose",
+    "env_names",
+    "fresh_episodes",
+    "hint_names",
+    "make",
+    "make_hint",
+    "make_params",
+    "mjx_env_names",
+    "register_composite",
+    "register_hint",
+    "resolve_physics",
+    "variant_names",
 ]

@@ -71,7 +71,9 @@ class AcrobotState:
     @classmethod
     def at(cls, theta1, theta2, dtheta1=0.0, dtheta2=0.0, t=0) -> "AcrobotState":
         """A hand-set state from numbers (or equal-shaped arrays, for a batch)."""
-        t1, t2, v1, v2, t = jnp.broadcast_arrays(*(jnp.asarray(x) for x in (theta1, theta2, dtheta1, dtheta2, t)))
+        t1, t2, v1, v2, t = jnp.broadcast_arrays(
+            *(jnp.asarray(x) for x in (theta1, theta2, dtheta1, dtheta2, t))
+        )
         f32 = lambda *x: jnp.stack(x, -1).astype(jnp.float32)  # noqa: E731
         return cls(f32(t1, t2), f32(v1, v2), t.astype(jnp.int32))
 
@@ -97,7 +99,6 @@ class Acrobot(MjxEnv):
     mjcf = MJCF
     max_steps = 500
     action_size = 1
-
 
     def default_params(self) -> AcrobotParams:
         return VARIANTS["standard"]
@@ -130,9 +131,15 @@ class Acrobot(MjxEnv):
         image = raster.canvas(size, BACKGROUND)
         image = raster.paint(image, raster.coverage(line, GOAL_RADIUS, pixel), GOAL)
         for a, b in ((origin, elbow), (elbow, tip)):
-            image = raster.paint(image, raster.coverage(raster.segment_distance(points, a, b), LINK_RADIUS, pixel), LINK)
+            image = raster.paint(
+                image,
+                raster.coverage(raster.segment_distance(points, a, b), LINK_RADIUS, pixel),
+                LINK,
+            )
         for c in (origin, elbow):
-            image = raster.paint(image, raster.coverage(raster.point_distance(points, c), JOINT_RADIUS, pixel), JOINT)
+            image = raster.paint(
+                image, raster.coverage(raster.point_distance(points, c), JOINT_RADIUS, pixel), JOINT
+            )
         return raster.to_uint8(image)
 
     def state_obs(self, state: AcrobotState, params: AcrobotParams) -> jax.Array:
@@ -180,6 +187,12 @@ def full_state(state: AcrobotState, params: AcrobotParams) -> jax.Array:
 # converged references; `agents`, an agent's own layer (the references' budgets and settings).
 # 700 episodes of at most 500 steps (the paper's 700 episodes, counted at their length).
 EXPERT_PPO = dict(total_env_steps=1_000_000)
-TRAINING = dict(hint="composite", ppo=dict(total_env_steps=350_000, reward_scale=0.1),
-                agents=dict(expert_ppo=dict(ppo=EXPERT_PPO), gail=dict(ppo=EXPERT_PPO),
-                            dagger=dict(ppo=dict(total_env_steps=100_000), dagger=dict(buffer_size=100_000))))
+TRAINING = dict(
+    hint="composite",
+    ppo=dict(total_env_steps=350_000, reward_scale=0.1),
+    agents=dict(
+        expert_ppo=dict(ppo=EXPERT_PPO),
+        gail=dict(ppo=EXPERT_PPO),
+        dagger=dict(ppo=dict(total_env_steps=100_000), dagger=dict(buffer_size=100_000)),
+    ),
+)

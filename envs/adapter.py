@@ -30,7 +30,8 @@ from hintsjax.envs.core import OBS_KEYS, Env, Step
 from hintsjax.envs.errors import ChoiceError
 from hintsjax.envs.hints import Hint, register_hint
 
-TRACK = "tracking"  # the variant whose camera follows the centre of mass; the others are the model's cameras
+# the variant whose camera follows the centre of mass; the others are the model's cameras
+TRACK = "tracking"
 
 
 class EnvUnavailable(ChoiceError):
@@ -89,7 +90,9 @@ def reset_shapes(task: Task) -> Any:
     """The shapes and dtypes of the task's reset state (traced once per task and process: a Brax
     reset takes seconds to trace)."""
     if task.name not in _RESET_SHAPES:
-        _RESET_SHAPES[task.name] = jax.eval_shape(task.env.reset, jax.random.key_data(jax.random.key(0)))
+        _RESET_SHAPES[task.name] = jax.eval_shape(
+            task.env.reset, jax.random.key_data(jax.random.key(0))
+        )
     return _RESET_SHAPES[task.name]
 
 
@@ -112,7 +115,9 @@ def variants(task: Task) -> dict[str, AdaptedParams]:
     names = [TRACK, *(c for c in camera_names(task.mj_model) if c != TRACK)]
     if task.camera not in names:
         raise ChoiceError("camera", task.camera, names, where=task.name)
-    return {name: AdaptedParams(name) for name in [task.camera, *(n for n in names if n != task.camera)]}
+    return {
+        name: AdaptedParams(name) for name in [task.camera, *(n for n in names if n != task.camera)]
+    }
 
 
 def make_scene(task: Task) -> render3d.Scene:
@@ -128,7 +133,14 @@ class AdaptedEnv(Env):
     """A `Task` as an Env: its reset and step, with the adapter's picture, state observation,
     truncation and hints. Made by `envs.make('<source>:<task>', ...)`."""
 
-    def __init__(self, hint: Hint, observe: tuple[str, ...] = OBS_KEYS, image_size: int | None = None, *, task: Task):
+    def __init__(
+        self,
+        hint: Hint,
+        observe: tuple[str, ...] = OBS_KEYS,
+        image_size: int | None = None,
+        *,
+        task: Task,
+    ):
         super().__init__(hint, observe, image_size)
         self.task = task
         self.name = task.name
@@ -140,7 +152,9 @@ class AdaptedEnv(Env):
         self.scene = make_scene(task) if "pixels" in self.observe else None
         limited = task.mj_model.actuator_ctrllimited.astype(bool)[:, None]
         self.ctrl_range = jnp.asarray(
-            jnp.where(limited, task.mj_model.actuator_ctrlrange, jnp.asarray([-1.0, 1.0])), jnp.float32)
+            jnp.where(limited, task.mj_model.actuator_ctrlrange, jnp.asarray([-1.0, 1.0])),
+            jnp.float32,
+        )
         self.extent = float(task.mj_model.stat.extent)
         self._shapes = reset_shapes(task)
         self.centre_height = float(task.mj_model.stat.center[2])
@@ -154,18 +168,26 @@ class AdaptedEnv(Env):
 
     def _state(self, task_state: Any, reward, t) -> AdaptedState:
         kept = jax.tree.map(lambda x: None if jnp.size(x) == 0 else x, task_state)
-        return AdaptedState(kept, jnp.asarray(reward, jnp.float32), jnp.asarray(t, jnp.int32), self.task.data_field)
+        return AdaptedState(
+            kept, jnp.asarray(reward, jnp.float32), jnp.asarray(t, jnp.int32), self.task.data_field
+        )
 
     def task_state(self, state: AdaptedState) -> Any:
         """The task's own state, its arrays of size 0 put back."""
-        return jax.tree.map(lambda shape, x: jnp.zeros(shape.shape, shape.dtype) if x is None else x, self._shapes, state.task)
+        return jax.tree.map(
+            lambda shape, x: jnp.zeros(shape.shape, shape.dtype) if x is None else x,
+            self._shapes,
+            state.task,
+        )
 
     def initial_state(self, key: jax.Array, params: AdaptedParams) -> AdaptedState:
-        raw = jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key) else key  # the tasks take raw keys
+        # the tasks take raw keys
+        raw = jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key) else key
         return self._state(self.task.env.reset(raw), 0.0, 0)
 
     def action_range(self, params: AdaptedParams) -> tuple[jax.Array, jax.Array]:
-        return self.ctrl_range[:, 0], self.ctrl_range[:, 1]  # the actuators' ctrlrange ([-1, 1] where unlimited)
+        # the actuators' ctrlrange ([-1, 1] where unlimited)
+        return self.ctrl_range[:, 0], self.ctrl_range[:, 1]
 
     def transition(self, key, state: AdaptedState, action, params: AdaptedParams) -> Step:
         """`action_repeat` steps of the task, their rewards summed (Brax's EpisodeWrapper); the
@@ -175,7 +197,9 @@ class AdaptedEnv(Env):
         for _ in range(self.task.action_repeat):
             task_state = self.task.env.step(task_state, ctrl)
             reward = reward + jnp.asarray(task_state.reward, jnp.float32)
-        return Step(self._state(task_state, reward, state.t), reward, jnp.asarray(task_state.done) > 0.5)
+        return Step(
+            self._state(task_state, reward, state.t), reward, jnp.asarray(task_state.done) > 0.5
+        )
 
     def state_obs(self, state: AdaptedState, params) -> jax.Array:
         """float32[n] the task's observation (its `state` entry where it is a dictionary)."""
@@ -189,20 +213,26 @@ class AdaptedEnv(Env):
             target = jnp.stack([com[0], com[1], jnp.float32(self.centre_height)])
             return render3d.tracking_camera(target, 1.5 * self.extent, -20.0, 90.0)
         i = self.cameras.index(params.camera)
-        return render3d.Camera(data.cam_xpos[i], data.cam_xmat[i].reshape(3, 3), float(self.mj_model.cam_fovy[i]))
+        return render3d.Camera(
+            data.cam_xpos[i], data.cam_xmat[i].reshape(3, 3), float(self.mj_model.cam_fovy[i])
+        )
 
     def render(self, state: AdaptedState, params: AdaptedParams) -> jax.Array:
         """uint8[64, 64, 3]: the model's geoms from the variant's camera."""
         scene = self.scene if self.scene is not None else make_scene(self.task)
         data = state.data
-        return render3d.render(scene, data.geom_xpos, data.geom_xmat, self.camera(data, params), self.image_size)
+        return render3d.render(
+            scene, data.geom_xpos, data.geom_xmat, self.camera(data, params), self.image_size
+        )
 
 
 def task_observation(task: Task, obs: Any) -> jax.Array:
     """float32[n] a task's observation: the array, or a dictionary's `state` entry."""
     if isinstance(obs, dict):
         if "state" not in obs:
-            raise EnvUnavailable(f"{task.name}: its observation is a dictionary without 'state' ({', '.join(obs)})")
+            raise EnvUnavailable(
+                f"{task.name}: its observation is a dictionary without 'state' ({', '.join(obs)})"
+            )
         obs = obs["state"]
     return jnp.asarray(obs, jnp.float32).reshape(-1)
 
@@ -234,15 +264,22 @@ def register_generic_hints(task: Task) -> None:
         """The task's observation."""
         return task_observation(task, state.task.obs)
 
-    register_hint(task.name, "state", dim=observation_size(task), unit="the task's observation")(full_state)
+    register_hint(task.name, "state", dim=observation_size(task), unit="the task's observation")(
+        full_state
+    )
     for i in range(model.nsensor):
         adr, dim = int(model.sensor_adr[i]), int(model.sensor_dim[i])
 
         def sensor(state: AdaptedState, params, adr=adr, dim=dim) -> jax.Array:
             """A sensor's reading (MuJoCo's sensordata)."""
-            return state.data.sensordata[adr:adr + dim]
+            return state.data.sensordata[adr : adr + dim]
 
-        register_hint(task.name, f"sensor:{model.sensor(i).name or f'sensor{i}'}", dim=dim, unit="the sensor's")(sensor)
+        register_hint(
+            task.name,
+            f"sensor:{model.sensor(i).name or f'sensor{i}'}",
+            dim=dim,
+            unit="the sensor's",
+        )(sensor)
     for b in range(1, model.nbody):
         root = int(model.body_rootid[b])
 
@@ -250,4 +287,6 @@ def register_generic_hints(task: Task) -> None:
             """A body's centre of mass's velocity (world frame)."""
             return body_velocity(state.data, b, root)
 
-        register_hint(task.name, f"body_velocity:{model.body(b).name or f'body{b}'}", dim=3, unit="m/s")(velocity)
+        register_hint(
+            task.name, f"body_velocity:{model.body(b).name or f'body{b}'}", dim=3, unit="m/s"
+        )(velocity)

@@ -21,7 +21,12 @@ import jax.numpy as jnp
 import mujoco
 
 from hintsjax.envs.hints import register_hint, share_hints
-from hintsjax.envs.locomotion import LocomotionEnv, LocomotionParams, LocomotionState, torso_height_above_target
+from hintsjax.envs.locomotion import (
+    LocomotionEnv,
+    LocomotionParams,
+    LocomotionState,
+    torso_height_above_target,
+)
 from hintsjax.envs.physics import Readout
 
 NAME = "ant"
@@ -29,8 +34,14 @@ TORSO = 1  # body id of the torso, Gymnasium's `main_body`
 
 VARIANTS = {
     "standard": LocomotionParams(
-        forward_reward_weight=1.0, ctrl_cost_weight=0.5, contact_cost_weight=5e-4, healthy_reward=1.0,
-        healthy_z_low=0.2, healthy_z_high=1.0, reset_noise_scale=0.1, target_height=0.75,
+        forward_reward_weight=1.0,
+        ctrl_cost_weight=0.5,
+        contact_cost_weight=5e-4,
+        healthy_reward=1.0,
+        healthy_z_low=0.2,
+        healthy_z_high=1.0,
+        reset_noise_scale=0.1,
+        target_height=0.75,
     )
 }
 
@@ -57,7 +68,12 @@ class Ant(LocomotionEnv):
         healthy = finite & (z >= params.healthy_z_low) & (z <= params.healthy_z_high)
         ctrl_cost = params.ctrl_cost_weight * jnp.sum(ctrl**2)
         contact_cost = params.contact_cost_weight * jnp.sum(contact_forces(data) ** 2)
-        reward = params.forward_reward_weight * velocity[0] + params.healthy_reward * healthy - ctrl_cost - contact_cost
+        reward = (
+            params.forward_reward_weight * velocity[0]
+            + params.healthy_reward * healthy
+            - ctrl_cost
+            - contact_cost
+        )
         return reward, ~healthy
 
     def observe_data(self, data: Readout) -> jax.Array:
@@ -86,8 +102,19 @@ def full_state(state: LocomotionState, params) -> jax.Array:
 
 FAST_NAME = "ant_fast"
 # The capsules from the torso to the knees: they reach the floor only once the ant lies on them.
-ABOVE_KNEES = tuple(f"{part}_geom" for part in ("aux_1", "aux_2", "aux_3", "aux_4", "left_leg", "right_leg", "back_leg",
-                                                  "rightback_leg"))
+ABOVE_KNEES = tuple(
+    f"{part}_geom"
+    for part in (
+        "aux_1",
+        "aux_2",
+        "aux_3",
+        "aux_4",
+        "left_leg",
+        "right_leg",
+        "back_leg",
+        "rightback_leg",
+    )
+)
 
 
 class AntFast(Ant):
@@ -102,12 +129,19 @@ class AntFast(Ant):
     tests/envs/test_locomotion.py."""
 
     name = FAST_NAME
-    options = {**Ant.options, "integrator": mujoco.mjtIntegrator.mjINT_EULER, "iterations": 2, "ls_iterations": 4}
+    options = {
+        **Ant.options,
+        "integrator": mujoco.mjtIntegrator.mjINT_EULER,
+        "iterations": 2,
+        "ls_iterations": 4,
+    }
 
     @classmethod
     def adapt(cls, model: mujoco.MjModel) -> mujoco.MjModel:
         for name in ABOVE_KNEES:
-            model.geom_contype[model.geom(name).id] = model.geom_conaffinity[model.geom(name).id] = 0
+            model.geom_contype[model.geom(name).id] = model.geom_conaffinity[
+                model.geom(name).id
+            ] = 0
         return super().adapt(model)
 
 
@@ -138,11 +172,19 @@ share_hints(FAST_NAME, NAME)
 # epochs. Not tuned further: it scored 5694 (5 seeds x 50 episodes).
 # Ant and Humanoid episodes end when the robot falls, so their GAIL is paid Ho and Ermon's
 # -log(1 - D) > 0, as idp's is: with the signed log odds, falling early would pay.
-EXPERT_PPO = dict(total_env_steps=10_000_000, num_envs=1024, batch_size=8192, minibatch_size=1024, epochs=8)
-TRAINING = dict(hint="speed", ppo=dict(total_env_steps=5_000_000, num_envs=256, encoder_lr=3e-4, epochs=4),
-                learners=dict(ppo=dict(target_kl=0.05, kl_adaptive_lr=True)),
-                agents=dict(expert_ppo=dict(ppo=EXPERT_PPO), gail=dict(ppo=EXPERT_PPO, gail=dict(reward="original")),
-                            dagger=dict(ppo=dict(total_env_steps=250_000), dagger=dict(buffer_size=250_000))))
+EXPERT_PPO = dict(
+    total_env_steps=10_000_000, num_envs=1024, batch_size=8192, minibatch_size=1024, epochs=8
+)
+TRAINING = dict(
+    hint="speed",
+    ppo=dict(total_env_steps=5_000_000, num_envs=256, encoder_lr=3e-4, epochs=4),
+    learners=dict(ppo=dict(target_kl=0.05, kl_adaptive_lr=True)),
+    agents=dict(
+        expert_ppo=dict(ppo=EXPERT_PPO),
+        gail=dict(ppo=EXPERT_PPO, gail=dict(reward="original")),
+        dagger=dict(ppo=dict(total_env_steps=250_000), dagger=dict(buffer_size=250_000)),
+    ),
+)
 # The fast-physics ant (AntFast) trains as the ant does, with each env's next start drawn once
 # per rollout (ppo.starts_per_rollout), as its throughput figure is measured.
 FAST_TRAINING = {**TRAINING, "ppo": {**TRAINING["ppo"], "starts_per_rollout": True}}

@@ -19,7 +19,9 @@ from hintsjax.envs.errors import ChoiceError
 
 SOURCE = "brax"
 EPISODE_LENGTH = 1000  # brax.training's default episode_length (its EpisodeWrapper's time limit)
-TRAINING: dict[str, Any] = dict(hint="reward", ppo=dict(total_env_steps=1_000_000, num_envs=128, encoder_lr=3e-4, epochs=4))
+TRAINING: dict[str, Any] = dict(
+    hint="reward", ppo=dict(total_env_steps=1_000_000, num_envs=128, encoder_lr=3e-4, epochs=4)
+)
 
 
 def names() -> list[str]:
@@ -34,12 +36,15 @@ def load(name: str) -> Task:
         raise ChoiceError("Brax env", name, names())
     try:
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # Brax's note that its own pipelines are unmaintained (we use MJX's)
+            # Brax's note that its own pipelines are unmaintained (we use MJX's)
+            warnings.simplefilter("ignore")
             env = brax.envs.get_environment(name, backend="mjx")
         mj_model = env.sys.mj_model
     except Exception as e:  # noqa: BLE001  Brax's own failure, in one line
-        raise EnvUnavailable(f"brax:{name} does not load on Brax's MJX backend: {type(e).__name__}: "
-                             f"{str(e).splitlines()[0][:200] if str(e) else ''}") from None
+        raise EnvUnavailable(
+            f"brax:{name} does not load on Brax's MJX backend: {type(e).__name__}: "
+            f"{str(e).splitlines()[0][:200] if str(e) else ''}"
+        ) from None
     return Task(f"{SOURCE}:{name}", env, mj_model, "pipeline_state", EPISODE_LENGTH)
 
 

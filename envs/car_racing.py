@@ -45,7 +45,8 @@ ENGINE_POWER = 1e8 * 0.02**2  # per rear wheel
 FRICTION_LIMIT = 1e6 * 0.02**2  # per wheel, on road
 TYRE_STIFFNESS = 205000 * 0.02**2  # force per u/s of slip
 BRAKE_RATE = 15 * WHEEL_R * FPS  # u/s^2 of rim speed at full brake
-MAX_SPEED = 100.0  # u/s: Box2D's cap on a body's translation, b2_maxTranslation = 2 u per 1/50 s step
+# u/s: Box2D's cap on a body's translation, b2_maxTranslation = 2 u per 1/50 s step
+MAX_SPEED = 100.0
 # Gymnasium's wheels (WHEELPOS, WHEEL_W, WHEEL_R times SIZE) in the car's frame [right, forward] (u):
 # front-left, front-right, rear-left, rear-right; each a box WHEEL_HALF [across, along] either side.
 WHEELS = np.array([(-55, 80), (55, 80), (-55, -82), (55, -82)], np.float32) * 0.02
@@ -82,7 +83,8 @@ class CarRacingParams:
     last_radius_high: float = 1.5 * TRACK_RAD
     second_alpha_low: float = TWO_PI / CHECKPOINTS  # checkpoint 1
     second_alpha_high: float = 2 * TWO_PI / CHECKPOINTS
-    perpendicular_glue: bool = False  # Gymnasium's glue measure is sqrt((cos b dx)^2 + (sin b dy)^2)
+    # Gymnasium's glue measure is sqrt((cos b dx)^2 + (sin b dy)^2)
+    perpendicular_glue: bool = False
     lap_complete_percent: float = 0.95
     grass_grip: float = 0.6
 
@@ -129,11 +131,20 @@ class Car:
     wheel_speed: jax.Array
 
     @classmethod
-    def at(cls, xy, angle, speed=0.0, lateral=0.0, yaw_rate=0.0, steer=0.0, gas=0.0, wheel_speed=None):
+    def at(
+        cls, xy, angle, speed=0.0, lateral=0.0, yaw_rate=0.0, steer=0.0, gas=0.0, wheel_speed=None
+    ):
         """A hand-set car; the four wheels roll at `speed` unless given."""
         wheels = (speed,) * 4 if wheel_speed is None else wheel_speed
-        return cls(jnp.asarray(xy, f32), f32(angle), jnp.asarray([speed, lateral], f32), f32(yaw_rate),
-                   f32(steer), f32(gas), jnp.asarray(wheels, f32))
+        return cls(
+            jnp.asarray(xy, f32),
+            f32(angle),
+            jnp.asarray([speed, lateral], f32),
+            f32(yaw_rate),
+            f32(steer),
+            f32(gas),
+            jnp.asarray(wheels, f32),
+        )
 
 
 @struct.dataclass
@@ -155,8 +166,16 @@ def checkpoints(key: jax.Array, params: CarRacingParams) -> tuple[jax.Array, jax
     c = jnp.arange(CHECKPOINTS, dtype=f32)
     noise = jax.random.uniform(k_noise, (CHECKPOINTS,), f32, 0.0, TWO_PI / CHECKPOINTS)
     rad = jax.random.uniform(k_rad, (CHECKPOINTS,), f32, TRACK_RAD / 3, TRACK_RAD)
-    alpha = (TWO_PI * c / CHECKPOINTS + noise).at[0].set(0.0).at[-1].set(TWO_PI * (CHECKPOINTS - 1) / CHECKPOINTS)
-    alpha = alpha.at[1].set(jax.random.uniform(k_second, (), f32, params.second_alpha_low, params.second_alpha_high))
+    alpha = (
+        (TWO_PI * c / CHECKPOINTS + noise)
+        .at[0]
+        .set(0.0)
+        .at[-1]
+        .set(TWO_PI * (CHECKPOINTS - 1) / CHECKPOINTS)
+    )
+    alpha = alpha.at[1].set(
+        jax.random.uniform(k_second, (), f32, params.second_alpha_low, params.second_alpha_high)
+    )
     last = jax.random.uniform(k_last, (), f32, params.last_radius_low, params.last_radius_high)
     return alpha, rad.at[0].set(1.5 * TRACK_RAD).at[-1].set(last)
 
@@ -196,14 +215,21 @@ def wrap(a: jax.Array) -> jax.Array:
 def _lap(key: jax.Array, params: CarRacingParams) -> tuple[Track, jax.Array]:
     """One candidate track from the trace's second lap, and whether Gymnasium would accept it."""
     alpha, beta, x, y = trace(*checkpoints(key, params))
-    passes = jnp.cumsum(jnp.concatenate([jnp.zeros(1, bool), (alpha[1:] > START_ALPHA) & (alpha[:-1] <= START_ALPHA)]))
+    passes = jnp.cumsum(
+        jnp.concatenate(
+            [jnp.zeros(1, bool), (alpha[1:] > START_ALPHA) & (alpha[:-1] <= START_ALPHA)]
+        )
+    )
     i1, i2 = jnp.argmax(passes >= 1), jnp.argmax(passes >= 2)
     n = i2 - 1 - i1
-    x, y, beta = (jax.lax.dynamic_slice(jnp.concatenate([a, jnp.zeros(MAX_TILES, f32)]), (i1,), (MAX_TILES,))
-                  for a in (x, y, beta))
+    x, y, beta = (
+        jax.lax.dynamic_slice(jnp.concatenate([a, jnp.zeros(MAX_TILES, f32)]), (i1,), (MAX_TILES,))
+        for a in (x, y, beta)
+    )
     xy = jnp.stack([x, y], -1)
     last = jnp.clip(n - 1, 0, MAX_TILES - 1)
-    gap = (xy[0] - xy[last]) * jnp.stack([jnp.cos(beta[0]), jnp.sin(beta[0])])  # Gymnasium's own measure
+    # Gymnasium's own measure
+    gap = (xy[0] - xy[last]) * jnp.stack([jnp.cos(beta[0]), jnp.sin(beta[0])])
     gap = jnp.where(params.perpendicular_glue, jnp.abs(gap.sum()), jnp.linalg.norm(gap))
     ok = (passes[-1] >= 2) & (n >= 50) & (n <= MAX_TILES) & (gap <= TRACK_DETAIL_STEP)
     n = jnp.clip(n, 50, MAX_TILES)
@@ -218,10 +244,11 @@ def _kerbs(beta: jax.Array, n: jax.Array) -> jax.Array:
     BORDER_MIN_COUNT - 1 tiles before."""
     # the headings repeat with period n, padded by c on either side so that shifts are slices
     c, i = BORDER_MIN_COUNT, jnp.arange(MAX_TILES)
-    dbeta = wrap(jnp.diff(beta[jnp.arange(-c, MAX_TILES + c) % n]))  # dbeta[k]: the turn into tile k - c + 1
-    turns = jnp.stack([dbeta[c - 1 - k: c - 1 - k + MAX_TILES + c - 1] for k in range(c)])
+    # dbeta[k]: the turn into tile k - c + 1
+    dbeta = wrap(jnp.diff(beta[jnp.arange(-c, MAX_TILES + c) % n]))
+    turns = jnp.stack([dbeta[c - 1 - k : c - 1 - k + MAX_TILES + c - 1] for k in range(c)])
     sharp = (jnp.abs(turns) > 0.2 * TRACK_TURN_RATE).all(0) & (jnp.abs(jnp.sign(turns).sum(0)) == c)
-    return jnp.stack([sharp[k: k + MAX_TILES] for k in range(c)]).any(0) & (i < n)
+    return jnp.stack([sharp[k : k + MAX_TILES] for k in range(c)]).any(0) & (i < n)
 
 
 def track_from_gymnasium(points: np.ndarray) -> Track:
@@ -250,7 +277,9 @@ def first_corner_angle(track: Track, window: int = 20) -> jax.Array:
     `window`-tile (70 u) stretch turning by >= 45 degrees starts it; its largest turn over a
     `window` stretch within the next `window` tiles is the corner's turn."""
     n, i = track.n_tiles, jnp.arange(MAX_TILES)
-    heading = jnp.cumsum(jnp.where((i > 0) & (i < n), wrap(track.beta - jnp.roll(track.beta, 1)), 0.0))
+    heading = jnp.cumsum(
+        jnp.where((i > 0) & (i < n), wrap(track.beta - jnp.roll(track.beta, 1)), 0.0)
+    )
     turn = jnp.where(i + window < n, jnp.abs(jnp.roll(heading, -window) - heading), 0.0)
     start = jnp.argmax(turn >= math.radians(45))
     corner = jnp.where((i >= start) & (i <= start + window), turn, 0.0).max()
@@ -276,7 +305,9 @@ def _edge_lines(quads: jax.Array) -> tuple[jax.Array, jax.Array]:
     """Unit inward normals float32[..., 4, 2] and offsets [..., 4] of quads' edges [front, right,
     back, left]: a point p is inside where p . normal - offset >= 0 for all four."""
     e = jnp.roll(quads, -1, axis=-2) - quads
-    normal = jnp.stack([e[..., 1], -e[..., 0]], -1) / jnp.maximum(jnp.linalg.norm(e, axis=-1, keepdims=True), 1e-6)
+    normal = jnp.stack([e[..., 1], -e[..., 0]], -1) / jnp.maximum(
+        jnp.linalg.norm(e, axis=-1, keepdims=True), 1e-6
+    )
     return normal, jnp.sum(normal * quads, -1)
 
 
@@ -294,7 +325,8 @@ def tile_at(track: Track, p: jax.Array) -> tuple[jax.Array, jax.Array]:
     return tiles[jnp.argmax(inside)], inside.any()
 
 
-CONTACT_TILES = 6  # tiles searched for wheel contacts: nearest point - 2 .. + 3 (the car spans <= 2.7 u)
+# tiles searched for wheel contacts: nearest point - 2 .. + 3 (the car spans <= 2.7 u)
+CONTACT_TILES = 6
 
 
 @struct.dataclass
@@ -326,7 +358,8 @@ def wheel_contact(track: Track, car: Car) -> WheelContact:
     tiles = (nearest_point(track, car.xy) + jnp.arange(-2, CONTACT_TILES - 2)) % track.n_tiles
     normal, offset = _edge_lines(_quads(track, tiles))  # [K, 4, 2], [K, 4]
     p = wheel_corners(car).reshape(16, 1, 1, 2)
-    inside = (p[..., 0] * normal[..., 0] + p[..., 1] * normal[..., 1] - offset >= 0).all(-1)  # [16, K]
+    # [16, K]
+    inside = (p[..., 0] * normal[..., 0] + p[..., 1] * normal[..., 1] - offset >= 0).all(-1)
     return WheelContact(tiles, inside.any(0), inside.reshape(4, 4 * CONTACT_TILES).any(-1))
 
 
@@ -358,7 +391,11 @@ def drive(car: Car, action: jax.Array, grip: jax.Array) -> Car:
     then positions updated (semi-implicit Euler); the wheels turn towards the steering target."""
     steer_action, gas, brake = jnp.clip(action, *ACTION_RANGE)
     gas = car.gas + jnp.minimum(gas - car.gas, 0.1)
-    target, limit, dt = jnp.clip(-steer_action, -STEER_LIMIT, STEER_LIMIT), grip * FRICTION_LIMIT, 1.0 / FPS
+    target, limit, dt = (
+        jnp.clip(-steer_action, -STEER_LIMIT, STEER_LIMIT),
+        grip * FRICTION_LIMIT,
+        1.0 / FPS,
+    )
     u, v, r = car.vel[0], car.vel[1], car.yaw_rate
     c, s = jnp.cos(STEERED * car.steer), jnp.sin(STEERED * car.steer)
     # each wheel's ground velocity [forward, left] in the car's frame, then along and across the wheel
@@ -366,7 +403,8 @@ def drive(car: Car, action: jax.Array, grip: jax.Array) -> Car:
     ground_u, ground_v = u - r * WHEEL_LEFT, v + r * arm
     along, across = ground_u * c + ground_v * s, -ground_u * s + ground_v * c
     spin = car.wheel_speed + dt * DRIVEN * ENGINE_POWER * gas * WHEEL_R**2 / WHEEL_INERTIA / (
-        jnp.abs(car.wheel_speed) + 5.0 * WHEEL_R)
+        jnp.abs(car.wheel_speed) + 5.0 * WHEEL_R
+    )
     spin = jnp.sign(spin) * jnp.maximum(jnp.abs(spin) - BRAKE_RATE * brake * dt, 0.0)
     spin = jnp.where(brake >= 0.9, 0.0, spin)
     f_long, f_lat = TYRE_STIFFNESS * (spin - along), -TYRE_STIFFNESS * across
@@ -376,17 +414,24 @@ def drive(car: Car, action: jax.Array, grip: jax.Array) -> Car:
     # each wheel's force in the car's frame, and its moment about the mass centre (+ turns left)
     fx, fy = f_long * c - f_lat * s, f_long * s + f_lat * c
     u, v = u + dt * fx.sum() / MASS, v + dt * fy.sum() / MASS  # in the frame at the frame's start
-    cap = jnp.minimum(1.0, MAX_SPEED / jnp.maximum(jnp.sqrt(u**2 + v**2), 1e-6))  # Box2D's speed cap
+    # Box2D's speed cap
+    cap = jnp.minimum(1.0, MAX_SPEED / jnp.maximum(jnp.sqrt(u**2 + v**2), 1e-6))
     u, v = u * cap, v * cap
     r = r + dt * jnp.sum(arm * fy - WHEEL_LEFT * fx) / INERTIA
     angle = car.angle + dt * r
-    fwd0, left0 = jnp.stack([-jnp.sin(car.angle), jnp.cos(car.angle)]), jnp.stack([-jnp.cos(car.angle), -jnp.sin(car.angle)])
+    fwd0, left0 = (
+        jnp.stack([-jnp.sin(car.angle), jnp.cos(car.angle)]),
+        jnp.stack([-jnp.cos(car.angle), -jnp.sin(car.angle)]),
+    )
     fwd = jnp.stack([-jnp.sin(angle), jnp.cos(angle)])
-    xy = car.xy + dt * (u * fwd0 + v * left0) + MASS_BEHIND * (fwd - fwd0)  # the origin, about the mass centre
+    # the origin, about the mass centre
+    xy = car.xy + dt * (u * fwd0 + v * left0) + MASS_BEHIND * (fwd - fwd0)
     turn_c, turn_s = jnp.cos(dt * r), jnp.sin(dt * r)  # the same velocity in the turned car's frame
     vel = jnp.stack([u * turn_c + v * turn_s, v * turn_c - u * turn_s])
     steer = car.steer + jnp.clip(50.0 * (target - car.steer), -3.0, 3.0) * dt
-    return car.replace(xy=xy, angle=angle, vel=vel, yaw_rate=r, steer=steer, gas=gas, wheel_speed=spin)
+    return car.replace(
+        xy=xy, angle=angle, vel=vel, yaw_rate=r, steer=steer, gas=gas, wheel_speed=spin
+    )
 
 
 # -- the picture ---------------------------------------------------------------------------------
@@ -397,7 +442,9 @@ KERB_RED, KERB_WHITE, HULL = (1.0, 0.0, 0.0), (1.0, 1.0, 1.0), (0.8, 0.0, 0.0)
 PIXEL = 0.5 * (1000 / SIZE + 800 / SIZE) / ZOOM  # mean pixel size in u, for anti-aliasing
 # car-frame coordinates [right, forward] (u) of each pixel centre: the car at window (500, 600)
 _cols, _rows = (np.arange(SIZE) + 0.5) * 1000 / SIZE, (np.arange(SIZE) + 0.5) * 800 / SIZE
-VIEW = np.stack(np.broadcast_arrays((_cols[None, :] - 500) / ZOOM, (600 - _rows[:, None]) / ZOOM), -1)
+VIEW = np.stack(
+    np.broadcast_arrays((_cols[None, :] - 500) / ZOOM, (600 - _rows[:, None]) / ZOOM), -1
+)
 VIEW = VIEW.astype(np.float32)
 VIEW_CENTRE = np.array([0.0, 200 / ZOOM], np.float32)
 # The road is drawn in BLOCKS x BLOCKS blocks, each from its BLOCK_TILES tiles nearest to it among
@@ -406,11 +453,16 @@ VIEW_CENTRE = np.array([0.0, 200 / ZOOM], np.float32)
 BLOCKS, BLOCK_TILES, VIEW_TILES = 4, 16, 64
 RENDER_UNROLL = 4  # tiles per loop iteration: 1.7x faster than 1 on a GPU (docs/throughput.md)
 _B = SIZE // BLOCKS
-VIEW_BLOCKS = VIEW.reshape(BLOCKS, _B, BLOCKS, _B, 2).transpose(0, 2, 1, 3, 4).reshape(BLOCKS**2, _B, _B, 2)
+VIEW_BLOCKS = (
+    VIEW.reshape(BLOCKS, _B, BLOCKS, _B, 2).transpose(0, 2, 1, 3, 4).reshape(BLOCKS**2, _B, _B, 2)
+)
 BLOCK_CENTRES = VIEW_BLOCKS.mean((1, 2))
-HULL_POLYS = [[(-60, 130), (60, 130), (60, 110), (-60, 110)], [(-15, 120), (15, 120), (20, 20), (-20, 20)],
-              [(25, 20), (50, -10), (50, -40), (20, -90), (-20, -90), (-50, -40), (-50, -10), (-25, 20)],
-              [(-50, -120), (50, -120), (50, -90), (-50, -90)]]
+HULL_POLYS = [
+    [(-60, 130), (60, 130), (60, 110), (-60, 110)],
+    [(-15, 120), (15, 120), (20, 20), (-20, 20)],
+    [(25, 20), (50, -10), (50, -40), (20, -90), (-20, -90), (-50, -40), (-50, -10), (-25, 20)],
+    [(-50, -120), (50, -120), (50, -90), (-50, -90)],
+]
 
 
 def _hull_cover() -> np.ndarray:
@@ -428,14 +480,20 @@ def _hull_cover() -> np.ndarray:
 
 
 HULL_COVER = _hull_cover()
-CAR_WINDOW = (slice(62, 84), slice(42, 54))  # rows and columns the car (steered wheels too) stays in
+# rows and columns the car (steered wheels too) stays in
+CAR_WINDOW = (slice(62, 84), slice(42, 54))
 
 
-def _box_cover(points: jax.Array, centre: jax.Array, angle: jax.Array, half: np.ndarray) -> jax.Array:
+def _box_cover(
+    points: jax.Array, centre: jax.Array, angle: jax.Array, half: np.ndarray
+) -> jax.Array:
     """float32[S, S] anti-aliased coverage of a rectangle turned by angle (rad, ccw)."""
     d = points - centre
     c, s = jnp.cos(angle), jnp.sin(angle)
-    local = jnp.abs(jnp.stack([c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1]], -1)) - half
+    local = (
+        jnp.abs(jnp.stack([c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1]], -1))
+        - half
+    )
     outside = jnp.linalg.norm(jnp.maximum(local, 0.0), axis=-1) + jnp.minimum(local.max(-1), 0.0)
     return raster.coverage(outside, 0.0, PIXEL)
 
@@ -460,7 +518,8 @@ def _road(state: CarRacingState) -> tuple[jax.Array, ...]:
     normal, offset = _edge_lines(_car_frame(_quads(track, tiles), car))
     offset = jnp.where(jnp.isfinite(far)[..., None], offset, 1e9)  # padding tiles cover nothing
     # a pixel's x depends on its column only and y on its row: edge distances are row + column
-    cols, rows = jnp.asarray(VIEW_BLOCKS[:, 0, :, 0]), jnp.asarray(VIEW_BLOCKS[:, :, 0, 1])  # [blocks, B]
+    # [blocks, B]
+    cols, rows = jnp.asarray(VIEW_BLOCKS[:, 0, :, 0]), jnp.asarray(VIEW_BLOCKS[:, :, 0, 1])
     across = cols[:, None, None, :] * normal[..., 0, None]  # [blocks, k, 4, B]
     down = rows[:, None, None, :] * normal[..., 1, None] - offset[..., None]
     right = wrap(track.beta[(tiles - 1) % track.n_tiles] - track.beta[tiles]) > 0  # the kerb's side
@@ -470,19 +529,32 @@ def _road(state: CarRacingState) -> tuple[jax.Array, ...]:
     def paint_tile(canvas, tile):
         cover, grey, kerb_cover, kerb_red = canvas
         across, down, right, kerb_width, red, shade = tile
-        d = [down[:, j, :, None] + across[:, j, None, :] for j in range(4)]  # front, right, back, left
+        # front, right, back, left
+        d = [down[:, j, :, None] + across[:, j, None, :] for j in range(4)]
         right, kerb_width, red, shade = (a[:, None, None] for a in (right, kerb_width, red, shade))
         along = (d[0] >= -1e-3) & (d[2] >= -1e-3)  # between the tile's two ends, overlapping seams
         road = jnp.where(along, jnp.clip(0.5 + jnp.minimum(d[1], d[3]) / PIXEL, 0.0, 1.0), 0.0)
         side = jnp.where(right, d[1], d[3])  # kerbs lie BORDER wide on the turn's inner side
-        band = jnp.where(along, jnp.clip(0.5 + jnp.minimum(-side, side + kerb_width) / PIXEL, 0.0, 1.0), 0.0)
-        return (jnp.maximum(cover, road), jnp.where(road > 0, shade, grey),
-                jnp.maximum(kerb_cover, band), jnp.where(band > 0, red, kerb_red)), None
+        band = jnp.where(
+            along, jnp.clip(0.5 + jnp.minimum(-side, side + kerb_width) / PIXEL, 0.0, 1.0), 0.0
+        )
+        return (
+            jnp.maximum(cover, road),
+            jnp.where(road > 0, shade, grey),
+            jnp.maximum(kerb_cover, band),
+            jnp.where(band > 0, red, kerb_red),
+        ), None
 
     zero = jnp.zeros(VIEW_BLOCKS.shape[:-1], f32)
-    per_tile = jax.tree.map(lambda a: jnp.moveaxis(a, 1, 0), (across, down, right, kerb_width, tiles % 2 == 1, shade))
-    canvas = jax.lax.scan(paint_tile, (zero, zero + ROAD, zero, zero > 0), per_tile, unroll=RENDER_UNROLL)[0]
-    return tuple(a.reshape(BLOCKS, BLOCKS, _B, _B).swapaxes(1, 2).reshape(SIZE, SIZE) for a in canvas)
+    per_tile = jax.tree.map(
+        lambda a: jnp.moveaxis(a, 1, 0), (across, down, right, kerb_width, tiles % 2 == 1, shade)
+    )
+    canvas = jax.lax.scan(
+        paint_tile, (zero, zero + ROAD, zero, zero > 0), per_tile, unroll=RENDER_UNROLL
+    )[0]
+    return tuple(
+        a.reshape(BLOCKS, BLOCKS, _B, _B).swapaxes(1, 2).reshape(SIZE, SIZE) for a in canvas
+    )
 
 
 def render_track(state: CarRacingState) -> jax.Array:
@@ -573,12 +645,27 @@ def state_observation(state: CarRacingState) -> jax.Array:
     track, car = state.track, state.car
     j, lateral, error = _track_frame(track, car)
     c, s = jnp.cos(car.angle), jnp.sin(car.angle)
-    ahead = (track.xy[(j + jnp.asarray(PREVIEW)) % track.n_tiles] - car.xy) @ jnp.array([[-s, -c], [c, -s]])
+    ahead = (track.xy[(j + jnp.asarray(PREVIEW)) % track.n_tiles] - car.xy) @ jnp.array(
+        [[-s, -c], [c, -s]]
+    )
     slip = car.wheel_speed.reshape(2, 2).mean(-1) - car.vel[0]  # [front, rear] pairs
     on = tile_at(track, car.xy)[1].astype(f32)
-    head = jnp.stack([car.vel[0] / 100, car.vel[1] / 100, car.yaw_rate / 5, car.steer / 0.4, car.gas,
-                      slip[1] / 100, slip[0] / 100, lateral / TRACK_WIDTH, jnp.sin(error), jnp.cos(error),
-                      on, progress(state)])
+    head = jnp.stack(
+        [
+            car.vel[0] / 100,
+            car.vel[1] / 100,
+            car.yaw_rate / 5,
+            car.steer / 0.4,
+            car.gas,
+            slip[1] / 100,
+            slip[0] / 100,
+            lateral / TRACK_WIDTH,
+            jnp.sin(error),
+            jnp.cos(error),
+            on,
+            progress(state),
+        ]
+    )
     return jnp.concatenate([head, ahead.reshape(-1) / 50.0]).astype(f32)
 
 
@@ -617,7 +704,9 @@ def target_speed(state: CarRacingState, params: CarRacingParams) -> jax.Array:
     """sqrt(A_LAT / |kappa|) for the sharpest curvature over the next 2 LOOKAHEAD tiles, at most V_MAX."""
     j = nearest_point(state.track, state.car.xy)
     ahead = jnp.arange(2 * LOOKAHEAD + 1)
-    kappa = jnp.abs(jax.vmap(lambda k: _curvature(state.track, (j + k) % state.track.n_tiles))(ahead)).max()
+    kappa = jnp.abs(
+        jax.vmap(lambda k: _curvature(state.track, (j + k) % state.track.n_tiles))(ahead)
+    ).max()
     return jnp.minimum(jnp.sqrt(A_LAT / jnp.maximum(kappa, 1e-6)), V_MAX)[None]
 
 
@@ -646,9 +735,15 @@ register_composite(NAME, "composite", ("on_track", "curvature"))
 # against the clipped Gaussian's 163, and the policies' means score far below their samples (the
 # sigmoid head 18 against 504, the Gaussian 167 against 438): they keep a std near 0.8 and drive
 # on it, gas and brake below 0 being none.
-TRAINING = dict(hint="composite", eval_variants=("hairpin",), stochastic_eval=True,
-                ppo=dict(total_env_steps=1_000_000, num_envs=128, starts_per_rollout=True),
-                learners=dict(ppo=dict(action_head="sigmoid")),
-                agents=dict(expert_ppo=dict(ppo=dict(total_env_steps=2_000_000)),
-                            gail=dict(ppo=dict(total_env_steps=2_000_000), gail=dict(reward="original")),
-                            dagger=dict(ppo=dict(total_env_steps=250_000), dagger=dict(buffer_size=250_000))))
+TRAINING = dict(
+    hint="composite",
+    eval_variants=("hairpin",),
+    stochastic_eval=True,
+    ppo=dict(total_env_steps=1_000_000, num_envs=128, starts_per_rollout=True),
+    learners=dict(ppo=dict(action_head="sigmoid")),
+    agents=dict(
+        expert_ppo=dict(ppo=dict(total_env_steps=2_000_000)),
+        gail=dict(ppo=dict(total_env_steps=2_000_000), gail=dict(reward="original")),
+        dagger=dict(ppo=dict(total_env_steps=250_000), dagger=dict(buffer_size=250_000)),
+    ),
+)

@@ -58,10 +58,14 @@ class Env:
     name: str = ""
     max_steps: int = 0
     action_size: int = 0
-    image_size: int = 64  # the picture's side in pixels; an instance may draw at another (`image_size=`)
-    fixed_image_size: bool = False  # True: the env draws at its own side only (the car's precomputed grid)
+    # the picture's side in pixels; an instance may draw at another (`image_size=`)
+    image_size: int = 64
+    # True: the env draws at its own side only (the car's precomputed grid)
+    fixed_image_size: bool = False
 
-    def __init__(self, hint: Hint, observe: tuple[str, ...] = OBS_KEYS, image_size: int | None = None):
+    def __init__(
+        self, hint: Hint, observe: tuple[str, ...] = OBS_KEYS, image_size: int | None = None
+    ):
         unknown = set(observe) - set(OBS_KEYS)
         if unknown:
             raise ValueError(f"unknown observation keys {sorted(unknown)}; valid: {OBS_KEYS}")
@@ -80,8 +84,10 @@ class Env:
         if image_size == cls.image_size:
             return
         if cls.fixed_image_size:
-            raise ValueError(f"{cls.name} draws {cls.image_size}x{cls.image_size} pictures only "
-                             f"(image_size={cls.image_size} or null), not {image_size}")
+            raise ValueError(
+                f"{cls.name} draws {cls.image_size}x{cls.image_size} pictures only "
+                f"(image_size={cls.image_size} or null), not {image_size}"
+            )
         if not 1 <= image_size:
             raise ValueError(f"image_size must be a positive number of pixels, got {image_size}")
 
@@ -188,14 +194,22 @@ class AutoReset:
         ts = self.env.reset(key, params)
         zero = jnp.zeros((), jnp.float32)
         state = EpisodeState(ts.state, zero, jnp.zeros((), jnp.int32))
-        return ts.replace(state=state, final_obs=ts.obs, info=_episode_info(zero, state.episode_length))
+        return ts.replace(
+            state=state, final_obs=ts.obs, info=_episode_info(zero, state.episode_length)
+        )
 
     def fresh_start(self, key: jax.Array, params: Any) -> Timestep:
         """A start for `step`'s `fresh`: the wrapped env's reset."""
         return self.env.reset(key, params)
 
-    def step(self, key: jax.Array, state: EpisodeState, action: jax.Array, params: Any,
-             fresh: Timestep | None = None) -> Timestep:
+    def step(
+        self,
+        key: jax.Array,
+        state: EpisodeState,
+        action: jax.Array,
+        params: Any,
+        fresh: Timestep | None = None,
+    ) -> Timestep:
         """One step; where the episode ends, the next one starts from `fresh` (a `fresh_start`).
 
         Without `fresh` a start is drawn here, on every step: vmapped code computes it whether or

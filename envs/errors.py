@@ -13,7 +13,9 @@ class ChoiceError(ValueError):
     def __init__(self, kind: str, name: str, choices: Iterable[str], where: str = ""):
         self.kind, self.name, self.choices = kind, name, sorted(choices)
         scope = f" for {where}" if where else ""
-        super().__init__(f"unknown {kind} '{name}'{scope}; valid choices: {', '.join(self.choices)}")
+        super().__init__(
+            f"unknown {kind} '{name}'{scope}; valid choices: {', '.join(self.choices)}"
+        )
 
 
 def choose(kind: str, name: str, table: Mapping[str, T], where: str = "") -> T:

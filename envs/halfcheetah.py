@@ -19,12 +19,21 @@ import jax
 import jax.numpy as jnp
 
 from hintsjax.envs.hints import register_hint
-from hintsjax.envs.locomotion import LocomotionEnv, LocomotionParams, LocomotionState, forward_velocity
+from hintsjax.envs.locomotion import (
+    LocomotionEnv,
+    LocomotionParams,
+    LocomotionState,
+    forward_velocity,
+)
 from hintsjax.envs.physics import Readout
 
 NAME = "halfcheetah"
 
-VARIANTS = {"standard": LocomotionParams(forward_reward_weight=1.0, ctrl_cost_weight=0.1, reset_noise_scale=0.1)}
+VARIANTS = {
+    "standard": LocomotionParams(
+        forward_reward_weight=1.0, ctrl_cost_weight=0.1, reset_noise_scale=0.1
+    )
+}
 
 
 class HalfCheetah(LocomotionEnv):
@@ -40,7 +49,9 @@ class HalfCheetah(LocomotionEnv):
         return jnp.stack([data.qpos[0], jnp.zeros_like(data.qpos[0])])
 
     def outcome(self, data, velocity, ctrl, params):
-        reward = params.forward_reward_weight * velocity[0] - params.ctrl_cost_weight * jnp.sum(ctrl**2)
+        reward = params.forward_reward_weight * velocity[0] - params.ctrl_cost_weight * jnp.sum(
+            ctrl**2
+        )
         return reward, jnp.zeros((), bool)
 
     def observe_data(self, data: Readout) -> jax.Array:
@@ -84,6 +95,12 @@ def full_state(state: LocomotionState, params) -> jax.Array:
 # Its expert: PPO on the state for 5 M steps, 512 envs per seed in batches of 4096 and 8
 # epochs; DAgger aggregates 250 K expert-labelled steps.
 EXPERT_PPO = dict(total_env_steps=5_000_000, num_envs=512, batch_size=4096, epochs=8)
-TRAINING = dict(hint="velocity", ppo=dict(total_env_steps=1_000_000, num_envs=128, encoder_lr=3e-4, epochs=4),
-                agents=dict(expert_ppo=dict(ppo=EXPERT_PPO), gail=dict(ppo=EXPERT_PPO),
-                            dagger=dict(ppo=dict(total_env_steps=250_000), dagger=dict(buffer_size=250_000))))
+TRAINING = dict(
+    hint="velocity",
+    ppo=dict(total_env_steps=1_000_000, num_envs=128, encoder_lr=3e-4, epochs=4),
+    agents=dict(
+        expert_ppo=dict(ppo=EXPERT_PPO),
+        gail=dict(ppo=EXPERT_PPO),
+        dagger=dict(ppo=dict(total_env_steps=250_000), dagger=dict(buffer_size=250_000)),
+    ),
+)

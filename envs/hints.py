@@ -178,7 +178,8 @@ def load_hints(source: str) -> str:
             if name not in sys.modules:
                 spec = importlib.util.spec_from_file_location(name, path)
                 module = importlib.util.module_from_spec(spec)
-                sys.modules[name] = module  # first: what it registers is named after it (program_cache digests it)
+                # first: what it registers is named after it (program_cache digests it)
+                sys.modules[name] = module
                 try:
                     spec.loader.exec_module(module)
                 except BaseException:
@@ -190,7 +191,11 @@ def load_hints(source: str) -> str:
     except HintFileError:
         raise
     except (Exception, SystemExit) as e:  # noqa: BLE001  whatever the user's file raised, in one line
-        what = f"{type(e).__name__}: {str(e).strip().splitlines()[0][:200]}" if str(e).strip() else type(e).__name__
+        what = (
+            f"{type(e).__name__}: {str(e).strip().splitlines()[0][:200]}"
+            if str(e).strip()
+            else type(e).__name__
+        )
         raise HintFileError(f"hints_from={source} does not import ({what})") from None
 
 
@@ -201,9 +206,13 @@ def check_hint_shapes(hint: Hint, state: Any, params: Any) -> None:
         try:
             out = jax.eval_shape(part.fn, state, params)
         except Exception as e:  # noqa: BLE001  the user's function fails to trace: one line naming it
-            raise HintFileError(f"hint '{part.name}' of {hint.env} fails on the env's state "
-                                f"({type(e).__name__}: {str(e).strip().splitlines()[0][:160] if str(e).strip() else ''})") from None
+            raise HintFileError(
+                f"hint '{part.name}' of {hint.env} fails on the env's state "
+                f"({type(e).__name__}: {str(e).strip().splitlines()[0][:160] if str(e).strip() else ''})"
+            ) from None
         shape = getattr(out, "shape", None)
         if shape is None or len(shape) > 1 or (shape[0] if shape else 1) != part.dim:
-            raise HintFileError(f"hint '{part.name}' of {hint.env} returns shape {shape}, not the ({part.dim},) it "
-                                f"was registered with (dim={part.dim})")
+            raise HintFileError(
+                f"hint '{part.name}' of {hint.env} returns shape {shape}, not the ({part.dim},) it "
+                f"was registered with (dim={part.dim})"
+            )

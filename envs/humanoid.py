@@ -20,8 +20,13 @@ import jax.numpy as jnp
 import mujoco
 
 from hintsjax.envs.hints import register_hint
-from hintsjax.envs.locomotion import (LocomotionEnv, LocomotionParams, LocomotionState, forward_velocity,
-                                      torso_height_above_target)
+from hintsjax.envs.locomotion import (
+    LocomotionEnv,
+    LocomotionParams,
+    LocomotionState,
+    forward_velocity,
+    torso_height_above_target,
+)
 from hintsjax.envs.physics import Readout
 
 NAME = "humanoid"
@@ -29,8 +34,14 @@ CONTACT_COST_MAX = 10.0
 
 VARIANTS = {
     "standard": LocomotionParams(
-        forward_reward_weight=1.25, ctrl_cost_weight=0.1, contact_cost_weight=5e-7, healthy_reward=5.0,
-        healthy_z_low=1.0, healthy_z_high=2.0, reset_noise_scale=1e-2, target_height=1.4,
+        forward_reward_weight=1.25,
+        ctrl_cost_weight=0.1,
+        contact_cost_weight=5e-7,
+        healthy_reward=5.0,
+        healthy_z_low=1.0,
+        healthy_z_high=2.0,
+        reset_noise_scale=1e-2,
+        target_height=1.4,
     )
 }
 
@@ -38,8 +49,12 @@ VARIANTS = {
 class Humanoid(LocomotionEnv):
     name = NAME
     asset = "humanoid.xml"
-    options = dict(solver=mujoco.mjtSolver.mjSOL_NEWTON, iterations=4, ls_iterations=8,
-                   integrator=mujoco.mjtIntegrator.mjINT_EULER)  # module docstring
+    options = dict(
+        solver=mujoco.mjtSolver.mjSOL_NEWTON,
+        iterations=4,
+        ls_iterations=8,
+        integrator=mujoco.mjtIntegrator.mjINT_EULER,
+    )  # module docstring
     variants = VARIANTS
     action_size = 17
     camera = dict(distance=3.0, elevation_deg=-15.0, azimuth_deg=90.0)
@@ -53,15 +68,28 @@ class Humanoid(LocomotionEnv):
         z = data.qpos[2]
         healthy = (z > params.healthy_z_low) & (z < params.healthy_z_high)
         ctrl_cost = params.ctrl_cost_weight * jnp.sum(ctrl**2)
-        contact_cost = jnp.minimum(params.contact_cost_weight * jnp.sum(data.cfrc_ext ** 2), CONTACT_COST_MAX)
-        reward = params.forward_reward_weight * velocity[0] + params.healthy_reward * healthy - ctrl_cost - contact_cost
+        contact_cost = jnp.minimum(
+            params.contact_cost_weight * jnp.sum(data.cfrc_ext**2), CONTACT_COST_MAX
+        )
+        reward = (
+            params.forward_reward_weight * velocity[0]
+            + params.healthy_reward * healthy
+            - ctrl_cost
+            - contact_cost
+        )
         return reward, ~healthy
 
     def observe_data(self, data: Readout) -> jax.Array:
-        return jnp.concatenate([
-            data.qpos[2:], data.qvel, data.cinert[1:].ravel(), data.cvel[1:].ravel(),
-            data.qfrc_actuator[6:], data.cfrc_ext[1:].ravel(),
-        ])
+        return jnp.concatenate(
+            [
+                data.qpos[2:],
+                data.qvel,
+                data.cinert[1:].ravel(),
+                data.cvel[1:].ravel(),
+                data.qfrc_actuator[6:],
+                data.cfrc_ext[1:].ravel(),
+            ]
+        )
 
 
 # -- hints (SPEC section 3) ---------------------------------------------------------------------
@@ -95,10 +123,25 @@ def full_state(state: LocomotionState, params) -> jax.Array:
 # normaliser 513 (460); without the bonus, the normaliser and the reward scale 124 (118).
 # The first 20 M run, with neither normaliser nor reward scale, was at 555 after 13.5 M
 # steps, its std grown to 38 (the actions are clipped to +-0.4).
-EXPERT_PPO = dict(total_env_steps=20_000_000, num_envs=1024, batch_size=8192, minibatch_size=1024, epochs=8)
-TRAINING = dict(hint="velocity", ppo=dict(total_env_steps=10_000_000, num_envs=256, encoder_lr=3e-4, epochs=4,
-                                          reward_scale=0.1, normalize_state=True),
-                learners=dict(ppo=dict(target_kl=0.05)),
-                agents=dict(expert_ppo=dict(ppo=EXPERT_PPO),
-                            gail=dict(ppo=EXPERT_PPO, gail=dict(reward="original", normalize_state=True, grad_penalty=10.0)),
-                            dagger=dict(ppo=dict(total_env_steps=250_000), dagger=dict(buffer_size=250_000))))
+EXPERT_PPO = dict(
+    total_env_steps=20_000_000, num_envs=1024, batch_size=8192, minibatch_size=1024, epochs=8
+)
+TRAINING = dict(
+    hint="velocity",
+    ppo=dict(
+        total_env_steps=10_000_000,
+        num_envs=256,
+        encoder_lr=3e-4,
+        epochs=4,
+        reward_scale=0.1,
+        normalize_state=True,
+    ),
+    learners=dict(ppo=dict(target_kl=0.05)),
+    agents=dict(
+        expert_ppo=dict(ppo=EXPERT_PPO),
+        gail=dict(
+            ppo=EXPERT_PPO, gail=dict(reward="original", normalize_state=True, grad_penalty=10.0)
+        ),
+        dagger=dict(ppo=dict(total_env_steps=250_000), dagger=dict(buffer_size=250_000)),
+    ),
+)

@@ -77,7 +77,12 @@ class IDPState:
 VARIANTS = {"standard": IDPParams()}
 
 # Colours of the MJCF: blue rail, yellow cart, teal poles; a pale sky behind them.
-RAIL, CART, POLE_COLOUR, BACKGROUND = (0.3, 0.3, 0.7), (0.7, 0.7, 0.0), (0.0, 0.7, 0.7), (0.92, 0.95, 1.0)
+RAIL, CART, POLE_COLOUR, BACKGROUND = (
+    (0.3, 0.3, 0.7),
+    (0.7, 0.7, 0.0),
+    (0.0, 0.7, 0.7),
+    (0.92, 0.95, 1.0),
+)
 CENTRE, HALF_EXTENT = (0.0, 0.5), 1.8  # the view: x in [-1.8, 1.8], z in [-1.3, 2.3]
 # Drawn sizes (m). The poles are drawn thicker than their 0.045 m capsules so that a 64x64
 # picture (0.056 m per pixel) shows them as solid lines rather than anti-aliased wisps.
@@ -109,7 +114,9 @@ class InvertedDoublePendulum(MjxEnv):
     def state_at(self, qpos, qvel, t=0) -> IDPState:
         """The state at (qpos, qvel) with MuJoCo's kinematics and constraint force computed."""
         f32 = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731
-        data = self.physics.run(f32(qpos), f32(qvel), jnp.zeros(1, jnp.float32), 0, contact_forces=False)
+        data = self.physics.run(
+            f32(qpos), f32(qvel), jnp.zeros(1, jnp.float32), 0, contact_forces=False
+        )
         return self._state(data, jnp.asarray(t, jnp.int32))
 
     def initial_state(self, key: jax.Array, params: IDPParams) -> IDPState:
@@ -124,7 +131,9 @@ class InvertedDoublePendulum(MjxEnv):
 
     def transition(self, key, state: IDPState, action, params: IDPParams) -> Step:
         ctrl = jnp.clip(jnp.reshape(action, (1,)), *self.action_range(params))
-        data = self.physics.run(state.qpos, state.qvel, ctrl, params.frame_skip, contact_forces=False)
+        data = self.physics.run(
+            state.qpos, state.qvel, ctrl, params.frame_skip, contact_forces=False
+        )
         next_state = self._state(data, state.t)
         x, y = next_state.tip[0], next_state.tip[1]
         terminated = y <= params.min_tip_height
@@ -142,7 +151,11 @@ class InvertedDoublePendulum(MjxEnv):
         cart, hinge, tip = pole_ends(state.qpos)
         along = jnp.array([CART_HALF_LENGTH, 0.0], jnp.float32)
         shapes = (
-            (raster.segment_distance(points, jnp.array([-1.0, 0.0]), jnp.array([1.0, 0.0])), RAIL_RADIUS, RAIL),
+            (
+                raster.segment_distance(points, jnp.array([-1.0, 0.0]), jnp.array([1.0, 0.0])),
+                RAIL_RADIUS,
+                RAIL,
+            ),
             (raster.segment_distance(points, cart - along, cart + along), CART_RADIUS, CART),
             (raster.segment_distance(points, cart, hinge), POLE_RADIUS, POLE_COLOUR),
             (raster.segment_distance(points, hinge, tip), POLE_RADIUS, POLE_COLOUR),
@@ -159,9 +172,15 @@ class InvertedDoublePendulum(MjxEnv):
 def observation(state: IDPState) -> jax.Array:
     """float32[9] = [x, sin phi1, sin phi2, cos phi1, cos phi2, clip(qvel, 10), clip(slider force, 10)]."""
     q = state.qpos
-    return jnp.concatenate([
-        q[:1], jnp.sin(q[1:]), jnp.cos(q[1:]), jnp.clip(state.qvel, -10, 10), jnp.clip(state.slider_force, -10, 10)[None]
-    ])
+    return jnp.concatenate(
+        [
+            q[:1],
+            jnp.sin(q[1:]),
+            jnp.cos(q[1:]),
+            jnp.clip(state.qvel, -10, 10),
+            jnp.clip(state.slider_force, -10, 10)[None],
+        ]
+    )
 
 
 # -- hints (SPEC section 3) ---------------------------------------------------------------------
@@ -201,6 +220,12 @@ def full_state(state: IDPState, params: IDPParams) -> jax.Array:
 # negative at first, ending an episode early pays, and idp's episodes end by falling (GAIL
 # scored 71 that way; measured in experiments/results/classic_table2.md).
 EXPERT_PPO = dict(total_env_steps=1_000_000, num_envs=512, batch_size=4096)
-TRAINING = dict(hint="composite", ppo=dict(total_env_steps=200_000, num_envs=128, reward_scale=0.1),
-                agents=dict(expert_ppo=dict(ppo=EXPERT_PPO), gail=dict(ppo=EXPERT_PPO, gail=dict(reward="original")),
-                            dagger=dict(ppo=dict(total_env_steps=100_000), dagger=dict(buffer_size=100_000))))
+TRAINING = dict(
+    hint="composite",
+    ppo=dict(total_env_steps=200_000, num_envs=128, reward_scale=0.1),
+    agents=dict(
+        expert_ppo=dict(ppo=EXPERT_PPO),
+        gail=dict(ppo=EXPERT_PPO, gail=dict(reward="original")),
+        dagger=dict(ppo=dict(total_env_steps=100_000), dagger=dict(buffer_size=100_000)),
+    ),
+)

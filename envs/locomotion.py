@@ -84,7 +84,8 @@ class LocomotionEnv(MjxEnv):
     max_steps = 1000
     camera: dict[str, float] = dict(distance=4.0, elevation_deg=-20.0, azimuth_deg=90.0)
     camera_height: float = 0.5  # the camera aims at the centre of mass's (x, y) at this height (m)
-    uniform_velocity_noise: bool = False  # Humanoid draws qvel uniformly; Ant and HalfCheetah normally
+    # Humanoid draws qvel uniformly; Ant and HalfCheetah normally
+    uniform_velocity_noise: bool = False
     contact_forces: bool = True  # the task reads `cfrc_ext` (mj_rnePostConstraint after each step)
 
     def __init__(self, *args, **kwargs):
@@ -102,7 +103,9 @@ class LocomotionEnv(MjxEnv):
         """float32[2] what the forward reward differentiates (x, y; y may be 0)."""
         raise NotImplementedError
 
-    def outcome(self, data: Readout, velocity: jax.Array, ctrl: jax.Array, params) -> tuple[jax.Array, jax.Array]:
+    def outcome(
+        self, data: Readout, velocity: jax.Array, ctrl: jax.Array, params
+    ) -> tuple[jax.Array, jax.Array]:
         """(reward, terminated) of a step that ended in `data` with `velocity` (float32[2]), its
         control cost charged on `ctrl` (the clipped action, or the raw one: `raw_action_ctrl_cost`)."""
         raise NotImplementedError
@@ -118,17 +121,26 @@ class LocomotionEnv(MjxEnv):
 
     def _state(self, data: Readout, position, velocity, reward, max_velocity, t) -> LocomotionState:
         return LocomotionState(
-            qpos=data.qpos, qvel=data.qvel, obs=self.observe_data(data),
-            geom_xpos=data.geom_xpos, geom_xmat=data.geom_xmat, com=self.mass_centre(data),
-            position=position, velocity=velocity, reward=jnp.asarray(reward, jnp.float32),
-            max_velocity=jnp.asarray(max_velocity, jnp.float32), t=jnp.asarray(t, jnp.int32),
+            qpos=data.qpos,
+            qvel=data.qvel,
+            obs=self.observe_data(data),
+            geom_xpos=data.geom_xpos,
+            geom_xmat=data.geom_xmat,
+            com=self.mass_centre(data),
+            position=position,
+            velocity=velocity,
+            reward=jnp.asarray(reward, jnp.float32),
+            max_velocity=jnp.asarray(max_velocity, jnp.float32),
+            t=jnp.asarray(t, jnp.int32),
         )
 
     def state_at(self, qpos, qvel, t=0) -> LocomotionState:
         """The state at (qpos, qvel) after MuJoCo's forward pass, as Gymnasium's `set_state`
         leaves it (with the contact forces filled in), and no step behind it."""
         f32 = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731
-        data = self.physics.run(f32(qpos), f32(qvel), jnp.zeros(self.mj_model.nu, jnp.float32), 0, self.contact_forces)
+        data = self.physics.run(
+            f32(qpos), f32(qvel), jnp.zeros(self.mj_model.nu, jnp.float32), 0, self.contact_forces
+        )
         zero = jnp.zeros((), jnp.float32)
         return self._state(data, self.position(data), jnp.zeros(2, jnp.float32), zero, zero, t)
 
@@ -137,7 +149,9 @@ class LocomotionEnv(MjxEnv):
         k_pos, k_vel = jax.random.split(key)
         noise = params.reset_noise_scale
         nq, nv = self.mj_model.nq, self.mj_model.nv
-        qpos = jnp.asarray(self.mj_model.qpos0, jnp.float32) + jax.random.uniform(k_pos, (nq,), jnp.float32, -noise, noise)
+        qpos = jnp.asarray(self.mj_model.qpos0, jnp.float32) + jax.random.uniform(
+            k_pos, (nq,), jnp.float32, -noise, noise
+        )
         if self.uniform_velocity_noise:
             qvel = jax.random.uniform(k_vel, (nv,), jnp.float32, -noise, noise)
         else:
@@ -153,13 +167,17 @@ class LocomotionEnv(MjxEnv):
     def transition(self, key, state: LocomotionState, action, params: LocomotionParams) -> Step:
         action = jnp.reshape(action, (self.action_size,))
         ctrl = jnp.clip(action, *self.action_range(params))
-        data = self.physics.run(state.qpos, state.qvel, ctrl, params.frame_skip, self.contact_forces)
+        data = self.physics.run(
+            state.qpos, state.qvel, ctrl, params.frame_skip, self.contact_forces
+        )
         position = self.position(data)
         velocity = (position - state.position) / self.dt
         charged = action if params.raw_action_ctrl_cost else ctrl
         reward, terminated = self.outcome(data, velocity, charged, params)
         max_velocity = jnp.maximum(state.max_velocity, velocity[0])
-        return Step(self._state(data, position, velocity, reward, max_velocity, state.t), reward, terminated)
+        return Step(
+            self._state(data, position, velocity, reward, max_velocity, state.t), reward, terminated
+        )
 
     def state_obs(self, state: LocomotionState, params) -> jax.Array:
         return state.obs
@@ -168,7 +186,9 @@ class LocomotionEnv(MjxEnv):
         """uint8[64, 64, 3]: the robot from a camera following its centre of mass."""
         target = jnp.stack([state.com[0], state.com[1], jnp.float32(self.camera_height)])
         camera = render3d.tracking_camera(target, **self.camera)
-        return render3d.render(self.scene, state.geom_xpos, state.geom_xmat, camera, self.image_size)
+        return render3d.render(
+            self.scene, state.geom_xpos, state.geom_xmat, camera, self.image_size
+        )
 
 
 # -- hints that more than one task shares (SPEC section 3) ----------------------------------

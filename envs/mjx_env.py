@@ -10,7 +10,16 @@ import mujoco
 
 from hintsjax.envs.core import OBS_KEYS, Env
 from hintsjax.envs.hints import Hint
-from hintsjax.envs.physics import AUTO, DEFAULT_CAPACITY, WARP, JaxPhysics, PhysicsKey, WarpPhysics, make_physics, resolve
+from hintsjax.envs.physics import (
+    AUTO,
+    DEFAULT_CAPACITY,
+    WARP,
+    JaxPhysics,
+    PhysicsKey,
+    WarpPhysics,
+    make_physics,
+    resolve,
+)
 
 
 # an env class's physics, made once per implementation (and Warp's capacity)
@@ -38,13 +47,20 @@ class MjxEnv(Env):
     # (docs/environments.md, "Physics").
     warp_by_default: bool = False
 
-    def __init__(self, hint: Hint, observe: tuple[str, ...] = OBS_KEYS, physics: str = AUTO,
-                 warp_capacity: float = DEFAULT_CAPACITY, image_size: int | None = None):
+    def __init__(
+        self,
+        hint: Hint,
+        observe: tuple[str, ...] = OBS_KEYS,
+        physics: str = AUTO,
+        warp_capacity: float = DEFAULT_CAPACITY,
+        image_size: int | None = None,
+    ):
         super().__init__(hint, observe, image_size)
         self.mj_model = self.make_mj_model()
         impl = resolve(physics, jax.default_backend(), self.warp_by_default, jax.device_count())
         key = PhysicsKey(impl, float(warp_capacity) if impl == WARP else 0.0)
-        if (type(self), key) not in _PER_CLASS:  # the model depends on the class alone (its MJCF and options)
+        # the model depends on the class alone (its MJCF and options)
+        if (type(self), key) not in _PER_CLASS:
             _PER_CLASS[type(self), key] = make_physics(self.mj_model, key)
         self.physics = _PER_CLASS[type(self), key]
         self.site_ids = {self.mj_model.site(i).name: i for i in range(self.mj_model.nsite)}

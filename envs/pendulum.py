@@ -97,7 +97,6 @@ class Pendulum(MjxEnv):
     max_steps = 200
     action_size = 1
 
-
     def default_params(self) -> PendulumParams:
         return VARIANTS["swingup"]
 
@@ -112,18 +111,16 @@ class Pendulum(MjxEnv):
         )
 
     def _mjx_data(self, state: PendulumState, torque: jax.Array) -> Readout:
-        return self.physics.run(state.theta[None], state.dtheta[None], torque[None], 0, contact_forces=False)
+        return self.physics.run(
+            state.theta[None], state.dtheta[None], torque[None], 0, contact_forces=False
+        )
 
     def action_range(self, params: PendulumParams) -> tuple[jax.Array, jax.Array]:
         return -params.max_torque * jnp.ones(1), params.max_torque * jnp.ones(1)
 
     def transition(self, key, state: PendulumState, action, params: PendulumParams) -> Step:
         torque = jnp.clip(jnp.reshape(action, (1,)), *self.action_range(params))[0]
-        cost = (
-            wrap_angle(state.theta - state.goal) ** 2
-            + 0.1 * state.dtheta**2
-            + 0.001 * torque**2
-        )
+        cost = wrap_angle(state.theta - state.goal) ** 2 + 0.1 * state.dtheta**2 + 0.001 * torque**2
         qacc = self._mjx_data(state, torque).qacc[0]
         dtheta = jnp.clip(state.dtheta + qacc * params.dt, -params.max_speed, params.max_speed)
         theta = state.theta + dtheta * params.dt
@@ -143,12 +140,22 @@ class Pendulum(MjxEnv):
         goal_tip = LENGTH * jnp.stack([jnp.sin(state.goal), jnp.cos(state.goal)])
         image = raster.canvas(size, BACKGROUND)
         image = raster.paint(
-            image, raster.coverage(raster.segment_distance(points, origin, goal_tip), GOAL_RADIUS, pixel), GOAL
+            image,
+            raster.coverage(raster.segment_distance(points, origin, goal_tip), GOAL_RADIUS, pixel),
+            GOAL,
         )
         image = raster.paint(
-            image, raster.coverage(raster.segment_distance(points, origin, self.tip(state)), ROD_RADIUS, pixel), ROD
+            image,
+            raster.coverage(
+                raster.segment_distance(points, origin, self.tip(state)), ROD_RADIUS, pixel
+            ),
+            ROD,
         )
-        image = raster.paint(image, raster.coverage(raster.point_distance(points, origin), PIVOT_RADIUS, pixel), PIVOT)
+        image = raster.paint(
+            image,
+            raster.coverage(raster.point_distance(points, origin), PIVOT_RADIUS, pixel),
+            PIVOT,
+        )
         return raster.to_uint8(image)
 
     def state_obs(self, state: PendulumState, params: PendulumParams) -> jax.Array:
@@ -186,7 +193,9 @@ def torque(state: PendulumState, params: PendulumParams) -> jax.Array:
     pump = 2.0 * (target - energy) * jnp.where(state.dtheta >= 0, 1.0, -1.0)
     err = wrap_angle(state.theta - state.goal)
     hold = -(10.0 * err + 2.0 * state.dtheta)
-    return jnp.clip(jnp.where(jnp.abs(err) < 0.35, hold, pump), -params.max_torque, params.max_torque)
+    return jnp.clip(
+        jnp.where(jnp.abs(err) < 0.35, hold, pump), -params.max_torque, params.max_torque
+    )
 
 
 @register_hint(NAME, "partial_state", dim=2, unit="1")
@@ -217,12 +226,23 @@ register_composite(NAME, "composite", ("angular_velocity", "goal_distance"))
 # 1 M, the entropy bonus 0.01 holds up better: 5 seeds x 50 episodes -153 +- 83 against
 # -173 +- 101 without (one GPU run each; on CPU -168 +- 99 against -376 +- 461, where one
 # seed failed late), so the expert and GAIL keep it.
-EXPERT_PPO = dict(total_env_steps=1_000_000, num_envs=16, batch_size=3200, minibatch_size=200, epochs=10,
-                  gamma=0.95, ent_coef=0.01, actor_lr=3e-4)
+EXPERT_PPO = dict(
+    total_env_steps=1_000_000,
+    num_envs=16,
+    batch_size=3200,
+    minibatch_size=200,
+    epochs=10,
+    gamma=0.95,
+    ent_coef=0.01,
+    actor_lr=3e-4,
+)
 TRAINING = dict(
     hint="composite",
     eval_variants=("swingto",),
     ppo=dict(total_env_steps=200_000, actor_lr=1e-3, reward_scale=0.1),
-    agents=dict(expert_ppo=dict(ppo=EXPERT_PPO), gail=dict(ppo=EXPERT_PPO),
-                dagger=dict(ppo=dict(total_env_steps=100_000), dagger=dict(buffer_size=100_000))),
+    agents=dict(
+        expert_ppo=dict(ppo=EXPERT_PPO),
+        gail=dict(ppo=EXPERT_PPO),
+        dagger=dict(ppo=dict(total_env_steps=100_000), dagger=dict(buffer_size=100_000)),
+    ),
 )

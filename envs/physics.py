@@ -89,14 +89,21 @@ def enable_warp() -> None:
     from mujoco.mjx.third_party.mujoco_warp._src import io as mjwp_io
     from mujoco.mjx.third_party.mujoco_warp._src import types as mjwp_types
 
-    mjxw.warp, mjxw.mujoco_warp, mjxw.mjwp_types, mjxw.mjwp_io = warp, mujoco_warp, mjwp_types, mjwp_io
+    mjxw.warp, mjxw.mujoco_warp, mjxw.mjwp_types, mjxw.mjwp_io = (
+        warp,
+        mujoco_warp,
+        mjwp_types,
+        mjwp_io,
+    )
     mjxw.types.GraphMode, mjxw.types.Callback = warp.JaxCallableGraphMode, mjwp_types.Callback
     mjx_io.wp, mjx_io.mjwp, mjx_io.mjwp_types = warp, mujoco_warp, mjwp_types
     mjxw.WARP_INSTALLED = True
 
+
 AUTO, JAX, WARP = "auto", "jax", "warp"
 CHOICES = (AUTO, JAX, WARP)
-DEFAULT_CAPACITY = 2.0  # Warp's buffers: this many times the model's most contacts and constraint rows per world
+# Warp's buffers: this many times the model's most contacts and constraint rows per world
+DEFAULT_CAPACITY = 2.0
 
 
 class PhysicsUnavailable(ValueError):
@@ -115,11 +122,17 @@ def gpu_likely() -> bool:
     for choosing flags early; a run's config resolves `auto` from the backend JAX really started."""
     import glob
 
-    platforms = {p.strip() for p in os.environ.get("JAX_PLATFORMS", "").lower().split(",") if p.strip()}
+    platforms = {
+        p.strip() for p in os.environ.get("JAX_PLATFORMS", "").lower().split(",") if p.strip()
+    }
     if platforms and not platforms & {"cuda", "gpu"}:
         return False
     visible = os.environ.get("CUDA_VISIBLE_DEVICES")
-    count = len([d for d in visible.split(",") if d.strip()]) if visible is not None else len(glob.glob("/dev/nvidia[0-9]*"))
+    count = (
+        len([d for d in visible.split(",") if d.strip()])
+        if visible is not None
+        else len(glob.glob("/dev/nvidia[0-9]*"))
+    )
     return _cuda_plugin_installed() and os.path.exists("/dev/nvidiactl") and count == 1
 
 
@@ -129,8 +142,10 @@ def _cuda_plugin_installed() -> bool:
     not once for each job of a sweep that gpu_likely is asked about)."""
     from importlib import metadata
 
-    return any((d.metadata["Name"] or "").lower().replace("_", "-").startswith("jax-cuda")
-               for d in metadata.distributions())
+    return any(
+        (d.metadata["Name"] or "").lower().replace("_", "-").startswith("jax-cuda")
+        for d in metadata.distributions()
+    )
 
 
 def resolve(choice: str, platform: str, warp_by_default: bool = True, devices: int = 1) -> str:
@@ -143,13 +158,21 @@ def resolve(choice: str, platform: str, warp_by_default: bool = True, devices: i
     CPU path, for tests: slow), with warp-lang installed; PhysicsUnavailable otherwise."""
     choose("physics", choice, dict.fromkeys(CHOICES))
     if choice == AUTO:
-        return WARP if warp_by_default and platform == "gpu" and devices == 1 and warp_installed() else JAX
+        return (
+            WARP
+            if warp_by_default and platform == "gpu" and devices == 1 and warp_installed()
+            else JAX
+        )
     if choice == WARP:
         if not warp_installed():
-            raise PhysicsUnavailable("physics=warp needs warp-lang: pip install -e '.[gpu]' (make setup-gpu); "
-                                     "or physics=jax")
+            raise PhysicsUnavailable(
+                "physics=warp needs warp-lang: pip install -e '.[gpu]' (make setup-gpu); "
+                "or physics=jax"
+            )
         if platform not in ("gpu", "cpu"):
-            raise PhysicsUnavailable(f"physics=warp runs on NVIDIA GPUs (and slowly on CPUs), not on {platform}; use physics=jax")
+            raise PhysicsUnavailable(
+                f"physics=warp runs on NVIDIA GPUs (and slowly on CPUs), not on {platform}; use physics=jax"
+            )
     return choice
 
 
@@ -176,9 +199,22 @@ class Readout:
 
 def readout(data: mjx.Data, overflow: jax.Array) -> Readout:
     impl = data._impl
-    return Readout(data.qpos, data.qvel, data.qacc, data.xpos, data.xipos, data.geom_xpos, data.geom_xmat,
-                   data.site_xpos, data.cvel, impl.cinert, data.qfrc_actuator, data.qfrc_constraint, impl.cfrc_ext,
-                   jnp.asarray(overflow, jnp.int32))
+    return Readout(
+        data.qpos,
+        data.qvel,
+        data.qacc,
+        data.xpos,
+        data.xipos,
+        data.geom_xpos,
+        data.geom_xmat,
+        data.site_xpos,
+        data.cvel,
+        impl.cinert,
+        data.qfrc_actuator,
+        data.qfrc_constraint,
+        impl.cfrc_ext,
+        jnp.asarray(overflow, jnp.int32),
+    )
 
 
 class JaxPhysics:
@@ -224,9 +260,16 @@ def per_world(mj_model: mujoco.MjModel, capacity: float) -> tuple[int, int]:
 # MuJoCo Warp's overflow bits (mujoco_warp OverflowType) that mean lost contacts or constraints.
 # The solver's iteration limits (bits 9 and 10) are not among them: the suite caps Newton's
 # iterations on purpose (envs/locomotion.py).
-LOST = {1 << 0: "constraint rows (njmax)", 1 << 1: "constraint nonzeros", 1 << 2: "collision pairs (naconmax)",
-        1 << 3: "contacts (naconmax)", 1 << 4: "CCD contacts", 1 << 5: "height-field contacts", 1 << 7: "islands",
-        1 << 8: "EPA horizon"}
+LOST = {
+    1 << 0: "constraint rows (njmax)",
+    1 << 1: "constraint nonzeros",
+    1 << 2: "collision pairs (naconmax)",
+    1 << 3: "contacts (naconmax)",
+    1 << 4: "CCD contacts",
+    1 << 5: "height-field contacts",
+    1 << 7: "islands",
+    1 << 8: "EPA horizon",
+}
 LOST_MASK = sum(LOST)
 _seen = {"bits": 0}
 
@@ -261,8 +304,12 @@ def collapse_vmaps(fn: Callable[..., Any]) -> Callable[..., Any]:
 
     @collapsed.def_vmap
     def rule(axis_size, in_batched, *args):
-        args = [a if batched else jnp.broadcast_to(a, (axis_size, *a.shape)) for a, batched in zip(args, in_batched)]
-        out = collapsed(*args)  # under an outer vmap, that one's rule folds its axis in the same way
+        args = [
+            a if batched else jnp.broadcast_to(a, (axis_size, *a.shape))
+            for a, batched in zip(args, in_batched)
+        ]
+        # under an outer vmap, that one's rule folds its axis in the same way
+        out = collapsed(*args)
         return out, jax.tree.map(lambda _: True, out)
 
     return collapsed
@@ -282,8 +329,13 @@ class WarpPhysics:
 
     impl = WARP
 
-    def __init__(self, mj_model: mujoco.MjModel, capacity: float = DEFAULT_CAPACITY, graph_mode: str | None = None,
-                 report_overflow: bool = True):
+    def __init__(
+        self,
+        mj_model: mujoco.MjModel,
+        capacity: float = DEFAULT_CAPACITY,
+        graph_mode: str | None = None,
+        report_overflow: bool = True,
+    ):
         enable_warp()  # warp-lang: checked by `resolve`
         import warp
 
@@ -299,7 +351,9 @@ class WarpPhysics:
         options = model.opt._impl.replace(warn_overflow=0)
         self.model = model.replace(opt=model.opt.replace(_impl=options))
         # the same model computing the contact forces (mj_rnePostConstraint) after its solve
-        self.model_rne = self.model.replace(opt=model.opt.replace(_impl=options.replace(run_rne_postconstraint=True)))
+        self.model_rne = self.model.replace(
+            opt=model.opt.replace(_impl=options.replace(run_rne_postconstraint=True))
+        )
         self._templates: dict[int, mjx.Data] = {}
         self._runs: dict[tuple[int, bool], Callable[..., Readout]] = {}
 
@@ -307,15 +361,22 @@ class WarpPhysics:
         """A fresh data of one world, its shared buffers sized for `worlds` worlds (numpy arrays)."""
         if worlds not in self._templates:
             with quiet(), jax.ensure_compile_time_eval():  # host arrays, also mid-trace
-                data = mjx.make_data(self.mj_model, impl="warp", naconmax=worlds * self.contacts_per_world,
-                                     njmax=self.rows_per_world, device=jax.devices("cpu")[0])
+                data = mjx.make_data(
+                    self.mj_model,
+                    impl="warp",
+                    naconmax=worlds * self.contacts_per_world,
+                    njmax=self.rows_per_world,
+                    device=jax.devices("cpu")[0],
+                )
                 self._templates[worlds] = jax.tree.map(np.asarray, data)
         return self._templates[worlds]
 
     def run(self, qpos, qvel, ctrl, substeps: int, contact_forces: bool) -> Readout:
         key = (substeps, contact_forces)
         if key not in self._runs:
-            self._runs[key] = collapse_vmaps(partial(self._run_batch, substeps=substeps, contact_forces=contact_forces))
+            self._runs[key] = collapse_vmaps(
+                partial(self._run_batch, substeps=substeps, contact_forces=contact_forces)
+            )
         return self._runs[key](qpos, qvel, ctrl)
 
     def _run_batch(self, qpos, qvel, ctrl, substeps: int, contact_forces: bool) -> Readout:
@@ -330,17 +391,34 @@ class WarpPhysics:
             if substeps == 0:
                 data = mjx.forward(last, data)
             else:
-                data = jax.lax.fori_loop(0, substeps - 1, lambda _, d: mjx.step(self.model, d), data)
+                data = jax.lax.fori_loop(
+                    0, substeps - 1, lambda _, d: mjx.step(self.model, d), data
+                )
                 data = mjx.step(last, data)
             return readout(data, data._impl.overflow)
 
         out = jax.vmap(one)(flat(qpos), flat(qvel), flat(ctrl))
         lost = out.overflow & LOST_MASK
-        if self.report_overflow:  # which bits any world set (max, not a bitwise or: reductions every backend has)
+        # which bits any world set (max, not a bitwise or: reductions every backend has)
+        if self.report_overflow:
             seen = jnp.max((lost[:, None] >> _LOST_SHIFTS) & 1, axis=0)
-            jax.lax.cond(jnp.max(seen) > 0, lambda b: jax.debug.callback(_record_overflow, b), lambda b: None, seen)
-        poisoned = lambda x: jnp.where(jnp.reshape(lost != 0, (worlds,) + (1,) * (x.ndim - 1)), jnp.nan, x)  # noqa: E731
-        out = out.replace(**{f: poisoned(getattr(out, f)) for f in Readout.__dataclass_fields__ if f != "overflow"})
+            jax.lax.cond(
+                jnp.max(seen) > 0,
+                lambda b: jax.debug.callback(_record_overflow, b),
+                lambda b: None,
+                seen,
+            )
+
+        def poisoned(x):
+            return jnp.where(jnp.reshape(lost != 0, (worlds,) + (1,) * (x.ndim - 1)), jnp.nan, x)
+
+        out = out.replace(
+            **{
+                f: poisoned(getattr(out, f))
+                for f in Readout.__dataclass_fields__
+                if f != "overflow"
+            }
+        )
         return jax.tree.map(lambda x: jnp.reshape(x, (*lead, *x.shape[1:])), out)
 
 

@@ -60,7 +60,9 @@ def _registry() -> Any:
         with contextlib.redirect_stdout(io.StringIO()):
             from mujoco_playground import registry
     except ImportError:
-        raise EnvUnavailable("env=playground:<name> needs MuJoCo Playground: pip install -e '.[playground]'") from None
+        raise EnvUnavailable(
+            "env=playground:<name> needs MuJoCo Playground: pip install -e '.[playground]'"
+        ) from None
     return registry
 
 
@@ -87,9 +89,18 @@ def load(task: str) -> Task:
         config = registry.get_default_config(task)
         env = registry.load(task, config_overrides={"impl": "jax"})
     except Exception as e:  # noqa: BLE001  Playground's own failure (a model it must download, ...), in one line
-        raise EnvUnavailable(f"playground:{task} does not load: {type(e).__name__}: {str(e).splitlines()[0][:200] if str(e) else ''}") from None
-    return Task(f"{SOURCE}:{task}", env, env.mj_model, "data", int(config.episode_length),
-                int(config.get("action_repeat", 1)), DEFAULTS.get(task, FALLBACK).camera)
+        raise EnvUnavailable(
+            f"playground:{task} does not load: {type(e).__name__}: {str(e).splitlines()[0][:200] if str(e) else ''}"
+        ) from None
+    return Task(
+        f"{SOURCE}:{task}",
+        env,
+        env.mj_model,
+        "data",
+        int(config.episode_length),
+        int(config.get("action_repeat", 1)),
+        DEFAULTS.get(task, FALLBACK).camera,
+    )
 
 
 def training(task: str) -> dict[str, Any]:

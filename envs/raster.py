@@ -11,7 +11,9 @@ import jax
 import jax.numpy as jnp
 
 
-def pixel_centres(size: int, half_extent: float, centre: tuple[float, float] = (0.0, 0.0)) -> jax.Array:
+def pixel_centres(
+    size: int, half_extent: float, centre: tuple[float, float] = (0.0, 0.0)
+) -> jax.Array:
     """float32[S, S, 2] world (x, y) of each pixel centre of a square view of half-width
     `half_extent` around `centre`; row 0 is the top (largest y)."""
     edge = jnp.linspace(-half_extent, half_extent, size + 1, dtype=jnp.float32)

@@ -26,8 +26,14 @@ from flax import struct
 
 # mjtGeom values; heightfields, meshes and SDFs are not drawn.
 PLANE, HFIELD, SPHERE, CAPSULE, ELLIPSOID, CYLINDER, BOX, MESH, SDF = range(9)
-SUPPORTED = {PLANE: "plane", SPHERE: "sphere", CAPSULE: "capsule", ELLIPSOID: "ellipsoid", CYLINDER: "cylinder",
-             BOX: "box"}
+SUPPORTED = {
+    PLANE: "plane",
+    SPHERE: "sphere",
+    CAPSULE: "capsule",
+    ELLIPSOID: "ellipsoid",
+    CYLINDER: "cylinder",
+    BOX: "box",
+}
 _UNSUPPORTED = {HFIELD: "hfield", MESH: "mesh", SDF: "sdf"}
 _DEFAULT_RGBA = (0.5, 0.5, 0.5, 1.0)  # MJCF's geom rgba when none is given: the material's shows
 _DARK_SQUARE = 0.6  # the checker's second tone, as a fraction of the plane's colour
@@ -81,9 +87,18 @@ class Scene:
     fog: float = _static()
 
 
-def make_scene(mj_model, *, groups: Sequence[int] = (0, 1, 2), checker: float = 1.0,
-               light_dir: Sequence[float] = (-0.3, 0.5, -1.0), ambient: float = 0.35, diffuse: float = 0.55,
-               headlight: float = 0.2, background: Sequence[float] = SKY, fog: float = 0.0) -> Scene:
+def make_scene(
+    mj_model,
+    *,
+    groups: Sequence[int] = (0, 1, 2),
+    checker: float = 1.0,
+    light_dir: Sequence[float] = (-0.3, 0.5, -1.0),
+    ambient: float = 0.35,
+    diffuse: float = 0.55,
+    headlight: float = 0.2,
+    background: Sequence[float] = SKY,
+    fog: float = 0.0,
+) -> Scene:
     """The Scene of `mj_model`'s geoms in `groups` whose alpha is not 0; a ValueError names any
     such geom of a type other than plane, sphere, capsule, ellipsoid, cylinder and box."""
     floats = lambda v: tuple(float(x) for x in v)  # noqa: E731
@@ -103,8 +118,19 @@ def make_scene(mj_model, *, groups: Sequence[int] = (0, 1, 2), checker: float = 
         drawn.append((kind, g, floats(mj_model.geom_size[g]), rgba[:3]))
     kinds, ids, sizes, rgbs = zip(*sorted(drawn)) if drawn else ((), (), (), ())
     light = floats(np.asarray(light_dir) / np.linalg.norm(light_dir))
-    return Scene(ids, kinds, sizes, rgbs, float(checker), light, float(ambient), float(diffuse), float(headlight),
-                 floats(background), float(fog))
+    return Scene(
+        ids,
+        kinds,
+        sizes,
+        rgbs,
+        float(checker),
+        light,
+        float(ambient),
+        float(diffuse),
+        float(headlight),
+        floats(background),
+        float(fog),
+    )
 
 
 def look_at(eye, target, up=(0.0, 0.0, 1.0), fovy: float = 45.0) -> Camera:
@@ -115,7 +141,9 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0), fovy: float = 45.0) -> Camera:
     return Camera(eye, jnp.stack([right, jnp.cross(back, right), back], axis=1), fovy)
 
 
-def tracking_camera(target, distance: float, elevation_deg: float, azimuth_deg: float, fovy: float = 45.0) -> Camera:
+def tracking_camera(
+    target, distance: float, elevation_deg: float, azimuth_deg: float, fovy: float = 45.0
+) -> Camera:
     """MuJoCo's free camera orbiting target[3]: it looks along (cos el cos az, cos el sin az,
     sin el) from `distance` away, so elevation -20 looks down and azimuth 90 looks along +y."""
     el, az = jnp.deg2rad(jnp.float32(elevation_deg)), jnp.deg2rad(jnp.float32(azimuth_deg))
@@ -240,7 +268,11 @@ def _local_normal(kind: int, p: Vec, size: Vec) -> Vec:
     gap = [jnp.abs(p[i]) - size[i] for i in range(3)]  # box: the face nearest the point
     fx = (gap[0] >= gap[1]) & (gap[0] >= gap[2])
     fy = ~fx & (gap[1] >= gap[2])
-    return jnp.where(fx, jnp.sign(x), zero), jnp.where(fy, jnp.sign(y), zero), jnp.where(fx | fy, zero, jnp.sign(z))
+    return (
+        jnp.where(fx, jnp.sign(x), zero),
+        jnp.where(fy, jnp.sign(y), zero),
+        jnp.where(fx | fy, zero, jnp.sign(z)),
+    )
 
 
 def _low_bits(scene: Scene) -> int:
@@ -261,7 +293,9 @@ def _nearest(scene: Scene, rays: Vec, centre: jax.Array, rot: jax.Array) -> jax.
     def unrolled():
         key = start
         for g, (kind, size) in enumerate(zip(scene.type, scene.size)):
-            key = jnp.minimum(key, pack(_distance(kind, rays, _vec(centre[g]), tuple(map(_vec, rot[g])), size), g))
+            key = jnp.minimum(
+                key, pack(_distance(kind, rays, _vec(centre[g]), tuple(map(_vec, rot[g])), size), g)
+            )
         return jax.lax.optimization_barrier(key)  # made once, not inside each consumer
 
     def scanned():
@@ -275,7 +309,9 @@ def _nearest(scene: Scene, rays: Vec, centre: jax.Array, rot: jax.Array) -> jax.
 
         g = jnp.arange(len(scene.geom), dtype=jnp.int32)
         branch = jnp.asarray([kinds.index(kind) for kind in scene.type], jnp.int32)
-        return jax.lax.scan(step, start, (g, branch, centre, rot, jnp.asarray(scene.size, jnp.float32)))[0]
+        return jax.lax.scan(
+            step, start, (g, branch, centre, rot, jnp.asarray(scene.size, jnp.float32))
+        )[0]
 
     return jax.lax.platform_dependent(cpu=scanned, default=unrolled)
 
@@ -287,30 +323,48 @@ def _cast(scene: Scene, geom_xpos: jax.Array, geom_xmat: jax.Array, camera: Came
     rays = _rays(size, camera.fovy)
     zero = jnp.zeros_like(rays[0])
     if not scene.geom:
-        return rays, zero + jnp.inf, zero.astype(jnp.int32) - 1, (zero,) * 3, (zero,) * 3, (zero,) * 4
+        return (
+            rays,
+            zero + jnp.inf,
+            zero.astype(jnp.int32) - 1,
+            (zero,) * 3,
+            (zero,) * 3,
+            (zero,) * 4,
+        )
     exact = jax.lax.Precision.HIGHEST  # GPUs would multiply float32 matrices in TF32
     ids = np.asarray(scene.geom)
     centre = jnp.einsum("gj,ji->gi", geom_xpos[ids] - camera.pos, camera.xmat, precision=exact)
-    rot = jnp.einsum("ji,gjk->gki", camera.xmat, geom_xmat[ids], precision=exact)  # [G, axis, coordinate]
+    # [G, axis, coordinate]
+    rot = jnp.einsum("ji,gjk->gki", camera.xmat, geom_xmat[ids], precision=exact)
     key, low = _nearest(scene, rays, centre, rot), _low_bits(scene)
     hit = key < 0x7F800000  # the bits of inf
     index = jnp.where(hit, key & low, -1)
     distance = jnp.where(hit, jax.lax.bitcast_convert_type(key & ~low, jnp.float32), jnp.inf)
     # The winner's centre, axes, size, type and colour, one gather per column: XLA on GPUs fuses
     # those into their consumers, but writes out the columns of a single gather of whole rows.
-    static = np.concatenate([np.asarray(scene.size), np.asarray(scene.type)[:, None], np.asarray(scene.rgb)], 1)
+    static = np.concatenate(
+        [np.asarray(scene.size), np.asarray(scene.type)[:, None], np.asarray(scene.rgb)], 1
+    )
     table = jnp.concatenate([centre, rot.reshape(-1, 9), jnp.asarray(static, jnp.float32)], 1)
     w = [column[jnp.maximum(index, 0)] for column in table.T]
     frame = (tuple(w[3:6]), tuple(w[6:9]), tuple(w[9:12]))
-    local = tuple(_dot(axis, tuple(jnp.where(hit, distance, 0) * rays[i] - w[i] for i in range(3))) for axis in frame)
+    local = tuple(
+        _dot(axis, tuple(jnp.where(hit, distance, 0) * rays[i] - w[i] for i in range(3)))
+        for axis in frame
+    )
     normal = (zero,) * 3
     for kind in sorted(set(scene.type)):
-        normal = tuple(jnp.where(w[15] == kind, n, m) for n, m in zip(_local_normal(kind, local, w[12:15]), normal))
+        normal = tuple(
+            jnp.where(w[15] == kind, n, m)
+            for n, m in zip(_local_normal(kind, local, w[12:15]), normal)
+        )
     normal = tuple(jnp.where(hit, n, 0.0) for n in _unit(_out_of(frame, normal)))
     return rays, distance, index, normal, tuple(jnp.where(hit, v, 0.0) for v in local), w[15:19]
 
 
-def cast(scene: Scene, geom_xpos: jax.Array, geom_xmat: jax.Array, camera: Camera, size: int) -> Hits:
+def cast(
+    scene: Scene, geom_xpos: jax.Array, geom_xmat: jax.Array, camera: Camera, size: int
+) -> Hits:
     """Hits of an [S, S] image (row 0 the top) of the geoms at geom_xpos[ngeom, 3],
     geom_xmat[ngeom, 3, 3] (as mjx.Data holds them) seen by `camera`."""
     _, distance, index, normal, local, _ = _cast(scene, geom_xpos, geom_xmat, camera, size)
@@ -320,28 +374,47 @@ def cast(scene: Scene, geom_xpos: jax.Array, geom_xmat: jax.Array, camera: Camer
     return Hits(distance.reshape(size, size), geom.reshape(size, size), image(world), image(local))
 
 
-def depth(scene: Scene, geom_xpos: jax.Array, geom_xmat: jax.Array, camera: Camera, size: int) -> jax.Array:
+def depth(
+    scene: Scene, geom_xpos: jax.Array, geom_xmat: jax.Array, camera: Camera, size: int
+) -> jax.Array:
     """float32[S, S] distance along each unit ray to the nearest surface, inf where none."""
     return cast(scene, geom_xpos, geom_xmat, camera, size).distance
 
 
-def render(scene: Scene, geom_xpos: jax.Array, geom_xmat: jax.Array, camera: Camera, size: int = 64) -> jax.Array:
+def render(
+    scene: Scene, geom_xpos: jax.Array, geom_xmat: jax.Array, camera: Camera, size: int = 64
+) -> jax.Array:
     """uint8[S, S, 3] picture (row 0 the top) of the geoms at geom_xpos[ngeom, 3],
     geom_xmat[ngeom, 3, 3] seen by `camera`."""
-    rays, distance, index, normal, local, (kind, *rgb) = _cast(scene, geom_xpos, geom_xmat, camera, size)
+    rays, distance, index, normal, local, (kind, *rgb) = _cast(
+        scene, geom_xpos, geom_xmat, camera, size
+    )
     light = tuple(_dot(axis, scene.light_dir) for axis in _vec(camera.xmat))  # in the camera frame
     facing = jnp.maximum(-_dot(normal, rays), 0.0)
-    shade = scene.ambient + scene.diffuse * jnp.maximum(-_dot(normal, light), 0.0) + scene.headlight * facing
+    shade = (
+        scene.ambient
+        + scene.diffuse * jnp.maximum(-_dot(normal, light), 0.0)
+        + scene.headlight * facing
+    )
     # Planes are checkered; the squares fade to their mean where a pixel would span most of one.
     square = jnp.floor(local[0] / scene.checker) + jnp.floor(local[1] / scene.checker)
-    footprint = distance * (2 * math.tan(math.radians(camera.fovy) / 2) / size) / jnp.maximum(facing, 0.05)
+    footprint = (
+        distance * (2 * math.tan(math.radians(camera.fovy) / 2) / size) / jnp.maximum(facing, 0.05)
+    )
     contrast = jnp.clip(1.5 - 2.0 * footprint / scene.checker, 0.0, 1.0) * (1 - _DARK_SQUARE) / 2
     tone = 1.0 - (1 - _DARK_SQUARE) / 2 + jnp.where(jnp.mod(square, 2) == 0, contrast, -contrast)
     tone = jnp.where(kind == PLANE, tone, 1.0)
     fade = jnp.exp(-distance / scene.fog) if scene.fog > 0 else 1.0
-    colour = [jnp.where(index >= 0, bg + fade * (c * tone * shade - bg), bg) for c, bg in zip(rgb, scene.background)]
+    colour = [
+        jnp.where(index >= 0, bg + fade * (c * tone * shade - bg), bg)
+        for c, bg in zip(rgb, scene.background)
+    ]
     # The three bytes packed in one uint32 once per pixel: XLA on GPUs would otherwise redo the
     # shading for each channel of the uint8[S, S, 3] it writes.
     rgb8 = [jnp.round(jnp.clip(c, 0.0, 1.0) * 255.0).astype(jnp.uint32) for c in colour]
     packed = jax.lax.optimization_barrier(rgb8[0] | rgb8[1] << 8 | rgb8[2] << 16)
-    return jnp.stack([packed >> (8 * i) & 255 for i in range(3)], -1).astype(jnp.uint8).reshape(size, size, 3)
+    return (
+        jnp.stack([packed >> (8 * i) & 255 for i in range(3)], -1)
+        .astype(jnp.uint8)
+        .reshape(size, size, 3)
+    )

@@ -41,7 +41,8 @@ def build(mj_model: mujoco.MjModel, capacity: float, device: str) -> float:
     contacts, rows = physics.per_world(mj_model, capacity)
     with warp.ScopedDevice(device), physics.quiet():
         model = mujoco_warp.put_model(mj_model)
-        model.opt.warn_overflow = 0  # as WarpPhysics: warn_overflow is built into the solver's kernels
+        # as WarpPhysics: warn_overflow is built into the solver's kernels
+        model.opt.warn_overflow = 0
         data = mujoco_warp.make_data(mj_model, nworld=1, naconmax=contacts, njmax=rows)
         model.opt.run_rne_postconstraint = True
         mujoco_warp.forward(model, data)  # an env's reset: a forward pass with contact forces
@@ -82,8 +83,13 @@ def start(env: str, physics_choice: str, capacity: float, backend: str) -> Kerne
     device = "cuda:0" if backend == "gpu" else "cpu"
     out = None if physics.debugging() else subprocess.DEVNULL
     try:
-        process = subprocess.Popen([sys.executable, "-m", "hintsjax.envs.warp_kernels", env, repr(capacity), device],
-                                   stdin=subprocess.DEVNULL, stdout=out, stderr=out, env={**os.environ, **JAX_ON_CPU})
+        process = subprocess.Popen(
+            [sys.executable, "-m", "hintsjax.envs.warp_kernels", env, repr(capacity), device],
+            stdin=subprocess.DEVNULL,
+            stdout=out,
+            stderr=out,
+            env={**os.environ, **JAX_ON_CPU},
+        )
     except OSError:  # no process to spare (best effort: the run builds its kernels itself)
         return KernelBuild(None)
     return KernelBuild(process)
@@ -92,7 +98,9 @@ def start(env: str, physics_choice: str, capacity: float, backend: str) -> Kerne
 def main() -> None:
     env, capacity, device = sys.argv[1], float(sys.argv[2]), sys.argv[3]
     seconds = build(envs.REGISTRY[env].cls.make_mj_model(), capacity, device)
-    print(f"{env}: MuJoCo Warp's kernels built or loaded on {device} in {seconds:.1f} s", flush=True)
+    print(
+        f"{env}: MuJoCo Warp's kernels built or loaded on {device} in {seconds:.1f} s", flush=True
+    )
 
 
 if __name__ == "__main__":

@@ -54,14 +54,19 @@ def best_time(fn, *args, repeats: int = 3) -> float:
 
 RESETS = {  # how AutoReset gets the next start: the --reset-cost rows compare them
     "step": "AutoReset",  # drawn on every step (AutoReset's default)
-    "rollout": "AutoReset, starts per rollout of 8",  # drawn once per 8 steps (ppo.starts_per_rollout)
+    # drawn once per 8 steps (ppo.starts_per_rollout)
+    "rollout": "AutoReset, starts per rollout of 8",
     "none": "no AutoReset",  # episodes run on past their end
 }
 
 
 # mj_model.opt fields whose values are MuJoCo enums, named in --model-option by their suffix
-OPTION_ENUMS = {"integrator": mujoco.mjtIntegrator, "solver": mujoco.mjtSolver, "cone": mujoco.mjtCone,
-                "jacobian": mujoco.mjtJacobian}
+OPTION_ENUMS = {
+    "integrator": mujoco.mjtIntegrator,
+    "solver": mujoco.mjtSolver,
+    "cone": mujoco.mjtCone,
+    "jacobian": mujoco.mjtJacobian,
+}
 
 
 def model_options(items: list[str]) -> dict:
@@ -72,9 +77,13 @@ def model_options(items: list[str]) -> dict:
     for item in items:
         field, _, value = item.partition("=")
         if field not in fields or not value:
-            raise ValueError(f"--model-option {item!r}: give FIELD=VALUE with FIELD one of {', '.join(fields)}")
+            raise ValueError(
+                f"--model-option {item!r}: give FIELD=VALUE with FIELD one of {', '.join(fields)}"
+            )
         if field in OPTION_ENUMS:
-            members = {name.split("_", 1)[1]: m for name, m in OPTION_ENUMS[field].__members__.items()}
+            members = {
+                name.split("_", 1)[1]: m for name, m in OPTION_ENUMS[field].__members__.items()
+            }
             if value.upper() not in members:
                 raise ValueError(f"--model-option {item!r}: {field} is one of {', '.join(members)}")
             options[field] = members[value.upper()]
@@ -83,15 +92,25 @@ def model_options(items: list[str]) -> dict:
     return options
 
 
-def bench_env(name: str, num_envs: int, steps: int, pixels: bool = True, reset: str = "step", rollout: int = 8,
-              options: dict | None = None, physics: str = envs.AUTO) -> dict:
+def bench_env(
+    name: str,
+    num_envs: int,
+    steps: int,
+    pixels: bool = True,
+    reset: str = "step",
+    rollout: int = 8,
+    options: dict | None = None,
+    physics: str = envs.AUTO,
+) -> dict:
     observe = ("pixels", "hint") if pixels else ("hint",)
     env = envs.make(name, ENV_DEFAULTS[name].get("hint", envs.NO_HINT), observe, physics=physics)
     if options:  # the same env with other physics options (--model-option)
         env = type(env).with_options(**options)(env.hint, observe, env.physics.impl)
     env = env if reset == "none" else envs.AutoReset(env)
     params = envs.make_params(name)
-    ts = jax.jit(jax.vmap(env.reset, in_axes=(0, None)))(jax.random.split(jax.random.key(0), num_envs), params)
+    ts = jax.jit(jax.vmap(env.reset, in_axes=(0, None)))(
+        jax.random.split(jax.random.key(0), num_envs), params
+    )
 
     @jax.jit
     def roll(state, key):
@@ -100,7 +119,8 @@ def bench_env(name: str, num_envs: int, steps: int, pixels: bool = True, reset: 
             action = jax.random.uniform(k_act, (num_envs, env.action_size), minval=-1, maxval=1)
             fresh = () if starts is None else (starts,)
             out = jax.vmap(env.step, in_axes=(0, 0, 0, None, *(0,) * len(fresh)))(
-                jax.random.split(k_env, num_envs), state, action, params, *fresh)
+                jax.random.split(k_env, num_envs), state, action, params, *fresh
+            )
             seen = out.obs["pixels"][:, 32, 32, 0].sum() if pixels else out.obs["hint"].sum()
             return out.state, seen + out.reward.sum()
 
@@ -109,15 +129,26 @@ def bench_env(name: str, num_envs: int, steps: int, pixels: bool = True, reset: 
 
         def chunk(state, key):
             k_starts, k_steps = jax.random.split(key)
-            starts = jax.vmap(env.fresh_start, in_axes=(0, None))(jax.random.split(k_starts, num_envs), params)
-            return jax.lax.scan(lambda s, k: step(s, k, starts), state, jax.random.split(k_steps, rollout))
+            starts = jax.vmap(env.fresh_start, in_axes=(0, None))(
+                jax.random.split(k_starts, num_envs), params
+            )
+            return jax.lax.scan(
+                lambda s, k: step(s, k, starts), state, jax.random.split(k_steps, rollout)
+            )
 
         return jax.lax.scan(chunk, state, jax.random.split(key, steps // rollout))
 
     seconds = best_time(roll, ts.state, jax.random.key(1))
     done = steps if reset != "rollout" else steps // rollout * rollout
-    return {"env": name, "pixels": pixels, "reset": reset, "num_envs": num_envs, "steps": done,
-            "physics": envs.resolve_physics(name, physics), "env_steps_per_s": num_envs * done / seconds}
+    return {
+        "env": name,
+        "pixels": pixels,
+        "reset": reset,
+        "num_envs": num_envs,
+        "steps": done,
+        "physics": envs.resolve_physics(name, physics),
+        "env_steps_per_s": num_envs * done / seconds,
+    }
 
 
 def bench_ceiling(batch: int) -> dict:
@@ -148,7 +179,14 @@ def bench_ceiling(batch: int) -> dict:
     return {"batch": batch, "update_samples_per_s": batch / seconds}
 
 
-def bench_train(name: str, seeds: int, updates: int, overrides: dict, agent: str = "hints", physics: str = envs.AUTO) -> dict:
+def bench_train(
+    name: str,
+    seeds: int,
+    updates: int,
+    overrides: dict,
+    agent: str = "hints",
+    physics: str = envs.AUTO,
+) -> dict:
     """Training rate of the env's default cell (hints/fc with its default hint), two ways:
     `env_steps_per_s` through pipeline.train, the function `python -m hintsjax.run` calls (chunks,
     checkpoints, logs; compile apart), and `scan_env_steps_per_s`, the same compiled chunks called
@@ -158,13 +196,24 @@ def bench_train(name: str, seeds: int, updates: int, overrides: dict, agent: str
 
     from hintsjax.training import compilation, pipeline
 
-    values = {"env": name, "agent": agent, "scheme": "fc", "seeds": seeds, "checkpoint_every": min(10, updates),
-              "physics": physics, "ppo": overrides}
+    values = {
+        "env": name,
+        "agent": agent,
+        "scheme": "fc",
+        "seeds": seeds,
+        "checkpoint_every": min(10, updates),
+        "physics": physics,
+        "ppo": overrides,
+    }
     cfg = run_config(values)
-    cfg = run_config({**values, "ppo": {**overrides, "total_env_steps": updates * cfg.ppo.batch_size}})
+    cfg = run_config(
+        {**values, "ppo": {**overrides, "total_env_steps": updates * cfg.ppo.batch_size}}
+    )
     with tempfile.TemporaryDirectory() as folder:
         results = pipeline.train(cfg, Path(folder), progress=False)
-    compiled = compilation.compile_training(make_trainer(cfg), cfg.seed_keys(), cfg.checkpoint_every)
+    compiled = compilation.compile_training(
+        make_trainer(cfg), cfg.seed_keys(), cfg.checkpoint_every
+    )
     state = compiled.init(cfg.seed_keys())
 
     def back_to_back(state):
@@ -176,9 +225,15 @@ def bench_train(name: str, seeds: int, updates: int, overrides: dict, agent: str
     updates = updates // compiled.chunk * compiled.chunk
     env_steps = seeds * updates * cfg.ppo.batch_size
     return {
-        "env": name, "agent": agent, "seeds": seeds, "updates": updates,
-        "physics": results["physics"],  # what `physics` (auto by default) resolved to, as the run's eval.json says
-        "ppo": {k: getattr(cfg.ppo, k) for k in ("num_envs", "batch_size", "epochs", "minibatch_size")},
+        "env": name,
+        "agent": agent,
+        "seeds": seeds,
+        "updates": updates,
+        # what `physics` (auto by default) resolved to, as the run's eval.json says
+        "physics": results["physics"],
+        "ppo": {
+            k: getattr(cfg.ppo, k) for k in ("num_envs", "batch_size", "epochs", "minibatch_size")
+        },
         "env_steps_per_s": results["train_env_steps_per_s"],
         "chunks_env_steps_per_s": results["chunks_env_steps_per_s"],
         "grad_samples_per_s": results["train_env_steps_per_s"] * cfg.ppo.epochs,
@@ -201,41 +256,69 @@ def update_parts(cfg, state) -> dict:
     rollout = jax.jit(jax.vmap(parts.rollout))
     _, traj, last = rollout(state, key)
     learn = jax.jit(jax.vmap(parts.learn))
-    width, steps = cfg.seeds * cfg.ppo.num_envs, cfg.ppo.rollout_length  # every seed's envs side by side
+    # every seed's envs side by side
+    width, steps = cfg.seeds * cfg.ppo.num_envs, cfg.ppo.rollout_length
     return {
         "rollout": best_time(lambda s, k: rollout(s, k)[2], state, key),
         "learn": best_time(lambda s: learn(s, traj, last, traj.reward, key)[1]["approx_kl"], state),
-        "env_steps_with_pictures": width * steps / bench_env(cfg.env, width, steps, physics=cfg.physics)["env_steps_per_s"],
-        "env_steps_only": width * steps / bench_env(cfg.env, width, steps, pixels=False,
-                                                    physics=cfg.physics)["env_steps_per_s"],
+        "env_steps_with_pictures": width
+        * steps
+        / bench_env(cfg.env, width, steps, physics=cfg.physics)["env_steps_per_s"],
+        "env_steps_only": width
+        * steps
+        / bench_env(cfg.env, width, steps, pixels=False, physics=cfg.physics)["env_steps_per_s"],
     }
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--envs", default="pendulum", help=f"comma-separated subset of {envs.env_names()}")
-    parser.add_argument("--sizes", default="4096,65536", help="comma-separated numbers of envs for the env rows")
-    parser.add_argument("--steps", type=int, default=100, help="env steps per timed scan in the env rows")
+    parser.add_argument(
+        "--envs", default="pendulum", help=f"comma-separated subset of {envs.env_names()}"
+    )
+    parser.add_argument(
+        "--sizes", default="4096,65536", help="comma-separated numbers of envs for the env rows"
+    )
+    parser.add_argument(
+        "--steps", type=int, default=100, help="env steps per timed scan in the env rows"
+    )
     parser.add_argument("--no-train", action="store_true", help="env rows only (no training rows)")
-    parser.add_argument("--reset-cost", action="store_true",
-                        help="add rows with starts drawn once per rollout of 8 steps, and without AutoReset")
-    parser.add_argument("--default-train-only", action="store_true",
-                        help="one training row per env: 5 seeds at the env's default settings")
-    parser.add_argument("--parts", action="store_true",
-                        help="only the milliseconds of one update's parts (rollout, learning, env steps alone "
-                             "without pictures) "
-                             "of each env's default cell at 5 seeds")
+    parser.add_argument(
+        "--reset-cost",
+        action="store_true",
+        help="add rows with starts drawn once per rollout of 8 steps, and without AutoReset",
+    )
+    parser.add_argument(
+        "--default-train-only",
+        action="store_true",
+        help="one training row per env: 5 seeds at the env's default settings",
+    )
+    parser.add_argument(
+        "--parts",
+        action="store_true",
+        help="only the milliseconds of one update's parts (rollout, learning, env steps alone "
+        "without pictures) "
+        "of each env's default cell at 5 seeds",
+    )
     parser.add_argument("--quick", action="store_true", help="small sizes (a CPU smoke run)")
-    parser.add_argument("--model-option", action="append", default=[], metavar="FIELD=VALUE",
-                        help="env rows of MJX envs: override an mj_model.opt field, e.g. integrator=EULER or "
-                             "iterations=1 (repeatable); the registered envs keep their own")
-    parser.add_argument("--physics", default=envs.AUTO, help="auto, jax or warp: what steps the MJX envs")
+    parser.add_argument(
+        "--model-option",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="env rows of MJX envs: override an mj_model.opt field, e.g. integrator=EULER or "
+        "iterations=1 (repeatable); the registered envs keep their own",
+    )
+    parser.add_argument(
+        "--physics", default=envs.AUTO, help="auto, jax or warp: what steps the MJX envs"
+    )
     parser.add_argument("--out", default=None, help="write the results as JSON here")
     args = parser.parse_args()
     names = [n.strip() for n in args.envs.split(",") if n.strip()]
     unknown = [n for n in names if n not in envs.REGISTRY]
     if unknown:
-        parser.exit(2, f"error: unknown env {unknown}; valid choices: {', '.join(envs.env_names())}\n")
+        parser.exit(
+            2, f"error: unknown env {unknown}; valid choices: {', '.join(envs.env_names())}\n"
+        )
     try:
         options = model_options(args.model_option)
     except ValueError as e:
@@ -251,42 +334,83 @@ def main() -> None:
     q = args.quick
     if args.parts:
         for name in names:
-            cfg = run_config({"env": name, "agent": "hints", "scheme": "fc", "seeds": 5, "physics": args.physics})
+            cfg = run_config(
+                {"env": name, "agent": "hints", "scheme": "fc", "seeds": 5, "physics": args.physics}
+            )
             state = jax.jit(jax.vmap(make_trainer(cfg).init))(cfg.seed_keys())
             parts = update_parts(cfg, state)
-            print(f"update  {name:>9} 5 seeds {cfg.ppo.num_envs} envs x {cfg.ppo.rollout_length} steps, {cfg.physics}: "
-                  + ", ".join(f"{k} {1e3 * v:.1f} ms" for k, v in parts.items()), flush=True)
+            print(
+                f"update  {name:>9} 5 seeds {cfg.ppo.num_envs} envs x {cfg.ppo.rollout_length} steps, {cfg.physics}: "
+                + ", ".join(f"{k} {1e3 * v:.1f} ms" for k, v in parts.items()),
+                flush=True,
+            )
         return
-    compilation_cache.enable(compilation_cache.folder(True))  # as the command line: a second bench compiles little
-    results = {"device": str(jax.devices()[0].device_kind), "platform": jax.default_backend(),
-               "jax": jax.__version__, "python": platform.python_version(), "xla_flags": os.environ.get("XLA_FLAGS", "")}
+    # as the command line: a second bench compiles little
+    compilation_cache.enable(compilation_cache.folder(True))
+    results = {
+        "device": str(jax.devices()[0].device_kind),
+        "platform": jax.default_backend(),
+        "jax": jax.__version__,
+        "python": platform.python_version(),
+        "xla_flags": os.environ.get("XLA_FLAGS", ""),
+    }
     results["ceiling"] = bench_ceiling(8192 if not q else 64)
     ceiling = results["ceiling"]["update_samples_per_s"]
-    print(f"ceiling batch {results['ceiling']['batch']}: {ceiling:,.0f} samples/s (fwd+bwd+Adam)", flush=True)
+    print(
+        f"ceiling batch {results['ceiling']['batch']}: {ceiling:,.0f} samples/s (fwd+bwd+Adam)",
+        flush=True,
+    )
     results["env"], results["train"] = [], []
     for name in names:
-        for n in ([int(n) for n in args.sizes.split(",")] if not q else (64,)):
+        for n in [int(n) for n in args.sizes.split(",")] if not q else (64,):
             size = envs.make(name).image_size
-            for pixels, reset in ((False, "step"), (True, "step"), *(((True, "rollout"), (True, "none")) if args.reset_cost else ())):
-                r = bench_env(name, n, args.steps if not q else 16, pixels, reset, options=options, physics=args.physics)
+            for pixels, reset in (
+                (False, "step"),
+                (True, "step"),
+                *(((True, "rollout"), (True, "none")) if args.reset_cost else ()),
+            ):
+                r = bench_env(
+                    name,
+                    n,
+                    args.steps if not q else 16,
+                    pixels,
+                    reset,
+                    options=options,
+                    physics=args.physics,
+                )
                 r["model_options"] = args.model_option
                 results["env"].append(r)
-                what = (f"with {size}x{size} picture" if pixels else "physics, reward, hint") + "".join(
-                    f"; {o}" for o in args.model_option)
-                print(f"env     {name:>9} {n:>6} envs: {r['env_steps_per_s']:>14,.0f} env steps/s "
-                      f"({what}; {RESETS[reset]}; {r['physics']})", flush=True)
-        settings = (((5, {}), (5, {"num_envs": 64}), (32, {}), (32, {"num_envs": 64, "minibatch_size": 1024}))
-                    if not q else ((2, {"num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}),))
+                what = (
+                    f"with {size}x{size} picture" if pixels else "physics, reward, hint"
+                ) + "".join(f"; {o}" for o in args.model_option)
+                print(
+                    f"env     {name:>9} {n:>6} envs: {r['env_steps_per_s']:>14,.0f} env steps/s "
+                    f"({what}; {RESETS[reset]}; {r['physics']})",
+                    flush=True,
+                )
+        settings = (
+            (
+                (5, {}),
+                (5, {"num_envs": 64}),
+                (32, {}),
+                (32, {"num_envs": 64, "minibatch_size": 1024}),
+            )
+            if not q
+            else ((2, {"num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}),)
+        )
         settings = settings[:1] if args.default_train_only else settings
         for seeds, overrides in settings if not args.no_train else ():
             r = bench_train(name, seeds, 40 if not q else 2, overrides, physics=args.physics)
             r["fraction_of_ceiling"] = r["grad_samples_per_s"] / ceiling
             results["train"].append(r)
-            print(f"train   {name:>9} {seeds:>3} seeds {r['ppo']}: {r['env_steps_per_s']:,.0f} env steps/s "
-                  f"through pipeline.train (bare scan {r['scan_env_steps_per_s']:,.0f}), "
-                  f"{r['grad_samples_per_s']:,.0f} grad samples/s = {r['fraction_of_ceiling']:.0%} of ceiling; "
-                  f"compile {r['compile_s']['train']:.1f} s; one update: "
-                  + ", ".join(f"{k} {1e3 * v:.1f} ms" for k, v in r["update_parts_s"].items()), flush=True)
+            print(
+                f"train   {name:>9} {seeds:>3} seeds {r['ppo']}: {r['env_steps_per_s']:,.0f} env steps/s "
+                f"through pipeline.train (bare scan {r['scan_env_steps_per_s']:,.0f}), "
+                f"{r['grad_samples_per_s']:,.0f} grad samples/s = {r['fraction_of_ceiling']:.0%} of ceiling; "
+                f"compile {r['compile_s']['train']:.1f} s; one update: "
+                + ", ".join(f"{k} {1e3 * v:.1f} ms" for k, v in r["update_parts_s"].items()),
+                flush=True,
+            )
     if args.out:
         with open(args.out, "w") as f:
             json.dump(results, f, indent=1)

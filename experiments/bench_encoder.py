@@ -64,7 +64,10 @@ def main() -> None:
         for dtype in (jnp.float32, jnp.bfloat16):
             for seeds in (1, args.seeds):
                 r = rate(conv, dtype, args.batch, seeds)
-                print(f"{conv:8s} {jnp.dtype(dtype).name:8s} seeds={seeds:<3d} batch={args.batch}: {r:,.0f} samples/s", flush=True)
+                print(
+                    f"{conv:8s} {jnp.dtype(dtype).name:8s} seeds={seeds:<3d} batch={args.batch}: {r:,.0f} samples/s",
+                    flush=True,
+                )
 
 
 if __name__ == "__main__":

@@ -31,7 +31,13 @@ GAIN = 2.0
 STEPS = 1000
 
 
-def pursue(xy: np.ndarray, angle: np.ndarray, speed: np.ndarray, track: list[np.ndarray], target_speed: float) -> np.ndarray:
+def pursue(
+    xy: np.ndarray,
+    angle: np.ndarray,
+    speed: np.ndarray,
+    track: list[np.ndarray],
+    target_speed: float,
+) -> np.ndarray:
     """Actions [B, 3] (steer, gas, brake) for cars at xy [B, 2], heading angle [B] (forward is
     (-sin, cos)), speed [B], on tracks given as centre points [n_b, 2] each."""
     actions = np.zeros((len(xy), 3), np.float32)
@@ -41,17 +47,27 @@ def pursue(xy: np.ndarray, angle: np.ndarray, speed: np.ndarray, track: list[np.
         fwd = np.array([-np.sin(angle[b]), np.cos(angle[b])])
         left = np.array([-np.cos(angle[b]), -np.sin(angle[b])])
         bearing = np.arctan2(rel @ left, rel @ fwd)  # + : the target is to the left
-        actions[b] = [np.clip(-GAIN * bearing, -1, 1), 0.5 * (speed[b] < target_speed), 0.3 * (speed[b] > 1.1 * target_speed)]
+        actions[b] = [
+            np.clip(-GAIN * bearing, -1, 1),
+            0.5 * (speed[b] < target_speed),
+            0.3 * (speed[b] > 1.1 * target_speed),
+        ]
     return actions
 
 
 def summarize(progress, returns, lap_steps, top_speed, exits) -> dict:
     laps = np.isfinite(lap_steps)
-    return {"progress": float(np.mean(progress)), "progress_std": float(np.std(progress)),
-            "return": float(np.mean(returns)), "return_std": float(np.std(returns)),
-            "laps": int(laps.sum()), "lap_seconds": float(np.mean(lap_steps[laps]) / 50) if laps.any() else None,
-            "top_speed": float(np.mean(top_speed)), "exits_per_lap": float(np.mean(exits / np.maximum(progress, 1e-3))),
-            "returns": [round(float(r), 1) for r in returns]}
+    return {
+        "progress": float(np.mean(progress)),
+        "progress_std": float(np.std(progress)),
+        "return": float(np.mean(returns)),
+        "return_std": float(np.std(returns)),
+        "laps": int(laps.sum()),
+        "lap_seconds": float(np.mean(lap_steps[laps]) / 50) if laps.any() else None,
+        "top_speed": float(np.mean(top_speed)),
+        "exits_per_lap": float(np.mean(exits / np.maximum(progress, 1e-3))),
+        "returns": [round(float(r), 1) for r in returns],
+    }
 
 
 @dataclass(frozen=True)
@@ -93,10 +109,17 @@ def drive_gymnasium(seeds: range, target_speed: float) -> GymnasiumEpisodes:
         for t in range(STEPS):
             hull = u.car.hull
             speed = float(np.linalg.norm(hull.linearVelocity))
-            action = pursue(np.array([[hull.position[0], hull.position[1]]]), np.array([hull.angle]), np.array([speed]),
-                            [points], target_speed)[0]
+            action = pursue(
+                np.array([[hull.position[0], hull.position[1]]]),
+                np.array([hull.angle]),
+                np.array([speed]),
+                [points],
+                target_speed,
+            )[0]
             _, reward, terminated, truncated, _ = env.step(action)
-            pose.append([hull.position[0], hull.position[1], hull.angle, u.car.wheels[0].joint.angle])
+            pose.append(
+                [hull.position[0], hull.position[1], hull.angle, u.car.wheels[0].joint.angle]
+            )
             visited.append(u.tile_visited_count)
             total += reward
             fastest = max(fastest, speed)
@@ -115,7 +138,9 @@ def drive_gymnasium(seeds: range, target_speed: float) -> GymnasiumEpisodes:
         poses.append(np.array(pose))
         visits.append(np.array(visited))
     env.close()
-    summary = summarize(np.array(progress), np.array(returns), np.array(lap_steps), np.array(top), np.array(exits))
+    summary = summarize(
+        np.array(progress), np.array(returns), np.array(lap_steps), np.array(top), np.array(exits)
+    )
     return GymnasiumEpisodes(summary, tracks, poses, visits)
 
 
@@ -153,8 +178,12 @@ def drive_ours(tracks, target_speed: float) -> dict:
     count = int(tracks.n_tiles.shape[0])
 
     def start(track):
-        return car.CarRacingState(track, car.Car.at(track.xy[0], track.beta[0]), jnp.zeros(car.MAX_TILES, bool),
-                                  jnp.zeros((), jnp.int32))
+        return car.CarRacingState(
+            track,
+            car.Car.at(track.xy[0], track.beta[0]),
+            jnp.zeros(car.MAX_TILES, bool),
+            jnp.zeros((), jnp.int32),
+        )
 
     state = jax.jit(jax.vmap(start))(tracks)
 
@@ -164,19 +193,27 @@ def drive_ours(tracks, target_speed: float) -> dict:
             out = env.transition(jax.random.key(0), s, a, params)
             off = ~car.wheel_contact(s.track, out.state.car).on_road.any()
             return out.state.replace(t=s.t + 1), out.reward, out.terminated, off
+
         return jax.vmap(one)(state, action)
 
     n = np.asarray(state.track.n_tiles)
     points = [np.asarray(state.track.xy[b, : n[b]]) for b in range(count)]
     alive = np.ones(count, bool)
-    total, fastest, out, off_before = np.zeros(count), np.zeros(count), np.zeros(count), np.zeros(count, bool)
+    total, fastest, out, off_before = (
+        np.zeros(count),
+        np.zeros(count),
+        np.zeros(count),
+        np.zeros(count, bool),
+    )
     lap = np.full(count, np.inf)
     for t in range(STEPS):
         c = state.car
         speed = np.linalg.norm(np.asarray(c.vel), axis=1)
         action = pursue(np.asarray(c.xy), np.asarray(c.angle), speed, points, target_speed)
         new_state, reward, done, off = step(state, jnp.asarray(action))
-        state = jax.tree.map(lambda a, b: jnp.where(alive.reshape(-1, *[1] * (a.ndim - 1)), a, b), new_state, state)
+        state = jax.tree.map(
+            lambda a, b: jnp.where(alive.reshape(-1, *[1] * (a.ndim - 1)), a, b), new_state, state
+        )
         reward, done, off = np.asarray(reward), np.asarray(done), np.asarray(off)
         total += np.where(alive, reward, 0.0)
         fastest = np.where(alive, np.maximum(fastest, speed), fastest)
@@ -223,8 +260,13 @@ def visit_rule_gap(episodes: GymnasiumEpisodes) -> dict:
     for rule, parts in gaps.items():
         d = np.concatenate(parts)
         final = np.array([p[-1] for p in parts])
-        out[rule] = {"mean": float(d.mean()), "mean_abs": float(np.abs(d).mean()), "max_abs": int(np.abs(d).max()),
-                     "final_mean_abs": float(np.abs(final).mean()), "frames": int(len(d))}
+        out[rule] = {
+            "mean": float(d.mean()),
+            "mean_abs": float(np.abs(d).mean()),
+            "max_abs": int(np.abs(d).max()),
+            "final_mean_abs": float(np.abs(final).mean()),
+            "frames": int(len(d)),
+        }
     return out
 
 
@@ -241,44 +283,105 @@ def main() -> None:
         episodes = drive_gymnasium(seeds, target)
         theirs = {**episodes.summary, "seconds": round(time.perf_counter() - start, 1)}
         start = time.perf_counter()
-        ours = {**drive_ours(stack_tracks(episodes.tracks), target), "seconds": round(time.perf_counter() - start, 1)}
+        ours = {
+            **drive_ours(stack_tracks(episodes.tracks), target),
+            "seconds": round(time.perf_counter() - start, 1),
+        }
         gap = visit_rule_gap(episodes)
         ratio = ours["return"] / theirs["return"] - 1
-        raw[f"{target:.0f}"] = {"gymnasium": theirs, "ours": ours, "return_difference": ratio, "visited_tiles_gap": gap}
+        raw[f"{target:.0f}"] = {
+            "gymnasium": theirs,
+            "ours": ours,
+            "return_difference": ratio,
+            "visited_tiles_gap": gap,
+        }
         print(target, raw[f"{target:.0f}"], flush=True)
-        for name, r in (("Gymnasium CarRacing-v3 (Box2D)", theirs), ("ours (hintsjax car_racing)", ours)):
-            rows.append([f"{target:.0f}", name, f"{r['progress']:.3f} ± {r['progress_std']:.3f}",
-                         f"{r['return']:.0f} ± {r['return_std']:.0f}", f"{r['laps']}/{args.tracks}",
-                         "-" if r["lap_seconds"] is None else f"{r['lap_seconds']:.1f}", f"{r['top_speed']:.1f}",
-                         f"{r['exits_per_lap']:.2f}"])
-        rows.append([f"{target:.0f}", "ours / Gymnasium - 1", "", f"{100 * ratio:+.1f} %", "", "", "", ""])
+        for name, r in (
+            ("Gymnasium CarRacing-v3 (Box2D)", theirs),
+            ("ours (hintsjax car_racing)", ours),
+        ):
+            rows.append(
+                [
+                    f"{target:.0f}",
+                    name,
+                    f"{r['progress']:.3f} ± {r['progress_std']:.3f}",
+                    f"{r['return']:.0f} ± {r['return_std']:.0f}",
+                    f"{r['laps']}/{args.tracks}",
+                    "-" if r["lap_seconds"] is None else f"{r['lap_seconds']:.1f}",
+                    f"{r['top_speed']:.1f}",
+                    f"{r['exits_per_lap']:.2f}",
+                ]
+            )
+        rows.append(
+            [f"{target:.0f}", "ours / Gymnasium - 1", "", f"{100 * ratio:+.1f} %", "", "", "", ""]
+        )
         for name, r in (("Gymnasium", theirs), ("ours", ours)):
             track_rows.append([f"{target:.0f}", name] + [f"{x:.0f}" for x in r["returns"]])
         for rule, g in gap.items():
-            gap_rows.append([f"{target:.0f}", rule, f"{g['mean']:+.2f}", f"{g['mean_abs']:.2f}", str(g["max_abs"]),
-                             f"{g['final_mean_abs']:.2f}", str(g["frames"])])
-    lines = ["# The scripted driver on Gymnasium's car and on ours, on Gymnasium's tracks", "",
-             f"Made by `python experiments/car_driver.py --tracks {args.tracks} --speeds {args.speeds}` on the 2-core "
-             f"CPU development machine, {time.strftime('%Y-%m-%d', time.gmtime())} (Gymnasium 1.4.0 with Box2D "
-             f"2.3.10). Both envs drive the same {args.tracks} tracks: Gymnasium's `reset(seed=s)` for s = 0.."
-             f"{args.tracks - 1}, loaded into our Track (`car_racing.track_from_gymnasium`), each car from "
-             f"Gymnasium's start. Pure pursuit on the centre line ({LOOKAHEAD} points ahead, gain {GAIN}), a target "
-             "speed held by gas 0.5 / brake 0.3, 1000 steps at most. Progress: tiles visited / all (mean ± std over "
-             "tracks); laps: episodes ended by a completed lap, and their mean time; exits: times all four wheels "
-             "left the tiles, per lap of track driven.", "",
-             *markdown_table(["target speed (u/s)", "env", "progress", "return", "laps", "lap time (s)",
-                              "top speed (u/s)", "exits per lap"], rows), "",
-             "## Return per track", "",
-             *markdown_table(["target speed (u/s)", "env"] + [f"seed {s}" for s in seeds], track_rows), "",
-             "## Visited tiles along Gymnasium's trajectories", "",
-             "Gymnasium's car is driven as above; after every frame its hull's pose and front-wheel angle are "
-             "replayed into our visit rules on the same track, and our count of visited tiles is compared with "
-             "Gymnasium's `tile_visited_count`. wheels: a tile is visited when a corner of a wheel's box lies in "
-             "its quad (`car_racing.wheel_contact`, the env's rule); centre: when the car's centre lies in it "
-             "(the env's rule before issue 50). Difference = ours - Gymnasium's, in tiles, over every frame of "
-             "every track; final: at the episode's last frame.", "",
-             *markdown_table(["target speed (u/s)", "rule", "mean difference", "mean abs difference",
-                              "max abs difference", "final mean abs difference", "frames"], gap_rows), ""]
+            gap_rows.append(
+                [
+                    f"{target:.0f}",
+                    rule,
+                    f"{g['mean']:+.2f}",
+                    f"{g['mean_abs']:.2f}",
+                    str(g["max_abs"]),
+                    f"{g['final_mean_abs']:.2f}",
+                    str(g["frames"]),
+                ]
+            )
+    lines = [
+        "# The scripted driver on Gymnasium's car and on ours, on Gymnasium's tracks",
+        "",
+        f"Made by `python experiments/car_driver.py --tracks {args.tracks} --speeds {args.speeds}` on the 2-core "
+        f"CPU development machine, {time.strftime('%Y-%m-%d', time.gmtime())} (Gymnasium 1.4.0 with Box2D "
+        f"2.3.10). Both envs drive the same {args.tracks} tracks: Gymnasium's `reset(seed=s)` for s = 0.."
+        f"{args.tracks - 1}, loaded into our Track (`car_racing.track_from_gymnasium`), each car from "
+        f"Gymnasium's start. Pure pursuit on the centre line ({LOOKAHEAD} points ahead, gain {GAIN}), a target "
+        "speed held by gas 0.5 / brake 0.3, 1000 steps at most. Progress: tiles visited / all (mean ± std over "
+        "tracks); laps: episodes ended by a completed lap, and their mean time; exits: times all four wheels "
+        "left the tiles, per lap of track driven.",
+        "",
+        *markdown_table(
+            [
+                "target speed (u/s)",
+                "env",
+                "progress",
+                "return",
+                "laps",
+                "lap time (s)",
+                "top speed (u/s)",
+                "exits per lap",
+            ],
+            rows,
+        ),
+        "",
+        "## Return per track",
+        "",
+        *markdown_table(["target speed (u/s)", "env"] + [f"seed {s}" for s in seeds], track_rows),
+        "",
+        "## Visited tiles along Gymnasium's trajectories",
+        "",
+        "Gymnasium's car is driven as above; after every frame its hull's pose and front-wheel angle are "
+        "replayed into our visit rules on the same track, and our count of visited tiles is compared with "
+        "Gymnasium's `tile_visited_count`. wheels: a tile is visited when a corner of a wheel's box lies in "
+        "its quad (`car_racing.wheel_contact`, the env's rule); centre: when the car's centre lies in it "
+        "(the env's rule before issue 50). Difference = ours - Gymnasium's, in tiles, over every frame of "
+        "every track; final: at the episode's last frame.",
+        "",
+        *markdown_table(
+            [
+                "target speed (u/s)",
+                "rule",
+                "mean difference",
+                "mean abs difference",
+                "max abs difference",
+                "final mean abs difference",
+                "frames",
+            ],
+            gap_rows,
+        ),
+        "",
+    ]
     args.out.write_text("\n".join(lines))
     args.out.with_suffix(".json").write_text(json.dumps(raw, indent=1))
     print(f"wrote {args.out}")

@@ -25,8 +25,15 @@ import shutil
 from pathlib import Path
 
 import numpy as np
-from hintsjax.reproduce.archive import (ARCHIVE, SUMMARY_JSON, about_lines, archive_run, read_about, run_folder,
-                    training_seed_means)
+from hintsjax.reproduce.archive import (
+    ARCHIVE,
+    SUMMARY_JSON,
+    about_lines,
+    archive_run,
+    read_about,
+    run_folder,
+    training_seed_means,
+)
 from hintsjax.reproduce.markdown import markdown_table
 from hintsjax.reproduce.report import iqm_cell, load, metric_cell, ordering, training_cell
 
@@ -35,18 +42,30 @@ ENV, AGENT = "car_racing", "ppo_rgb"
 # Each variant's settings over the car's defaults (and STUDY's); the first is the reference the others are
 # compared with. The heads are named, not left to the defaults, which these measurements chose (the sigmoid).
 VARIANTS: dict[str, dict] = {
-    "gaussian": {"ppo": {"action_head": "gaussian"}},  # a Gaussian whose draws the env clips (gas and brake into [0, 1])
+    # a Gaussian whose draws the env clips (gas and brake into [0, 1])
+    "gaussian": {"ppo": {"action_head": "gaussian"}},
     "tanh": {"ppo": {"action_head": "tanh"}},  # squashed into the action range: nothing clipped
-    "sigmoid": {"ppo": {"action_head": "sigmoid"}},  # the authors' head: mean 2 sigmoid(x) - 1, std >= 0.01
-    "gaussian-reward0.1": {"ppo": {"action_head": "gaussian", "reward_scale": 0.1}},  # rewards scaled for learning
+    # the authors' head: mean 2 sigmoid(x) - 1, std >= 0.01
+    "sigmoid": {"ppo": {"action_head": "sigmoid"}},
+    # rewards scaled for learning
+    "gaussian-reward0.1": {"ppo": {"action_head": "gaussian", "reward_scale": 0.1}},
 }
 # Every variant's run evaluates with the policy's mean (its eval.json); the sampled evaluation is
 # hintsjax.evaluate's, beside it.
 STUDY = {"stochastic_eval": False}
 STD_KEY = "policy_std_end"  # final_std's value, kept in an archived run's summary
-TRACKS = ("standard", "hairpin")  # evaluations[0] and [1]: the training task, then the car's eval_variants
-SMOKE = {"eval_episodes": 2, "ppo": {"total_env_steps": 2048, "num_envs": 8, "batch_size": 1024, "minibatch_size": 512,
-                                    "epochs": 1}}
+# evaluations[0] and [1]: the training task, then the car's eval_variants
+TRACKS = ("standard", "hairpin")
+SMOKE = {
+    "eval_episodes": 2,
+    "ppo": {
+        "total_env_steps": 2048,
+        "num_envs": 8,
+        "batch_size": 1024,
+        "minibatch_size": 512,
+        "epochs": 1,
+    },
+}
 
 
 def stochastic_file(folder: Path, track: str) -> Path | None:
@@ -74,14 +93,22 @@ def train(runs: Path, names: list[str], seeds: int, smoke: bool) -> None:
     from hintsjax import evaluate, run
 
     cfgs = [run_config(variant_settings(n, seeds, smoke)) for n in names]
-    for members in plan(cfgs):  # a group with one member finished (cut while writing results) resumes whole
+    # a group with one member finished (cut while writing results) resumes whole
+    for members in plan(cfgs):
         group = [names[i] for i in members]
         if all((runs / ENV / n / "eval.json").exists() for n in group):
             continue
         if len(group) == 1:
             folder = runs / ENV / group[0]
-            values = ({"resume": str(folder)} if (folder / "config.yaml").exists() else
-                      {**variant_settings(group[0], seeds, smoke), "out_dir": str(runs / ENV), "name": group[0]})
+            values = (
+                {"resume": str(folder)}
+                if (folder / "config.yaml").exists()
+                else {
+                    **variant_settings(group[0], seeds, smoke),
+                    "out_dir": str(runs / ENV),
+                    "name": group[0],
+                }
+            )
             if run.main_from_values(values):
                 raise SystemExit(f"{group[0]}: training failed (see above)")
             continue
@@ -89,11 +116,16 @@ def train(runs: Path, names: list[str], seeds: int, smoke: bool) -> None:
         for i in members:
             (runs / ENV / names[i]).mkdir(parents=True, exist_ok=True)
             save_run_config(runs / ENV / names[i], cfgs[i])
-        pipeline.train_group([cfgs[i] for i in members], folder, [runs / ENV / n for n in group],
-                        resume=checkpoint.latest_update(folder) is not None)
+        pipeline.train_group(
+            [cfgs[i] for i in members],
+            folder,
+            [runs / ENV / n for n in group],
+            resume=checkpoint.latest_update(folder) is not None,
+        )
     for name in names:
         folder = runs / ENV / name
-        missing = [track for track in TRACKS if stochastic_file(folder, track) is None]  # one program for both
+        # one program for both
+        missing = [track for track in TRACKS if stochastic_file(folder, track) is None]
         if missing and evaluate.main([str(folder), "--stochastic", "--variant", ",".join(missing)]):
             raise SystemExit(f"{name}: the stochastic evaluation on {', '.join(missing)} failed")
 
@@ -138,21 +170,42 @@ def report(runs: Path, out: Path) -> None:
         if (runs / ENV / name / "eval.json").exists():
             dest = archive_run(runs, ENV, name)
             summary = json.loads((dest / SUMMARY_JSON).read_text())
-            (dest / SUMMARY_JSON).write_text(json.dumps({**summary, STD_KEY: final_std(runs / ENV / name)}) + "\n")
+            (dest / SUMMARY_JSON).write_text(
+                json.dumps({**summary, STD_KEY: final_std(runs / ENV / name)}) + "\n"
+            )
             for track in TRACKS:
                 if (found := stochastic_file(runs / ENV / name, track)) is not None:
                     shutil.copyfile(found, dest / found.name)
-    header = ["variant", "settings", *(f"{t}, {m}" for t in TRACKS for m in ("deterministic", "stochastic")),
-              "P hairpin (det.)", "training return", "policy std at the end"]
+    header = [
+        "variant",
+        "settings",
+        *(f"{t}, {m}" for t in TRACKS for m in ("deterministic", "stochastic")),
+        "P hairpin (det.)",
+        "training return",
+        "policy std at the end",
+    ]
     rows, comparisons = [], []
     for name in names:
         folder = run_folder(runs, ENV, name)
-        cells = [iqm_cell(evaluation_of(folder, t, s)) for t in range(len(TRACKS)) for s in (False, True)]
-        rows.append([name, json.dumps(VARIANTS[name]) if VARIANTS[name] else "defaults", *cells,
-                     metric_cell(load(runs, ENV, name), "progress", 1, percent=True), training_cell(runs, ENV, name),
-                     final_std(folder)])
+        cells = [
+            iqm_cell(evaluation_of(folder, t, s)) for t in range(len(TRACKS)) for s in (False, True)
+        ]
+        rows.append(
+            [
+                name,
+                json.dumps(VARIANTS[name]) if VARIANTS[name] else "defaults",
+                *cells,
+                metric_cell(load(runs, ENV, name), "progress", 1, percent=True),
+                training_cell(runs, ENV, name),
+                final_std(folder),
+            ]
+        )
     reference = names[0] if names else None
-    first = load(runs, ENV, reference)["evaluations"][0] if names else {"seeds": 0, "episodes_per_seed": 0}
+    first = (
+        load(runs, ENV, reference)["evaluations"][0]
+        if names
+        else {"seeds": 0, "episodes_per_seed": 0}
+    )
     for name in names[1:]:
         for t, track in enumerate(TRACKS):
             for stochastic in (False, True):
@@ -160,18 +213,30 @@ def report(runs: Path, out: Path) -> None:
                 b = evaluation_of(run_folder(runs, ENV, reference), t, stochastic)
                 text = ordering(name, a, reference, b)
                 if text:
-                    comparisons.append(f"- {track}, {'stochastic' if stochastic else 'deterministic'}: {text}")
+                    comparisons.append(
+                        f"- {track}, {'stochastic' if stochastic else 'deterministic'}: {text}"
+                    )
         trained = [training_seed_means(run_folder(runs, ENV, n)) for n in (name, reference)]
         if None not in trained:  # the training episodes (sampled actions, last tenth of updates)
-            comparisons.append(f"- training return: {stats.ordering_text(name, reference, stats.poi_ci(*trained))}")
-    lines = ["# The car's learning side: action heads, evaluation protocol, reward scale (issue 26)", "",
-             f"PPO-RGB on the car at its table's budget, one row per variant (`experiments/car_learning.py`); cells: "
-             f"IQM [95% CI] of the per-seed mean returns ({first['seeds']} seeds x {first['episodes_per_seed']} "
-             "evaluation episodes). Deterministic: the policy's mean; stochastic: sampled actions (the authors' "
-             f"protocol). Runs: experiments/results/runs/{runs.name}.", "",
-             *markdown_table(header, rows), "",
-             f"Each variant against `{reference}` (probability of improvement over seeds, 95% bootstrap interval; "
-             "decided where it excludes 0.5):", "", *comparisons, ""]
+            comparisons.append(
+                f"- training return: {stats.ordering_text(name, reference, stats.poi_ci(*trained))}"
+            )
+    lines = [
+        "# The car's learning side: action heads, evaluation protocol, reward scale (issue 26)",
+        "",
+        f"PPO-RGB on the car at its table's budget, one row per variant (`experiments/car_learning.py`); cells: "
+        f"IQM [95% CI] of the per-seed mean returns ({first['seeds']} seeds x {first['episodes_per_seed']} "
+        "evaluation episodes). Deterministic: the policy's mean; stochastic: sampled actions (the authors' "
+        f"protocol). Runs: experiments/results/runs/{runs.name}.",
+        "",
+        *markdown_table(header, rows),
+        "",
+        f"Each variant against `{reference}` (probability of improvement over seeds, 95% bootstrap interval; "
+        "decided where it excludes 0.5):",
+        "",
+        *comparisons,
+        "",
+    ]
     lines += about_lines(read_about(ARCHIVE / runs.name))
     out.write_text("\n".join(lines))
     print(f"wrote {out}")
@@ -179,11 +244,21 @@ def report(runs: Path, out: Path) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--variants", default=",".join(VARIANTS), help=f"comma-separated subset of {', '.join(VARIANTS)}")
+    parser.add_argument(
+        "--variants",
+        default=",".join(VARIANTS),
+        help=f"comma-separated subset of {', '.join(VARIANTS)}",
+    )
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--runs", type=Path, default=Path("runs/car_learning"))
-    parser.add_argument("--smoke", action="store_true", help="tiny budgets: check the plumbing on a CPU")
-    parser.add_argument("--report", action="store_true", help="only write the report (and archive the finished runs)")
+    parser.add_argument(
+        "--smoke", action="store_true", help="tiny budgets: check the plumbing on a CPU"
+    )
+    parser.add_argument(
+        "--report",
+        action="store_true",
+        help="only write the report (and archive the finished runs)",
+    )
     parser.add_argument("--out", type=Path, default=RESULTS / "car_learning.md")
     args = parser.parse_args()
     names = [n for n in args.variants.split(",") if n]

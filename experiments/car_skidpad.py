@@ -72,7 +72,12 @@ def measure(trace: np.ndarray) -> dict:
     last = trace[-MEASURE:]
     speed, yaw = last[:, 0].mean(), np.abs(last[:, 1]).mean()
     slip = np.degrees(np.arctan2(np.abs(last[:, 3]), np.abs(last[:, 2]))).mean()
-    return {"speed": speed, "yaw_rate": yaw, "lateral_acceleration": speed * yaw, "slip_degrees": slip}
+    return {
+        "speed": speed,
+        "yaw_rate": yaw,
+        "lateral_acceleration": speed * yaw,
+        "slip_degrees": slip,
+    }
 
 
 def main() -> None:
@@ -85,17 +90,36 @@ def main() -> None:
     for target in [float(v) for v in args.speeds.split(",")]:
         for steer in [float(s) for s in args.steers.split(",")]:
             b, o = measure(box2d_run(target, steer)), measure(ours_run(target, steer))
-            rows.append([f"{target:.0f}", f"{steer:g}"] + [f"{b[k]:.1f} / {o[k]:.1f}" for k in
-                                                          ("speed", "yaw_rate", "lateral_acceleration", "slip_degrees")])
+            rows.append(
+                [f"{target:.0f}", f"{steer:g}"]
+                + [
+                    f"{b[k]:.1f} / {o[k]:.1f}"
+                    for k in ("speed", "yaw_rate", "lateral_acceleration", "slip_degrees")
+                ]
+            )
             print(rows[-1], flush=True)
-    lines = ["# Skidpad: Gymnasium's Box2D car / ours", "",
-             f"Made by `python experiments/car_skidpad.py --speeds {args.speeds} --steers {args.steers}` (2-core CPU "
-             f"development machine, Gymnasium 1.4.0, Box2D 2.3.10, {time.strftime('%Y-%m-%d', time.gmtime())}). "
-             "Each cell: Gymnasium's value / ours, the mean over the last "
-             f"{MEASURE} of {TURN} frames at a fixed steering input, after {STRAIGHT} frames straight; on grass "
-             "(both cars' grip 0.6 of the road's). Steer 1 is full lock (0.42 rad at the wheels in both: Box2D holds its 0.4 rad joint limit with a slop).", "",
-             *markdown_table(["target speed (u/s)", "steer", "speed (u/s)", "yaw rate (rad/s)",
-                              "lateral acceleration (u/s^2)", "slip angle (deg)"], rows), ""]
+    lines = [
+        "# Skidpad: Gymnasium's Box2D car / ours",
+        "",
+        f"Made by `python experiments/car_skidpad.py --speeds {args.speeds} --steers {args.steers}` (2-core CPU "
+        f"development machine, Gymnasium 1.4.0, Box2D 2.3.10, {time.strftime('%Y-%m-%d', time.gmtime())}). "
+        "Each cell: Gymnasium's value / ours, the mean over the last "
+        f"{MEASURE} of {TURN} frames at a fixed steering input, after {STRAIGHT} frames straight; on grass "
+        "(both cars' grip 0.6 of the road's). Steer 1 is full lock (0.42 rad at the wheels in both: Box2D holds its 0.4 rad joint limit with a slop).",
+        "",
+        *markdown_table(
+            [
+                "target speed (u/s)",
+                "steer",
+                "speed (u/s)",
+                "yaw rate (rad/s)",
+                "lateral acceleration (u/s^2)",
+                "slip angle (deg)",
+            ],
+            rows,
+        ),
+        "",
+    ]
     args.out.write_text("\n".join(lines))
     print(f"wrote {args.out}")
 

@@ -32,7 +32,9 @@ def main() -> None:
     parser.add_argument("--env", default="pendulum")
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
-    cfg = run_config({"env": args.env, "agent": "hints", "scheme": "fc", "hint": ENV_DEFAULTS[args.env]["hint"]})
+    cfg = run_config(
+        {"env": args.env, "agent": "hints", "scheme": "fc", "hint": ENV_DEFAULTS[args.env]["hint"]}
+    )
     keys = cfg.seed_keys()
     compiled = compilation.compile_training(make_trainer(cfg), keys, cfg.checkpoint_every)
     n = np.int32(compiled.chunk)
@@ -40,14 +42,19 @@ def main() -> None:
     t = time.perf_counter()
     jax.block_until_ready(compiled.run_chunk(state, n))
     chunk = time.perf_counter() - t
-    print(f"{args.env}: one chunk of {compiled.chunk} updates takes {chunk:.3f} s ({jax.devices()[0].device_kind})")
+    print(
+        f"{args.env}: one chunk of {compiled.chunk} updates takes {chunk:.3f} s ({jax.devices()[0].device_kind})"
+    )
 
     def device_get(folder: Path, state, update: int) -> None:
         jax.device_get(state)
 
     # name -> (save, copy the state towards the host before the next chunk is dispatched)
-    ways = {"checkpoint.save": (checkpoint.save, False), "jax.device_get": (device_get, False),
-            "checkpoint.save, copied before the chunk": (checkpoint.save, True)}
+    ways = {
+        "checkpoint.save": (checkpoint.save, False),
+        "jax.device_get": (device_get, False),
+        "checkpoint.save, copied before the chunk": (checkpoint.save, True),
+    }
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(folder)
         with checkpoint.writing(folder):
@@ -65,8 +72,10 @@ def main() -> None:
                     save(folder, state, update)
                     took = time.perf_counter() - t
                     jax.block_until_ready(following)
-                    print(f"  {name}: {took:.3f} s; the chunk ended {time.perf_counter() - t0:.3f} s after its dispatch",
-                          flush=True)
+                    print(
+                        f"  {name}: {took:.3f} s; the chunk ended {time.perf_counter() - t0:.3f} s after its dispatch",
+                        flush=True,
+                    )
                     while checkpoint.saving(folder):
                         time.sleep(0.01)
 

@@ -44,10 +44,19 @@ def one(args: argparse.Namespace) -> dict:
     from hintsjax.training import compilation
 
     seconds: dict[str, float] = defaultdict(float)
-    jax.monitoring.register_event_duration_secs_listener(lambda event, s, **_: seconds.__setitem__(event, seconds[event] + s))
+    jax.monitoring.register_event_duration_secs_listener(
+        lambda event, s, **_: seconds.__setitem__(event, seconds[event] + s)
+    )
     compilation_cache.enable(args.cache)
-    cfg = run_config({"env": args.env, "agent": "hints", "scheme": "fc", "hint": ENV_DEFAULTS[args.env]["hint"],
-                      "checkpoint_every": args.updates})
+    cfg = run_config(
+        {
+            "env": args.env,
+            "agent": "hints",
+            "scheme": "fc",
+            "hint": ENV_DEFAULTS[args.env]["hint"],
+            "checkpoint_every": args.updates,
+        }
+    )
     keys = cfg.seed_keys()
     t = time.perf_counter()
     compiled = compilation.compile_training(make_trainer(cfg), keys, args.updates)
@@ -56,10 +65,18 @@ def one(args: argparse.Namespace) -> dict:
     state, _ = jax.block_until_ready(compiled.run_chunk(state, np.int32(args.updates)))
     digest = flag_variants.params_digest(state.params)
     short = {k.rsplit("/", 1)[-1]: round(v, 2) for k, v in seconds.items()}
-    return {"variant": args.variant, "warm": args.warm, "xla_flags": os.environ.get("XLA_FLAGS", ""),
-            "device": jax.devices()[0].device_kind, "jax": jax.__version__, "compile_s": round(total, 2),
-            "trace_s": round(compiled.trace_seconds, 2), "loaded_traced": compiled.loaded, "events_s": short,
-            "digest": digest}
+    return {
+        "variant": args.variant,
+        "warm": args.warm,
+        "xla_flags": os.environ.get("XLA_FLAGS", ""),
+        "device": jax.devices()[0].device_kind,
+        "jax": jax.__version__,
+        "compile_s": round(total, 2),
+        "trace_s": round(compiled.trace_seconds, 2),
+        "loaded_traced": compiled.loaded,
+        "events_s": short,
+        "digest": digest,
+    }
 
 
 def main() -> None:
@@ -67,8 +84,11 @@ def main() -> None:
     parser.add_argument("--env", default="ant")
     parser.add_argument("--updates", type=int, default=2)
     parser.add_argument("--variants", default="base,threads16")
-    parser.add_argument("--warm", action="store_true", help="compile each variant a second time from its cache")
-    parser.add_argument("--variant", default=None, help=argparse.SUPPRESS)  # set in the child process
+    parser.add_argument(
+        "--warm", action="store_true", help="compile each variant a second time from its cache"
+    )
+    # set in the child process
+    parser.add_argument("--variant", default=None, help=argparse.SUPPRESS)
     parser.add_argument("--cache", default=None, help=argparse.SUPPRESS)
     parser.add_argument("--out", default=None, help="write the rows as JSON here")
     args = parser.parse_args()
@@ -78,9 +98,22 @@ def main() -> None:
     rows = []
     for name in flag_variants.chosen(parser, args.variants, VARIANTS):
         with tempfile.TemporaryDirectory() as cache:
-            for warm in ([False, True] if args.warm else [False]):
-                row = flag_variants.run(__file__, VARIANTS[name], ["--variant", name, "--env", args.env, "--updates",
-                                                                   str(args.updates), "--cache", cache] + (["--warm"] if warm else []))
+            for warm in [False, True] if args.warm else [False]:
+                row = flag_variants.run(
+                    __file__,
+                    VARIANTS[name],
+                    [
+                        "--variant",
+                        name,
+                        "--env",
+                        args.env,
+                        "--updates",
+                        str(args.updates),
+                        "--cache",
+                        cache,
+                    ]
+                    + (["--warm"] if warm else []),
+                )
                 if row is None:
                     break
                 rows.append(row)

@@ -24,16 +24,27 @@ def main() -> None:
     parser.add_argument("--agent", default="ppo_state")
     parser.add_argument("--updates", type=int, default=20)
     args = parser.parse_args()
-    cfg = run_config({"env": "pendulum", "agent": args.agent, "seeds": 5,
-                      "ppo": {"total_env_steps": args.updates * 1024}})
+    cfg = run_config(
+        {
+            "env": "pendulum",
+            "agent": args.agent,
+            "seeds": 5,
+            "ppo": {"total_env_steps": args.updates * 1024},
+        }
+    )
     trainer = make_trainer(cfg)
     keys = jax.random.split(jax.random.key(0), cfg.seeds)
     train = jax.jit(jax.vmap(trainer.train))
     runs = [jax.tree.map(np.asarray, train(keys)[0].params) for _ in range(2)]
-    diff = max(float(np.abs(a - b).max()) for a, b in zip(jax.tree.leaves(runs[0]), jax.tree.leaves(runs[1])))
-    print(f"{args.agent} {args.updates} updates, XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r}: "
-          f"max |param difference| between two runs in this process = {diff:.3g}, "
-          f"checksum {sum(float(np.abs(x).astype(np.float64).sum()) for x in jax.tree.leaves(runs[0])):.10e}")
+    diff = max(
+        float(np.abs(a - b).max())
+        for a, b in zip(jax.tree.leaves(runs[0]), jax.tree.leaves(runs[1]))
+    )
+    print(
+        f"{args.agent} {args.updates} updates, XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r}: "
+        f"max |param difference| between two runs in this process = {diff:.3g}, "
+        f"checksum {sum(float(np.abs(x).astype(np.float64).sum()) for x in jax.tree.leaves(runs[0])):.10e}"
+    )
 
 
 if __name__ == "__main__":

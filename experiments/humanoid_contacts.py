@@ -34,7 +34,9 @@ def self_pairs(m: mujoco.MjModel) -> list[tuple[int, int]]:
             ba, bb = m.geom_bodyid[a], m.geom_bodyid[b]
             if 0 in (ba, bb) or ba == bb or m.body_parentid[ba] == bb or m.body_parentid[bb] == ba:
                 continue
-            if (m.geom_contype[a] & m.geom_conaffinity[b]) or (m.geom_contype[b] & m.geom_conaffinity[a]):
+            if (m.geom_contype[a] & m.geom_conaffinity[b]) or (
+                m.geom_contype[b] & m.geom_conaffinity[a]
+            ):
                 pairs.append((a, b))
     return pairs
 
@@ -57,7 +59,8 @@ def closest_approach(m: mujoco.MjModel, pairs, poses: int, seed: int = 0) -> np.
 
 
 def rk4(m: mujoco.MjModel) -> None:
-    m.opt.integrator = mujoco.mjtIntegrator.mjINT_RK4  # humanoid.xml's own (envs/humanoid.py uses Euler)
+    # humanoid.xml's own (envs/humanoid.py uses Euler)
+    m.opt.integrator = mujoco.mjtIntegrator.mjINT_RK4
 
 
 def no_contacts(m: mujoco.MjModel) -> None:
@@ -81,7 +84,9 @@ def steps_per_second(change, n: int, steps: int = 5) -> tuple[float, int]:
     state = jax.vmap(lambda k: env.initial_state(k, params))(keys)
     action = jnp.zeros((n, env.action_size))
     step = jax.vmap(lambda k, s, a: env.transition(k, s, a, params).state)
-    run = jax.jit(lambda s: jax.lax.scan(lambda s, _: (step(keys, s, action), None), s, None, steps)[0])
+    run = jax.jit(
+        lambda s: jax.lax.scan(lambda s, _: (step(keys, s, action), None), s, None, steps)[0]
+    )
     jax.block_until_ready(run(state))
     t = time.perf_counter()
     jax.block_until_ready(run(state))
@@ -99,15 +104,25 @@ def main() -> None:
     pairs = self_pairs(m)
     closest = closest_approach(m, pairs, args.poses)
     for cm in (1, 5, 10):
-        print(f"{np.sum(closest > cm / 100)} of {len(pairs)} self pairs never come within {cm} cm "
-              f"({args.poses} poses)", flush=True)
+        print(
+            f"{np.sum(closest > cm / 100)} of {len(pairs)} self pairs never come within {cm} cm "
+            f"({args.poses} poses)",
+            flush=True,
+        )
     if args.no_steps:
         return
-    rows = (("as it is", None), ("RK4", rk4), ("contacts off", no_contacts), ("floor contacts only", floor_only))
+    rows = (
+        ("as it is", None),
+        ("RK4", rk4),
+        ("contacts off", no_contacts),
+        ("floor contacts only", floor_only),
+    )
     for name, change in rows:
         rate, slots = steps_per_second(change, args.envs)
-        print(f"{name:>20}: {rate:8.0f} env steps/s ({args.envs} envs, {slots} contact slots, {jax.devices()[0].platform})",
-              flush=True)
+        print(
+            f"{name:>20}: {rate:8.0f} env steps/s ({args.envs} envs, {slots} contact slots, {jax.devices()[0].platform})",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

@@ -36,7 +36,11 @@ SPAN = 100  # updates before --at whose training episodes give a seed's return t
 def row(folder: Path) -> str:
     """One run's markdown row."""
     storms = kl_storms(folder)
-    evaluation = json.loads((folder / "eval.json").read_text())["evaluations"][0] if (folder / "eval.json").exists() else None
+    evaluation = (
+        json.loads((folder / "eval.json").read_text())["evaluations"][0]
+        if (folder / "eval.json").exists()
+        else None
+    )
     means = ", ".join(f"{m:.0f}" for m in evaluation["seed_means"]) if evaluation else "-"
     below = ", ".join(str(s) for s in evaluation.get("outlier_seeds", [])) if evaluation else "-"
     if storms is None:
@@ -61,7 +65,9 @@ def stormed_by(folder: Path, at: int) -> list[bool]:
     """Per seed, whether its first KL storm had begun by update `at` (its STORM_UPDATES-th update)."""
     storms = kl_storms(folder)
     if storms is None:
-        raise SystemExit(f"error: {folder} has no PPO log (metrics.csv with approx_kl, or an archived summary.json)")
+        raise SystemExit(
+            f"error: {folder} has no PPO log (metrics.csv with approx_kl, or an archived summary.json)"
+        )
     return [s["first"] is not None and s["first"] + STORM_UPDATES - 1 <= at for s in storms]
 
 
@@ -70,7 +76,9 @@ def returns_by(folder: Path, at: int) -> list[float]:
     archived log's bins are numbered by their last update)."""
     log = read_log(folder / "metrics.csv", ("episode_return",))
     if log.updates[-1] < at:
-        raise SystemExit(f"error: {folder}'s log ends at update {log.updates[-1]}, before --at {at}")
+        raise SystemExit(
+            f"error: {folder}'s log ends at update {log.updates[-1]}, before --at {at}"
+        )
     window = (log.updates > at - SPAN) & (log.updates <= at)
     return [float(x) for x in np.nanmean(log.columns["episode_return"][:, window], axis=1)]
 
@@ -88,36 +96,55 @@ def fisher_fewer(hits: int, n: int, base_hits: int, base_n: int) -> float:
     """One-sided Fisher exact p: the chance of `hits` or fewer storms among an arm's n seeds when the
     hits + base_hits storms fell at random among all n + base_n seeds (hypergeometric)."""
     total, drawn = hits + base_hits, n + base_n
-    return sum(math.comb(n, k) * math.comb(base_n, total - k) for k in range(0, hits + 1)
-               if total - k <= base_n) / math.comb(drawn, total)
+    return sum(
+        math.comb(n, k) * math.comb(base_n, total - k)
+        for k in range(0, hits + 1)
+        if total - k <= base_n
+    ) / math.comb(drawn, total)
 
 
 def arms_report(arms: dict[str, list[Path]], at: int) -> list[str]:
     """The arms' pooled seeds as far as update `at`, the first arm the base."""
+
     def evaluated(fs: list[Path]) -> list[float] | None:
         means = [evaluation_by(f, at) for f in fs]
         return None if None in means else [x for m in means for x in m]
 
-    pooled = {name: ([x for f in fs for x in stormed_by(f, at)], [x for f in fs for x in returns_by(f, at)], evaluated(fs))
-              for name, fs in arms.items()}
+    pooled = {
+        name: (
+            [x for f in fs for x in stormed_by(f, at)],
+            [x for f in fs for x in returns_by(f, at)],
+            evaluated(fs),
+        )
+        for name, fs in arms.items()
+    }
     base_name, (base_storms, base_returns, base_evals) = next(iter(pooled.items()))
-    lines = [f"As far as update {at}: seeds whose first KL storm ({STORM_UPDATES} or more updates in a row with approx. KL "
-             f"above {KL_ABOVE}) had begun, each seed's training return over updates {at - SPAN + 1}-{at}, and where every "
-             "run of an arm ended there, its final evaluation (each seed's mean).",
-             "", f"| arm | runs | seeds | seeds with a storm by {at} | Fisher p (fewer than {base_name} by chance) "
-             f"| training return, IQM [95% CI] | P(arm > {base_name}) | evaluation, IQM [95% CI] "
-             f"| P(arm > {base_name}), evaluation |", "|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"As far as update {at}: seeds whose first KL storm ({STORM_UPDATES} or more updates in a row with approx. KL "
+        f"above {KL_ABOVE}) had begun, each seed's training return over updates {at - SPAN + 1}-{at}, and where every "
+        "run of an arm ended there, its final evaluation (each seed's mean).",
+        "",
+        f"| arm | runs | seeds | seeds with a storm by {at} | Fisher p (fewer than {base_name} by chance) "
+        f"| training return, IQM [95% CI] | P(arm > {base_name}) | evaluation, IQM [95% CI] "
+        f"| P(arm > {base_name}), evaluation |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for name, (storms, returns, evals) in pooled.items():
         if name == base_name:
             p, poi = "-", "-"
         else:
             p = f"{fisher_fewer(sum(storms), len(storms), sum(base_storms), len(base_storms)):.3g}"
             poi = ordering_text(name, base_name, poi_ci(returns, base_returns))
-        eval_poi = "-" if name == base_name or evals is None or base_evals is None else \
-            ordering_text(name, base_name, poi_ci(evals, base_evals))
-        lines.append(f"| {name} | {', '.join(f.name for f in arms[name])} | {len(storms)} | {sum(storms)} | {p} "
-                     f"| {iqm_cell(returns, digits=0)} | {poi} | {'-' if evals is None else iqm_cell(evals, digits=0)} "
-                     f"| {eval_poi} |")
+        eval_poi = (
+            "-"
+            if name == base_name or evals is None or base_evals is None
+            else ordering_text(name, base_name, poi_ci(evals, base_evals))
+        )
+        lines.append(
+            f"| {name} | {', '.join(f.name for f in arms[name])} | {len(storms)} | {sum(storms)} | {p} "
+            f"| {iqm_cell(returns, digits=0)} | {poi} | {'-' if evals is None else iqm_cell(evals, digits=0)} "
+            f"| {eval_poi} |"
+        )
     return lines
 
 
@@ -125,14 +152,29 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("runs", type=Path, nargs="*", help="run folders, live or archived")
     parser.add_argument("--at", type=int, help="compare --arm's arms as far as this update")
-    parser.add_argument("--arm", action="append", default=[], metavar="NAME=RUN[,RUN...]",
-                        help="with --at: an arm's runs, pooled (the first arm is the base)")
+    parser.add_argument(
+        "--arm",
+        action="append",
+        default=[],
+        metavar="NAME=RUN[,RUN...]",
+        help="with --at: an arm's runs, pooled (the first arm is the base)",
+    )
     parser.add_argument("--out", type=Path, help="a markdown file to write the table to")
     args = parser.parse_args()
     if args.at is not None or args.arm:
-        if args.at is None or args.at < 1 or len(args.arm) < 2 or args.runs or not all("=" in a for a in args.arm):
-            parser.error("--at N (N >= 1) takes two or more --arm NAME=RUN[,RUN...] and no other runs")
-        arms = {a.split("=", 1)[0]: [Path(r) for r in a.split("=", 1)[1].split(",")] for a in args.arm}
+        if (
+            args.at is None
+            or args.at < 1
+            or len(args.arm) < 2
+            or args.runs
+            or not all("=" in a for a in args.arm)
+        ):
+            parser.error(
+                "--at N (N >= 1) takes two or more --arm NAME=RUN[,RUN...] and no other runs"
+            )
+        arms = {
+            a.split("=", 1)[0]: [Path(r) for r in a.split("=", 1)[1].split(",")] for a in args.arm
+        }
         text = "\n".join(arms_report(arms, args.at)) + "\n"
     elif args.runs:
         text = "\n".join(report(args.runs)) + "\n"

@@ -18,10 +18,35 @@ import dataclasses
 from pathlib import Path
 
 from hintsjax.reproduce.archive import ARCHIVE, about_lines, read_about, sweep_seconds
-from hintsjax.reproduce.markdown import (KEPT, apart_text, cell_stats, generated_marker, kept_rows, markdown_table, section_name,
-                    write_report, write_section)
-from hintsjax.reproduce.report import (ORDERINGS_ABOUT, cell, curve_lines, footer, iqm_cell, kl_cell, load, metrics_path,
-                    ordering_line, poi_cell, ppo_text, references_note, seed_means, trained_ppo, training_cell, wall_clock)
+from hintsjax.reproduce.markdown import (
+    KEPT,
+    apart_text,
+    cell_stats,
+    generated_marker,
+    kept_rows,
+    markdown_table,
+    section_name,
+    write_report,
+    write_section,
+)
+from hintsjax.reproduce.report import (
+    ORDERINGS_ABOUT,
+    cell,
+    curve_lines,
+    footer,
+    iqm_cell,
+    kl_cell,
+    load,
+    metrics_path,
+    ordering_line,
+    poi_cell,
+    ppo_text,
+    references_note,
+    seed_means,
+    trained_ppo,
+    training_cell,
+    wall_clock,
+)
 from hintsjax.reproduce.sweep import hints_run
 from hintsjax.reproduce.table_script import TableScript, table_main
 
@@ -39,18 +64,37 @@ HINTS = {  # the paper's hint columns (Table 3; Table 6 names them)
 }
 # The paper's Table 3 (mean ± std over n=50), keyed by our run labels.
 PAPER = {
-    "halfcheetah": {"dagger": "2351.16 ± 109.6", "ppo_state": "2327.99 ± 535.8", "ppo_rgb": "1.82 ± 18.6",
-                    "hints-fc-reward": "55.41 ± 24.5", "hints-fc-velocity": "138.45 ± 19.3",
-                    "hints-fc-max_velocity": "21.91 ± 66.5", "hints-fc-state": "30.42 ± 13.2"},
-    "ant": {"dagger": "4000.42 ± 152.8", "ppo_state": "533.77 ± 254.7", "ppo_rgb": "1015.49 ± 3.3",
-            "hints-fc-speed": "1313.57 ± 57.6", "hints-fc-goal_height": "1442.82 ± 162.6", "hints-fc-state": "1007.52 ± 5.1"},
-    "humanoid": {"dagger": "588.00 ± 152.4", "ppo_state": "228.30 ± 17.6", "ppo_rgb": "310.86 ± 41.7",
-                 "hints-fc-velocity": "455.95 ± 94.5", "hints-fc-goal_height": "306.14 ± 52.5"},
+    "halfcheetah": {
+        "dagger": "2351.16 ± 109.6",
+        "ppo_state": "2327.99 ± 535.8",
+        "ppo_rgb": "1.82 ± 18.6",
+        "hints-fc-reward": "55.41 ± 24.5",
+        "hints-fc-velocity": "138.45 ± 19.3",
+        "hints-fc-max_velocity": "21.91 ± 66.5",
+        "hints-fc-state": "30.42 ± 13.2",
+    },
+    "ant": {
+        "dagger": "4000.42 ± 152.8",
+        "ppo_state": "533.77 ± 254.7",
+        "ppo_rgb": "1015.49 ± 3.3",
+        "hints-fc-speed": "1313.57 ± 57.6",
+        "hints-fc-goal_height": "1442.82 ± 162.6",
+        "hints-fc-state": "1007.52 ± 5.1",
+    },
+    "humanoid": {
+        "dagger": "588.00 ± 152.4",
+        "ppo_state": "228.30 ± 17.6",
+        "ppo_rgb": "310.86 ± 41.7",
+        "hints-fc-velocity": "455.95 ± 94.5",
+        "hints-fc-goal_height": "306.14 ± 52.5",
+    },
 }
 # What a row's figures alone do not say (measured; the report prints it under the env's references).
 NOTES = {
-    "ant": ("The ant's curves show ppo_rgb's earlier run at Table 5's rates (994); its row is the retraining at "
-            "today's settings (2026-11-23, `--only ppo_rgb` alone on an H200)."),
+    "ant": (
+        "The ant's curves show ppo_rgb's earlier run at Table 5's rates (994); its row is the retraining at "
+        "today's settings (2026-11-23, `--only ppo_rgb` alone on an H200)."
+    ),
     "humanoid": (
         "expert_ppo and dagger trained beside two other runs on one H200 (2026-11-23; that sweep's record was "
         "lost with the machine). gail trained alone on an H200 by `python -m hintsjax.run env=humanoid "
@@ -69,7 +113,8 @@ NOTES = {
         "updates 3451 to 8600: each later call to the machine "
         "copied the carried folder over the running one's, and the run, going on in memory, wrote on into "
         "the copy; its parameters and evaluation are whole, its curve joins update 3450 to 8601 with a "
-        "straight line, and its training-return and KL cells cover the 4615 updates logged."),
+        "straight line, and its training-return and KL cells cover the 4615 updates logged."
+    ),
 }
 DEFAULT_RUNS = "runs/locomotion"
 REPORT = "locomotion_table3.md"  # under RESULTS
@@ -87,7 +132,9 @@ def table_runs(env: str) -> list[str]:
     return [*REFERENCES, *BASELINES, *(hints_run("fc", h) for h in HINTS[env])]
 
 
-def kept_row(runs: Path, env: str, label: str, kept: dict[tuple[str, str], list[str]]) -> list[str] | None:
+def kept_row(
+    runs: Path, env: str, label: str, kept: dict[tuple[str, str], list[str]]
+) -> list[str] | None:
     """The previous report's row of a run that neither runs/ nor the archive holds (not even begun)."""
     if load(runs, env, label) is None and metrics_path(runs, env, label) is None:
         return kept.get((env, label))
@@ -97,6 +144,7 @@ def kept_row(runs: Path, env: str, label: str, kept: dict[tuple[str, str], list[
 def findings(runs: Path, env: str, kept: dict[tuple[str, str], list[str]]) -> str:
     """The paper's claims for these rows, as numbers: hints beat vision only, and (but for the
     cheetah) beat PPO on the state. A row kept from the previous report counts with its mean."""
+
     def stats(label: str) -> tuple[float, float] | None:
         row = kept_row(runs, env, label, kept)
         return cell_stats(cell(load(runs, env, label)) if row is None else row[1])
@@ -110,15 +158,24 @@ def findings(runs: Path, env: str, kept: dict[tuple[str, str], list[str]]) -> st
     top = hints[best]
 
     def verdict(other: tuple[float, float]) -> str:
-        return f"{'yes' if top[0] > other[0] else 'no'} ({apart_text(top, other)} the seeds' spread)"
+        return (
+            f"{'yes' if top[0] > other[0] else 'no'} ({apart_text(top, other)} the seeds' spread)"
+        )
 
-    return (f"Best HINTS-FC hint `{best}` {top[0]:.1f}; PPO-RGB {rgb[0]:.1f}; PPO-x {state[0]:.1f}. "
-            f"Hints beat vision only: {verdict(rgb)}; beat the state: {verdict(state)}. "
-            "(Beyond: the means differ by more than the two stds of the per-seed means together.)")
+    return (
+        f"Best HINTS-FC hint `{best}` {top[0]:.1f}; PPO-RGB {rgb[0]:.1f}; PPO-x {state[0]:.1f}. "
+        f"Hints beat vision only: {verdict(rgb)}; beat the state: {verdict(state)}. "
+        "(Beyond: the means differ by more than the two stds of the per-seed means together.)"
+    )
 
 
-def settings_lines(runs: Path, env: str, labels: list[str], kept: dict[tuple[str, str], list[str]] | None = None,
-                   reported: dict[tuple[str, str], str] | None = None) -> list[str]:
+def settings_lines(
+    runs: Path,
+    env: str,
+    labels: list[str],
+    kept: dict[tuple[str, str], list[str]] | None = None,
+    reported: dict[tuple[str, str], str] | None = None,
+) -> list[str]:
     """The PPO settings the rows were trained with (each run's config.yaml), grouped when they
     differ, naming the fields where a row's are not today's defaults; rows not yet run are listed at
     today's defaults (config.ENV_DEFAULTS); kept rows as the previous report listed them (`reported`,
@@ -133,12 +190,21 @@ def settings_lines(runs: Path, env: str, labels: list[str], kept: dict[tuple[str
             text = reported.get((env, label), reported.get((env, ""), ppo_text(default)))
             groups.setdefault(f"{text} (kept rows {KEPT}; as last reported)", []).append(label)
             continue
-        note = ("not run yet; config.ENV_DEFAULTS" if ppo is None else "config.ENV_DEFAULTS" if ppo == default
-                else f"not today's config.ENV_DEFAULTS: {differ(changed_fields(ppo, default))}")
+        note = (
+            "not run yet; config.ENV_DEFAULTS"
+            if ppo is None
+            else "config.ENV_DEFAULTS"
+            if ppo == default
+            else f"not today's config.ENV_DEFAULTS: {differ(changed_fields(ppo, default))}"
+        )
         groups.setdefault(f"{ppo_text(ppo or default)} ({note})", []).append(label)
     if len(groups) == 1:
         return [f"PPO: {next(iter(groups))}."]
-    return ["PPO, as each row was trained:", "", *(f"- {', '.join(rows)}: {text}." for text, rows in groups.items())]
+    return [
+        "PPO, as each row was trained:",
+        "",
+        *(f"- {', '.join(rows)}: {text}." for text, rows in groups.items()),
+    ]
 
 
 def reported_settings(path: Path) -> dict[tuple[str, str], str]:
@@ -151,12 +217,17 @@ def reported_settings(path: Path) -> dict[tuple[str, str], str]:
         if line.startswith("## "):
             section, listing = section_name(line), False
         elif line.startswith("PPO: "):
-            found[(section, "")] = line[len("PPO: "):].removesuffix(".").rsplit(" (", 1)[0]
+            found[(section, "")] = line[len("PPO: ") :].removesuffix(".").rsplit(" (", 1)[0]
         elif line == "PPO, as each row was trained:":
             listing = True
         elif listing and line.startswith("- "):
             rows, text = line[2:].split(": ", 1)
-            found.update({(section, label): text.removesuffix(".").rsplit(" (", 1)[0] for label in rows.split(", ")})
+            found.update(
+                {
+                    (section, label): text.removesuffix(".").rsplit(" (", 1)[0]
+                    for label in rows.split(", ")
+                }
+            )
         elif line:
             listing = False
     return found
@@ -164,7 +235,9 @@ def reported_settings(path: Path) -> dict[tuple[str, str], str]:
 
 def changed_fields(ppo, default) -> list[str]:
     """The PPOConfig fields in which `ppo` (a row's, as trained) differs from today's `default`."""
-    return [f.name for f in dataclasses.fields(ppo) if getattr(ppo, f.name) != getattr(default, f.name)]
+    return [
+        f.name for f in dataclasses.fields(ppo) if getattr(ppo, f.name) != getattr(default, f.name)
+    ]
 
 
 def differ(names: list[str]) -> str:
@@ -177,7 +250,8 @@ def report(runs: Path, force: bool = False) -> None:
 
     kept, reported = kept_rows(RESULTS / REPORT), reported_settings(RESULTS / REPORT)
     lines = [
-        "# Locomotion: the paper's Table 3 (Ant, Cheetah, Humanoid rows), reproduced", "",
+        "# Locomotion: the paper's Table 3 (Ant, Cheetah, Humanoid rows), reproduced",
+        "",
         "Each cell: mean ± std of the episode return over 5 training seeds x 50 evaluation episodes",
         "(deterministic policy); in brackets the std of the 5 per-seed means. The paper's cells are",
         "mean ± std over n=50. Wall-clock per run (hardware at the end) includes compilation and evaluation.",
@@ -186,30 +260,61 @@ def report(runs: Path, force: bool = False) -> None:
         "Training return: the training episodes (sampled actions) that ended in the last 10% of",
         "updates, mean ± std over the seeds. Updates with KL > 0.5: the share of PPO updates (all",
         "seeds) whose approx. KL from the rollout policy exceeded 0.5, a blown-up update; healthy runs",
-        "stay near 0% (experiments/results/locomotion_ppo_stability.md).", "",
+        "stay near 0% (experiments/results/locomotion_ppo_stability.md).",
+        "",
     ]
     for env in ENVS:
-        learners = [label for label in table_runs(env) if label not in REFERENCES]  # at the table's budget
-        lines += [f"## {env} ({run_config({'env': env}).ppo.total_env_steps / 1e6:g} M env steps per seed)", "",
-                  *settings_lines(runs, env, learners, kept, reported), ""]
+        # at the table's budget
+        learners = [label for label in table_runs(env) if label not in REFERENCES]
+        lines += [
+            f"## {env} ({run_config({'env': env}).ppo.total_env_steps / 1e6:g} M env steps per seed)",
+            "",
+            *settings_lines(runs, env, learners, kept, reported),
+            "",
+        ]
         rows = []
         for label in table_runs(env):
             if (row := kept_row(runs, env, label, kept)) is not None:
                 rows.append(row)
                 continue
             result = load(runs, env, label)
-            rows.append([label, cell(result), PAPER[env].get(label, "-"), training_cell(runs, env, label),
-                         kl_cell(runs, env, label), wall_clock(result)])
-        lines += markdown_table(["agent", "ours", "paper", "training return, last 10%", "updates with KL > 0.5",
-                                 "wall-clock (s)"], rows)
+            rows.append(
+                [
+                    label,
+                    cell(result),
+                    PAPER[env].get(label, "-"),
+                    training_cell(runs, env, label),
+                    kl_cell(runs, env, label),
+                    wall_clock(result),
+                ]
+            )
+        lines += markdown_table(
+            [
+                "agent",
+                "ours",
+                "paper",
+                "training return, last 10%",
+                "updates with KL > 0.5",
+                "wall-clock (s)",
+            ],
+            rows,
+        )
         lines += ["", findings(runs, env, kept), "", references_note(runs, env, REFERENCES), ""]
         lines += [NOTES[env], ""] if env in NOTES else []
-        lines += curve_lines(runs, env, learners, RESULTS / f"locomotion_curves_{env}.png", f"{env}: Table 3 agents, 5 seeds",
-                             kept=tuple(label for label in learners if kept_row(runs, env, label, kept)))
+        lines += curve_lines(
+            runs,
+            env,
+            learners,
+            RESULTS / f"locomotion_curves_{env}.png",
+            f"{env}: Table 3 agents, 5 seeds",
+            kept=tuple(label for label in learners if kept_row(runs, env, label, kept)),
+        )
     if any(KEPT in line for line in lines):
-        lines.append(f"Rows marked {KEPT} are kept from the previous report: their runs predate the results archive "
-                     "(experiments/results/runs) and their run folders were lost. The sweeps before the archive took "
-                     f"{UNARCHIVED_SWEEP_SECONDS} s of GPU wall-clock, beside the footer's.")
+        lines.append(
+            f"Rows marked {KEPT} are kept from the previous report: their runs predate the results archive "
+            "(experiments/results/runs) and their run folders were lost. The sweeps before the archive took "
+            f"{UNARCHIVED_SWEEP_SECONDS} s of GPU wall-clock, beside the footer's."
+        )
         lines.append("")
     lines.append(footer(runs, TABLE, run_ids(ENVS)))
     write_report(RESULTS / REPORT, lines, force)
@@ -229,13 +334,28 @@ def ordering_lines(runs: Path, env: str) -> list[str]:
         return []
     best = max(hints, key=lambda h: stats.iqm(seed_means(hints[h])))
     label = lambda h: hints_run("fc", h)  # noqa: E731
-    pairs = [("O1 (hints beat vision only)", label(best), hints[best], "ppo_rgb", run("ppo_rgb")),
-             ("O4 (hints close the gap to PPO on the state)", label(best), hints[best], "ppo_state", run("ppo_state"))]
+    pairs = [
+        ("O1 (hints beat vision only)", label(best), hints[best], "ppo_rgb", run("ppo_rgb")),
+        (
+            "O4 (hints close the gap to PPO on the state)",
+            label(best),
+            hints[best],
+            "ppo_state",
+            run("ppo_state"),
+        ),
+    ]
     specific = {h: r for h, r in hints.items() if h != "state"}
     if "state" in hints and specific:
         top = max(specific, key=lambda h: stats.iqm(seed_means(specific[h])))
-        pairs.append(("O5 (a specific hint beats the full state as a hint)", label(top), specific[top], label("state"),
-                      hints["state"]))
+        pairs.append(
+            (
+                "O5 (a specific hint beats the full state as a hint)",
+                label(top),
+                specific[top],
+                label("state"),
+                hints["state"],
+            )
+        )
     return [ordering_line(*pair) for pair in pairs if pair[2] is not None and pair[4] is not None]
 
 
@@ -247,11 +367,14 @@ def learners_report(runs: Path, names: list[str], path: Path, force: bool = Fals
     from hintsjax.settings.layers import run_config
 
     about = {k: v for k, v in read_about(ARCHIVE / runs.name).items() if k in (*ENVS, "references")}
-    lines = [f"Made by `python experiments/locomotion.py --learners-report experiments/results/{path.name} "
-             f"--runs runs/{runs.name}` from the archived runs (experiments/results/runs/{runs.name}).",
-             "Cells: mean ± std over all seeds x 50 evaluation episodes (in brackets the std of the per-seed means), the",
-             "IQM of the per-seed means with a 95 % stratified bootstrap interval, and P(row > PPO-RGB) over the seeds.",
-             f"GPU wall-clock of the sweeps (runs/{runs.name}/sweeps.jsonl): {sweep_seconds(runs, TABLE):.0f} s.", ""]
+    lines = [
+        f"Made by `python experiments/locomotion.py --learners-report experiments/results/{path.name} "
+        f"--runs runs/{runs.name}` from the archived runs (experiments/results/runs/{runs.name}).",
+        "Cells: mean ± std over all seeds x 50 evaluation episodes (in brackets the std of the per-seed means), the",
+        "IQM of the per-seed means with a 95 % stratified bootstrap interval, and P(row > PPO-RGB) over the seeds.",
+        f"GPU wall-clock of the sweeps (runs/{runs.name}/sweeps.jsonl): {sweep_seconds(runs, TABLE):.0f} s.",
+        "",
+    ]
     for env in names:
         labels = [*BASELINES, *(hints_run("fc", h) for h in HINTS[env])]
         results = {label: load(runs, env, label) for label in labels}
@@ -261,22 +384,44 @@ def learners_report(runs: Path, names: list[str], path: Path, force: bool = Fals
             lines += [f"## {env} ({budget:g} M env steps per seed)", "", "Not trained yet.", ""]
             continue
         seeds = sorted({len(seed_means(r)) for r in trained.values()})
-        lines += [f"## {env} ({budget:g} M env steps per seed, {', '.join(map(str, seeds))} seeds per row)", "",
-                  *settings_lines(runs, env, labels), ""]
+        lines += [
+            f"## {env} ({budget:g} M env steps per seed, {', '.join(map(str, seeds))} seeds per row)",
+            "",
+            *settings_lines(runs, env, labels),
+            "",
+        ]
         rgb = results["ppo_rgb"]
-        rows = [[label, cell(r), iqm_cell(r), "-" if label == "ppo_rgb" else poi_cell(r, rgb), PAPER[env].get(label, "-"),
-                 wall_clock(r)] for label, r in results.items()]
-        lines += markdown_table(["agent", "ours", "IQM [95% CI]", "P(row > PPO-RGB)", "paper", "wall-clock (s)"], rows)
+        rows = [
+            [
+                label,
+                cell(r),
+                iqm_cell(r),
+                "-" if label == "ppo_rgb" else poi_cell(r, rgb),
+                PAPER[env].get(label, "-"),
+                wall_clock(r),
+            ]
+            for label, r in results.items()
+        ]
+        lines += markdown_table(
+            ["agent", "ours", "IQM [95% CI]", "P(row > PPO-RGB)", "paper", "wall-clock (s)"], rows
+        )
         lines += ["", ORDERINGS_ABOUT, "", *ordering_lines(runs, env), ""]
-        lines += curve_lines(runs, env, list(trained), RESULTS / f"table3_seeds20_curves_{env}.png",
-                             f"{env}: Table 3 learners, {', '.join(map(str, seeds))} seeds")
+        lines += curve_lines(
+            runs,
+            env,
+            list(trained),
+            RESULTS / f"table3_seeds20_curves_{env}.png",
+            f"{env}: Table 3 learners, {', '.join(map(str, seeds))} seeds",
+        )
     write_section(path, GENERATED, [*lines, *about_lines(about)], force)
 
 
 GENERATED = generated_marker("locomotion.py")
 
 
-SCRIPT = TableScript(__doc__.splitlines()[0], DEFAULT_RUNS, ENVS, {TABLE: run_ids}, report, learners_report)
+SCRIPT = TableScript(
+    __doc__.splitlines()[0], DEFAULT_RUNS, ENVS, {TABLE: run_ids}, report, learners_report
+)
 
 
 def main() -> None:

@@ -38,10 +38,12 @@ from hintsjax.reproduce import stats
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "results" / "physics_expert.json"
 GAP_STEPS = (1, 10, 100)
-ABOUT = ("Each env's packaged expert (mean actions) for `episodes` full episodes from the same starts under "
-         "physics=jax and physics=warp: mean return [95 % bootstrap CI], falls, warp - jax [95 % CI, episodes "
-         "resampled independently]; jax_nudged_1e-6: the jax run again from starts with qvel + 1e-6 (the task's "
-         "own chaos); qpos_gap_median: median over episodes of max |qpos| gap at steps 1, 10, 100.")
+ABOUT = (
+    "Each env's packaged expert (mean actions) for `episodes` full episodes from the same starts under "
+    "physics=jax and physics=warp: mean return [95 % bootstrap CI], falls, warp - jax [95 % CI, episodes "
+    "resampled independently]; jax_nudged_1e-6: the jax run again from starts with qvel + 1e-6 (the task's "
+    "own chaos); qpos_gap_median: median over episodes of max |qpos| gap at steps 1, 10, 100."
+)
 
 
 def rollout(env, expert):
@@ -61,7 +63,13 @@ def rollout(env, expert):
             total = total + jnp.where(alive, nxt.reward, 0.0)
             length = length + alive
             fell = fell | (alive & nxt.terminated)
-            return (nxt, total, length, fell, alive & ~nxt.terminated & ~nxt.truncated), nxt.state.qpos
+            return (
+                nxt,
+                total,
+                length,
+                fell,
+                alive & ~nxt.terminated & ~nxt.truncated,
+            ), nxt.state.qpos
 
         zero = jnp.zeros((), jnp.float32)
         carry = (first, zero, jnp.zeros((), jnp.int32), jnp.zeros((), bool), jnp.ones((), bool))
@@ -79,8 +87,13 @@ def compare(name: str, episodes: int) -> dict:
         runs[physics] = rollout(envs.make(name, "none", ("state",), physics=physics), expert)
         start = time.perf_counter()
         total, length, fell, qpos = jax.block_until_ready(runs[physics](keys, 0.0))
-        out[physics] = dict(returns=np.asarray(total), lengths=np.asarray(length), fell=np.asarray(fell),
-                            qpos=np.asarray(qpos), seconds=time.perf_counter() - start)
+        out[physics] = dict(
+            returns=np.asarray(total),
+            lengths=np.asarray(length),
+            fell=np.asarray(fell),
+            qpos=np.asarray(qpos),
+            seconds=time.perf_counter() - start,
+        )
     nudged_returns, _, nudged_fell, nudged = map(np.asarray, runs["jax"](keys, 1e-6))
     jx, wp = out["jax"], out["warp"]
     diff = stats.difference_ci(wp["returns"], jx["returns"])
@@ -88,17 +101,33 @@ def compare(name: str, episodes: int) -> dict:
     row = {"env": name, "episodes": episodes, "max_steps": int(envs.make(name).max_steps)}
     for physics, r in out.items():
         ci = stats.bootstrap_ci(r["returns"], np.mean)
-        row[physics] = {"mean_return": float(ci.point), "ci": [float(ci.low), float(ci.high)],
-                        "std": float(r["returns"].std()), "falls": int(r["fell"].sum()),
-                        "mean_length": float(r["lengths"].mean()), "seconds": round(r["seconds"], 1)}
-    row["warp_minus_jax"] = {"mean": float(diff.point), "ci": [float(diff.low), float(diff.high)],
-                             "decided": bool(stats.difference_decided(diff))}
-    chaos = stats.difference_ci(nudged_returns, jx["returns"])  # the same physics, starts 1e-6 apart
-    row["jax_nudged_1e-6"] = {"mean_return": float(nudged_returns.mean()), "falls": int(nudged_fell.sum()),
-                              "minus_jax": {"mean": float(chaos.point), "ci": [float(chaos.low), float(chaos.high)]}}
-    row["qpos_gap_median"] = {f"step_{s}": {"warp_vs_jax": float(np.median(gap(wp["qpos"], jx["qpos"])[:, i])),
-                                            "jax_nudged_1e-6": float(np.median(gap(nudged, jx["qpos"])[:, i]))}
-                              for i, s in enumerate(GAP_STEPS)}
+        row[physics] = {
+            "mean_return": float(ci.point),
+            "ci": [float(ci.low), float(ci.high)],
+            "std": float(r["returns"].std()),
+            "falls": int(r["fell"].sum()),
+            "mean_length": float(r["lengths"].mean()),
+            "seconds": round(r["seconds"], 1),
+        }
+    row["warp_minus_jax"] = {
+        "mean": float(diff.point),
+        "ci": [float(diff.low), float(diff.high)],
+        "decided": bool(stats.difference_decided(diff)),
+    }
+    # the same physics, starts 1e-6 apart
+    chaos = stats.difference_ci(nudged_returns, jx["returns"])
+    row["jax_nudged_1e-6"] = {
+        "mean_return": float(nudged_returns.mean()),
+        "falls": int(nudged_fell.sum()),
+        "minus_jax": {"mean": float(chaos.point), "ci": [float(chaos.low), float(chaos.high)]},
+    }
+    row["qpos_gap_median"] = {
+        f"step_{s}": {
+            "warp_vs_jax": float(np.median(gap(wp["qpos"], jx["qpos"])[:, i])),
+            "jax_nudged_1e-6": float(np.median(gap(nudged, jx["qpos"])[:, i])),
+        }
+        for i, s in enumerate(GAP_STEPS)
+    }
     return row
 
 
@@ -109,15 +138,21 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=OUT)
     args = parser.parse_args()
     # rows by env: a rerun replaces its envs' rows and keeps the others; written after each env
-    rows = {r["env"]: r for r in json.loads(args.out.read_text())["rows"]} if args.out.exists() else {}
+    rows = (
+        {r["env"]: r for r in json.loads(args.out.read_text())["rows"]} if args.out.exists() else {}
+    )
     for name in args.envs:
         row = compare(name, args.episodes)
-        row.update(device=jax.devices()[0].device_kind, jax_version=jax.__version__,
-                   command=f"python experiments/physics_expert.py --envs {name} --episodes {args.episodes}")
+        row.update(
+            device=jax.devices()[0].device_kind,
+            jax_version=jax.__version__,
+            command=f"python experiments/physics_expert.py --envs {name} --episodes {args.episodes}",
+        )
         rows[name] = row
         print(json.dumps(row), flush=True)
-        args.out.write_text(json.dumps({"about": ABOUT,
-                                        "rows": list(rows.values())}, indent=1) + "\n")
+        args.out.write_text(
+            json.dumps({"about": ABOUT, "rows": list(rows.values())}, indent=1) + "\n"
+        )
 
 
 if __name__ == "__main__":

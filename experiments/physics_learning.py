@@ -50,7 +50,10 @@ class Arm:
     @cached_property
     def results(self) -> list[dict | None]:
         """Each run's eval.json (None where it has none), read once."""
-        return [json.loads((f / "eval.json").read_text()) if (f / "eval.json").exists() else None for f in self.folders]
+        return [
+            json.loads((f / "eval.json").read_text()) if (f / "eval.json").exists() else None
+            for f in self.folders
+        ]
 
     def seed_means(self) -> np.ndarray | None:
         """[S] evaluation means over every folder's seeds; None when a run was not evaluated."""
@@ -100,7 +103,10 @@ class Arm:
         return min(float(steps[-1]) for steps, _ in self.curves)
 
     def runs_text(self, key: str, scale: float = 1.0, unit: str = "") -> str:
-        values = [("-" if r is None or r.get(key) is None else f"{_value(r[key]) / scale:.1f}{unit}") for r in self.results]
+        values = [
+            ("-" if r is None or r.get(key) is None else f"{_value(r[key]) / scale:.1f}{unit}")
+            for r in self.results
+        ]
         return ", ".join(values)
 
 
@@ -111,7 +117,10 @@ def _value(entry) -> float:
 def arms_of(runs: Path, about: dict) -> dict[str, dict[str, Arm]]:
     """{env: {physics: Arm}} from about.json's `arms`, or the `<env>-<physics>` folders."""
     if "arms" in about:
-        return {env: {p: Arm(tuple(runs / f for f in named[p])) for p in PHYSICS} for env, named in about["arms"].items()}
+        return {
+            env: {p: Arm(tuple(runs / f for f in named[p])) for p in PHYSICS}
+            for env, named in about["arms"].items()
+        }
     envs = sorted({p.name.rsplit("-", 1)[0] for p in runs.iterdir() if p.is_dir()})
     return {env: {p: Arm((runs / f"{env}-{p}",)) for p in PHYSICS} for env in envs}
 
@@ -119,10 +128,16 @@ def arms_of(runs: Path, about: dict) -> dict[str, dict[str, Arm]]:
 def comparison(warp: np.ndarray, jax: np.ndarray) -> tuple[str, str, str]:
     """(P(warp > jax) cell, difference cell, verdict) of two [S] score arrays."""
     poi, diff = stats.poi_ci(warp, jax), stats.difference_ci(warp, jax)
-    verdict = (f"decided: warp scores {'below' if diff.high < 0 else 'above'} jax (the difference's interval excludes 0)"
-               if stats.difference_decided(diff) else "undecided: the difference's interval holds 0")
-    return (f"{poi.point:.2f} [{poi.low:.2f}, {poi.high:.2f}]", f"{diff.point:+.1f} [{diff.low:+.1f}, {diff.high:+.1f}]",
-            verdict)
+    verdict = (
+        f"decided: warp scores {'below' if diff.high < 0 else 'above'} jax (the difference's interval excludes 0)"
+        if stats.difference_decided(diff)
+        else "undecided: the difference's interval holds 0"
+    )
+    return (
+        f"{poi.point:.2f} [{poi.low:.2f}, {poi.high:.2f}]",
+        f"{diff.point:+.1f} [{diff.low:+.1f}, {diff.high:+.1f}]",
+        verdict,
+    )
 
 
 def outliers_text(scores: np.ndarray | None) -> str:
@@ -135,51 +150,91 @@ def outliers_text(scores: np.ndarray | None) -> str:
 def report(runs: Path) -> list[str]:
     about = json.loads((runs / "about.json").read_text())
     where = runs.relative_to(HERE.parent) if runs.is_relative_to(HERE.parent) else runs
-    lines = ["# Learning on MJX-Warp against MJX-JAX", "",
-             f"{about['what']}. Hardware: {about['hardware']} ({about['date']}). Written by "
-             f"`python experiments/physics_learning.py --runs {where}` from the runs in that folder.", "",
-             "## The evaluation (deterministic policy, each seed's mean over its episodes)", "",
-             "| env | env steps per seed | seeds, jax / warp | jax: IQM [95 % CI] | warp: IQM [95 % CI] | P(warp > jax) | "
-             "warp - jax, mean [95 % CI] | seeds far below, jax / warp | seeds with a KL storm, jax / warp |",
-             "|---|---|---|---|---|---|---|---|---|"]
-    training = ["", "## The training return at equal env steps (sampled actions, each seed's mean over the episodes "
-                f"logged in the last {LAST:.0%} of the steps both physics reached)", "",
-                "| env | env steps per seed | seeds, jax / warp | jax: IQM [95 % CI] | warp: IQM [95 % CI] | P(warp > jax) | "
-                "warp - jax, mean [95 % CI] | seeds whose policy std ended above its start, jax / warp |",
-                "|---|---|---|---|---|---|---|---|"]
-    speed = ["", "## Each run's training rate and compile", "",
-             "| env | training env steps/s, jax | training env steps/s, warp | training compile s, jax | training compile s, warp |",
-             "|---|---|---|---|---|"]
+    lines = [
+        "# Learning on MJX-Warp against MJX-JAX",
+        "",
+        f"{about['what']}. Hardware: {about['hardware']} ({about['date']}). Written by "
+        f"`python experiments/physics_learning.py --runs {where}` from the runs in that folder.",
+        "",
+        "## The evaluation (deterministic policy, each seed's mean over its episodes)",
+        "",
+        "| env | env steps per seed | seeds, jax / warp | jax: IQM [95 % CI] | warp: IQM [95 % CI] | P(warp > jax) | "
+        "warp - jax, mean [95 % CI] | seeds far below, jax / warp | seeds with a KL storm, jax / warp |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    training = [
+        "",
+        "## The training return at equal env steps (sampled actions, each seed's mean over the episodes "
+        f"logged in the last {LAST:.0%} of the steps both physics reached)",
+        "",
+        "| env | env steps per seed | seeds, jax / warp | jax: IQM [95 % CI] | warp: IQM [95 % CI] | P(warp > jax) | "
+        "warp - jax, mean [95 % CI] | seeds whose policy std ended above its start, jax / warp |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    speed = [
+        "",
+        "## Each run's training rate and compile",
+        "",
+        "| env | training env steps/s, jax | training env steps/s, warp | training compile s, jax | training compile s, warp |",
+        "|---|---|---|---|---|",
+    ]
     verdicts = []
     for env, arms in arms_of(runs, about).items():
         jx, wp = arms["jax"].seed_means(), arms["warp"].seed_means()
-        steps = {r["env_steps"] for p in PHYSICS for r in arms[p].results if r is not None and "env_steps" in r}
+        steps = {
+            r["env_steps"]
+            for p in PHYSICS
+            for r in arms[p].results
+            if r is not None and "env_steps" in r
+        }
         if jx is not None and wp is not None:
             poi, diff, verdict = comparison(wp, jx)
-            lines.append(f"| {env} | {', '.join(f'{s:,}' for s in sorted(steps)) or '-'} | {len(jx)} / {len(wp)} | "
-                         f"{stats.iqm_cell(jx)} | {stats.iqm_cell(wp)} | {poi} | {diff} | "
-                         f"{outliers_text(jx)} / {outliers_text(wp)} | {arms['jax'].storm_seeds()} / {arms['warp'].storm_seeds()} |")
+            lines.append(
+                f"| {env} | {', '.join(f'{s:,}' for s in sorted(steps)) or '-'} | {len(jx)} / {len(wp)} | "
+                f"{stats.iqm_cell(jx)} | {stats.iqm_cell(wp)} | {poi} | {diff} | "
+                f"{outliers_text(jx)} / {outliers_text(wp)} | {arms['jax'].storm_seeds()} / {arms['warp'].storm_seeds()} |"
+            )
             verdicts.append(f"- {env}, evaluation: {verdict}")
         else:
-            lines.append(f"| {env} | - | - | {'-' if jx is None else stats.iqm_cell(jx)} | "
-                         f"{'-' if wp is None else stats.iqm_cell(wp)} | - | - | - | - |")
+            lines.append(
+                f"| {env} | - | - | {'-' if jx is None else stats.iqm_cell(jx)} | "
+                f"{'-' if wp is None else stats.iqm_cell(wp)} | - | - | - | - |"
+            )
         up_to = min(arms[p].reached() for p in PHYSICS)
         tj, tw = arms["jax"].training_means(up_to), arms["warp"].training_means(up_to)
         poi, diff, verdict = comparison(tw, tj)
-        training.append(f"| {env} | {up_to:,.0f} | {len(tj)} / {len(tw)} | {stats.iqm_cell(tj)} | {stats.iqm_cell(tw)} | "
-                        f"{poi} | {diff} | {arms['jax'].std_grown(up_to)} / {arms['warp'].std_grown(up_to)} |")
+        training.append(
+            f"| {env} | {up_to:,.0f} | {len(tj)} / {len(tw)} | {stats.iqm_cell(tj)} | {stats.iqm_cell(tw)} | "
+            f"{poi} | {diff} | {arms['jax'].std_grown(up_to)} / {arms['warp'].std_grown(up_to)} |"
+        )
         verdicts.append(f"- {env}, training return at {up_to:,.0f} env steps: {verdict}")
-        speed.append(f"| {env} | {arms['jax'].runs_text('train_env_steps_per_s', 1e3, ' K')} | "
-                     f"{arms['warp'].runs_text('train_env_steps_per_s', 1e3, ' K')} | "
-                     f"{arms['jax'].runs_text('compile_seconds')} | {arms['warp'].runs_text('compile_seconds')} |")
-    return [*lines, *training, *speed, "", "Verdicts (difference of means, 95 % bootstrap CI over seeds):", *verdicts, "",
-            "Commands:", *[f"- {name}: `{cmd}`" for name, cmd in about["commands"].items()], "",
-            "Notes:", *[f"- {note}" for note in about["notes"]], ""]
+        speed.append(
+            f"| {env} | {arms['jax'].runs_text('train_env_steps_per_s', 1e3, ' K')} | "
+            f"{arms['warp'].runs_text('train_env_steps_per_s', 1e3, ' K')} | "
+            f"{arms['jax'].runs_text('compile_seconds')} | {arms['warp'].runs_text('compile_seconds')} |"
+        )
+    return [
+        *lines,
+        *training,
+        *speed,
+        "",
+        "Verdicts (difference of means, 95 % bootstrap CI over seeds):",
+        *verdicts,
+        "",
+        "Commands:",
+        *[f"- {name}: `{cmd}`" for name, cmd in about["commands"].items()],
+        "",
+        "Notes:",
+        *[f"- {note}" for note in about["notes"]],
+        "",
+    ]
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--runs", type=Path, default=RUNS, help="a folder of runs with its about.json")
+    parser.add_argument(
+        "--runs", type=Path, default=RUNS, help="a folder of runs with its about.json"
+    )
     parser.add_argument("--out", type=Path, default=OUT, help="the markdown file to write")
     args = parser.parse_args()
     text = "\n".join(report(args.runs.resolve()))

@@ -44,7 +44,12 @@ RESULTS = Path(__file__).resolve().parent / "results"
 REPORT = "playground.md"  # under RESULTS
 DEFAULT_RUNS = "runs/playground"
 TABLE = "playground"  # the sweep's name in runs/<...>/sweeps.jsonl
-ENVS = ("playground:CartpoleSwingup", "playground:CheetahRun", "playground:WalkerWalk", "playground:ReacherEasy")
+ENVS = (
+    "playground:CartpoleSwingup",
+    "playground:CheetahRun",
+    "playground:WalkerWalk",
+    "playground:ReacherEasy",
+)
 HINTS = {  # one natural hint per task (envs/playground.py DEFAULTS)
     "playground:CartpoleSwingup": "pole_angle",
     "playground:CheetahRun": "torso_velocity",
@@ -63,9 +68,12 @@ def run_ids(names) -> list[str]:
 
 SIDES = ("hintsjax", "brax")
 TRAINERS = {"hintsjax": "hintsjax ppo_state", "brax": "brax.training ppo"}
-MODES = ("deterministic", "stochastic")  # how each side's final policy is evaluated: mean action, or sampled
+# how each side's final policy is evaluated: mean action, or sampled
+MODES = ("deterministic", "stochastic")
 EVAL_EPISODES = 128  # fresh episodes per seed and mode, on both sides: Brax's num_eval_envs
-NO_CLIP = 1e9  # hintsjax's max_grad_norm for Brax's None (no clipping): it clips only a gradient whose norm passes 1e9
+# hintsjax's max_grad_norm for Brax's None (no clipping): it clips only a gradient whose norm passes
+# 1e9
+NO_CLIP = 1e9
 
 
 def brax_settings(smoke: bool) -> dict:
@@ -74,8 +82,17 @@ def brax_settings(smoke: bool) -> dict:
 
     settings = dict(dm_control_suite_params.brax_ppo_config(VERSUS_TASK))
     if smoke:
-        settings.update(num_timesteps=4096, num_evals=2, num_envs=8, batch_size=8, num_minibatches=4, unroll_length=8,
-                        num_updates_per_batch=1, num_eval_envs=8, num_resets_per_eval=0)
+        settings.update(
+            num_timesteps=4096,
+            num_evals=2,
+            num_envs=8,
+            batch_size=8,
+            num_minibatches=4,
+            unroll_length=8,
+            num_updates_per_batch=1,
+            num_eval_envs=8,
+            num_resets_per_eval=0,
+        )
     return settings
 
 
@@ -105,21 +122,40 @@ def hintsjax_values(brax: dict, seeds: int, steps: int, smoke: bool) -> dict:
     the whole rollout (Brax's over each unroll), the ratio clip (0.2 beside Brax's 0.3) and the
     episodes running on across updates (Brax resets every env after each: ppo.reset_every_update)."""
     batch = steps_per_update(brax)
-    ppo = {"total_env_steps": steps, "num_envs": brax["num_envs"], "batch_size": batch,
-           "minibatch_size": batch // brax["num_minibatches"], "epochs": brax["num_updates_per_batch"],
-           "gamma": brax["discounting"], "actor_lr": brax["learning_rate"], "critic_lr": brax["learning_rate"],
-           "ent_coef": brax["entropy_cost"], "reward_scale": brax["reward_scaling"],
-           "max_grad_norm": brax.get("max_grad_norm") or NO_CLIP,
-           "normalize_state": brax["normalize_observations"],
-           # Brax's order: a rollout's states join the statistics before learning on it (issue 61:
-           # after it, at 20 updates, cost CartpoleSwingup more than half its return on a CPU)
-           "normalize_before_learning": brax["normalize_observations"]}
-    return {"env": f"playground:{VERSUS_TASK}", "agent": "ppo_state", "seeds": seeds, "eval_episodes": 2 if smoke else 50,
-            "checkpoint_every": 10 ** 9, "ppo": ppo}
+    ppo = {
+        "total_env_steps": steps,
+        "num_envs": brax["num_envs"],
+        "batch_size": batch,
+        "minibatch_size": batch // brax["num_minibatches"],
+        "epochs": brax["num_updates_per_batch"],
+        "gamma": brax["discounting"],
+        "actor_lr": brax["learning_rate"],
+        "critic_lr": brax["learning_rate"],
+        "ent_coef": brax["entropy_cost"],
+        "reward_scale": brax["reward_scaling"],
+        "max_grad_norm": brax.get("max_grad_norm") or NO_CLIP,
+        "normalize_state": brax["normalize_observations"],
+        # Brax's order: a rollout's states join the statistics before learning on it (issue 61:
+        # after it, at 20 updates, cost CartpoleSwingup more than half its return on a CPU)
+        "normalize_before_learning": brax["normalize_observations"],
+    }
+    return {
+        "env": f"playground:{VERSUS_TASK}",
+        "agent": "ppo_state",
+        "seeds": seeds,
+        "eval_episodes": 2 if smoke else 50,
+        "checkpoint_every": 10**9,
+        "ppo": ppo,
+    }
 
 
-def train_hintsjax(brax: dict, seeds: int, updates: int, overrides: dict | None = None,
-                   episodes: int = EVAL_EPISODES) -> dict:
+def train_hintsjax(
+    brax: dict,
+    seeds: int,
+    updates: int,
+    overrides: dict | None = None,
+    episodes: int = EVAL_EPISODES,
+) -> dict:
     """hintsjax's ppo_state with Brax's settings (`hintsjax_values`, plus `overrides` of its ppo
     section), its seeds vmapped in one program, exactly `updates` updates; the seconds run from the
     call to the trained policies (compilation included, evaluation not); then each seed's final
@@ -137,7 +173,8 @@ def train_hintsjax(brax: dict, seeds: int, updates: int, overrides: dict | None 
     values["eval_episodes"] = episodes
     cfg = run_config(values)
     trainer = make_trainer(cfg)
-    every = max(d for d in range(1, 9) if updates % d == 0)  # updates between progress lines: one compiled chunk
+    # updates between progress lines: one compiled chunk
+    every = max(d for d in range(1, 9) if updates % d == 0)
     t = time.time()
     state = jax.jit(jax.vmap(trainer.init))(cfg.seed_keys())
     chunk = jax.jit(jax.vmap(lambda s: trainer.run(s, every)))
@@ -145,17 +182,31 @@ def train_hintsjax(brax: dict, seeds: int, updates: int, overrides: dict | None 
     for _ in range(updates // every):
         state, metrics = chunk(state)
         curve.append(np.asarray(metrics["episode_return"])[:, -1].round(1).tolist())
-        kl_curve.append(np.asarray(metrics["approx_kl"]).max(axis=1).round(4).tolist())  # the chunk's largest update KL
-        print(f"update {int(np.asarray(state.update)[0])}: training return per seed {curve[-1]}, "
-              f"largest KL {kl_curve[-1]}", flush=True)
+        # the chunk's largest update KL
+        kl_curve.append(np.asarray(metrics["approx_kl"]).max(axis=1).round(4).tolist())
+        print(
+            f"update {int(np.asarray(state.update)[0])}: training return per seed {curve[-1]}, "
+            f"largest KL {kl_curve[-1]}",
+            flush=True,
+        )
     assert int(np.asarray(state.update)[0]) == updates
     seconds = time.time() - t
     compiled = compile_evaluator(cfg, state.params, None, episodes)
-    evals = {mode: evaluate_variants(cfg, state.params, (None,), episodes, mode == "stochastic", compiled)[0][0]
-             for mode in MODES}
-    return {"env_steps_per_seed": updates * cfg.ppo.batch_size, "seconds": seconds,
-            **{mode: [float(x) for x in evals[mode]["seed_means"]] for mode in MODES},
-            "curve": curve, "kl_curve": kl_curve, "every": every, "settings": to_dict(cfg)["ppo"]}
+    evals = {
+        mode: evaluate_variants(
+            cfg, state.params, (None,), episodes, mode == "stochastic", compiled
+        )[0][0]
+        for mode in MODES
+    }
+    return {
+        "env_steps_per_seed": updates * cfg.ppo.batch_size,
+        "seconds": seconds,
+        **{mode: [float(x) for x in evals[mode]["seed_means"]] for mode in MODES},
+        "curve": curve,
+        "kl_curve": kl_curve,
+        "every": every,
+        "settings": to_dict(cfg)["ppo"],
+    }
 
 
 def mend_brax_for_this_jax() -> None:
@@ -191,11 +242,21 @@ def train_brax(brax: dict, seeds: int, updates: int, episodes: int = EVAL_EPISOD
     from mujoco_playground import registry, wrapper
 
     mend_brax_for_this_jax()
-    run = {**brax, **brax_schedule(updates), "num_timesteps": updates * steps_per_update(brax), "num_eval_envs": episodes}
+    run = {
+        **brax,
+        **brax_schedule(updates),
+        "num_timesteps": updates * steps_per_update(brax),
+        "num_eval_envs": episodes,
+    }
     factory = ppo_networks.make_ppo_networks
     if "network_factory" in run:
         factory = functools.partial(ppo_networks.make_ppo_networks, **run.pop("network_factory"))
-    out: dict = {"brax_final_eval": [], "env_steps_per_seed": [], "curve": [], **{mode: [] for mode in MODES}}
+    out: dict = {
+        "brax_final_eval": [],
+        "env_steps_per_seed": [],
+        "curve": [],
+        **{mode: [] for mode in MODES},
+    }
     trained, seconds = [], 0.0
     for seed in range(seeds):
         env = registry.load(VERSUS_TASK, config_overrides={"impl": "jax"})
@@ -207,24 +268,39 @@ def train_brax(brax: dict, seeds: int, updates: int, episodes: int = EVAL_EPISOD
                 print(f"seed {seed} step {step}: eval return {seen[-1][1]}", flush=True)
 
         t = time.time()
-        make_policy, params, _ = ppo.train(environment=env, wrap_env_fn=wrapper.wrap_for_brax_training,
-                                           network_factory=factory, progress_fn=progress, seed=seed, **run)
+        make_policy, params, _ = ppo.train(
+            environment=env,
+            wrap_env_fn=wrapper.wrap_for_brax_training,
+            network_factory=factory,
+            progress_fn=progress,
+            seed=seed,
+            **run,
+        )
         seconds += time.time() - t
         out["brax_final_eval"].append(seen[-1][1])
         out["env_steps_per_seed"].append(seen[-1][0])
         out["curve"].append(seen)
         trained.append((env, make_policy, params))
     for seed, (env, make_policy, params) in enumerate(trained):
-        eval_env = wrapper.wrap_for_brax_training(env, episode_length=brax["episode_length"], action_repeat=1)
+        eval_env = wrapper.wrap_for_brax_training(
+            env, episode_length=brax["episode_length"], action_repeat=1
+        )
         for mode in MODES:
-            evaluator = acting.Evaluator(eval_env, functools.partial(make_policy, deterministic=mode == "deterministic"),
-                                         num_eval_envs=episodes, episode_length=brax["episode_length"],
-                                         action_repeat=1, key=jax.random.PRNGKey(1000 + seed))
+            evaluator = acting.Evaluator(
+                eval_env,
+                functools.partial(make_policy, deterministic=mode == "deterministic"),
+                num_eval_envs=episodes,
+                episode_length=brax["episode_length"],
+                action_repeat=1,
+                key=jax.random.PRNGKey(1000 + seed),
+            )
             out[mode].append(float(evaluator.run_evaluation(params, {})["eval/episode_reward"]))
     return {**out, "seconds": seconds, "settings": run}
 
 
-def versus_brax(runs: Path, seeds: int, steps: int | None, smoke: bool, sides: tuple[str, ...] = SIDES) -> None:
+def versus_brax(
+    runs: Path, seeds: int, steps: int | None, smoke: bool, sides: tuple[str, ...] = SIDES
+) -> None:
     """Item 6: each side of `sides` in this process, one after the other, at the same whole number
     of updates (`steps` // the update's env steps), into the record runs/versus_brax.json. Each side
     reads the record again when it ends and replaces its own entry only, so the two sides can run
@@ -235,22 +311,41 @@ def versus_brax(runs: Path, seeds: int, steps: int | None, smoke: bool, sides: t
     updates = max((steps or brax["num_timesteps"]) // steps_per_update(brax), 1)
     episodes = 4 if smoke else EVAL_EPISODES
     path = runs / VERSUS_JSON
-    budget = {"task": VERSUS_TASK, "seeds": seeds, "updates": updates,
-              "env_steps_per_seed": updates * steps_per_update(brax), "smoke": smoke}
+    budget = {
+        "task": VERSUS_TASK,
+        "seeds": seeds,
+        "updates": updates,
+        "env_steps_per_seed": updates * steps_per_update(brax),
+        "smoke": smoke,
+    }
     for side in sides:
-        print(f"{TRAINERS[side]}: {seeds} seeds x {updates} updates of {steps_per_update(brax):,} env steps", flush=True)
-        result = (train_hintsjax(brax, seeds, updates, episodes=episodes) if side == "hintsjax"
-                  else train_brax(brax, seeds, updates, episodes))
+        print(
+            f"{TRAINERS[side]}: {seeds} seeds x {updates} updates of {steps_per_update(brax):,} env steps",
+            flush=True,
+        )
+        result = (
+            train_hintsjax(brax, seeds, updates, episodes=episodes)
+            if side == "hintsjax"
+            else train_brax(brax, seeds, updates, episodes)
+        )
         record = json.loads(path.read_text()) if path.exists() else {}
         if {k: record.get(k) for k in budget} != budget:
             record = {**budget, "results": {}}
-        record["results"][side] = {"trainer": TRAINERS[side], **result, "eval_episodes": episodes,
-                                   "device": jax.devices()[0].device_kind, "date": time.strftime("%Y-%m-%d %H:%M"),
-                                   "command": " ".join(["python", f"experiments/{Path(sys.argv[0]).name}", *sys.argv[1:]])}
+        record["results"][side] = {
+            "trainer": TRAINERS[side],
+            **result,
+            "eval_episodes": episodes,
+            "device": jax.devices()[0].device_kind,
+            "date": time.strftime("%Y-%m-%d %H:%M"),
+            "command": " ".join(["python", f"experiments/{Path(sys.argv[0]).name}", *sys.argv[1:]]),
+        }
         runs.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(record, indent=1))
-        print(f"{TRAINERS[side]}: {result['seconds']:.0f} s; final returns (deterministic) "
-              f"{[round(x, 1) for x in result['deterministic']]}", flush=True)
+        print(
+            f"{TRAINERS[side]}: {result['seconds']:.0f} s; final returns (deterministic) "
+            f"{[round(x, 1) for x in result['deterministic']]}",
+            flush=True,
+        )
 
 
 def seed_steps(result: dict) -> list[int]:
@@ -279,7 +374,10 @@ def versus_lines(runs: Path) -> list[str]:
     path = versus_record(runs)
     lines = ["## hintsjax's ppo_state beside Brax's PPO (item 6)", ""]
     if not path.exists():
-        return lines + [f"Not run yet (`python experiments/playground.py --versus-brax`: {VERSUS_JSON}).", ""]
+        return lines + [
+            f"Not run yet (`python experiments/playground.py --versus-brax`: {VERSUS_JSON}).",
+            "",
+        ]
     record = json.loads(path.read_text())
     results = record["results"]
     rows = []
@@ -289,23 +387,48 @@ def versus_lines(runs: Path) -> list[str]:
             continue
         r = results[side]
         steps = seed_steps(r)
-        rows.append([r["trainer"], "/".join(f"{s:,}" for s in sorted(set(steps))),
-                     stats.iqm_cell(r["deterministic"]), stats.iqm_cell(r["stochastic"]), f"{r['seconds']:.0f}",
-                     f"{sum(steps) / r['seconds']:,.0f}", f"{r['device']}, {r['date']}: `{r['command']}`"])
-    lines += [f"{record['task']} from its state, {record['seeds']} seeds x {record['updates']} updates of "
-              f"{record['env_steps_per_seed'] // record['updates']:,} env steps ({record['env_steps_per_seed']:,} a seed) "
-              f"on each side{' (smoke: the numbers mean nothing)' if record['smoke'] else ''}. Final return: each seed's "
-              f"final policy on {max(r['eval_episodes'] for r in results.values()) if results else EVAL_EPISODES} fresh episodes, deterministic (mean action) and stochastic; wall-clock: "
-              "from the call to the last trained policy, compilation included (Brax's seeds one after another, "
-              "hintsjax's vmapped in one program).", ""]
-    lines += markdown_table(["trainer", "env steps a seed", "final return, deterministic: IQM [95% CI]",
-                             "stochastic", "wall-clock (s)", "env steps/s", "GPU, date, command"], rows)
+        rows.append(
+            [
+                r["trainer"],
+                "/".join(f"{s:,}" for s in sorted(set(steps))),
+                stats.iqm_cell(r["deterministic"]),
+                stats.iqm_cell(r["stochastic"]),
+                f"{r['seconds']:.0f}",
+                f"{sum(steps) / r['seconds']:,.0f}",
+                f"{r['device']}, {r['date']}: `{r['command']}`",
+            ]
+        )
+    lines += [
+        f"{record['task']} from its state, {record['seeds']} seeds x {record['updates']} updates of "
+        f"{record['env_steps_per_seed'] // record['updates']:,} env steps ({record['env_steps_per_seed']:,} a seed) "
+        f"on each side{' (smoke: the numbers mean nothing)' if record['smoke'] else ''}. Final return: each seed's "
+        f"final policy on {max(r['eval_episodes'] for r in results.values()) if results else EVAL_EPISODES} fresh episodes, deterministic (mean action) and stochastic; wall-clock: "
+        "from the call to the last trained policy, compilation included (Brax's seeds one after another, "
+        "hintsjax's vmapped in one program).",
+        "",
+    ]
+    lines += markdown_table(
+        [
+            "trainer",
+            "env steps a seed",
+            "final return, deterministic: IQM [95% CI]",
+            "stochastic",
+            "wall-clock (s)",
+            "env steps/s",
+            "GPU, date, command",
+        ],
+        rows,
+    )
     if all(side in results for side in SIDES):
         first, second = (results[side] for side in SIDES)
         lines.append("")
         for mode in MODES:
-            lines.append(f"- {mode}: " + stats.ordering_text(first["trainer"], second["trainer"],
-                                                              stats.poi_ci(first[mode], second[mode])))
+            lines.append(
+                f"- {mode}: "
+                + stats.ordering_text(
+                    first["trainer"], second["trainer"], stats.poi_ci(first[mode], second[mode])
+                )
+            )
     return lines + [""]
 
 
@@ -313,33 +436,64 @@ def report(runs: Path, force: bool = False, out: Path | None = None) -> None:
     versus_record(runs, keep=out is None)
     hardware = sweep_hardware(runs, TABLE, run_ids(ENVS))
     lines = [
-        "# HINTs on MuJoCo Playground's DeepMind Control tasks (issue 48)", "",
-        *(["Smoke run (`--smoke`): tiny budgets on a CPU, the numbers mean nothing.", ""] if out is not None else []),
+        "# HINTs on MuJoCo Playground's DeepMind Control tasks (issue 48)",
+        "",
+        *(
+            ["Smoke run (`--smoke`): tiny budgets on a CPU, the numbers mean nothing.", ""]
+            if out is not None
+            else []
+        ),
         "Commands: `python experiments/playground.py` (item 5), `python experiments/playground.py --versus-brax`",
-        f"(item 6), then `python experiments/playground.py --report`. Hardware: {hardware or 'see each wall-clock cell'}.", "",
+        f"(item 6), then `python experiments/playground.py --report`. Hardware: {hardware or 'see each wall-clock cell'}.",
+        "",
         "Each cell: IQM of the 5 training seeds' mean returns (50 deterministic evaluation episodes each), with",
         "its 95% stratified-bootstrap CI (hintsjax.reproduce.stats); P(HINTS > PPO-RGB) over the seeds' mean returns.",
         "The tasks are Playground's, adapted by envs/adapter.py and seen as 64x64 renders (envs/render3d.py)",
-        "from each task's camera (envs/playground.py DEFAULTS); '-': not run yet.", "",
-        "## PPO-RGB and HINTS-FC (item 5)", "",
+        "from each task's camera (envs/playground.py DEFAULTS); '-': not run yet.",
+        "",
+        "## PPO-RGB and HINTS-FC (item 5)",
+        "",
     ]
     rows = []
     for env in ENVS:
         hints_label = hints_run("fc", HINTS[env])
         rgb, hinted = load(runs, env, "ppo_rgb"), load(runs, env, hints_label)
-        rows.append([env.split(":", 1)[1], HINTS[env], iqm_cell(rgb), iqm_cell(hinted),
-                     ordering("HINTS", hinted, "PPO-RGB", rgb) or "-", f"{wall_clock(rgb)} / {wall_clock(hinted)}"])
-    lines += markdown_table(["task", "hint", "PPO-RGB", "HINTS-FC", "P(HINTS > PPO-RGB)", "wall-clock (s)"], rows)
-    lines += ["", *versus_lines(runs), *about_lines(read_about(ARCHIVE / runs.name)), footer(runs, TABLE, run_ids(ENVS))]
+        rows.append(
+            [
+                env.split(":", 1)[1],
+                HINTS[env],
+                iqm_cell(rgb),
+                iqm_cell(hinted),
+                ordering("HINTS", hinted, "PPO-RGB", rgb) or "-",
+                f"{wall_clock(rgb)} / {wall_clock(hinted)}",
+            ]
+        )
+    lines += markdown_table(
+        ["task", "hint", "PPO-RGB", "HINTS-FC", "P(HINTS > PPO-RGB)", "wall-clock (s)"], rows
+    )
+    lines += [
+        "",
+        *versus_lines(runs),
+        *about_lines(read_about(ARCHIVE / runs.name)),
+        footer(runs, TABLE, run_ids(ENVS)),
+    ]
     write_report(out or RESULTS / REPORT, lines, force)
 
 
 def extra_arguments(parser: argparse.ArgumentParser) -> None:
     """--versus-brax and its --steps and --side."""
-    parser.add_argument("--versus-brax", action="store_true", help="item 6: hintsjax's ppo_state beside Brax's PPO")
-    parser.add_argument("--steps", type=int, default=None,
-                        help="--versus-brax: env steps per seed, in whole updates (default Playground's: 60 M, 61 updates)")
-    parser.add_argument("--side", choices=SIDES, default=None, help="--versus-brax: one side only (default both)")
+    parser.add_argument(
+        "--versus-brax", action="store_true", help="item 6: hintsjax's ppo_state beside Brax's PPO"
+    )
+    parser.add_argument(
+        "--steps",
+        type=int,
+        default=None,
+        help="--versus-brax: env steps per seed, in whole updates (default Playground's: 60 M, 61 updates)",
+    )
+    parser.add_argument(
+        "--side", choices=SIDES, default=None, help="--versus-brax: one side only (default both)"
+    )
 
 
 def extra_mode(parser: argparse.ArgumentParser, args: argparse.Namespace) -> bool:
@@ -347,7 +501,9 @@ def extra_mode(parser: argparse.ArgumentParser, args: argparse.Namespace) -> boo
     report beside the runs. False for the other calls (the sweep of item 5, its report)."""
     if args.versus_brax:
         chosen_envs(parser, args, ENVS)  # checks --seeds
-        versus_brax(args.runs, args.seeds, args.steps, args.smoke, (args.side,) if args.side else SIDES)
+        versus_brax(
+            args.runs, args.seeds, args.steps, args.smoke, (args.side,) if args.side else SIDES
+        )
         return True
     if args.report and args.smoke:
         os.environ["JAX_PLATFORMS"] = "cpu"  # as table_main's reports: the parent only reads
@@ -356,8 +512,15 @@ def extra_mode(parser: argparse.ArgumentParser, args: argparse.Namespace) -> boo
     return False
 
 
-SCRIPT = TableScript(__doc__.splitlines()[0], DEFAULT_RUNS, ENVS, {TABLE: run_ids}, report,
-                     extra_arguments=extra_arguments, extra_mode=extra_mode)
+SCRIPT = TableScript(
+    __doc__.splitlines()[0],
+    DEFAULT_RUNS,
+    ENVS,
+    {TABLE: run_ids},
+    report,
+    extra_arguments=extra_arguments,
+    extra_mode=extra_mode,
+)
 
 
 def main() -> None:

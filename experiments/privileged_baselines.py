@@ -23,25 +23,52 @@ import numpy as np
 
 from hintsjax.reproduce.archive import ARCHIVE, about_lines, read_about
 from hintsjax.reproduce.markdown import markdown_table, write_report
-from hintsjax.reproduce.report import ORDERINGS_ABOUT, footer, interval_text, load, ppo_text, seed_means, trained_ppo, verdict
+from hintsjax.reproduce.report import (
+    ORDERINGS_ABOUT,
+    footer,
+    interval_text,
+    load,
+    ppo_text,
+    seed_means,
+    trained_ppo,
+    verdict,
+)
 from hintsjax.reproduce.table_script import TableScript, table_main
 
 RESULTS = Path(__file__).resolve().parent / "results"
 OUT = RESULTS / "privileged_baselines.md"
 TABLE = "privileged"
 ENVS = ("pendulum", "acrobot", "idp", "halfcheetah", "ant")
-SIGNAL = {"pendulum": "composite", "acrobot": "composite", "idp": "composite", "halfcheetah": "state", "ant": "state"}
-LEARNED = ARCHIVE / "learned_hints"  # learned_hints.py's archived runs: <env>-<hint>-learned-k2/eval.json
+SIGNAL = {
+    "pendulum": "composite",
+    "acrobot": "composite",
+    "idp": "composite",
+    "halfcheetah": "state",
+    "ant": "state",
+}
+# learned_hints.py's archived runs: <env>-<hint>-learned-k2/eval.json
+LEARNED = ARCHIVE / "learned_hints"
 LEARNED_FRAMES = 2
 # What each row's agent sees of the privileged signal in training, and what it needs at deployment.
 ROWS = {
     "ppo_rgb": ("PPO-RGB", "nothing", "pictures"),
     "asym_ac": ("asymmetric actor-critic", "the critic, beside the pictures", "pictures"),
-    "pi_dropout": ("PI dropout (FiLM)", "the policy, dropped with p = ppo.hint_dropout", "pictures"),
-    "hint_aux": ("hint as an auxiliary target", "a head predicting it from the features", "pictures"),
+    "pi_dropout": (
+        "PI dropout (FiLM)",
+        "the policy, dropped with p = ppo.hint_dropout",
+        "pictures",
+    ),
+    "hint_aux": (
+        "hint as an auxiliary target",
+        "a head predicting it from the features",
+        "pictures",
+    ),
     "hints": ("HINTS-FC", "the policy and the critic", "pictures + the hint"),
-    "learned": ("HINTS-FC, learned generator", "the policy and the critic (the generator's hint)",
-                "pictures (the generator reads them)"),
+    "learned": (
+        "HINTS-FC, learned generator",
+        "the policy and the critic (the generator's hint)",
+        "pictures (the generator reads them)",
+    ),
 }
 
 
@@ -85,40 +112,78 @@ def env_lines(runs: Path, env: str) -> list[str]:
             rows.append([name, sees, needs, "-", "-", "-", "-", "-"])
             continue
         x = np.asarray(seed_means(result), np.float64)
-        rows.append([name, sees, needs, f"{x.mean():.1f} ± {x.std():.1f}", stats.iqm_cell(x), str(len(x)),
-                     poi(hints, result), poi(result, rgb)])
+        rows.append(
+            [
+                name,
+                sees,
+                needs,
+                f"{x.mean():.1f} ± {x.std():.1f}",
+                stats.iqm_cell(x),
+                str(len(x)),
+                poi(hints, result),
+                poi(result, rgb),
+            ]
+        )
     ppo = trained_ppo(runs, env, labels(env)[0])
-    lines = [f"## {env}: the privileged signal is the {SIGNAL[env]} {'state' if SIGNAL[env] == 'state' else 'hint'}", "",
-             *markdown_table(["agent", "what sees the privileged signal in training", "needs at deployment",
-                              "mean ± std over seeds", "IQM [95% CI]", "seeds", "P(HINTS-FC > row) [95% CI]",
-                              "P(row > PPO-RGB) [95% CI]"], rows), ""]
+    lines = [
+        f"## {env}: the privileged signal is the {SIGNAL[env]} {'state' if SIGNAL[env] == 'state' else 'hint'}",
+        "",
+        *markdown_table(
+            [
+                "agent",
+                "what sees the privileged signal in training",
+                "needs at deployment",
+                "mean ± std over seeds",
+                "IQM [95% CI]",
+                "seeds",
+                "P(HINTS-FC > row) [95% CI]",
+                "P(row > PPO-RGB) [95% CI]",
+            ],
+            rows,
+        ),
+        "",
+    ]
     if ppo is not None:
         lines += [f"PPO: {ppo_text(ppo)}.", ""]
     if learned is not None:
-        lines += [f"The learned generator's row is learned_hints.py's archived run {env}-{SIGNAL[env]}-learned-"
-                  f"k{LEARNED_FRAMES} (experiments/results/learned_hints.md), trained apart from this sweep.", ""]
+        lines += [
+            f"The learned generator's row is learned_hints.py's archived run {env}-{SIGNAL[env]}-learned-"
+            f"k{LEARNED_FRAMES} (experiments/results/learned_hints.md), trained apart from this sweep.",
+            "",
+        ]
     return lines
 
 
 def report(runs: Path, force: bool = False) -> None:
     names = [env for env in ENVS if any(load(runs, env, label) for label in labels(env))]
-    lines = ["# Hints against the privileged-signal baselines", "",
-             "Written by `python experiments/privileged_baselines.py --report` from the runs of "
-             "`python experiments/privileged_baselines.py --envs ... --seeds ...` (commands and hardware below). "
-             "Does a hint do more than giving the same privileged signal to the learner in training only? The "
-             "baselines see the signal (the hint HINTS-FC gets, or the state) in training and act on pictures alone; "
-             "HINTS-FC needs the hint at deployment. Returns: the mean over each seed's 50 deterministic episodes, "
-             "then mean ± std over seeds and the IQM with its 95% bootstrap interval (hintsjax/reproduce/stats.py). "
-             "P(HINTS-FC > row): the probability that a seed of HINTS-FC beats a seed of the row; P(row > PPO-RGB): "
-             "whether the row gains on pictures alone.", "",
-             ORDERINGS_ABOUT.split(" The best hint")[0], ""]
+    lines = [
+        "# Hints against the privileged-signal baselines",
+        "",
+        "Written by `python experiments/privileged_baselines.py --report` from the runs of "
+        "`python experiments/privileged_baselines.py --envs ... --seeds ...` (commands and hardware below). "
+        "Does a hint do more than giving the same privileged signal to the learner in training only? The "
+        "baselines see the signal (the hint HINTS-FC gets, or the state) in training and act on pictures alone; "
+        "HINTS-FC needs the hint at deployment. Returns: the mean over each seed's 50 deterministic episodes, "
+        "then mean ± std over seeds and the IQM with its 95% bootstrap interval (hintsjax/reproduce/stats.py). "
+        "P(HINTS-FC > row): the probability that a seed of HINTS-FC beats a seed of the row; P(row > PPO-RGB): "
+        "whether the row gains on pictures alone.",
+        "",
+        ORDERINGS_ABOUT.split(" The best hint")[0],
+        "",
+    ]
     for env in names:
         lines += env_lines(runs, env)
-    lines += [footer(runs, TABLE, run_ids(names)), "", *about_lines(read_about(ARCHIVE / runs.name))]
+    lines += [
+        footer(runs, TABLE, run_ids(names)),
+        "",
+        *about_lines(read_about(ARCHIVE / runs.name)),
+    ]
     write_report(OUT, lines, force)
 
 
-SCRIPT = TableScript(__doc__.splitlines()[0], "runs/privileged", ENVS, {TABLE: run_ids}, report, seeds=20)
+SCRIPT = TableScript(
+    __doc__.splitlines()[0], "runs/privileged", ENVS, {TABLE: run_ids}, report, seeds=20
+)
 
 if __name__ == "__main__":
     table_main(SCRIPT)

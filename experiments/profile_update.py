@@ -35,30 +35,51 @@ from hintsjax.reproduce import flag_variants
 VARIANTS = {
     "base": ("", {}),
     "nodet": ("--xla_gpu_deterministic_ops=false", {}),
-    "cmdbuf": ("--xla_gpu_enable_command_buffer=FUSION,CUBLAS,CUBLASLT,CUSTOM_CALL,CUDNN,WHILE,CONDITIONAL", {}),
+    "cmdbuf": (
+        "--xla_gpu_enable_command_buffer=FUSION,CUBLAS,CUBLASLT,CUSTOM_CALL,CUDNN,WHILE,CONDITIONAL",
+        {},
+    ),
     "nocmdbuf": ("--xla_gpu_enable_command_buffer=", {}),
     # deterministic without --xla_gpu_deterministic_ops: no non-deterministic ops (scatter's
     # atomics), kernels chosen without autotuning (the same in every process) or with it
-    "excl_at0": ("--xla_gpu_deterministic_ops=false --xla_gpu_exclude_nondeterministic_ops=true "
-                 "--xla_gpu_autotune_level=0", {}),
+    "excl_at0": (
+        "--xla_gpu_deterministic_ops=false --xla_gpu_exclude_nondeterministic_ops=true "
+        "--xla_gpu_autotune_level=0",
+        {},
+    ),
     "excl": ("--xla_gpu_deterministic_ops=false --xla_gpu_exclude_nondeterministic_ops=true", {}),
     "at0": ("--xla_gpu_deterministic_ops=false --xla_gpu_autotune_level=0", {}),
-    "excl_at0_unroll_learn": ("--xla_gpu_deterministic_ops=false --xla_gpu_exclude_nondeterministic_ops=true "
-                              "--xla_gpu_autotune_level=0", {4: 4}),
+    "excl_at0_unroll_learn": (
+        "--xla_gpu_deterministic_ops=false --xla_gpu_exclude_nondeterministic_ops=true "
+        "--xla_gpu_autotune_level=0",
+        {4: 4},
+    ),
     # XLA's sort-and-prefix-scan rewrite of scatters that deterministic ops would otherwise turn
     # into while loops of one update per iteration (MJX's scatter-adds)
     "scatter_det": ("--xla_gpu_enable_scatter_determinism_expander=true", {}),
     # deterministic ops off, autotuning persisted (XLA's docs/determinism.md: compilation is
     # deterministic once autotuning is read from a cache): the first process tunes and writes the
     # folder, later ones read it; `tuned_b` starts another folder
-    "tuned": ("--xla_gpu_deterministic_ops=false --xla_gpu_per_fusion_autotune_cache_dir=/tmp/hintsjax_autotune_a", {}),
-    "tuned_b": ("--xla_gpu_deterministic_ops=false --xla_gpu_per_fusion_autotune_cache_dir=/tmp/hintsjax_autotune_b", {}),
-    "tuned_scatter": ("--xla_gpu_deterministic_ops=false --xla_gpu_enable_scatter_determinism_expander=true "
-                      "--xla_gpu_per_fusion_autotune_cache_dir=/tmp/hintsjax_autotune_a", {}),
+    "tuned": (
+        "--xla_gpu_deterministic_ops=false --xla_gpu_per_fusion_autotune_cache_dir=/tmp/hintsjax_autotune_a",
+        {},
+    ),
+    "tuned_b": (
+        "--xla_gpu_deterministic_ops=false --xla_gpu_per_fusion_autotune_cache_dir=/tmp/hintsjax_autotune_b",
+        {},
+    ),
+    "tuned_scatter": (
+        "--xla_gpu_deterministic_ops=false --xla_gpu_enable_scatter_determinism_expander=true "
+        "--xla_gpu_per_fusion_autotune_cache_dir=/tmp/hintsjax_autotune_a",
+        {},
+    ),
     # physics=warp runs with deterministic ops off (MuJoCo Warp's atomics are not reproducible anyway):
     # its baseline is `nodet`; this adds CUDA graphs over the update's while loops and conditionals
-    "nodet_cmdbuf": ("--xla_gpu_deterministic_ops=false "
-                     "--xla_gpu_enable_command_buffer=FUSION,CUBLAS,CUBLASLT,CUSTOM_CALL,CUDNN,WHILE,CONDITIONAL", {}),
+    "nodet_cmdbuf": (
+        "--xla_gpu_deterministic_ops=false "
+        "--xla_gpu_enable_command_buffer=FUSION,CUBLAS,CUBLASLT,CUSTOM_CALL,CUDNN,WHILE,CONDITIONAL",
+        {},
+    ),
     "nodet_unroll_learn": ("--xla_gpu_deterministic_ops=false", {4: 4}),
     "unroll_rollout": ("", {64: 8}),
     "unroll_learn": ("", {4: 4}),
@@ -83,8 +104,13 @@ def kernel_table(trace_dir: Path, top: int) -> dict:
     """Sum the GPU events of the newest perfetto trace under trace_dir by name."""
     path = max(trace_dir.rglob("*.trace.json.gz"), key=os.path.getmtime)
     events = json.loads(gzip.open(path).read())["traceEvents"]
-    gpu_pids = {e["pid"] for e in events if e.get("ph") == "M" and e.get("name") == "process_name"
-                and "/device:GPU" in str(e.get("args", {}).get("name", ""))}
+    gpu_pids = {
+        e["pid"]
+        for e in events
+        if e.get("ph") == "M"
+        and e.get("name") == "process_name"
+        and "/device:GPU" in str(e.get("args", {}).get("name", ""))
+    }
     kernels = [e for e in events if e.get("ph") == "X" and e.get("pid") in gpu_pids and "dur" in e]
     if not kernels:
         return {"note": "no GPU events in the trace"}
@@ -99,9 +125,18 @@ def kernel_table(trace_dir: Path, top: int) -> dict:
             busy += b - max(a, end)
             end = b
     span = intervals[-1][1] - intervals[0][0]
-    rows = [{"name": n[:120], "ms": t / 1e3, "count": c} for n, (t, c) in sorted(by_name.items(), key=lambda kv: -kv[1][0])]
-    return {"span_ms": span / 1e3, "busy_ms": busy / 1e3, "busy_fraction": busy / span, "events": len(kernels),
-            "top": rows[:top], "kinds": kinds(rows)}
+    rows = [
+        {"name": n[:120], "ms": t / 1e3, "count": c}
+        for n, (t, c) in sorted(by_name.items(), key=lambda kv: -kv[1][0])
+    ]
+    return {
+        "span_ms": span / 1e3,
+        "busy_ms": busy / 1e3,
+        "busy_fraction": busy / span,
+        "events": len(kernels),
+        "top": rows[:top],
+        "kinds": kinds(rows),
+    }
 
 
 def kinds(rows: list[dict]) -> dict:
@@ -109,15 +144,26 @@ def kinds(rows: list[dict]) -> dict:
     out: dict[str, list[float]] = defaultdict(lambda: [0.0, 0])
     for row in rows:
         name = row["name"]
-        kind = ("physics (Warp)" if "cuda_kernel_forward" in name
-                else "patch copies (concatenate)" if "concatenate" in name
-                else "matrix products" if any(k in name for k in ("gemm", "cutlass", "cublas", "dot", "sm90", "xmma", "ampere"))
-                else "reductions" if "reduce" in name
-                else "copies and transposes" if any(k in name for k in ("transpose", "copy", "memcpy", "memset"))
-                else "other fusions")
+        kind = (
+            "physics (Warp)"
+            if "cuda_kernel_forward" in name
+            else "patch copies (concatenate)"
+            if "concatenate" in name
+            else "matrix products"
+            if any(
+                k in name for k in ("gemm", "cutlass", "cublas", "dot", "sm90", "xmma", "ampere")
+            )
+            else "reductions"
+            if "reduce" in name
+            else "copies and transposes"
+            if any(k in name for k in ("transpose", "copy", "memcpy", "memset"))
+            else "other fusions"
+        )
         out[kind][0] += row["ms"]
         out[kind][1] += row["count"]
-    return {k: {"ms": v[0], "count": v[1]} for k, v in sorted(out.items(), key=lambda kv: -kv[1][0])}
+    return {
+        k: {"ms": v[0], "count": v[1]} for k, v in sorted(out.items(), key=lambda kv: -kv[1][0])
+    }
 
 
 def ppo_overrides(text: str) -> dict:
@@ -156,12 +202,25 @@ def one_learn(args: argparse.Namespace, cfg) -> dict:
         table = kernel_table(Path(folder), args.top)
     ppo = cfg.ppo
     steps = ppo.epochs * ppo.num_minibatches
-    return {"variant": args.variant, "part": "learn", "env": cfg.env, "seeds": cfg.seeds,
-            "ppo": {k: getattr(ppo, k) for k in ("num_envs", "rollout_length", "batch_size", "epochs", "minibatch_size")},
-            "xla_flags": os.environ.get("XLA_FLAGS", ""), "device": jax.devices()[0].device_kind,
-            "compile_s": compile_s, "digest": digest, "learn_ms": 1e3 * min(times),
-            "gradient_steps": steps, "ms_per_gradient_step": 1e3 * min(times) / steps,
-            "samples_per_s": cfg.seeds * ppo.batch_size * ppo.epochs / min(times), "kernels": table}
+    return {
+        "variant": args.variant,
+        "part": "learn",
+        "env": cfg.env,
+        "seeds": cfg.seeds,
+        "ppo": {
+            k: getattr(ppo, k)
+            for k in ("num_envs", "rollout_length", "batch_size", "epochs", "minibatch_size")
+        },
+        "xla_flags": os.environ.get("XLA_FLAGS", ""),
+        "device": jax.devices()[0].device_kind,
+        "compile_s": compile_s,
+        "digest": digest,
+        "learn_ms": 1e3 * min(times),
+        "gradient_steps": steps,
+        "ms_per_gradient_step": 1e3 * min(times) / steps,
+        "samples_per_s": cfg.seeds * ppo.batch_size * ppo.epochs / min(times),
+        "kernels": table,
+    }
 
 
 def one(args: argparse.Namespace) -> dict:
@@ -176,8 +235,17 @@ def one(args: argparse.Namespace) -> dict:
     for flag in os.environ.get("XLA_FLAGS", "").split():  # XLA wants the autotune folder made
         if flag.startswith("--xla_gpu_per_fusion_autotune_cache_dir="):
             Path(flag.split("=", 1)[1]).mkdir(parents=True, exist_ok=True)
-    cfg = run_config({"env": args.env, "agent": "hints", "scheme": "fc", "seeds": args.seeds,
-                      "checkpoint_every": args.updates, "physics": args.physics, "ppo": ppo_overrides(args.ppo)})
+    cfg = run_config(
+        {
+            "env": args.env,
+            "agent": "hints",
+            "scheme": "fc",
+            "seeds": args.seeds,
+            "checkpoint_every": args.updates,
+            "physics": args.physics,
+            "ppo": ppo_overrides(args.ppo),
+        }
+    )
     if args.part == "learn":
         return one_learn(args, cfg)
     keys = cfg.seed_keys()
@@ -198,9 +266,18 @@ def one(args: argparse.Namespace) -> dict:
             state, _ = jax.block_until_ready(compiled.run_chunk(state, n))
         table = kernel_table(Path(folder), args.top)
     per_update = min(times) / args.updates
-    return {"variant": args.variant, "physics": cfg.physics, "unroll": VARIANTS[args.variant][1], "xla_flags": os.environ.get("XLA_FLAGS", ""), "device": jax.devices()[0].device_kind,
-            "compile_s": compiled.seconds, "digest": digest, "update_ms": 1e3 * per_update,
-            "env_steps_per_s": cfg.seeds * cfg.ppo.batch_size / per_update, "kernels": table}
+    return {
+        "variant": args.variant,
+        "physics": cfg.physics,
+        "unroll": VARIANTS[args.variant][1],
+        "xla_flags": os.environ.get("XLA_FLAGS", ""),
+        "device": jax.devices()[0].device_kind,
+        "compile_s": compiled.seconds,
+        "digest": digest,
+        "update_ms": 1e3 * per_update,
+        "env_steps_per_s": cfg.seeds * cfg.ppo.batch_size / per_update,
+        "kernels": table,
+    }
 
 
 def main() -> None:
@@ -209,40 +286,84 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--updates", type=int, default=10)
     parser.add_argument("--top", type=int, default=25)
-    parser.add_argument("--physics", default="auto", choices=("auto", "jax", "warp"), help="MJCF envs' physics (default: auto)")
-    parser.add_argument("--variants", default="base,nodet",
-                        help=f"comma-separated of {', '.join(VARIANTS)} (one twice: is it reproducible?)")
-    parser.add_argument("--variant", default=None, help=argparse.SUPPRESS)  # set in the child process
-    parser.add_argument("--out", default=None, help="write every variant's result as JSON into this folder")
-    parser.add_argument("--part", default="update", choices=("update", "learn"),
-                        help="profile a whole chunk of updates, or the learner alone (default: update)")
-    parser.add_argument("--ppo", default="", help="PPO settings over the env's, e.g. num_envs=1024,epochs=4")
+    parser.add_argument(
+        "--physics",
+        default="auto",
+        choices=("auto", "jax", "warp"),
+        help="MJCF envs' physics (default: auto)",
+    )
+    parser.add_argument(
+        "--variants",
+        default="base,nodet",
+        help=f"comma-separated of {', '.join(VARIANTS)} (one twice: is it reproducible?)",
+    )
+    # set in the child process
+    parser.add_argument("--variant", default=None, help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--out", default=None, help="write every variant's result as JSON into this folder"
+    )
+    parser.add_argument(
+        "--part",
+        default="update",
+        choices=("update", "learn"),
+        help="profile a whole chunk of updates, or the learner alone (default: update)",
+    )
+    parser.add_argument(
+        "--ppo", default="", help="PPO settings over the env's, e.g. num_envs=1024,epochs=4"
+    )
     args = parser.parse_args()
     if args.variant is not None:
         flag_variants.report(one(args))
         return
     results = []
     for name in flag_variants.chosen(parser, args.variants, VARIANTS):
-        r = flag_variants.run(__file__, VARIANTS[name][0], ["--variant", name, "--env", args.env, "--seeds", str(args.seeds),
-                                                            "--updates", str(args.updates), "--top", str(args.top),
-                                                            "--physics", args.physics, "--part", args.part, "--ppo", args.ppo])
+        r = flag_variants.run(
+            __file__,
+            VARIANTS[name][0],
+            [
+                "--variant",
+                name,
+                "--env",
+                args.env,
+                "--seeds",
+                str(args.seeds),
+                "--updates",
+                str(args.updates),
+                "--top",
+                str(args.top),
+                "--physics",
+                args.physics,
+                "--part",
+                args.part,
+                "--ppo",
+                args.ppo,
+            ],
+        )
         if r is None:
             continue
         results.append(r)
         k = r["kernels"]
-        rate = (f"{r['update_ms']:.1f} ms/update = {r['env_steps_per_s']:,.0f} env steps/s" if args.part == "update" else
-                f"learn {r['learn_ms']:.1f} ms = {r['gradient_steps']} steps of {r['ms_per_gradient_step']:.2f} ms, "
-                f"{r['samples_per_s']:,.0f} samples/s")
-        print(f"\n== {name} ({r['xla_flags']}): {rate}, "
-              f"compile {r['compile_s']:.1f} s, params digest {r['digest']}; GPU busy {k.get('busy_ms', 0):.1f} of {k.get('span_ms', 0):.1f} ms "
-              f"({k.get('busy_fraction', 0):.0%}), {k.get('events', 0)} kernels", flush=True)
+        rate = (
+            f"{r['update_ms']:.1f} ms/update = {r['env_steps_per_s']:,.0f} env steps/s"
+            if args.part == "update"
+            else f"learn {r['learn_ms']:.1f} ms = {r['gradient_steps']} steps of {r['ms_per_gradient_step']:.2f} ms, "
+            f"{r['samples_per_s']:,.0f} samples/s"
+        )
+        print(
+            f"\n== {name} ({r['xla_flags']}): {rate}, "
+            f"compile {r['compile_s']:.1f} s, params digest {r['digest']}; GPU busy {k.get('busy_ms', 0):.1f} of {k.get('span_ms', 0):.1f} ms "
+            f"({k.get('busy_fraction', 0):.0%}), {k.get('events', 0)} kernels",
+            flush=True,
+        )
         for kind, v in k.get("kinds", {}).items():
             print(f"  {v['ms']:9.2f} ms {v['count']:7d}x  [{kind}]")
         for row in k.get("top", []):
             print(f"  {row['ms']:9.2f} ms {row['count']:7d}x  {row['name']}")
     if args.out:
         Path(args.out).mkdir(parents=True, exist_ok=True)
-        (Path(args.out) / f"profile_{args.part}_{args.env}_{args.physics}.json").write_text(json.dumps(results, indent=1))
+        (Path(args.out) / f"profile_{args.part}_{args.env}_{args.physics}.json").write_text(
+            json.dumps(results, indent=1)
+        )
 
 
 if __name__ == "__main__":

@@ -54,10 +54,20 @@ def isa() -> str:
 def one(seed: int, cores: list[int] | None, out_dir: Path, extra: list[str]) -> dict:
     """Run the quickstart at `seed` (pinned to `cores`, with `extra` arguments) and read back its
     run folder's results."""
-    command = [sys.executable, "-m", "hintsjax.quickstart", "--seed", str(seed), "--out-dir", str(out_dir), *extra]
+    command = [
+        sys.executable,
+        "-m",
+        "hintsjax.quickstart",
+        "--seed",
+        str(seed),
+        "--out-dir",
+        str(out_dir),
+        *extra,
+    ]
     if cores and shutil.which("taskset"):
         command = ["taskset", "-c", ",".join(map(str, cores)), *command]
-    env = {**os.environ, "JAX_PLATFORMS": "cpu", "HINTSJAX_COMPILATION_CACHE": "off"}  # a first run: cold
+    # a first run: cold
+    env = {**os.environ, "JAX_PLATFORMS": "cpu", "HINTSJAX_COMPILATION_CACHE": "off"}
     t = time.perf_counter()
     done = subprocess.run(command, env=env, capture_output=True, text=True)
     wall = time.perf_counter() - t
@@ -66,25 +76,43 @@ def one(seed: int, cores: list[int] | None, out_dir: Path, extra: list[str]) -> 
     run = next(out_dir.glob("quickstart-*"))
     result = json.loads((run / "eval.json").read_text())
     baseline = json.loads((run / "random_policy.json").read_text())
-    return {"seed": seed, "arguments": " ".join(extra), "wall_s": round(wall, 1), "compile_s": result["compile_seconds"],
-            "train_s": round(result["train_seconds"], 1), "trained": round(result["evaluations"][0]["mean"], 1),
-            "random": round(baseline["mean"], 1), "last_lines": done.stdout.strip().splitlines()[-6:]}
+    return {
+        "seed": seed,
+        "arguments": " ".join(extra),
+        "wall_s": round(wall, 1),
+        "compile_s": result["compile_seconds"],
+        "train_s": round(result["train_seconds"], 1),
+        "trained": round(result["evaluations"][0]["mean"], 1),
+        "random": round(baseline["mean"], 1),
+        "last_lines": done.stdout.strip().splitlines()[-6:],
+    }
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", default="0,1,2,3", help="comma-separated seeds (default: 0,1,2,3)")
+    parser.add_argument(
+        "--seeds", default="0,1,2,3", help="comma-separated seeds (default: 0,1,2,3)"
+    )
     parser.add_argument("--parallel", type=int, default=1, help="runs at a time (default: 1)")
-    parser.add_argument("--cores", type=int, default=2, help="cores pinned to each run (0: no pinning; default: 2)")
-    parser.add_argument("--quickstart", default="", help="more arguments for the quickstart, e.g. '--epochs 4 --updates 40'")
-    parser.add_argument("--out", type=Path, default=Path("experiments/results/quickstart_spread.json"))
+    parser.add_argument(
+        "--cores", type=int, default=2, help="cores pinned to each run (0: no pinning; default: 2)"
+    )
+    parser.add_argument(
+        "--quickstart",
+        default="",
+        help="more arguments for the quickstart, e.g. '--epochs 4 --updates 40'",
+    )
+    parser.add_argument(
+        "--out", type=Path, default=Path("experiments/results/quickstart_spread.json")
+    )
     args = parser.parse_args()
     seeds = [int(s) for s in args.seeds.split(",")]
     available = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
     slots: queue.Queue = queue.Queue()  # each run takes a free set of cores and gives it back
     for slot in range(args.parallel):
-        slots.put(available[slot * args.cores:(slot + 1) * args.cores] if args.cores else None)
+        slots.put(available[slot * args.cores : (slot + 1) * args.cores] if args.cores else None)
     with tempfile.TemporaryDirectory() as tmp, ThreadPoolExecutor(args.parallel) as pool:
+
         def task(seed: int) -> dict:
             cores = slots.get()
             folder = Path(tmp) / f"seed{seed}"
@@ -97,10 +125,18 @@ def main() -> None:
             return row
 
         rows = list(pool.map(task, seeds))
-    record = {"command": "python -m hintsjax.quickstart --seed S (make run is seed 0), JAX_PLATFORMS=cpu, cold caches",
-              "cpu": cpu_name(), "isa": isa(), "cores_per_run": args.cores, "runs_at_once": args.parallel,
-              "python": platform.python_version(), "jax": version("jax"), "jaxlib": version("jaxlib"),
-              "date": time.strftime("%Y-%m-%d"), "rows": rows}
+    record = {
+        "command": "python -m hintsjax.quickstart --seed S (make run is seed 0), JAX_PLATFORMS=cpu, cold caches",
+        "cpu": cpu_name(),
+        "isa": isa(),
+        "cores_per_run": args.cores,
+        "runs_at_once": args.parallel,
+        "python": platform.python_version(),
+        "jax": version("jax"),
+        "jaxlib": version("jaxlib"),
+        "date": time.strftime("%Y-%m-%d"),
+        "rows": rows,
+    }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(record, indent=1))
     print(f"wrote {args.out}")

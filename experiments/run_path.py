@@ -30,31 +30,56 @@ import tempfile
 import time
 from pathlib import Path
 
-CELLS = {"pendulum": ["env=pendulum", "agent=hints", "hint=composite", "scheme=fc"],
-         "ant": ["env=ant", "agent=hints", "hint=speed", "scheme=fc"],
-         # a different, cheaper task on the ant's body (Euler, 2 Newton iterations, 9 contacts: docs/environments.md)
-         "ant_fast": ["env=ant_fast", "agent=hints", "hint=speed", "scheme=fc"],
-         "humanoid": ["env=humanoid", "agent=hints", "hint=velocity", "scheme=fc"]}
-PARTIAL = ("ant", "ant_fast", "humanoid")  # cells trained for --updates updates, their full wall extrapolated
+CELLS = {
+    "pendulum": ["env=pendulum", "agent=hints", "hint=composite", "scheme=fc"],
+    "ant": ["env=ant", "agent=hints", "hint=speed", "scheme=fc"],
+    # a different, cheaper task on the ant's body (Euler, 2 Newton iterations, 9 contacts: docs/environments.md)
+    "ant_fast": ["env=ant_fast", "agent=hints", "hint=speed", "scheme=fc"],
+    "humanoid": ["env=humanoid", "agent=hints", "hint=velocity", "scheme=fc"],
+}
+# cells trained for --updates updates, their full wall extrapolated
+PARTIAL = ("ant", "ant_fast", "humanoid")
 
 
 def timed_command(args: list[str], cache: Path, out_dir: Path) -> tuple[float, dict]:
     """Run the command once (MuJoCo Warp's kernels cached beside XLA's); (wall seconds, its eval.json)."""
     name = f"r{time.time_ns()}"
     t = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "hintsjax.run", *args, f"out_dir={out_dir}", f"name={name}",
-                    f"compilation_cache={cache}"], check=True, env={**os.environ, "WARP_CACHE_PATH": str(cache / "warp")})
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "hintsjax.run",
+            *args,
+            f"out_dir={out_dir}",
+            f"name={name}",
+            f"compilation_cache={cache}",
+        ],
+        check=True,
+        env={**os.environ, "WARP_CACHE_PATH": str(cache / "warp")},
+    )
     wall = time.perf_counter() - t
     return wall, json.loads((out_dir / name / "eval.json").read_text())
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--cells", default="pendulum,ant", help=f"comma-separated subset of {', '.join(CELLS)}")
-    parser.add_argument("--updates", "--ant-updates", type=int, default=200,
-                        help=f"updates of the locomotion cells ({', '.join(PARTIAL)}: the ant's full budget is 4882)")
-    parser.add_argument("--physics", default="jax", help="comma-separated: auto, jax, warp (one row pair each)")
-    parser.add_argument("--no-bench", action="store_true", help="the command's rows only (no bench row)")
+    parser.add_argument(
+        "--cells", default="pendulum,ant", help=f"comma-separated subset of {', '.join(CELLS)}"
+    )
+    parser.add_argument(
+        "--updates",
+        "--ant-updates",
+        type=int,
+        default=200,
+        help=f"updates of the locomotion cells ({', '.join(PARTIAL)}: the ant's full budget is 4882)",
+    )
+    parser.add_argument(
+        "--physics", default="jax", help="comma-separated: auto, jax, warp (one row pair each)"
+    )
+    parser.add_argument(
+        "--no-bench", action="store_true", help="the command's rows only (no bench row)"
+    )
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
     cells = [c for c in args.cells.split(",") if c]
@@ -82,14 +107,24 @@ def main() -> None:
                 wall, result = timed_command(CELLS[cell] + budget, cache, Path(out))
                 updates = result["env_steps"] // cfg.ppo.batch_size
                 compile_s = sum(result["compile_seconds"].values())
-                row = {"env": cell, "label": result["label"], "physics": result["physics"], "cell_wall_s": wall, "compile_s": compile_s,
-                       "compile_s_parts": result["compile_seconds"], "updates": updates,
-                       "train_env_steps_per_s": result["train_env_steps_per_s"],
-                       "chunks_env_steps_per_s": result.get("chunks_env_steps_per_s"),
-                       "device": jax.devices()[0].device_kind, "jax": jax.__version__,
-                       "deterministic": result["deterministic"],  # the run's own (physics=warp turns them off)
-                       "warm_cache": warm}
-                if updates < cfg.ppo.num_updates:  # extrapolated to the full budget at the measured rate
+                row = {
+                    "env": cell,
+                    "label": result["label"],
+                    "physics": result["physics"],
+                    "cell_wall_s": wall,
+                    "compile_s": compile_s,
+                    "compile_s_parts": result["compile_seconds"],
+                    "updates": updates,
+                    "train_env_steps_per_s": result["train_env_steps_per_s"],
+                    "chunks_env_steps_per_s": result.get("chunks_env_steps_per_s"),
+                    "device": jax.devices()[0].device_kind,
+                    "jax": jax.__version__,
+                    # the run's own (physics=warp turns them off)
+                    "deterministic": result["deterministic"],
+                    "warm_cache": warm,
+                }
+                # extrapolated to the full budget at the measured rate
+                if updates < cfg.ppo.num_updates:
                     rest = (cfg.ppo.num_updates - updates) * cfg.ppo.batch_size * cfg.seeds
                     row["full_cell_wall_s"] = wall + rest / result["train_env_steps_per_s"]
                 rows.append(row)
@@ -103,14 +138,27 @@ def main() -> None:
         for row in rows:
             if row["env"] == cell and row["physics"] == cfg.physics:
                 row["bench_env_steps_per_s"] = bench["scan_env_steps_per_s"]
-                row["cli_fraction_of_bench"] = row["train_env_steps_per_s"] / bench["scan_env_steps_per_s"]
-                if row["chunks_env_steps_per_s"] is not None:  # training's start to the last chunk: the bench's span
-                    row["chunks_fraction_of_bench"] = row["chunks_env_steps_per_s"] / bench["scan_env_steps_per_s"]
+                row["cli_fraction_of_bench"] = (
+                    row["train_env_steps_per_s"] / bench["scan_env_steps_per_s"]
+                )
+                # training's start to the last chunk: the bench's span
+                if row["chunks_env_steps_per_s"] is not None:
+                    row["chunks_fraction_of_bench"] = (
+                        row["chunks_env_steps_per_s"] / bench["scan_env_steps_per_s"]
+                    )
                 row["update_parts_s"] = bench["update_parts_s"]
         print(json.dumps({"bench": bench}), flush=True)
     if args.out:
-        args.out.write_text(json.dumps({"command": "python experiments/run_path.py " + " ".join(sys.argv[1:]),
-                                        "rows": rows}, indent=1) + "\n")
+        args.out.write_text(
+            json.dumps(
+                {
+                    "command": "python experiments/run_path.py " + " ".join(sys.argv[1:]),
+                    "rows": rows,
+                },
+                indent=1,
+            )
+            + "\n"
+        )
 
 
 if __name__ == "__main__":

@@ -52,13 +52,30 @@ def record(row: dict) -> None:
     RESULTS.write_text(json.dumps(rows, indent=1) + "\n")
 
 
-def table(env: str, seeds: int, alone: bool, workers: int, runs: Path, sweep_args: list[str] = ()) -> dict:
+def table(
+    env: str, seeds: int, alone: bool, workers: int, runs: Path, sweep_args: list[str] = ()
+) -> dict:
     import hintsjax
 
     labels = learner_rows(env)
-    cmd = [sys.executable, str(HERE / "classic_control.py"), "--table", "2", "--envs", env, "--seeds", str(seeds),
-           "--runs", str(runs), "--only", ",".join(labels), "--workers", str(workers), *(["--alone"] if alone else []),
-           *sweep_args]
+    cmd = [
+        sys.executable,
+        str(HERE / "classic_control.py"),
+        "--table",
+        "2",
+        "--envs",
+        env,
+        "--seeds",
+        str(seeds),
+        "--runs",
+        str(runs),
+        "--only",
+        ",".join(labels),
+        "--workers",
+        str(workers),
+        *(["--alone"] if alone else []),
+        *sweep_args,
+    ]
     print(" ".join(cmd), flush=True)
     t = time.perf_counter()
     subprocess.run(cmd, check=True)
@@ -69,15 +86,29 @@ def table(env: str, seeds: int, alone: bool, workers: int, runs: Path, sweep_arg
 
     epochs = run_config({"env": env, "agent": "hints"}).ppo.epochs
     groups = {tuple(r.get("group", [r["label"]])) for r in results}
-    return {"env": env, "rows": labels, "seeds": seeds, "wall_s": round(wall, 1),
-            "env_steps_per_s": round(env_steps / wall), "epochs": epochs,
-            "device": jax.devices()[0].device_kind, "devices": len(jax.devices()), "deterministic": hintsjax.deterministic_gpu_ops(),
-            "platform": jax.default_backend(), "jax": jax.__version__, "grouped": not alone, "workers": workers,
-            "groups": [list(g) for g in sorted(groups, key=len, reverse=True)], "sweep_args": list(sweep_args),
-            "env_steps": env_steps,
-            "train_seconds": {r["label"]: round(r["train_seconds"], 1) for r in results},
-            "compile_seconds": {r["label"]: r["compile_seconds"] for r in results},
-            "command": " ".join(["python", "experiments/classic_control.py", *cmd[2:]]).replace(str(runs), "<runs>")}
+    return {
+        "env": env,
+        "rows": labels,
+        "seeds": seeds,
+        "wall_s": round(wall, 1),
+        "env_steps_per_s": round(env_steps / wall),
+        "epochs": epochs,
+        "device": jax.devices()[0].device_kind,
+        "devices": len(jax.devices()),
+        "deterministic": hintsjax.deterministic_gpu_ops(),
+        "platform": jax.default_backend(),
+        "jax": jax.__version__,
+        "grouped": not alone,
+        "workers": workers,
+        "groups": [list(g) for g in sorted(groups, key=len, reverse=True)],
+        "sweep_args": list(sweep_args),
+        "env_steps": env_steps,
+        "train_seconds": {r["label"]: round(r["train_seconds"], 1) for r in results},
+        "compile_seconds": {r["label"]: r["compile_seconds"] for r in results},
+        "command": " ".join(["python", "experiments/classic_control.py", *cmd[2:]]).replace(
+            str(runs), "<runs>"
+        ),
+    }
 
 
 def cpu_rate(env: str, seeds: int, updates: int) -> dict:
@@ -89,8 +120,17 @@ def cpu_rate(env: str, seeds: int, updates: int) -> dict:
     labels = [label for label in learner_rows(env) if label.startswith("hints-")]
     cfgs = [run_config(run_values(env, label, seeds)) for label in labels]
     steps = updates * cfgs[0].ppo.batch_size
-    cfgs = [run_config({**run_values(env, label, seeds), "checkpoint_every": updates,
-                        "eval_episodes": 1, "ppo": {"total_env_steps": steps}}) for label in labels]
+    cfgs = [
+        run_config(
+            {
+                **run_values(env, label, seeds),
+                "checkpoint_every": updates,
+                "eval_episodes": 1,
+                "ppo": {"total_env_steps": steps},
+            }
+        )
+        for label in labels
+    ]
     with tempfile.TemporaryDirectory() as folder:
         dirs = [Path(folder) / c.label for c in cfgs]
         for d, c in zip(dirs, cfgs):
@@ -98,25 +138,48 @@ def cpu_rate(env: str, seeds: int, updates: int) -> dict:
             save_run_config(d, c)
         results = pipeline.train_group(cfgs, Path(folder) / "group", dirs, progress=False)
     rate = results[0]["train_env_steps_per_s"] * len(cfgs)  # per member x members
-    return {"env": env, "rows": labels, "seeds": seeds, "updates": updates, "platform": "cpu",
-            "device": f"{os.cpu_count()} CPU cores", "env_steps_per_s": round(rate, 1),
-            "authors_env_steps_per_s": AUTHORS_CPU_ENV_STEPS_PER_S, "ratio": round(rate / AUTHORS_CPU_ENV_STEPS_PER_S, 1),
-            "compile_seconds": results[0]["compile_seconds"], "grouped": True,
-            "note": f"training only (compiles apart), {updates} updates of the {len(cfgs)}-row HINTS-FC group "
-                    "extrapolated to the table; the other rows (PPO-RGB, PPO-x) train at a similar or higher rate"}
+    return {
+        "env": env,
+        "rows": labels,
+        "seeds": seeds,
+        "updates": updates,
+        "platform": "cpu",
+        "device": f"{os.cpu_count()} CPU cores",
+        "env_steps_per_s": round(rate, 1),
+        "authors_env_steps_per_s": AUTHORS_CPU_ENV_STEPS_PER_S,
+        "ratio": round(rate / AUTHORS_CPU_ENV_STEPS_PER_S, 1),
+        "compile_seconds": results[0]["compile_seconds"],
+        "grouped": True,
+        "note": f"training only (compiles apart), {updates} updates of the {len(cfgs)}-row HINTS-FC group "
+        "extrapolated to the table; the other rows (PPO-RGB, PPO-x) train at a similar or higher rate",
+    }
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--env", default="pendulum")
     parser.add_argument("--seeds", default="5,20", help="comma-separated seed counts")
-    parser.add_argument("--alone", action="store_true", help="every row in its own program (as before groups)")
-    parser.add_argument("--workers", type=int, default=3, help="groups trained at once (classic_control --workers)")
-    parser.add_argument("--keep", type=Path, default=None, help="train into this runs folder and keep it")
-    parser.add_argument("--cpu-updates", type=int, default=0, help="time this many updates on the CPU instead")
-    parser.add_argument("--gpus", default="", help="classic_control --gpus: one GPU per worker (default: every "
-                                                   "worker spreads its seeds over all visible GPUs)")
-    parser.add_argument("--group-size", type=int, default=0, help="classic_control --group-size (0: no limit)")
+    parser.add_argument(
+        "--alone", action="store_true", help="every row in its own program (as before groups)"
+    )
+    parser.add_argument(
+        "--workers", type=int, default=3, help="groups trained at once (classic_control --workers)"
+    )
+    parser.add_argument(
+        "--keep", type=Path, default=None, help="train into this runs folder and keep it"
+    )
+    parser.add_argument(
+        "--cpu-updates", type=int, default=0, help="time this many updates on the CPU instead"
+    )
+    parser.add_argument(
+        "--gpus",
+        default="",
+        help="classic_control --gpus: one GPU per worker (default: every "
+        "worker spreads its seeds over all visible GPUs)",
+    )
+    parser.add_argument(
+        "--group-size", type=int, default=0, help="classic_control --group-size (0: no limit)"
+    )
     args = parser.parse_args()
     if args.cpu_updates:
         os.environ["JAX_PLATFORMS"] = "cpu"
@@ -133,16 +196,27 @@ def main() -> None:
     for seeds in [int(s) for s in args.seeds.split(",")]:
         with tempfile.TemporaryDirectory() as tmp:
             runs = args.keep / f"seeds{seeds}" if args.keep else Path(tmp)
-            sweep_args = [*(["--gpus", args.gpus] if args.gpus else []),
-                          *(["--group-size", str(args.group_size)] if args.group_size else [])]
+            sweep_args = [
+                *(["--gpus", args.gpus] if args.gpus else []),
+                *(["--group-size", str(args.group_size)] if args.group_size else []),
+            ]
             rows.append(table(args.env, seeds, args.alone, args.workers, runs, sweep_args))
     ceiling = bench_ceiling(8192)["update_samples_per_s"]
     print(f"ceiling: {ceiling:,.0f} samples/s", flush=True)
     for row in rows:
-        row.update(ceiling_fraction=round(row["env_steps_per_s"] * row.pop("epochs") / ceiling, 3),
-                   ceiling_samples_per_s=round(ceiling))
-        print(json.dumps({k: row[k] for k in ("env", "seeds", "wall_s", "env_steps_per_s", "ceiling_fraction")}),
-              flush=True)
+        row.update(
+            ceiling_fraction=round(row["env_steps_per_s"] * row.pop("epochs") / ceiling, 3),
+            ceiling_samples_per_s=round(ceiling),
+        )
+        print(
+            json.dumps(
+                {
+                    k: row[k]
+                    for k in ("env", "seeds", "wall_s", "env_steps_per_s", "ceiling_fraction")
+                }
+            ),
+            flush=True,
+        )
         record(row)
 
 

@@ -24,7 +24,8 @@ from pathlib import Path
 
 import yaml
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # experiments/playground.py, a script beside this one
+# experiments/playground.py, a script beside this one
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 import playground  # noqa: E402
 
 ROWS = Path("runs/versus_brax_knobs/rows.jsonl")
@@ -34,10 +35,29 @@ EVAL_EPISODES = playground.EVAL_EPISODES  # 128, Brax's num_eval_envs
 #   many: 96 updates of 16 minibatches of 64 unrolls, 4 epochs (not 16), 2.95 M env steps per seed;
 #   few:  20 updates of 32 minibatches of 32 unrolls, 16 epochs: the GPU run's 20 updates of 512
 #         gradient steps each, with minibatches 32 times smaller, 614,400 env steps per seed.
-REGIMES = {  # and gpu: Playground's settings as they are (2048 envs), 61 updates (60 M env steps), on a GPU
+# and gpu: Playground's settings as they are (2048 envs), 61 updates (60 M env steps), on a GPU
+REGIMES = {
     "gpu": (61, {}),
-    "many": (96, dict(num_envs=64, batch_size=64, num_minibatches=16, unroll_length=30, num_updates_per_batch=4)),
-    "few": (20, dict(num_envs=64, batch_size=32, num_minibatches=32, unroll_length=30, num_updates_per_batch=16)),
+    "many": (
+        96,
+        dict(
+            num_envs=64,
+            batch_size=64,
+            num_minibatches=16,
+            unroll_length=30,
+            num_updates_per_batch=4,
+        ),
+    ),
+    "few": (
+        20,
+        dict(
+            num_envs=64,
+            batch_size=32,
+            num_minibatches=32,
+            unroll_length=30,
+            num_updates_per_batch=16,
+        ),
+    ),
 }
 
 
@@ -54,7 +74,8 @@ def parse_overrides(pairs: list[str]) -> dict:
         section, name = key.split(".", 1)
         assert section == "ppo", key
         value = yaml.safe_load(value)
-        ppo[name] = float(value) if isinstance(value, str) and value[:1].isdigit() else value  # YAML reads 1e9 as text
+        # YAML reads 1e9 as text
+        ppo[name] = float(value) if isinstance(value, str) and value[:1].isdigit() else value
     return ppo
 
 
@@ -69,14 +90,18 @@ def train_brax(regime: str, seeds: int, updates: int) -> dict:
 def table() -> None:
     rows = [json.loads(line) for line in ROWS.read_text().splitlines()]
     mean = lambda xs: sum(xs) / len(xs)  # noqa: E731
-    print("| regime | side | knob | env steps per seed | deterministic return per seed (mean) | stochastic return per seed (mean) | wall-clock (s) |")
+    print(
+        "| regime | side | knob | env steps per seed | deterministic return per seed (mean) | stochastic return per seed (mean) | wall-clock (s) |"
+    )
     print("|---|---|---|---|---|---|---|")
     for r in rows:
         det, sto = r["deterministic"], r["stochastic"]
         steps = r["env_steps_per_seed"]
         steps = steps if isinstance(steps, int) else "/".join(str(s) for s in sorted(set(steps)))
-        print(f"| {r.get('regime', 'many')} | {r['side']} | {r['label']} | {steps} | {', '.join(f'{x:.1f}' for x in det)} ({mean(det):.1f}) | "
-              f"{', '.join(f'{x:.1f}' for x in sto)} ({mean(sto):.1f}) | {r['seconds']:.0f} |")
+        print(
+            f"| {r.get('regime', 'many')} | {r['side']} | {r['label']} | {steps} | {', '.join(f'{x:.1f}' for x in det)} ({mean(det):.1f}) | "
+            f"{', '.join(f'{x:.1f}' for x in sto)} ({mean(sto):.1f}) | {r['seconds']:.0f} |"
+        )
 
 
 def main() -> None:
@@ -96,13 +121,37 @@ def main() -> None:
         assert not args.overrides, "Brax's side takes no overrides"
         result = train_brax(args.regime, args.seeds, args.updates)
     else:
-        result = train_hintsjax(args.regime, args.seeds, args.updates, parse_overrides(args.overrides))
-    row = {"side": args.side, "label": args.label, "regime": args.regime, "overrides": args.overrides, "seeds": args.seeds,
-           "updates": args.updates, "date": time.strftime("%Y-%m-%d %H:%M"), **result}
+        result = train_hintsjax(
+            args.regime, args.seeds, args.updates, parse_overrides(args.overrides)
+        )
+    row = {
+        "side": args.side,
+        "label": args.label,
+        "regime": args.regime,
+        "overrides": args.overrides,
+        "seeds": args.seeds,
+        "updates": args.updates,
+        "date": time.strftime("%Y-%m-%d %H:%M"),
+        **result,
+    }
     ROWS.parent.mkdir(parents=True, exist_ok=True)
     with ROWS.open("a") as f:
         f.write(json.dumps(row) + "\n")
-    print(json.dumps({k: row[k] for k in ("side", "label", "env_steps_per_seed", "deterministic", "stochastic", "seconds")}))
+    print(
+        json.dumps(
+            {
+                k: row[k]
+                for k in (
+                    "side",
+                    "label",
+                    "env_steps_per_seed",
+                    "deterministic",
+                    "stochastic",
+                    "seconds",
+                )
+            }
+        )
+    )
 
 
 if __name__ == "__main__":

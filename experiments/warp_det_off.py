@@ -26,7 +26,9 @@ def main() -> None:
     parser.add_argument("--env", default="ant")
     parser.add_argument("--updates", type=int, default=100)
     parser.add_argument("--eval-compile", choices=("beside", "first"), default="first")
-    parser.add_argument("--out", type=Path, default=None, help="append the row to this JSON-lines file")
+    parser.add_argument(
+        "--out", type=Path, default=None, help="append the row to this JSON-lines file"
+    )
     args = parser.parse_args()
 
     import jax
@@ -40,8 +42,16 @@ def main() -> None:
     pipeline.evaluation_compiles_first = lambda cfg: args.eval_compile == "first"
     steps = args.updates * run_config({"env": args.env, "physics": "warp"}).ppo.batch_size
     with tempfile.TemporaryDirectory() as out:
-        values = {"env": args.env, "agent": "hints", "scheme": "fc", "physics": "warp", "checkpoint_every": 50,
-                  "ppo": {"total_env_steps": steps}, "out_dir": out, "name": "trial"}
+        values = {
+            "env": args.env,
+            "agent": "hints",
+            "scheme": "fc",
+            "physics": "warp",
+            "checkpoint_every": 50,
+            "ppo": {"total_env_steps": steps},
+            "out_dir": out,
+            "name": "trial",
+        }
         err = io.StringIO()
         with contextlib.redirect_stderr(err):
             try:
@@ -49,13 +59,22 @@ def main() -> None:
             except Exception as e:  # noqa: BLE001  what failed is the result
                 status, _ = -1, print(f"{type(e).__name__}: {e}", file=err)
         result = Path(out, "trial", "eval.json")
-        row = {"env": args.env, "updates": args.updates, "eval_compile": args.eval_compile, "status": status,
-               "deterministic_ops": hintsjax.deterministic_gpu_ops(), "device": jax.devices()[0].device_kind}
+        row = {
+            "env": args.env,
+            "updates": args.updates,
+            "eval_compile": args.eval_compile,
+            "status": status,
+            "deterministic_ops": hintsjax.deterministic_gpu_ops(),
+            "device": jax.devices()[0].device_kind,
+        }
         if result.exists():
             found = json.loads(result.read_text())
-            row.update(env_steps_per_s=round(found["train_env_steps_per_s"]), train_s=round(found["train_seconds"], 1),
-                       compile_s={k: round(v, 1) for k, v in found["compile_seconds"].items()},
-                       return_mean=round(found["evaluations"][0]["mean"], 1))
+            row.update(
+                env_steps_per_s=round(found["train_env_steps_per_s"]),
+                train_s=round(found["train_seconds"], 1),
+                compile_s={k: round(v, 1) for k, v in found["compile_seconds"].items()},
+                return_mean=round(found["evaluations"][0]["mean"], 1),
+            )
         row["error_tail"] = err.getvalue()[-600:] if status else ""
     print(json.dumps(row), flush=True)
     if args.out:

@@ -22,7 +22,10 @@ deterministic_gpu_ops = _xla_flags.deterministic_gpu_ops
 
 # One run over several processes or hosts (hintsjax/system/devices.py): each process must join the
 # others before anything starts JAX's backend, as importing some of the package's modules does.
-if int(_os.environ.get("JAX_NUM_PROCESSES", "1") or 1) > 1 or int(_os.environ.get("SLURM_STEP_NUM_TASKS", "1") or 1) > 1:
+if (
+    int(_os.environ.get("JAX_NUM_PROCESSES", "1") or 1) > 1
+    or int(_os.environ.get("SLURM_STEP_NUM_TASKS", "1") or 1) > 1
+):
     from hintsjax.system.devices import join_processes as _join_processes
 
     _join_processes()

@@ -30,20 +30,34 @@ class Command:
 COMMANDS = {
     "run": Command("hintsjax.run", "train an agent: env=, agent=, scheme=, hint=, ppo.<key>= ..."),
     "evaluate": Command("hintsjax.evaluate", "evaluate a run folder's agent on its env's variants"),
-    "video": Command("hintsjax.video", "a GIF of one episode of a run folder's agent, its hint drawn"),
-    "expert": Command("hintsjax.expert", "export a state PPO run's best seed as an expert for dagger and gail"),
-    "generator": Command("hintsjax.generator", "train a learned hint generator (hint_source=<its folder>)"),
+    "video": Command(
+        "hintsjax.video", "a GIF of one episode of a run folder's agent, its hint drawn"
+    ),
+    "expert": Command(
+        "hintsjax.expert", "export a state PPO run's best seed as an expert for dagger and gail"
+    ),
+    "generator": Command(
+        "hintsjax.generator", "train a learned hint generator (hint_source=<its folder>)"
+    ),
     "rank": Command("hintsjax.rank", "rank candidate hints of an env before training with them"),
-    "quickstart": Command("hintsjax.quickstart", "a first agent on CPU beside a random policy, with its GIF"),
+    "quickstart": Command(
+        "hintsjax.quickstart", "a first agent on CPU beside a random policy, with its GIF"
+    ),
 }
 
 
 def usage() -> str:
     """The console script's --help page: its commands, one line each."""
     width = max(map(len, COMMANDS))
-    return "\n".join([f"usage: {PROG} <command> [arguments]   ({PROG} <command> --help: that command's arguments)", "",
-                      *(f"  {name:<{width}}  {c.about}" for name, c in COMMANDS.items()), "",
-                      f"{PROG} <command> is python -m hintsjax.<command>."])
+    return "\n".join(
+        [
+            f"usage: {PROG} <command> [arguments]   ({PROG} <command> --help: that command's arguments)",
+            "",
+            *(f"  {name:<{width}}  {c.about}" for name, c in COMMANDS.items()),
+            "",
+            f"{PROG} <command> is python -m hintsjax.<command>.",
+        ]
+    )
 
 
 @command

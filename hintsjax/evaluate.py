@@ -31,19 +31,39 @@ from hintsjax.evaluation.outliers import far_below_text
 
 @command
 def main(argv: list[str] | None = None) -> int:
-    parser = ArgumentParser(prog="python -m hintsjax.evaluate", description=__doc__.splitlines()[0], epilog=choices.text(),
-                            formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(
+        prog="python -m hintsjax.evaluate",
+        description=__doc__.splitlines()[0],
+        epilog=choices.text(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     parser.add_argument("run", type=Path, help="a run folder written by python -m hintsjax.run")
-    parser.add_argument("--variant", default=None,
-                        help="env variant(s) to evaluate on, comma-separated, all by one compiled program "
-                             "(default: the training one)")
-    parser.add_argument("--episodes", type=whole, default=None, help="episodes per seed (default: the run's)")
+    parser.add_argument(
+        "--variant",
+        default=None,
+        help="env variant(s) to evaluate on, comma-separated, all by one compiled program "
+        "(default: the training one)",
+    )
+    parser.add_argument(
+        "--episodes", type=whole, default=None, help="episodes per seed (default: the run's)"
+    )
     mode = parser.add_mutually_exclusive_group()
-    mode.add_argument("--stochastic", action="store_true", help="sample actions (default: as the run's stochastic_eval)")
-    mode.add_argument("--deterministic", action="store_true", help="the mean action (default: as the run's stochastic_eval)")
-    parser.add_argument("--hint-source", default=None,
-                        help="the agent's hints at deploy: programmatic, or a generator folder (hintsjax.generator); "
-                             "default: the run's eval_hint_source")
+    mode.add_argument(
+        "--stochastic",
+        action="store_true",
+        help="sample actions (default: as the run's stochastic_eval)",
+    )
+    mode.add_argument(
+        "--deterministic",
+        action="store_true",
+        help="the mean action (default: as the run's stochastic_eval)",
+    )
+    parser.add_argument(
+        "--hint-source",
+        default=None,
+        help="the agent's hints at deploy: programmatic, or a generator folder (hintsjax.generator); "
+        "default: the run's eval_hint_source",
+    )
     args = parser.parse_args(argv)
     cfg = load_run_config(args.run)
     if args.hint_source is not None:
@@ -64,11 +84,15 @@ def main(argv: list[str] | None = None) -> int:
     tag = "" if source == PROGRAMMATIC else f"-hints-{Path(source).name}"
     for result in results:
         out = args.run / f"eval-{result['variant']}-{mode}-{episodes}{tag}.json"
-        text = json.dumps({"label": cfg.label, "env": cfg.env, "hint_source": source, **result}, indent=1)
+        text = json.dumps(
+            {"label": cfg.label, "env": cfg.env, "hint_source": source, **result}, indent=1
+        )
         paths.write_whole(out, lambda part: part.write_text(text))
-        print(f"{cfg.label} on {cfg.env}/{result['variant']} ({mode}, {cfg.seeds} seeds x {episodes} episodes"
-              f"{'' if not tag else ', hints from ' + source}): "
-              f"{result['mean']:.2f} +- {result['std']:.2f}{metrics_text(result)}  -> {out}")
+        print(
+            f"{cfg.label} on {cfg.env}/{result['variant']} ({mode}, {cfg.seeds} seeds x {episodes} episodes"
+            f"{'' if not tag else ', hints from ' + source}): "
+            f"{result['mean']:.2f} +- {result['std']:.2f}{metrics_text(result)}  -> {out}"
+        )
         if outliers := far_below_text(result, args.run):
             print(f"{cfg.label} on {cfg.env}/{result['variant']}: {outliers}")
     return 0

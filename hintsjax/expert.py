@@ -21,16 +21,28 @@ from hintsjax.algorithms.experts import EXPERT_JSON, export
 
 @command
 def main(argv: list[str] | None = None) -> int:
-    parser = ArgumentParser(prog="python -m hintsjax.expert", description=__doc__.splitlines()[0],
-                            epilog=choices.text(), formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(
+        prog="python -m hintsjax.expert",
+        description=__doc__.splitlines()[0],
+        epilog=choices.text(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     parser.add_argument("run", type=Path, help="a finished run folder of agent=expert_ppo")
-    parser.add_argument("--out", type=Path, default=None, help="expert folder (default: hintsjax/experts/<env>)")
-    parser.add_argument("--force", action="store_true", help="replace the expert in that folder (a packaged one, by default)")
+    parser.add_argument(
+        "--out", type=Path, default=None, help="expert folder (default: hintsjax/experts/<env>)"
+    )
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="replace the expert in that folder (a packaged one, by default)",
+    )
     args = parser.parse_args(argv)
     out = export(args.run, args.out, args.force)
     meta = json.loads((out / EXPERT_JSON).read_text())
-    print(f"expert for {meta['env']}: seed {meta['seed_index']} of {args.run} "
-          f"({meta['seed_eval_mean']:.2f} over {meta['episodes_per_seed']} episodes) -> {out}")
+    print(
+        f"expert for {meta['env']}: seed {meta['seed_index']} of {args.run} "
+        f"({meta['seed_eval_mean']:.2f} over {meta['episodes_per_seed']} episodes) -> {out}"
+    )
     return 0
 
 

@@ -20,21 +20,29 @@ from hintsjax.hints.generators import GeneratorConfig, train_folder
 
 def parse(argv: list[str]) -> GeneratorConfig:
     """GeneratorConfig from `key=value` arguments; UsageError naming the valid keys."""
-    cfg = parse_key_values(GeneratorConfig, argv, "python -m hintsjax.generator", __doc__.splitlines()[0]).validate()
-    paths.check_folder(cfg.out_dir, "out_dir")  # before the pictures are drawn and the generator trained
+    cfg = parse_key_values(
+        GeneratorConfig, argv, "python -m hintsjax.generator", __doc__.splitlines()[0]
+    ).validate()
+    # before the pictures are drawn and the generator trained
+    paths.check_folder(cfg.out_dir, "out_dir")
     return cfg
 
 
 @command
 def main(argv: list[str] | None = None) -> int:
     cfg = parse(sys.argv[1:] if argv is None else argv)
-    print(f"generator of {cfg.env}/{cfg.hint} from {cfg.frames} pictures: {cfg.seeds} seed(s), "
-          f"{cfg.num_envs} x {cfg.steps} steps of {cfg.policy} rollouts, {cfg.epochs} epochs", flush=True)
+    print(
+        f"generator of {cfg.env}/{cfg.hint} from {cfg.frames} pictures: {cfg.seeds} seed(s), "
+        f"{cfg.num_envs} x {cfg.steps} steps of {cfg.policy} rollouts, {cfg.epochs} epochs",
+        flush=True,
+    )
     with writing_to(cfg.out_dir):  # a full disk or read-only folder: one line naming it
         folder, meta = train_folder(cfg)
     r2 = ", ".join(f"{n} {v:.3f}" for n, v in zip(meta["dimensions"], meta["heldout_r2_mean"]))
-    print(f"held-out R^2 (mean over seeds): {r2}; compile {meta['seconds']['compile']:.0f} s, "
-          f"train {meta['seconds']['train']:.0f} s -> {folder}")
+    print(
+        f"held-out R^2 (mean over seeds): {r2}; compile {meta['seconds']['compile']:.0f} s, "
+        f"train {meta['seconds']['train']:.0f} s -> {folder}"
+    )
     return 0
 
 

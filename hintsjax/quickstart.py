@@ -30,10 +30,26 @@ from hintsjax.evaluation import recording
 from hintsjax.evaluation.evaluator import eval_keys, evaluate_params
 from hintsjax.training import outputs, pipeline, runlog
 
-QUICK_PPO = {"batch_size": 3200, "minibatch_size": 200, "epochs": 6, "gamma": 0.95, "actor_lr": 3e-4,
-             "starts_per_rollout": True}
-SETTINGS = {"env": "pendulum", "agent": "hints", "hint": "composite", "scheme": "fc", "seeds": 1, "eval_episodes": 20,
-            "eval_variants": (), "checkpoint_every": 8, "image_size": 36, "ppo": QUICK_PPO}
+QUICK_PPO = {
+    "batch_size": 3200,
+    "minibatch_size": 200,
+    "epochs": 6,
+    "gamma": 0.95,
+    "actor_lr": 3e-4,
+    "starts_per_rollout": True,
+}
+SETTINGS = {
+    "env": "pendulum",
+    "agent": "hints",
+    "hint": "composite",
+    "scheme": "fc",
+    "seeds": 1,
+    "eval_episodes": 20,
+    "eval_variants": (),
+    "checkpoint_every": 8,
+    "image_size": 36,
+    "ppo": QUICK_PPO,
+}
 MAX_SEED = 2**31 - 1  # jax.random.key takes an int32-range seed here
 BASELINE_JSON = "random_policy.json"
 
@@ -53,24 +69,51 @@ def swing_up_gif(cfg: RunConfig, run_dir: Path, candidates: int = 8) -> Path:
     env = cfg.make_env()
     steps = min(env.max_steps, recording.MAX_STEPS)
     key = eval_keys(cfg)[0]
-    episodes = [recording.rollout(cfg, params, cfg.variant, steps, jax.random.fold_in(key, i)) for i in range(candidates)]
+    episodes = [
+        recording.rollout(cfg, params, cfg.variant, steps, jax.random.fold_in(key, i))
+        for i in range(candidates)
+    ]
     episode = min(episodes, key=lambda e: float(e.rewards[0])).cut()
     out = run_dir / "swing-up.gif"
-    recording.write_gif(recording.compose_frames(episode, recording.hint_labels(env.hint), 4, env.max_steps), out, 25)
+    recording.write_gif(
+        recording.compose_frames(episode, recording.hint_labels(env.hint), 4, env.max_steps),
+        out,
+        25,
+    )
     print(f"{out}: {int(episode.valid.sum())} frames, return {float(episode.rewards.sum()):.2f}")
     return out
 
 
 @command
 def main(argv: list[str] | None = None) -> int:
-    parser = ArgumentParser(prog="python -m hintsjax.quickstart", description=__doc__.splitlines()[0],
-                            epilog="After it, python -m hintsjax.run trains any of these:\n\n" + choices.text(), formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(
+        prog="python -m hintsjax.quickstart",
+        description=__doc__.splitlines()[0],
+        epilog="After it, python -m hintsjax.run trains any of these:\n\n" + choices.text(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     batch = SETTINGS["ppo"]["batch_size"]
-    parser.add_argument("--updates", type=whole, default=32, help=f"updates of {batch} env steps (default: 32)")
-    parser.add_argument("--out-dir", type=Path, default=Path("runs"), help="where the run folder goes (default: runs)")
-    parser.add_argument("--epochs", type=whole, default=SETTINGS["ppo"]["epochs"],
-                        help=f"PPO's epochs over each update's batch (default: {SETTINGS['ppo']['epochs']})")
-    parser.add_argument("--seed", type=int, default=0, help=f"the run's seed, 0 to {MAX_SEED} (default: 0, what the README shows)")
+    parser.add_argument(
+        "--updates", type=whole, default=32, help=f"updates of {batch} env steps (default: 32)"
+    )
+    parser.add_argument(
+        "--out-dir",
+        type=Path,
+        default=Path("runs"),
+        help="where the run folder goes (default: runs)",
+    )
+    parser.add_argument(
+        "--epochs",
+        type=whole,
+        default=SETTINGS["ppo"]["epochs"],
+        help=f"PPO's epochs over each update's batch (default: {SETTINGS['ppo']['epochs']})",
+    )
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help=f"the run's seed, 0 to {MAX_SEED} (default: 0, what the README shows)",
+    )
     args = parser.parse_args(argv)
     if args.updates < 1:
         parser.exit(2, f"error: --updates must be at least 1, got {args.updates}\n")
@@ -80,23 +123,40 @@ def main(argv: list[str] | None = None) -> int:
         parser.exit(2, f"error: --seed must be 0 to {MAX_SEED}, got {args.seed}\n")
     paths.check_folder(args.out_dir, "--out-dir")
     t = time.perf_counter()
-    cfg = run_config({**SETTINGS, "seed": args.seed, "ppo": {**SETTINGS["ppo"], "epochs": args.epochs,
-                                                                  "total_env_steps": batch * args.updates}})
+    cfg = run_config(
+        {
+            **SETTINGS,
+            "seed": args.seed,
+            "ppo": {
+                **SETTINGS["ppo"],
+                "epochs": args.epochs,
+                "total_env_steps": batch * args.updates,
+            },
+        }
+    )
     compilation_cache.enable(compilation_cache.folder(True))
     with writing_to(args.out_dir):  # a full disk or read-only folder: one line naming it
-        run_dir = outputs.new_run_dir(str(args.out_dir), f"quickstart-{time.strftime('%Y%m%d-%H%M%S')}", cfg)
+        run_dir = outputs.new_run_dir(
+            str(args.out_dir), f"quickstart-{time.strftime('%Y%m%d-%H%M%S')}", cfg
+        )
         save_run_config(run_dir, cfg)
         trained = pipeline.train(cfg, run_dir)["evaluations"][0]
-        with ThreadPoolExecutor(max_workers=2) as pool:  # each is mostly a compile, one core's work: side by side
-            baseline_done, gif_done = pool.submit(random_policy, cfg, cfg.variant), pool.submit(swing_up_gif, cfg, run_dir)
+        # each is mostly a compile, one core's work: side by side
+        with ThreadPoolExecutor(max_workers=2) as pool:
+            baseline_done, gif_done = (
+                pool.submit(random_policy, cfg, cfg.variant),
+                pool.submit(swing_up_gif, cfg, run_dir),
+            )
             baseline, gif = baseline_done.result(), gif_done.result()
         (run_dir / BASELINE_JSON).write_text(json.dumps(baseline, indent=1))
-    print(f"\n{cfg.env}/{trained['variant']}, {cfg.eval_episodes} episodes each ({time.perf_counter() - t:.0f} s in all):\n"
-          f"  trained agent ({cfg.label}, {cfg.ppo.total_env_steps} env steps): "
-          f"{trained['mean']:8.1f} +- {trained['std']:.1f}\n"
-          f"  random policy (the agent before training, sampling its actions): "
-          f"{baseline['mean']:8.1f} +- {baseline['std']:.1f}\n"
-          f"run folder:     {run_dir}\nlearning curve: {run_dir / runlog.CURVE_PNG}\none episode:    {gif}")
+    print(
+        f"\n{cfg.env}/{trained['variant']}, {cfg.eval_episodes} episodes each ({time.perf_counter() - t:.0f} s in all):\n"
+        f"  trained agent ({cfg.label}, {cfg.ppo.total_env_steps} env steps): "
+        f"{trained['mean']:8.1f} +- {trained['std']:.1f}\n"
+        f"  random policy (the agent before training, sampling its actions): "
+        f"{baseline['mean']:8.1f} +- {baseline['std']:.1f}\n"
+        f"run folder:     {run_dir}\nlearning curve: {run_dir / runlog.CURVE_PNG}\none episode:    {gif}"
+    )
     return 0
 
 

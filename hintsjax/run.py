@@ -21,8 +21,18 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
 
 from hintsjax.system import checkpoint, compilation_cache, devices, paths, requeue, xla_flags
-from hintsjax.system.errors import (INTERRUPTED, TERMINATED, Terminated, UsageError, command, fail, machines, report_bug,
-                                    report_machine, sigterm_as_interrupt)
+from hintsjax.system.errors import (
+    INTERRUPTED,
+    TERMINATED,
+    Terminated,
+    UsageError,
+    command,
+    fail,
+    machines,
+    report_bug,
+    report_machine,
+    sigterm_as_interrupt,
+)
 from hintsjax.settings import schema
 from hintsjax.settings.config import RunConfig
 from hintsjax.settings.layers import CONFIG_YAML, load_run_config, save_run_config
@@ -33,13 +43,13 @@ from hintsjax.training.pipeline import train
 from hintsjax.training.request import request, rounded_budget
 
 
-
 def main_from_values(values: dict[str, Any]) -> int:
     """Run from plain config values (what Hydra resolved); returns the exit status. SIGTERM (a
     cluster's time limit or preemption) is handled as Ctrl-C is, and always saves the newest state
     whose metrics are logged; so is submitit's preemption signal, after which submitit requeues
     the job (system/requeue.py)."""
-    with requeue.preemption_as_interrupt(), sigterm_as_interrupt():  # submitit's own handler kept, whatever its signal
+    # submitit's own handler kept, whatever its signal
+    with requeue.preemption_as_interrupt(), sigterm_as_interrupt():
         try:
             return _run(values)
         except requeue.Preempted as e:  # before the run had a folder: nothing to save
@@ -68,12 +78,17 @@ def _run(values: dict[str, Any]) -> int:
     except Exception as e:  # noqa: BLE001  the boundary: a bug, not bad input
         return report_bug(e)
     cfg, run_dir = asked.cfg, asked.run_dir
-    named = any((values.get("ppo") or {}).get(k) is not None for k in ("total_env_steps", "batch_size"))
-    if named and (note := rounded_budget(cfg)) and devices.is_main():  # an env's own budget is not the user's to round
+    named = any(
+        (values.get("ppo") or {}).get(k) is not None for k in ("total_env_steps", "batch_size")
+    )
+    # an env's own budget is not the user's to round
+    if named and (note := rounded_budget(cfg)) and devices.is_main():
         print(note, file=sys.stderr)
     compilation_cache.enable(compilation_cache.folder(values.get("compilation_cache")))
-    existed = paths.existing_part(asked.out_dir)  # what stays if the run goes again before its first update
-    made = resume = False  # a folder made by this call (not a resumed or requeued run's); a checkpoint to go on from
+    # what stays if the run goes again before its first update
+    existed = paths.existing_part(asked.out_dir)
+    # a folder made by this call (not a resumed or requeued run's); a checkpoint to go on from
+    made = resume = False
     try:
         if run_dir is None:
             if devices.is_main():
@@ -82,44 +97,66 @@ def _run(values: dict[str, Any]) -> int:
                     run_dir, made = new_run_dir(asked.out_dir, asked.name, cfg), True
                     save_run_config(run_dir, cfg)
                     requeue.record(run_dir)
-            run_dir = Path(devices.agree(str(run_dir)))  # the folder process 0 made (or found), on every process
+            # the folder process 0 made (or found), on every process
+            run_dir = Path(devices.agree(str(run_dir)))
             # a requeued run's newest checkpoint, if it had one (process 0 looks: the look tidies the folder)
-            resume = devices.agree_that(devices.is_main() and checkpoint.latest_update(run_dir) is not None)
+            resume = devices.agree_that(
+                devices.is_main() and checkpoint.latest_update(run_dir) is not None
+            )
         else:
             resume = True
             if asked.longer and devices.is_main():
                 save_run_config(run_dir, cfg)  # the budget it now trains to
     except Exception as e:  # noqa: BLE001  the boundary: a full disk or read-only folder, else a bug
-        return report_machine(e, run_dir or asked.out_dir) if machines(e) else report_bug(e, run_dir)
+        return (
+            report_machine(e, run_dir or asked.out_dir) if machines(e) else report_bug(e, run_dir)
+        )
     try:
         train(cfg, run_dir, resume=resume)
-    except UsageError as e:  # found before the first update (a program that cannot fit): a new folder goes again
-        if made and run_dir.is_dir() and {p.name for p in run_dir.iterdir()} <= {CONFIG_YAML, requeue.JOB_JSON}:
+    # found before the first update (a program that cannot fit): a new folder goes again
+    except UsageError as e:
+        if (
+            made
+            and run_dir.is_dir()
+            and {p.name for p in run_dir.iterdir()} <= {CONFIG_YAML, requeue.JOB_JSON}
+        ):
             paths.unmake(run_dir, existed)
         return fail(e)
-    except checkpoint.CheckpointWriteError as e:  # the newest complete checkpoint stays; resume from it
+    # the newest complete checkpoint stays; resume from it
+    except checkpoint.CheckpointWriteError as e:
         print(f"error: {e}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt as e:  # Ctrl-C (SIGTERM): advance saved a checkpoint if one was due, and its writes are done
+    # Ctrl-C (SIGTERM): advance saved a checkpoint if one was due, and its writes are done
+    except KeyboardInterrupt as e:
         good = checkpoint.latest_update(run_dir)
         saved = f"checkpoint at update {good}" if good else "no checkpoint yet"
-        if isinstance(e, requeue.Preempted):  # submitit's signal: its own handler requeues the job and exits
+        # submitit's signal: its own handler requeues the job and exits
+        if isinstance(e, requeue.Preempted):
             return requeue.hand_over(e, run_dir, saved)
         stopped = "terminated (SIGTERM)" if isinstance(e, Terminated) else "interrupted"
-        print(f"{stopped}; {saved}; go on with: python -m hintsjax.run resume={run_dir}", file=sys.stderr)
+        print(
+            f"{stopped}; {saved}; go on with: python -m hintsjax.run resume={run_dir}",
+            file=sys.stderr,
+        )
         return TERMINATED if isinstance(e, Terminated) else INTERRUPTED
     except NonFiniteError as e:  # its checkpoints were all written before it went non-finite
         good = checkpoint.latest_update(run_dir)  # read once the background writes are done
         if devices.is_main():
-            (run_dir / NONFINITE_JSON).write_text(json.dumps({**e.found, "last_good_checkpoint": good}) + "\n")
-        print(f"error: {e}; last good checkpoint: {f'update {good}' if good else 'none'} ({run_dir})", file=sys.stderr)
+            (run_dir / NONFINITE_JSON).write_text(
+                json.dumps({**e.found, "last_good_checkpoint": good}) + "\n"
+            )
+        print(
+            f"error: {e}; last good checkpoint: {f'update {good}' if good else 'none'} ({run_dir})",
+            file=sys.stderr,
+        )
         return 1
     except Exception as e:  # noqa: BLE001  the boundary: the machine's refusals; else a bug, its traceback kept in the run folder
         return report_machine(e, run_dir) if machines(e) else report_bug(e, run_dir)
     return 0
 
 
-ConfigStore.instance().store(name="config", node=overrides.hydra_config())  # the schema, read off the fields
+# the schema, read off the fields
+ConfigStore.instance().store(name="config", node=overrides.hydra_config())
 
 
 @hydra.main(version_base=None, config_path=None, config_name="config")
@@ -137,7 +174,8 @@ def checked_main() -> int:
         print(f"{__doc__.strip()}\n\n{choices.text()}\n\n{schema.help_text()}\n")
     overrides.check_overrides(sys.argv[1:])
     if overrides.asks_only_for_warp(sys.argv[1:]):
-        xla_flags.drop_determinism()  # nothing under MuJoCo Warp repeats bit for bit; they only cost speed
+        # nothing under MuJoCo Warp repeats bit for bit; they only cost speed
+        xla_flags.drop_determinism()
     overrides.check_sweep(sys.argv[1:], request)
     _hydra_main()  # exits itself with a run's non-zero status
     return 0

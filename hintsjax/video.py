@@ -23,26 +23,53 @@ from hintsjax.settings.layers import load_run_config
 from hintsjax.cli import choices
 from hintsjax.algorithms.registry import make_trainer
 from hintsjax.evaluation.evaluator import eval_keys
-from hintsjax.evaluation.recording import MAX_STEPS, compose_frames, frame_shape, hint_labels, rollout, write_gif
+from hintsjax.evaluation.recording import (
+    MAX_STEPS,
+    compose_frames,
+    frame_shape,
+    hint_labels,
+    rollout,
+    write_gif,
+)
 
 
 @command
 def main(argv: list[str] | None = None) -> int:
-    parser = ArgumentParser(prog="python -m hintsjax.video", description=__doc__.splitlines()[0], epilog=choices.text(),
-                            formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(
+        prog="python -m hintsjax.video",
+        description=__doc__.splitlines()[0],
+        epilog=choices.text(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     parser.add_argument("run", type=Path, help="a run folder written by python -m hintsjax.run")
-    parser.add_argument("--seed", type=whole, default=0, help="which of the run's seeds acts (default: 0)")
+    parser.add_argument(
+        "--seed", type=whole, default=0, help="which of the run's seeds acts (default: 0)"
+    )
     parser.add_argument("--variant", default=None, help="env variant (default: the training one)")
-    parser.add_argument("--steps", type=whole, default=None, help=f"at most this many steps (default: the episode, at most {MAX_STEPS})")
-    parser.add_argument("--scale", type=whole, default=4, help="picture upscaling, nearest neighbour (default: 4)")
-    parser.add_argument("--out", type=Path, default=None, help="GIF path (default: RUN/video-<variant>-seed<seed>.gif)")
+    parser.add_argument(
+        "--steps",
+        type=whole,
+        default=None,
+        help=f"at most this many steps (default: the episode, at most {MAX_STEPS})",
+    )
+    parser.add_argument(
+        "--scale", type=whole, default=4, help="picture upscaling, nearest neighbour (default: 4)"
+    )
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="GIF path (default: RUN/video-<variant>-seed<seed>.gif)",
+    )
     parser.add_argument("--fps", type=whole, default=25, help="frames per second (default: 25)")
     args = parser.parse_args(argv)
     cfg = load_run_config(args.run)
     variant = args.variant or cfg.variant or envs.variant_names(cfg.env)[0]
     env_params(cfg.env, variant)
     if not 0 <= args.seed < cfg.seeds:
-        raise UsageError(f"--seed must be in [0, {cfg.seeds}) for this run of {cfg.seeds} seeds, got {args.seed}")
+        raise UsageError(
+            f"--seed must be in [0, {cfg.seeds}) for this run of {cfg.seeds} seeds, got {args.seed}"
+        )
     env = cfg.make_env(deploy=True)
     steps = min(env.max_steps, MAX_STEPS) if args.steps is None else args.steps
     for name, value in (("--steps", steps), ("--scale", args.scale), ("--fps", args.fps)):
@@ -59,8 +86,10 @@ def main(argv: list[str] | None = None) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     paths.write_whole(out, lambda part: write_gif(frames, part, args.fps))
     ended = "episode ended" if episode.done.any() else f"cut at {steps} steps"
-    print(f"{out}: {len(frames)} frames, return {float(episode.rewards.sum()):.2f} "
-          f"({cfg.label} on {cfg.env}/{variant}, seed {args.seed}, {ended})")
+    print(
+        f"{out}: {len(frames)} frames, return {float(episode.rewards.sum()):.2f} "
+        f"({cfg.label} on {cfg.env}/{variant}, seed {args.seed}, {ended})"
+    )
     return 0
 
 

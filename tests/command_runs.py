@@ -29,8 +29,13 @@ import traceback
 from pathlib import Path
 
 
-def outcomes(module: str, cases: list[list[str]], root: Path, runs: tuple[str, ...] = (),
-             cwd: Path | None = None) -> list[tuple[int, str, str, Path]]:
+def outcomes(
+    module: str,
+    cases: list[list[str]],
+    root: Path,
+    runs: tuple[str, ...] = (),
+    cwd: Path | None = None,
+) -> list[tuple[int, str, str, Path]]:
     """`python -m module *args` for each args of `cases`, through one start of this script: each
     case's (exit status, stdout, stderr, the folder it ran in: `cwd`, or an empty folder of its own
     under `root`). Fails unless the start itself printed nothing on stderr."""
@@ -38,13 +43,27 @@ def outcomes(module: str, cases: list[list[str]], root: Path, runs: tuple[str, .
     for k, args in enumerate(cases):
         folder = cwd or root / f"case{k}"
         folder.mkdir(exist_ok=True)
-        jobs.append({"args": args, "cwd": str(folder), "out": str(root / f"case{k}.out"), "err": str(root / f"case{k}.err")})
-    out = subprocess.run([sys.executable, __file__, module, json.dumps(jobs), *runs], cwd=root, capture_output=True,
-                         text=True, timeout=600)
+        jobs.append(
+            {
+                "args": args,
+                "cwd": str(folder),
+                "out": str(root / f"case{k}.out"),
+                "err": str(root / f"case{k}.err"),
+            }
+        )
+    out = subprocess.run(
+        [sys.executable, __file__, module, json.dumps(jobs), *runs],
+        cwd=root,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert out.returncode == 0 and out.stderr == "", out.stderr[-3000:]
     statuses = json.loads(out.stdout)
-    return [(status, Path(job["out"]).read_text(), Path(job["err"]).read_text(), Path(job["cwd"]))
-            for status, job in zip(statuses, jobs, strict=True)]
+    return [
+        (status, Path(job["out"]).read_text(), Path(job["err"]).read_text(), Path(job["cwd"]))
+        for status, job in zip(statuses, jobs, strict=True)
+    ]
 
 
 def run_case(module: str, case: dict) -> None:
@@ -83,7 +102,8 @@ def main() -> None:
     for name in (module, *runs):
         importlib.import_module(name)  # with everything it imports
     for name in (module, *runs):
-        del sys.modules[name]  # each runs as __main__ in a case, as under `python -m`, not from this copy
+        # each runs as __main__ in a case, as under `python -m`, not from this copy
+        del sys.modules[name]
     statuses = []
     for case in cases:
         sys.stdout.flush()

@@ -45,7 +45,8 @@ from hintsjax.system import compilation_cache, errors, program_cache
 os.environ[program_cache.ENV_VAR] = "off"
 os.environ[errors.DEBUG] = "1"
 
-MADE_CACHE = "HINTSJAX_TEST_XLA_CACHE_MADE"  # the folder this run made (set by the first process: xdist's controller)
+# the folder this run made (set by the first process: xdist's controller)
+MADE_CACHE = "HINTSJAX_TEST_XLA_CACHE_MADE"
 if os.environ.get("HINTSJAX_TEST_XLA_CACHE", "on") != "off":
     if MADE_CACHE not in os.environ:
         os.environ[MADE_CACHE] = tempfile.mkdtemp(prefix="hintsjax-tests-xla-")
@@ -58,7 +59,9 @@ def pytest_configure(config):
     test module is imported yet, and xdist's workers start later and inherit it). The slow tier
     alone (`-m slow`, `make test-slow`) keeps XLA's default: its drives run for minutes, which -O0
     made several times longer (the humanoid's 2x10^5-step drive took 1296 s on a core)."""
-    if config.option.markexpr.strip() != "slow" and xla_tier.OPTIMIZATION not in os.environ.get("XLA_FLAGS", ""):
+    if config.option.markexpr.strip() != "slow" and xla_tier.OPTIMIZATION not in os.environ.get(
+        "XLA_FLAGS", ""
+    ):
         os.environ["XLA_FLAGS"] = xla_tier.default_tier_flags()
 
 

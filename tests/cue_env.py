@@ -49,7 +49,8 @@ class CueEnv(Env):
 
     def initial_state(self, key: jax.Array, params: CueParams) -> CueState:
         cue = jnp.where(jax.random.bernoulli(key), 1.0, -1.0).astype(jnp.float32)
-        distractor = jax.random.uniform(jax.random.fold_in(key, 1), (), jnp.float32, -1.0, 1.0)  # the cue's draw unchanged
+        # the cue's draw unchanged
+        distractor = jax.random.uniform(jax.random.fold_in(key, 1), (), jnp.float32, -1.0, 1.0)
         return CueState(cue=cue, t=jnp.zeros((), jnp.int32), distractor=distractor)
 
     def transition(self, key, state: CueState, action, params: CueParams) -> Step:
@@ -81,4 +82,6 @@ def distractor(state: CueState, params: CueParams) -> jax.Array:
     return state.distractor[None]
 
 
-envs.REGISTRY[NAME] = envs.EnvEntry(CueEnv, {"default": CueParams()}, training=dict(hint="cue", ppo=dict(actor_lr=1e-3)))
+envs.REGISTRY[NAME] = envs.EnvEntry(
+    CueEnv, {"default": CueParams()}, training=dict(hint="cue", ppo=dict(actor_lr=1e-3))
+)

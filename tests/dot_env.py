@@ -43,10 +43,14 @@ class DotEnv(Env):
         return DotParams()
 
     def initial_state(self, key: jax.Array, params: DotParams) -> DotState:
-        return DotState(jax.random.uniform(key, (), jnp.float32, -1.0, 1.0), jnp.zeros((), jnp.int32))
+        return DotState(
+            jax.random.uniform(key, (), jnp.float32, -1.0, 1.0), jnp.zeros((), jnp.int32)
+        )
 
     def transition(self, key, state: DotState, action, params: DotParams) -> Step:
-        position = jnp.clip(state.position + params.speed * jnp.tanh(jnp.reshape(action, ())), -1.0, 1.0)
+        position = jnp.clip(
+            state.position + params.speed * jnp.tanh(jnp.reshape(action, ())), -1.0, 1.0
+        )
         return Step(state.replace(position=position), -(position**2), jnp.zeros((), bool))
 
     def render(self, state: DotState, params: DotParams) -> jax.Array:
@@ -65,4 +69,6 @@ def position(state: DotState, params: DotParams) -> jax.Array:
     return state.position[None]
 
 
-envs.REGISTRY[NAME] = envs.EnvEntry(DotEnv, {"default": DotParams()}, training=dict(hint="position", ppo=dict(actor_lr=1e-3)))
+envs.REGISTRY[NAME] = envs.EnvEntry(
+    DotEnv, {"default": DotParams()}, training=dict(hint="position", ppo=dict(actor_lr=1e-3))
+)

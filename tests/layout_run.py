@@ -19,12 +19,25 @@ import linear_env  # noqa: F401  (registers the test env "linear")
 from hintsjax.settings.layers import run_config, save_run_config
 from hintsjax.training import pipeline
 
-TINY_PPO = {"total_env_steps": 320, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}
+TINY_PPO = {
+    "total_env_steps": 320,
+    "num_envs": 4,
+    "batch_size": 64,
+    "minibatch_size": 32,
+    "epochs": 1,
+}
 
 
 def values(agent: str) -> dict:
-    return {"env": "linear", "agent": agent, "seeds": 3, "ppo": TINY_PPO, "eval_episodes": 2,
-            "checkpoint_every": 2, "checkpoint_seconds": 0}
+    return {
+        "env": "linear",
+        "agent": agent,
+        "seeds": 3,
+        "ppo": TINY_PPO,
+        "eval_episodes": 2,
+        "checkpoint_every": 2,
+        "checkpoint_seconds": 0,
+    }
 
 
 def main() -> None:
@@ -39,8 +52,15 @@ def main() -> None:
         d.mkdir(parents=True)
         save_run_config(d, c)
     group = pipeline.train_group(cfgs, out / "group" / "_group", dirs, progress=False)
-    print(json.dumps({"devices": len(jax.devices()), "alone": alone["evaluations"][0]["seed_means"],
-                      "group": [r["evaluations"][0]["seed_means"] for r in group]}))
+    print(
+        json.dumps(
+            {
+                "devices": len(jax.devices()),
+                "alone": alone["evaluations"][0]["seed_means"],
+                "group": [r["evaluations"][0]["seed_means"] for r in group],
+            }
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -43,7 +43,9 @@ class LinearEnv(Env):
         return LinearParams()
 
     def initial_state(self, key: jax.Array, params: LinearParams) -> LinearState:
-        return LinearState(jax.random.uniform(key, (2,), minval=-1.0, maxval=1.0), jnp.zeros((), jnp.int32))
+        return LinearState(
+            jax.random.uniform(key, (2,), minval=-1.0, maxval=1.0), jnp.zeros((), jnp.int32)
+        )
 
     def transition(self, key, state: LinearState, action, params: LinearParams) -> Step:
         a = jnp.reshape(action, ())
@@ -75,5 +77,8 @@ class LinearExpert:
 
 EXPERT = LinearExpert(jnp.asarray(GAINS, jnp.float32), jnp.asarray([-2.0], jnp.float32))
 
-envs.REGISTRY[NAME] = envs.EnvEntry(LinearEnv, {"default": LinearParams(), "terminating": LinearParams(0.3)},
-                                    training=dict(ppo=dict(hidden=(32, 32))))
+envs.REGISTRY[NAME] = envs.EnvEntry(
+    LinearEnv,
+    {"default": LinearParams(), "terminating": LinearParams(0.3)},
+    training=dict(ppo=dict(hidden=(32, 32))),
+)

@@ -19,11 +19,18 @@ from pathlib import Path
 import linear_env  # noqa: F401  (registers the test env "linear")
 from hintsjax import run
 
-TINY_PPO = {"total_env_steps": 320, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}
+TINY_PPO = {
+    "total_env_steps": 320,
+    "num_envs": 4,
+    "batch_size": 64,
+    "minibatch_size": 32,
+    "epochs": 1,
+}
 
 
 HUNG_SECONDS = 300  # far beyond a run's 10-80 s: print every thread's stack to the log and exit
-HUNG_MARK = f"Timeout ({datetime.timedelta(seconds=HUNG_SECONDS)})!"  # how faulthandler's dump after HUNG_SECONDS begins
+# how faulthandler's dump after HUNG_SECONDS begins
+HUNG_MARK = f"Timeout ({datetime.timedelta(seconds=HUNG_SECONDS)})!"
 
 
 def main() -> int:
@@ -31,9 +38,20 @@ def main() -> int:
     out = Path(sys.argv[1])
     if sys.argv[2:] == ["--resume"]:
         return run.main_from_values({"resume": str(out / "run"), "compilation_cache": False})
-    return run.main_from_values({"env": "linear", "agent": "ppo_state", "seeds": 3, "ppo": TINY_PPO, "eval_episodes": 2,
-                                 "checkpoint_every": 2, "checkpoint_seconds": 0, "out_dir": str(out), "name": "run",
-                                 "compilation_cache": False})
+    return run.main_from_values(
+        {
+            "env": "linear",
+            "agent": "ppo_state",
+            "seeds": 3,
+            "ppo": TINY_PPO,
+            "eval_episodes": 2,
+            "checkpoint_every": 2,
+            "checkpoint_seconds": 0,
+            "out_dir": str(out),
+            "name": "run",
+            "compilation_cache": False,
+        }
+    )
 
 
 if __name__ == "__main__":

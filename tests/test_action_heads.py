@@ -51,8 +51,13 @@ class EdgeEnv(Env):
         return jnp.ones(2, jnp.float32)
 
 
-envs.REGISTRY["edge"] = envs.EnvEntry(EdgeEnv, {"default": ()},
-                                      training=dict(ppo=dict(hidden=(16, 16), num_envs=16, batch_size=64, minibatch_size=32, epochs=4)))
+envs.REGISTRY["edge"] = envs.EnvEntry(
+    EdgeEnv,
+    {"default": ()},
+    training=dict(
+        ppo=dict(hidden=(16, 16), num_envs=16, batch_size=64, minibatch_size=32, epochs=4)
+    ),
+)
 
 
 @pytest.mark.parametrize("name", ["pendulum", "acrobot", "car_racing"])
@@ -76,23 +81,35 @@ def test_locomotion_action_range_is_the_actuators_ctrlrange():
 def test_squashed_actions_map_the_real_line_onto_the_range():
     car = envs.SquashedActions(envs.make("car_racing", envs.NO_HINT, ("state",)))
     params = envs.make_params("car_racing")
-    np.testing.assert_allclose(car.squash(jnp.zeros(3), params), [0.0, 0.5, 0.5])  # gas and brake half on
+    # gas and brake half on
+    np.testing.assert_allclose(car.squash(jnp.zeros(3), params), [0.0, 0.5, 0.5])
     np.testing.assert_allclose(car.squash(jnp.full(3, 30.0), params), [1.0, 1.0, 1.0])
     np.testing.assert_allclose(car.squash(jnp.full(3, -30.0), params), [-1.0, 0.0, 0.0])
     pendulum = envs.make("pendulum", envs.NO_HINT, ("state",))
     squashed, params = envs.SquashedActions(pendulum), envs.make_params("pendulum")
-    state, key, u = pendulum.reset(jax.random.key(0), params).state, jax.random.key(1), jnp.array([0.3])
-    np.testing.assert_array_equal(squashed.step(key, state, u, params).obs["state"],
-                                  pendulum.step(key, state, 2.0 * jnp.tanh(u), params).obs["state"])
+    state, key, u = (
+        pendulum.reset(jax.random.key(0), params).state,
+        jax.random.key(1),
+        jnp.array([0.3]),
+    )
+    np.testing.assert_array_equal(
+        squashed.step(key, state, u, params).obs["state"],
+        pendulum.step(key, state, 2.0 * jnp.tanh(u), params).obs["state"],
+    )
 
 
 def test_sigmoid_head_bounds_the_mean_and_floors_the_std():
     net = ActorCritic(AGENTS["ppo_state"], "fc", 2, hidden=(8,), action_head="sigmoid")
     variables = net.init(jax.random.key(0), {"state": jnp.zeros((1, 3))})
     params = variables["params"]
-    params = {**params, "log_std": jnp.array([-10.0, 0.5]),
-              "actor": jax.tree.map(lambda x: 1e3 * jnp.ones_like(x), params["actor"])}
-    mean, log_std, _ = net.apply({"params": params}, {"state": jnp.array([[1.0, 1.0, 1.0], [-1.0, -1.0, -1.0]])})
+    params = {
+        **params,
+        "log_std": jnp.array([-10.0, 0.5]),
+        "actor": jax.tree.map(lambda x: 1e3 * jnp.ones_like(x), params["actor"]),
+    }
+    mean, log_std, _ = net.apply(
+        {"params": params}, {"state": jnp.array([[1.0, 1.0, 1.0], [-1.0, -1.0, -1.0]])}
+    )
     assert bool(jnp.all(jnp.abs(mean) <= 1.0)) and float(jnp.max(jnp.abs(mean))) > 0.99
     np.testing.assert_allclose(log_std, [np.log(SIGMOID_MIN_STD), 0.5], rtol=1e-6)
 
@@ -118,7 +135,14 @@ def test_a_tanh_agent_learns_the_action_at_the_edge_of_its_range():
     """Reward = the action: the squashed policy's deterministic action, tanh(mean), nears the
     range's edge 1, and every action the env received lay in the range (returns <= 1; the gaussian
     head's draws, unsquashed, go beyond it)."""
-    cfg = run_config(dict(env="edge", agent="ppo_state", seeds=1, ppo=dict(action_head="tanh", total_env_steps=64 * 40)))
+    cfg = run_config(
+        dict(
+            env="edge",
+            agent="ppo_state",
+            seeds=1,
+            ppo=dict(action_head="tanh", total_env_steps=64 * 40),
+        )
+    )
     trainer = make_trainer(cfg)
     before = trainer.init(jax.random.key(0))
     state, metrics = jax.jit(lambda s: trainer.run(s, cfg.ppo.num_updates))(before)
@@ -127,4 +151,3 @@ def test_a_tanh_agent_learns_the_action_at_the_edge_of_its_range():
     assert float(jnp.tanh(mean(state))) > 0.9, float(jnp.tanh(mean(state)))
     returns = np.asarray(metrics["episode_return"])
     assert np.nanmax(returns) <= 1.0 and np.nanmean(returns[-5:]) > np.nanmean(returns[:5])
-

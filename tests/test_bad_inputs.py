@@ -18,12 +18,30 @@ from hintsjax.system import errors, paths
 from hintsjax.training import pipeline
 
 TABLE = yaml.safe_load((Path(__file__).parent / "data" / "bad_inputs.yaml").read_text())
-COMMANDS = {"evaluate": evaluate.main, "video": video.main, "expert": expert.main, "quickstart": quickstart.main,
-            "rank": rank.main, "generator": generator.main}
+COMMANDS = {
+    "evaluate": evaluate.main,
+    "video": video.main,
+    "expert": expert.main,
+    "quickstart": quickstart.main,
+    "rank": rank.main,
+    "generator": generator.main,
+}
 # the commands of key=value arguments write into out_dir: a case must leave it unmade (a case's own out_dir comes after, and wins)
 EXTRA = {"rank": ["out_dir={tmp}/out"], "generator": ["out_dir={tmp}/out"]}
-TINY = {"env": "pendulum", "agent": "ppo_state", "seeds": 2, "eval_episodes": 3, "checkpoint_every": 2,
-        "ppo": {"total_env_steps": 128, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}}
+TINY = {
+    "env": "pendulum",
+    "agent": "ppo_state",
+    "seeds": 2,
+    "eval_episodes": 3,
+    "checkpoint_every": 2,
+    "ppo": {
+        "total_env_steps": 128,
+        "num_envs": 4,
+        "batch_size": 64,
+        "minibatch_size": 32,
+        "epochs": 1,
+    },
+}
 
 
 @pytest.fixture(scope="module")
@@ -32,19 +50,31 @@ def places(tmp_path_factory) -> dict[str, str]:
     root = tmp_path_factory.mktemp("bad_inputs")
     assert run.main_from_values({**TINY, "out_dir": str(root), "name": "run"}) == 0
     config = (root / "run" / "config.yaml").read_text()
-    folders = {"noconf": "", "nockpt": config, "badyaml": "env: [\n", "listyaml": "- 1\n- 2\n",
-               "hints_run": config.replace("agent: ppo_state", "agent: hints")}
+    folders = {
+        "noconf": "",
+        "nockpt": config,
+        "badyaml": "env: [\n",
+        "listyaml": "- 1\n- 2\n",
+        "hints_run": config.replace("agent: ppo_state", "agent: hints"),
+    }
     for name, text in folders.items():
         (root / name).mkdir()
         if text:
             (root / name / "config.yaml").write_text(text)
     (root / "file").write_text("not a folder\n")
-    return {"run": str(root / "run"), "file": str(root / "file"), "hints": str(Path(__file__).parent / "data" / "hints"),
-            **{name: str(root / name) for name in folders}}
+    return {
+        "run": str(root / "run"),
+        "file": str(root / "file"),
+        "hints": str(Path(__file__).parent / "data" / "hints"),
+        **{name: str(root / name) for name in folders},
+    }
 
 
 def tree(folder: Path) -> dict[str, bytes]:
-    return {str(p.relative_to(folder)): p.read_bytes() if p.is_file() else b"/" for p in sorted(folder.rglob("*"))}
+    return {
+        str(p.relative_to(folder)): p.read_bytes() if p.is_file() else b"/"
+        for p in sorted(folder.rglob("*"))
+    }
 
 
 def filled(text: str, places: dict[str, str], tmp_path: Path) -> str:
@@ -52,7 +82,9 @@ def filled(text: str, places: dict[str, str], tmp_path: Path) -> str:
     return text.format(**places, tmp=str(tmp_path))
 
 
-def outcome(main, args: str, places: dict[str, str], tmp_path: Path, capsys) -> tuple[int, list[str], str, bool]:
+def outcome(
+    main, args: str, places: dict[str, str], tmp_path: Path, capsys
+) -> tuple[int, list[str], str, bool]:
     """`main(args)` with the placeholders filled: (exit status, the lines on stderr, stderr, whether
     the fixture's folders and tmp_path are as they were)."""
     argv = [filled(a, places, tmp_path) for a in args.split()]
@@ -66,16 +98,23 @@ def outcome(main, args: str, places: dict[str, str], tmp_path: Path, capsys) -> 
     return status, err.strip().splitlines(), err, (tree(watched), tree(tmp_path)) == before
 
 
-
 CASES = [(name, args, message) for name in COMMANDS for args, message in TABLE[name].items()]
 
 
 @pytest.mark.parametrize("name, args, message", CASES, ids=[f"{n}: {a}" for n, a, _ in CASES])
-def test_a_command_refuses_bad_input_in_one_line_and_writes_nothing(name, args, message, places, tmp_path, capsys):
+def test_a_command_refuses_bad_input_in_one_line_and_writes_nothing(
+    name, args, message, places, tmp_path, capsys
+):
     extra = " ".join(EXTRA.get(name, []))
-    status, lines, err, unchanged = outcome(COMMANDS[name], f"{extra} {args}".strip(), places, tmp_path, capsys)
+    status, lines, err, unchanged = outcome(
+        COMMANDS[name], f"{extra} {args}".strip(), places, tmp_path, capsys
+    )
     assert status == 2, err
-    assert len(lines) == 1 and lines[0].startswith("error: ") and filled(message, places, tmp_path) in lines[0], lines
+    assert (
+        len(lines) == 1
+        and lines[0].startswith("error: ")
+        and filled(message, places, tmp_path) in lines[0]
+    ), lines
     assert "Traceback" not in err and unchanged
 
 
@@ -87,7 +126,11 @@ def test_a_run_refuses_an_out_dir_it_cannot_make(args, places, tmp_path, capsys)
 
     status, lines, err, unchanged = outcome(main, args, places, tmp_path, capsys)
     assert status == 2, err
-    assert len(lines) == 1 and lines[0].startswith("error: ") and filled(TABLE["run_folders"][args], places, tmp_path) in lines[0], lines
+    assert (
+        len(lines) == 1
+        and lines[0].startswith("error: ")
+        and filled(TABLE["run_folders"][args], places, tmp_path) in lines[0]
+    ), lines
     assert "Traceback" not in err and unchanged
 
 
@@ -96,14 +139,22 @@ def test_a_run_on_a_playground_or_brax_task_refuses_bad_input(args, places, tmp_
     """An unknown Playground or Brax name (listing the valid ones), a hint file that does not
     import, a hint of the wrong width: one line, exit 2, nothing written (in-process, as Hydra
     hands the values over)."""
-    pytest.importorskip("mujoco_playground", reason="the Playground adapter needs the playground extra")
+    pytest.importorskip(
+        "mujoco_playground", reason="the Playground adapter needs the playground extra"
+    )
 
     def main(argv: list[str]) -> int:
-        return run.main_from_values({"out_dir": str(tmp_path / "runs"), **dict(arg.split("=", 1) for arg in argv)})
+        return run.main_from_values(
+            {"out_dir": str(tmp_path / "runs"), **dict(arg.split("=", 1) for arg in argv)}
+        )
 
     status, lines, err, unchanged = outcome(main, args, places, tmp_path, capsys)
     assert status == 2, err
-    assert len(lines) == 1 and lines[0].startswith("error: ") and filled(TABLE["run_adapted_envs"][args], places, tmp_path) in lines[0], lines
+    assert (
+        len(lines) == 1
+        and lines[0].startswith("error: ")
+        and filled(TABLE["run_adapted_envs"][args], places, tmp_path) in lines[0]
+    ), lines
     assert "Traceback" not in err and unchanged
 
 
@@ -124,14 +175,16 @@ def test_a_file_written_whole_keeps_what_was_there_when_the_disk_fills(tmp_path)
     paths.write_whole(out, lambda part: part.write_text("new\n"))
     assert out.read_text() == "new\n" and [p.name for p in tmp_path.iterdir()] == ["eval.json"]
     refused = errors.machine_write(PermissionError(errno.EACCES, "Permission denied", "/x/y"))
-    assert refused.strerror == "could not read or write /x/y: Permission denied"  # outside writing_to: maybe a read
+    # outside writing_to: maybe a read
+    assert refused.strerror == "could not read or write /x/y: Permission denied"
     with pytest.raises(PermissionError):  # not the machine's refusal of a write: passes as it was
         with errors.writing_to(out):
             raise PermissionError(errno.ENOTDIR, "not this")
 
 
 def test_a_run_whose_folder_is_read_only_or_whose_device_runs_out_of_memory_says_so_in_one_line(
-        monkeypatch, tmp_path, capsys):
+    monkeypatch, tmp_path, capsys
+):
     """A run folder the disk refuses (EROFS as config.yaml is written) is one line naming the
     folder, exit 1; an allocation XLA refuses (a real RESOURCE_EXHAUSTED, 32 TiB) while training
     starts is one line naming the settings to lower, exit 1; neither is "a bug in hintsjax"."""
@@ -146,7 +199,9 @@ def test_a_run_whose_folder_is_read_only_or_whose_device_runs_out_of_memory_says
 
     monkeypatch.setattr(run, "save_run_config", read_only)
     assert run.main_from_values(values) == errors.MACHINE
-    assert capsys.readouterr().err.strip().splitlines() == [f"error: could not write {tmp_path / 'r'}: Read-only file system"]
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"error: could not write {tmp_path / 'r'}: Read-only file system"
+    ]
 
     def too_big(*args, **kwargs):
         return jax.jit(lambda: jnp.ones((2**45,), jnp.uint8))().block_until_ready()
@@ -157,8 +212,10 @@ def test_a_run_whose_folder_is_read_only_or_whose_device_runs_out_of_memory_says
     monkeypatch.setattr(pipeline, "start", too_big)
     assert run.main_from_values({**values, "name": "oom"}) == errors.MACHINE
     lines = capsys.readouterr().err.strip().splitlines()
-    assert lines == [f"error: the device ran out of memory (Out of memory allocating {2**45} bytes.); lower "
-                     f"{pipeline.TRAINING_SIZES} and run again"], lines
+    assert lines == [
+        f"error: the device ran out of memory (Out of memory allocating {2**45} bytes.); lower "
+        f"{pipeline.TRAINING_SIZES} and run again"
+    ], lines
     assert not (tmp_path / "oom" / "traceback.txt").exists()
 
     @errors.command
@@ -169,11 +226,13 @@ def test_a_run_whose_folder_is_read_only_or_whose_device_runs_out_of_memory_says
 
     assert evaluating() == errors.MACHINE
     assert capsys.readouterr().err.strip().splitlines() == [
-        f"error: the device ran out of memory (Out of memory allocating {2**45} bytes.); lower --episodes and run again"]
+        f"error: the device ran out of memory (Out of memory allocating {2**45} bytes.); lower --episodes and run again"
+    ]
 
 
 def test_a_run_whose_compiled_program_cannot_fit_is_refused_before_training_and_leaves_nothing(
-        monkeypatch, tmp_path, capsys):
+    monkeypatch, tmp_path, capsys
+):
     """A device of 300 KB: the lower bounds pass (64 transitions of 16 bytes a seed), but XLA's
     memory analysis of the compiled training program (params and Adam's moments alone are MBs)
     refuses it before the first update: one line naming the settings to lower, exit 2, and the
@@ -181,18 +240,31 @@ def test_a_run_whose_compiled_program_cannot_fit_is_refused_before_training_and_
     from hintsjax.system import memory
 
     monkeypatch.setattr(memory, "device_bytes", lambda device=None: 300_000)
-    monkeypatch.setattr(pipeline, "compile_evaluator", lambda *args, **kwargs: None)  # not this test's: its compile's time
-    assert run.main_from_values({**TINY, "out_dir": str(tmp_path / "runs" / "new"), "name": "r"}) == 2
+    # not this test's: its compile's time
+    monkeypatch.setattr(pipeline, "compile_evaluator", lambda *args, **kwargs: None)
+    assert (
+        run.main_from_values({**TINY, "out_dir": str(tmp_path / "runs" / "new"), "name": "r"}) == 2
+    )
     err = capsys.readouterr().err
     lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: seeds=2 x ppo.batch_size=64 cannot fit: training's compiled "
-                                                   "program needs ") and lines[0].endswith(
-        "(XLA's memory analysis), a device has 293.0 KiB; lower ppo.batch_size (with ppo.num_envs and "
-        "ppo.minibatch_size), seeds or image_size"), lines
+    assert (
+        len(lines) == 1
+        and lines[0].startswith(
+            "error: seeds=2 x ppo.batch_size=64 cannot fit: training's compiled program needs "
+        )
+        and lines[0].endswith(
+            "(XLA's memory analysis), a device has 293.0 KiB; lower ppo.batch_size (with ppo.num_envs and "
+            "ppo.minibatch_size), seeds or image_size"
+        )
+    ), lines
     assert "Traceback" not in err and list(tmp_path.iterdir()) == []
 
 
 def test_the_table_holds_at_least_120_cases_across_all_seven_commands():
-    commands = {name.split("_")[0] for name in TABLE} - {"unwritable"}  # its cases: tests/test_video.py
+    # its cases: tests/test_video.py
+    commands = {name.split("_")[0] for name in TABLE} - {"unwritable"}
     assert commands == {"run", *COMMANDS} and sum(map(len, TABLE.values())) >= 120
-    assert all(isinstance(section, dict) and all(isinstance(m, str) for m in section.values()) for section in TABLE.values())
+    assert all(
+        isinstance(section, dict) and all(isinstance(m, str) for m in section.values())
+        for section in TABLE.values()
+    )

@@ -11,13 +11,21 @@ import bench  # experiments/bench.py: experiments/ is on pytest's path (pyprojec
 
 
 def test_model_options_parse_enums_by_name_and_numbers():
-    options = bench.model_options(["integrator=euler", "iterations=1", "tolerance=1e-6", "cone=ELLIPTIC"])
-    assert options == {"integrator": mujoco.mjtIntegrator.mjINT_EULER, "iterations": 1, "tolerance": 1e-6,
-                       "cone": mujoco.mjtCone.mjCONE_ELLIPTIC}
+    options = bench.model_options(
+        ["integrator=euler", "iterations=1", "tolerance=1e-6", "cone=ELLIPTIC"]
+    )
+    assert options == {
+        "integrator": mujoco.mjtIntegrator.mjINT_EULER,
+        "iterations": 1,
+        "tolerance": 1e-6,
+        "cone": mujoco.mjtCone.mjCONE_ELLIPTIC,
+    }
 
 
-@pytest.mark.parametrize("item, names", [("integrater=EULER", "integrator"), ("integrator=RK5", "RK4"),
-                                         ("iterations", "iterations")])
+@pytest.mark.parametrize(
+    "item, names",
+    [("integrater=EULER", "integrator"), ("integrator=RK5", "RK4"), ("iterations", "iterations")],
+)
 def test_bad_model_options_name_the_valid_ones(item, names):
     with pytest.raises(ValueError, match=names):
         bench.model_options([item])
@@ -27,7 +35,9 @@ def test_bad_model_options_name_the_valid_ones(item, names):
 def test_a_training_row_says_which_physics_the_run_got():
     """bench_train end to end on CPU, at a toy size: its row records the physics that `auto`
     resolved to (the run's own eval.json value), and rates from both of its timings."""
-    row = bench.bench_train("pendulum", 2, 2, {"num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1})
+    row = bench.bench_train(
+        "pendulum", 2, 2, {"num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1}
+    )
     assert row["physics"] == "jax" and row["updates"] == 2
     assert row["env_steps_per_s"] > 0 and row["scan_env_steps_per_s"] > 0
     assert set(row["update_parts_s"]) >= {"rollout", "learn"}

@@ -33,8 +33,16 @@ from hintsjax.evaluate import main as evaluate_main
 pytestmark = pytest.mark.usefixtures("traced_programs_kept")
 
 TINY = [
-    "agent=ppo_state", "seeds=2", "eval_episodes=3", "checkpoint_every=2", "checkpoint_seconds=0",
-    "ppo.total_env_steps=256", "ppo.num_envs=4", "ppo.batch_size=64", "ppo.minibatch_size=32", "ppo.epochs=1",
+    "agent=ppo_state",
+    "seeds=2",
+    "eval_episodes=3",
+    "checkpoint_every=2",
+    "checkpoint_seconds=0",
+    "ppo.total_env_steps=256",
+    "ppo.num_envs=4",
+    "ppo.batch_size=64",
+    "ppo.minibatch_size=32",
+    "ppo.epochs=1",
 ]
 
 
@@ -51,7 +59,9 @@ def tiny_values(**extra) -> dict:
 
 
 def cli(*args: str, cwd: Path, module: str = "hintsjax.run") -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", module, *args], cwd=cwd, capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", module, *args], cwd=cwd, capture_output=True, text=True, timeout=300
+    )
 
 
 def with_xla_flag(flag: str) -> str:
@@ -59,7 +69,8 @@ def with_xla_flag(flag: str) -> str:
     return f"{os.environ.get('XLA_FLAGS', '')} {flag}".strip()
 
 
-BAD = yaml.safe_load((Path(__file__).parent / "data" / "bad_inputs.yaml").read_text())  # every command's bad input
+# every command's bad input
+BAD = yaml.safe_load((Path(__file__).parent / "data" / "bad_inputs.yaml").read_text())
 BAD_RUN_ARGS = BAD["run_command_line"]  # through the real command line
 
 
@@ -69,8 +80,11 @@ def bad_run_outcomes(tmp_path_factory) -> dict[str, tuple[int, str, str, Path]]:
     folder of its own: (exit status, stdout, stderr, the folder). One interpreter start for them
     all (tests/command_runs.py: a child forked per case runs the module as `python -m` does);
     what importing the command prints would show on that start's stderr, which must be empty."""
-    done = command_runs.outcomes("hintsjax.run", [[*arg.split(), "out_dir=runs"] for arg in BAD_RUN_ARGS],
-                                 tmp_path_factory.mktemp("bad_run"))
+    done = command_runs.outcomes(
+        "hintsjax.run",
+        [[*arg.split(), "out_dir=runs"] for arg in BAD_RUN_ARGS],
+        tmp_path_factory.mktemp("bad_run"),
+    )
     return dict(zip(BAD_RUN_ARGS, done, strict=True))
 
 
@@ -105,22 +119,38 @@ def test_names_and_folders_are_strings_whatever_yaml_makes_of_them():
     assert run_config({"env": "pendulum", "ppo": {"hidden": [64]}}).ppo.hidden == (64,)
 
 
-def test_a_budget_that_is_not_whole_updates_says_what_it_was_rounded_to(tmp_path, monkeypatch, capsys):
+def test_a_budget_that_is_not_whole_updates_says_what_it_was_rounded_to(
+    tmp_path, monkeypatch, capsys
+):
     """`ppo.total_env_steps=300` with batches of 64: one line saying it trains 4 updates, 256 env
     steps a seed (it did so without a word); a whole number of updates says nothing, and neither
     does an env's own budget (the ant's 5 M in batches of 1024: the design's command)."""
     from hintsjax.settings.layers import run_config
 
-    values = {k: v for k, v in tiny_values(ppo={**tiny_values()["ppo"], "total_env_steps": 300}).items() if k != "out_dir"}
+    values = {
+        k: v
+        for k, v in tiny_values(ppo={**tiny_values()["ppo"], "total_env_steps": 300}).items()
+        if k != "out_dir"
+    }
     cfg = run_config(values)
-    assert request.rounded_budget(cfg) == ("note: ppo.total_env_steps=300 is not a multiple of ppo.batch_size=64: "
-                                           "trains 4 updates, 256 env steps a seed")
+    assert request.rounded_budget(cfg) == (
+        "note: ppo.total_env_steps=300 is not a multiple of ppo.batch_size=64: "
+        "trains 4 updates, 256 env steps a seed"
+    )
     assert request.rounded_budget(run_config({**values, "ppo": tiny_values()["ppo"]})) is None
     monkeypatch.setattr(run, "train", lambda *args, **kwargs: None)
-    assert run.main_from_values(tiny_values(out_dir=str(tmp_path), ppo={**tiny_values()["ppo"], "total_env_steps": 300})) == 0
+    assert (
+        run.main_from_values(
+            tiny_values(out_dir=str(tmp_path), ppo={**tiny_values()["ppo"], "total_env_steps": 300})
+        )
+        == 0
+    )
     assert capsys.readouterr().err.strip().splitlines() == [request.rounded_budget(cfg)]
     ant = {"env": "ant", "hint": "speed", "scheme": "fc", "out_dir": str(tmp_path / "ant")}
-    assert request.rounded_budget(run_config({k: v for k, v in ant.items() if k != "out_dir"})) is not None
+    assert (
+        request.rounded_budget(run_config({k: v for k, v in ant.items() if k != "out_dir"}))
+        is not None
+    )
     assert run.main_from_values(ant) == 0
     assert "note:" not in capsys.readouterr().err
 
@@ -141,14 +171,20 @@ def test_bad_settings_exit_2_with_one_line_and_write_nothing(arg, tmp_path, caps
         (values.setdefault(section, {}) if section else values)[name or key] = parsed(text)
     assert run.main_from_values(values) == 2
     lines = capsys.readouterr().err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: ") and BAD_SETTINGS[arg] in lines[0], lines
+    assert len(lines) == 1 and lines[0].startswith("error: ") and BAD_SETTINGS[arg] in lines[0], (
+        lines
+    )
     assert not (tmp_path / "runs").exists()
 
 
 @pytest.mark.parametrize("arg", list(BAD_IMITATION_VALUES))
 def test_bad_imitation_settings_exit_2_with_one_line_and_write_nothing(arg, tmp_path, capsys):
     key, value = arg.split("=")
-    values = {"env": "pendulum", "agent": "gail" if key.startswith("gail") else "dagger", "out_dir": str(tmp_path / "runs")}
+    values = {
+        "env": "pendulum",
+        "agent": "gail" if key.startswith("gail") else "dagger",
+        "out_dir": str(tmp_path / "runs"),
+    }
     if "." in key:
         section, key = key.split(".")
         values[section] = {key: int(value) if value.isdigit() else value}
@@ -156,7 +192,9 @@ def test_bad_imitation_settings_exit_2_with_one_line_and_write_nothing(arg, tmp_
         values[key] = value
     assert run.main_from_values(values) == 2
     lines = capsys.readouterr().err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: ") and BAD_IMITATION_VALUES[arg] in lines[0], lines
+    assert (
+        len(lines) == 1 and lines[0].startswith("error: ") and BAD_IMITATION_VALUES[arg] in lines[0]
+    ), lines
     assert not (tmp_path / "runs").exists()
 
 
@@ -183,9 +221,15 @@ def finished_run(tmp_path_factory) -> Path:
 
 def state_arrays(run_dir: Path) -> list[np.ndarray]:
     """Every array of a run's newest checkpoint (params, optimiser state, env state, key, update)."""
-    state, _ = checkpoint.restore_latest(run_dir, make_trainer(layers.load_run_config(run_dir)).abstract_state())
-    return [np.asarray(jax.random.key_data(x) if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key) else x)
-            for x in jax.tree.leaves(state)]
+    state, _ = checkpoint.restore_latest(
+        run_dir, make_trainer(layers.load_run_config(run_dir)).abstract_state()
+    )
+    return [
+        np.asarray(
+            jax.random.key_data(x) if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key) else x
+        )
+        for x in jax.tree.leaves(state)
+    ]
 
 
 def logged_returns(run_dir: Path) -> list[tuple[str, str, str]]:
@@ -198,8 +242,13 @@ def logged_returns(run_dir: Path) -> list[tuple[str, str, str]]:
 
 def killed_run(mode: str, values: dict, cwd: Path) -> subprocess.CompletedProcess:
     """tests/killed_run.py in `mode` on a run of `values`, in a process of its own."""
-    return subprocess.run([sys.executable, str(Path(__file__).parent / "killed_run.py"), mode, json.dumps(values)],
-                          cwd=cwd, capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, str(Path(__file__).parent / "killed_run.py"), mode, json.dumps(values)],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
 
 
 def assert_ends_as(folder: Path, finished_run: Path) -> None:
@@ -217,8 +266,11 @@ def assert_resumes_to_the_uninterrupted_end(folder: Path, finished_run: Path, cw
     assert_ends_as(folder, finished_run)
 
 
-@pytest.mark.parametrize("when", [pytest.param("after", marks=pytest.mark.slow), "during"])  # after: 27 s, in the slow tier
-def test_a_run_killed_with_sigkill_resumes_to_the_uninterrupted_end_bit_for_bit(when, finished_run, tmp_path):
+# after: 27 s, in the slow tier
+@pytest.mark.parametrize("when", [pytest.param("after", marks=pytest.mark.slow), "during"])
+def test_a_run_killed_with_sigkill_resumes_to_the_uninterrupted_end_bit_for_bit(
+    when, finished_run, tmp_path
+):
     """SIGKILL once the first checkpoint is written (`after`), or while the second is being written
     in the background (`during`): the resumed run (the real command) ends with the uninterrupted
     run's state, every array equal bit for bit, and logs the same returns; a checkpoint the kill
@@ -231,12 +283,23 @@ def test_a_run_killed_with_sigkill_resumes_to_the_uninterrupted_end_bit_for_bit(
     assert_resumes_to_the_uninterrupted_end(folder, finished_run, tmp_path)
 
 
-@pytest.mark.parametrize("mode, status, said, values", [
-    ("interrupt", errors.INTERRUPTED, "interrupted", {}),
-    # in the slow tier: SIGTERM in-process is the default tier's (the test below)
-    pytest.param("terminate", errors.TERMINATED, "terminated (SIGTERM)", {"checkpoint_seconds": 1e9}, marks=pytest.mark.slow),
-])
-def test_a_stopped_run_saves_says_how_to_go_on_and_resumes_bit_for_bit(mode, status, said, values, finished_run, tmp_path):
+@pytest.mark.parametrize(
+    "mode, status, said, values",
+    [
+        ("interrupt", errors.INTERRUPTED, "interrupted", {}),
+        # in the slow tier: SIGTERM in-process is the default tier's (the test below)
+        pytest.param(
+            "terminate",
+            errors.TERMINATED,
+            "terminated (SIGTERM)",
+            {"checkpoint_seconds": 1e9},
+            marks=pytest.mark.slow,
+        ),
+    ],
+)
+def test_a_stopped_run_saves_says_how_to_go_on_and_resumes_bit_for_bit(
+    mode, status, said, values, finished_run, tmp_path
+):
     """SIGINT (Ctrl-C, `interrupt`) once the first chunk's metrics are logged: a checkpoint is due
     (checkpoint_seconds=0), so that state is saved; SIGTERM (`terminate`: a real kill of the run's
     own process, as a scheduler's) saves it though none is due (checkpoint_seconds=1e9). Either
@@ -245,16 +308,20 @@ def test_a_stopped_run_saves_says_how_to_go_on_and_resumes_bit_for_bit(mode, sta
     array equal bit for bit, with the same logged returns."""
     out = killed_run(mode, tiny_values(out_dir=str(tmp_path), name="stopped", **values), tmp_path)
     folder = tmp_path / "stopped"
-    assert out.returncode == status == {"interrupt": 130, "terminate": 143}[mode], out.stderr[-2000:]
+    assert out.returncode == status == {"interrupt": 130, "terminate": 143}[mode], out.stderr[
+        -2000:
+    ]
     assert "Traceback" not in out.stderr + out.stdout
-    assert out.stderr.strip().splitlines()[-1] == (f"{said}; checkpoint at update 2; "
-                                                   f"go on with: python -m hintsjax.run resume={folder}")
+    assert out.stderr.strip().splitlines()[-1] == (
+        f"{said}; checkpoint at update 2; go on with: python -m hintsjax.run resume={folder}"
+    )
     assert checkpoint.latest_update(folder) == 2 and not (folder / "eval.json").exists()
     assert_resumes_to_the_uninterrupted_end(folder, finished_run, tmp_path)
 
 
-def test_sigterm_saves_the_newest_logged_state_the_uninterrupted_runs_bit_for_bit(finished_run, tmp_path, monkeypatch,
-                                                                                   capsys):
+def test_sigterm_saves_the_newest_logged_state_the_uninterrupted_runs_bit_for_bit(
+    finished_run, tmp_path, monkeypatch, capsys
+):
     """SIGTERM (how a cluster stops a job at its time limit or on preemption), sent to the run's
     process by a real kill once the first chunk's metrics are logged: no checkpoint is due
     (checkpoint_seconds=1e9, where Ctrl-C would save nothing), yet that state is saved; one line
@@ -274,11 +341,17 @@ def test_sigterm_saves_the_newest_logged_state_the_uninterrupted_runs_bit_for_bi
     monkeypatch.setattr(loop, "check_physics", check_then_terminate)
     before = signal.getsignal(signal.SIGTERM)
     folder = tmp_path / "terminated"
-    assert run.main_from_values(tiny_values(out_dir=str(tmp_path), name="terminated", checkpoint_seconds=1e9)) == 143
+    assert (
+        run.main_from_values(
+            tiny_values(out_dir=str(tmp_path), name="terminated", checkpoint_seconds=1e9)
+        )
+        == 143
+    )
     assert signal.getsignal(signal.SIGTERM) == before
     err = capsys.readouterr().err
     assert "Traceback" not in err and err.strip().splitlines()[-1] == (
-        f"terminated (SIGTERM); checkpoint at update 2; go on with: python -m hintsjax.run resume={folder}")
+        f"terminated (SIGTERM); checkpoint at update 2; go on with: python -m hintsjax.run resume={folder}"
+    )
     assert checkpoint.latest_update(folder) == 2 and not (folder / "eval.json").exists()
     at_two = tmp_path / "uninterrupted_at_2"
     shutil.copytree(finished_run / "checkpoints", at_two / "checkpoints")
@@ -289,13 +362,15 @@ def test_sigterm_saves_the_newest_logged_state_the_uninterrupted_runs_bit_for_bi
     assert logged_returns(folder) == [r for r in logged_returns(finished_run) if int(r[0]) <= 2]
 
 
-@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")  # the dropped exception, as Python reports it
+# the dropped exception, as Python reports it
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
 def test_a_sigterm_python_dropped_is_raised_again_where_training_checks():
     """A signal's exception raised while a garbage collector's callback runs (JAX has one) is
     dropped by Python ("Exception ignored in ..."): it happened to submitit's preemption signal in
     a trial. The stop is kept, raise_stop_asked (called at training's safe points) raises it
     again, and nothing is left once the block ends. Within stops_deferred (training's loop) the
     signal only keeps its stop, for the loop to raise."""
+
     def terminate_inside(phase, info):
         if phase == "start":
             signal.raise_signal(signal.SIGTERM)
@@ -319,24 +394,41 @@ def test_a_sigterm_python_dropped_is_raised_again_where_training_checks():
 
 
 def test_a_sweep_is_expanded_in_hydras_order_with_every_value_checked_first():
-    jobs = overrides.sweep_jobs(["-m", "seeds=1,2", "scheme=lc,fc", "ppo.num_envs=4", "hydra/launcher=basic"])
-    assert [label for label, _ in jobs] == ["seeds=1 scheme=lc", "seeds=1 scheme=fc", "seeds=2 scheme=lc", "seeds=2 scheme=fc"]
+    jobs = overrides.sweep_jobs(
+        ["-m", "seeds=1,2", "scheme=lc,fc", "ppo.num_envs=4", "hydra/launcher=basic"]
+    )
+    assert [label for label, _ in jobs] == [
+        "seeds=1 scheme=lc",
+        "seeds=1 scheme=fc",
+        "seeds=2 scheme=lc",
+        "seeds=2 scheme=fc",
+    ]
     values = jobs[3][1]
     assert values["seeds"] == 2 and values["scheme"] == "fc" and values["ppo"]["num_envs"] == 4
-    assert values["env"] == overrides.defaults()["env"] and values["ppo"]["epochs"] == overrides.defaults()["ppo"]["epochs"]
+    assert (
+        values["env"] == overrides.defaults()["env"]
+        and values["ppo"]["epochs"] == overrides.defaults()["ppo"]["epochs"]
+    )
     assert overrides.sweep_jobs(["seeds=1"]) == []  # not a sweep
     seen = []
     overrides.check_sweep(["-m", "seed=0,1"], lambda v: seen.append(v["seed"]))
     assert seen == [0, 1]
     with pytest.raises(UsageError, match="sweep job 'seed=1': no"):
-        overrides.check_sweep(["-m", "seed=0,1"], lambda v: (_ for _ in ()).throw(UsageError("no")) if v["seed"] else None)
+        overrides.check_sweep(
+            ["-m", "seed=0,1"],
+            lambda v: (_ for _ in ()).throw(UsageError("no")) if v["seed"] else None,
+        )
 
 
 def test_help_into_a_closed_pipe_stops_quietly_with_the_shells_status(tmp_path):
     """`python -m hintsjax.run --help | head -1`: once the reader has gone, the command stops with
     nothing on stderr and exit 141 (128 + SIGPIPE, as a shell's commands do), not as a bug."""
-    proc = subprocess.Popen([sys.executable, "-m", "hintsjax.run", "--help"], cwd=tmp_path,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "hintsjax.run", "--help"],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     proc.stdout.close()  # the reader goes before the first line arrives
     stderr = proc.communicate(timeout=300)[1].decode()
     assert proc.returncode == errors.CLOSED_PIPE == 141 and stderr == "", stderr[-2000:]
@@ -357,8 +449,10 @@ def test_a_bug_is_one_line_saying_so_with_its_traceback_kept(monkeypatch, tmp_pa
     monkeypatch.setattr(run, "train", boom)
     assert run.main_from_values(tiny_values(out_dir=str(tmp_path), name="r")) == 1
     lines = capsys.readouterr().err.strip().splitlines()
-    assert lines == [f"error: a bug in hintsjax (RuntimeError: boom); its traceback is in {tmp_path / 'r' / 'traceback.txt'}; "
-                     "please report it with that traceback"]
+    assert lines == [
+        f"error: a bug in hintsjax (RuntimeError: boom); its traceback is in {tmp_path / 'r' / 'traceback.txt'}; "
+        "please report it with that traceback"
+    ]
     kept = (tmp_path / "r" / "traceback.txt").read_text()
     assert kept.startswith("Traceback") and "in boom" in kept and "second line" in kept
 
@@ -375,7 +469,8 @@ def test_a_bug_is_one_line_saying_so_with_its_traceback_kept(monkeypatch, tmp_pa
         evaluate.main([str(tmp_path / "r"), "--nope"])
     assert exited.value.code == 2
     assert capsys.readouterr().err.strip().splitlines() == [
-        "error: unrecognized arguments: --nope; see python -m hintsjax.evaluate --help"]
+        "error: unrecognized arguments: --nope; see python -m hintsjax.evaluate --help"
+    ]
 
 
 def test_a_checkpoint_that_cannot_be_written_is_the_one_named(tmp_path):
@@ -384,31 +479,64 @@ def test_a_checkpoint_that_cannot_be_written_is_the_one_named(tmp_path):
     and its folder (the failure surfaces when the next one is handed over, update 4, which the
     message named before), nothing else is printed but the progress bar, and nothing takes the
     half-written one for complete."""
-    command = " ".join([sys.executable, "-m", "hintsjax.run", "env=pendulum", *TINY, "out_dir=runs", "name=full",
-                        "compilation_cache=false"])
+    command = " ".join(
+        [
+            sys.executable,
+            "-m",
+            "hintsjax.run",
+            "env=pendulum",
+            *TINY,
+            "out_dir=runs",
+            "name=full",
+            "compilation_cache=false",
+        ]
+    )
     # ulimit -f: the KiB a file may hold; config.yaml and metrics.csv fit, the checkpoint's arrays do not
-    out = subprocess.run(["bash", "-c", f"ulimit -f 100 && exec {command}"], cwd=tmp_path, capture_output=True,
-                         text=True, timeout=300)
+    out = subprocess.run(
+        ["bash", "-c", f"ulimit -f 100 && exec {command}"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     folder = (tmp_path / "runs" / "full").absolute()
     assert out.returncode == 1, out.stderr[-2000:]
     bar = ("upd/s", "s/upd")  # tqdm's rate, either way up (below one update a second under load)
-    said = [line for line in out.stderr.replace("\r", "\n").splitlines() if line.strip() and not any(b in line for b in bar)]
-    assert len(said) == 1, said[:12]  # no "Event loop is closed" traces from orbax's closed loop before it
-    assert said[0].startswith(f"error: could not write checkpoint 2 in {folder / 'checkpoints'}: "), said[0]
+    said = [
+        line
+        for line in out.stderr.replace("\r", "\n").splitlines()
+        if line.strip() and not any(b in line for b in bar)
+    ]
+    # no "Event loop is closed" traces from orbax's closed loop before it
+    assert len(said) == 1, said[:12]
+    assert said[0].startswith(
+        f"error: could not write checkpoint 2 in {folder / 'checkpoints'}: "
+    ), said[0]
     assert checkpoint.latest_update(folder) is None
 
 
 def test_run_folder_holds_everything(finished_run):
     names = {p.name for p in finished_run.iterdir()}
-    assert {"config.yaml", "metrics.csv", "tb", "checkpoints", "eval.json", "learning_curve.png"} <= names
+    assert {
+        "config.yaml",
+        "metrics.csv",
+        "tb",
+        "checkpoints",
+        "eval.json",
+        "learning_curve.png",
+    } <= names
     assert any(p.name.startswith("events") for p in (finished_run / "tb").iterdir())
     config = yaml.safe_load((finished_run / "config.yaml").read_text())
     assert config["agent"] == "ppo_state" and config["ppo"]["total_env_steps"] == 256
     results = json.loads((finished_run / "eval.json").read_text())
-    assert results["deterministic"] is True and results["physics"] == "jax"  # on a CPU every op repeats
+    # on a CPU every op repeats
+    assert results["deterministic"] is True and results["physics"] == "jax"
     split = results["wall_split_seconds"]  # where the call's wall-clock went, stage by stage
-    assert list(split) == ["startup", "before_training", "training", "evaluation"] and all(v >= 0 for v in split.values())
-    assert split["before_training"] >= results["compile_seconds"]["train"]  # the compile is part of it
+    assert list(split) == ["startup", "before_training", "training", "evaluation"] and all(
+        v >= 0 for v in split.values()
+    )
+    # the compile is part of it
+    assert split["before_training"] >= results["compile_seconds"]["train"]
     assert split["training"] >= results["train_seconds_this_call"]
     variants = [e["variant"] for e in results["evaluations"]]
     assert variants == ["swingup", "swingto"]  # the training task, then pendulum's deploy variant
@@ -445,16 +573,30 @@ def test_checkpoint_seconds_spaces_the_checkpoints_and_keeps_the_last(tmp_path, 
     """With checkpoint_seconds longer than the run, only the last update is saved; every update
     is still logged."""
     saved, real_save = [], checkpoint.save
-    monkeypatch.setattr(checkpoint, "save", lambda run_dir, state, update: (saved.append(update), real_save(run_dir, state, update)))
-    assert run.main_from_values(tiny_values(out_dir=str(tmp_path), name="spaced", checkpoint_seconds=1e9)) == 0
+    monkeypatch.setattr(
+        checkpoint,
+        "save",
+        lambda run_dir, state, update: (saved.append(update), real_save(run_dir, state, update)),
+    )
+    assert (
+        run.main_from_values(
+            tiny_values(out_dir=str(tmp_path), name="spaced", checkpoint_seconds=1e9)
+        )
+        == 0
+    )
     assert saved == [4]
     assert json.loads((tmp_path / "spaced" / loop.SECONDS_JSON).read_text())["update"] == 4
     assert len((tmp_path / "spaced" / "metrics.csv").read_text().strip().splitlines()) == 1 + 4 * 2
-    assert run.main_from_values(tiny_values(out_dir=str(tmp_path), name="bad", checkpoint_seconds=-1)) == 2
+    assert (
+        run.main_from_values(tiny_values(out_dir=str(tmp_path), name="bad", checkpoint_seconds=-1))
+        == 2
+    )
     assert not (tmp_path / "bad").exists()
 
 
-def test_interrupted_then_resumed_run_ends_where_the_uninterrupted_one_ends(finished_run, tmp_path, monkeypatch):
+def test_interrupted_then_resumed_run_ends_where_the_uninterrupted_one_ends(
+    finished_run, tmp_path, monkeypatch
+):
     values = tiny_values(out_dir=str(tmp_path), name="interrupted")
     real_save = checkpoint.save
 
@@ -463,7 +605,8 @@ def test_interrupted_then_resumed_run_ends_where_the_uninterrupted_one_ends(fini
         raise KeyboardInterrupt  # the process dies right after its first checkpoint
 
     monkeypatch.setattr(checkpoint, "save", save_then_crash)
-    assert run.main_from_values(dict(values)) == errors.INTERRUPTED  # the interrupt is one line and exit 130
+    # the interrupt is one line and exit 130
+    assert run.main_from_values(dict(values)) == errors.INTERRUPTED
     monkeypatch.setattr(checkpoint, "save", real_save)
     interrupted = tmp_path / "interrupted"
     assert checkpoint.latest_update(interrupted) == 2
@@ -493,11 +636,27 @@ def test_evaluate_command_on_a_deploy_variant(finished_run, capsys):
 
 def test_evaluate_command_on_two_variants_in_one_program(finished_run, capsys):
     """--variant a,b writes each variant's file, equal to evaluating it alone."""
-    assert evaluate_main([str(finished_run), "--variant", "swingup,swingto", "--episodes", "4", "--stochastic"]) == 0
-    both = {v: json.loads((finished_run / f"eval-{v}-stochastic-4.json").read_text()) for v in ("swingup", "swingto")}
-    assert evaluate_main([str(finished_run), "--variant", "swingto", "--episodes", "4", "--stochastic"]) == 0
+    assert (
+        evaluate_main(
+            [str(finished_run), "--variant", "swingup,swingto", "--episodes", "4", "--stochastic"]
+        )
+        == 0
+    )
+    both = {
+        v: json.loads((finished_run / f"eval-{v}-stochastic-4.json").read_text())
+        for v in ("swingup", "swingto")
+    }
+    assert (
+        evaluate_main(
+            [str(finished_run), "--variant", "swingto", "--episodes", "4", "--stochastic"]
+        )
+        == 0
+    )
     alone = json.loads((finished_run / "eval-swingto-stochastic-4.json").read_text())
-    assert both["swingto"]["returns"] == alone["returns"] and both["swingup"]["returns"] != alone["returns"]
+    assert (
+        both["swingto"]["returns"] == alone["returns"]
+        and both["swingup"]["returns"] != alone["returns"]
+    )
     assert evaluate_main([str(finished_run), "--variant", "swingup,nope"]) == 2
     assert "valid choices: swingto, swingup" in capsys.readouterr().err
 
@@ -513,16 +672,23 @@ def test_evaluate_command_samples_as_the_run_does_unless_told(finished_run, tmp_
     shutil.copytree(finished_run, sampled_run)
     values = yaml.safe_load((sampled_run / "config.yaml").read_text())
     assert values["stochastic_eval"] is False
-    (sampled_run / "config.yaml").write_text(yaml.safe_dump({**values, "stochastic_eval": True}, sort_keys=False))
+    (sampled_run / "config.yaml").write_text(
+        yaml.safe_dump({**values, "stochastic_eval": True}, sort_keys=False)
+    )
     args = ["--variant", "swingto", "--episodes", "4"]
     assert evaluate_main([str(sampled_run), *args]) == 0
     default = json.loads((sampled_run / "eval-swingto-stochastic-4.json").read_text())
     assert evaluate_main([str(finished_run), *args, "--stochastic"]) == 0
-    assert default["returns"] == json.loads((finished_run / "eval-swingto-stochastic-4.json").read_text())["returns"]
+    assert (
+        default["returns"]
+        == json.loads((finished_run / "eval-swingto-stochastic-4.json").read_text())["returns"]
+    )
     assert evaluate_main([str(sampled_run), *args, "--deterministic"]) == 0
     assert evaluate_main([str(finished_run), *args]) == 0
-    deterministic = [json.loads((run / "eval-swingto-deterministic-4.json").read_text())["returns"]
-                     for run in (sampled_run, finished_run)]
+    deterministic = [
+        json.loads((run / "eval-swingto-deterministic-4.json").read_text())["returns"]
+        for run in (sampled_run, finished_run)
+    ]
     assert deterministic[0] == deterministic[1] != default["returns"]
     with pytest.raises(SystemExit):
         evaluate_main([str(sampled_run), "--stochastic", "--deterministic"])
@@ -533,8 +699,12 @@ def test_evaluate_bad_inputs(finished_run, tmp_path, capsys):
     assert evaluate_main([str(finished_run), "--variant", "nope"]) == 2
     assert "valid choices: swingto, swingup" in capsys.readouterr().err
     assert evaluate_main([str(finished_run), "--episodes", "0"]) == 2
-    assert evaluate_main([str(finished_run), "--episodes", str(2 * 10**9)]) == 2  # 3.8 TiB of activations at least
-    assert f"--episodes={2 * 10**9} cannot fit: evaluating 2 seeds x {2 * 10**9} episodes" in capsys.readouterr().err
+    # 3.8 TiB of activations at least
+    assert evaluate_main([str(finished_run), "--episodes", str(2 * 10**9)]) == 2
+    assert (
+        f"--episodes={2 * 10**9} cannot fit: evaluating 2 seeds x {2 * 10**9} episodes"
+        in capsys.readouterr().err
+    )
     with pytest.raises(SystemExit) as exited:  # beyond int32: argparse's one line
         evaluate_main([str(finished_run), "--episodes", str(10**12)])
     assert exited.value.code == 2 and "must be at most 2147483647" in capsys.readouterr().err
@@ -560,8 +730,14 @@ def test_a_checkpoint_saved_on_another_device_restores_here(finished_run, tmp_pa
         "state, update = checkpoint.restore_latest(src, make_trainer(layers.load_run_config(src)).abstract_state())\n"
         "checkpoint.save(dest, jax.device_put(state, jax.devices()[1]), update)\n"
     )
-    env = {**os.environ, "JAX_PLATFORMS": "cpu", "XLA_FLAGS": with_xla_flag("--xla_force_host_platform_device_count=2")}
-    out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=300)
+    env = {
+        **os.environ,
+        "JAX_PLATFORMS": "cpu",
+        "XLA_FLAGS": with_xla_flag("--xla_force_host_platform_device_count=2"),
+    }
+    out = subprocess.run(
+        [sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=300
+    )
     assert out.returncode == 0, out.stderr[-2000:]
     assert len(jax.devices()) == 1
     cfg = layers.load_run_config(finished_run)
@@ -583,7 +759,9 @@ def test_mismatched_checkpoint_is_refused(finished_run, tmp_path):
     (copy / "config.yaml").write_text(yaml.safe_dump(config))
     before = sorted(p.name for p in copy.rglob("*"))
     # Refused from the stored shapes, before any array is read.
-    with pytest.raises(UsageError, match=r"does not match its config.yaml: its \d+ arrays differ in shape"):
+    with pytest.raises(
+        UsageError, match=r"does not match its config.yaml: its \d+ arrays differ in shape"
+    ):
         checkpoint.restore_latest(copy, make_trainer(layers.load_run_config(copy)).abstract_state())
     assert sorted(p.name for p in copy.rglob("*")) == before  # nothing written or removed
 
@@ -599,7 +777,10 @@ def test_corrupt_checkpoints_are_refused_through_the_command_line(finished_run, 
     metrics_before = (copy / "metrics.csv").read_text()
     out = cli(str(copy), cwd=tmp_path, module="hintsjax.evaluate")
     assert out.returncode == 2 and "Traceback" not in out.stderr
-    assert out.stderr.strip().startswith("error: checkpoint 4") and len(out.stderr.strip().splitlines()) == 1
+    assert (
+        out.stderr.strip().startswith("error: checkpoint 4")
+        and len(out.stderr.strip().splitlines()) == 1
+    )
     out = cli(f"resume={copy}", cwd=tmp_path)
     assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
     assert (copy / "metrics.csv").read_text() == metrics_before
@@ -624,7 +805,9 @@ def corrupted(step: Path, how: str) -> None:
         raise ValueError(how)
 
 
-def test_a_corrupt_newest_checkpoint_falls_back_to_the_one_before_and_resumes_bit_for_bit(finished_run, tmp_path, capsys):
+def test_a_corrupt_newest_checkpoint_falls_back_to_the_one_before_and_resumes_bit_for_bit(
+    finished_run, tmp_path, capsys
+):
     """Checkpoint 4 damaged four ways a crash leaves one: each restore passes it over for
     checkpoint 2 (its arrays exactly those of checkpoint 2 read while whole) with one line naming
     both; resumed through the run command, the run sets 4 aside (checkpoints-corrupt/), trains
@@ -644,17 +827,26 @@ def test_a_corrupt_newest_checkpoint_falls_back_to_the_one_before_and_resumes_bi
         state, update = checkpoint.restore_latest(copy, abstract)
         lines = capsys.readouterr().err.strip().splitlines()
         assert update == 2 and len(lines) == 1, (how, lines)
-        assert lines[0].startswith(f"warning: checkpoint 4 in {copy / 'checkpoints'} cannot be restored (") and \
-            lines[0].endswith("); using checkpoint 2, the newest that restores"), lines
-        restored = [np.asarray(jax.random.key_data(x) if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key) else x)
-                    for x in jax.tree.leaves(state)]
+        assert lines[0].startswith(
+            f"warning: checkpoint 4 in {copy / 'checkpoints'} cannot be restored ("
+        ) and lines[0].endswith("); using checkpoint 2, the newest that restores"), lines
+        restored = [
+            np.asarray(
+                jax.random.key_data(x) if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key) else x
+            )
+            for x in jax.tree.leaves(state)
+        ]
         for a, b in zip(restored, two, strict=True):
             np.testing.assert_array_equal(a, b)
         assert (copy / "checkpoints" / "4").exists()  # only a run that trains on sets it aside
-    (copy / "checkpoints" / "99").mkdir()  # and a stray empty folder (made by hand) is no checkpoint
+    # and a stray empty folder (made by hand) is no checkpoint
+    (copy / "checkpoints" / "99").mkdir()
     assert run.main_from_values({"resume": str(copy)}) == 0
     assert not (copy / "checkpoints" / "99").exists()
-    assert f"using checkpoint 2, the newest that restores; set aside in {copy / checkpoint.CORRUPT}" in capsys.readouterr().err
+    assert (
+        f"using checkpoint 2, the newest that restores; set aside in {copy / checkpoint.CORRUPT}"
+        in capsys.readouterr().err
+    )
     assert [p.name.split("-")[0] for p in (copy / checkpoint.CORRUPT).iterdir()] == ["4"]
     assert_ends_as(copy, finished_run)
 
@@ -668,7 +860,9 @@ def test_a_stray_empty_checkpoint_folder_is_no_checkpoint(finished_run, tmp_path
     assert checkpoint.latest_update(copy) == 4 and not (copy / "checkpoints" / "99").exists()
 
 
-@pytest.mark.parametrize("garbage", [b"not,a,metrics\nfile,at,all\n", b"update,seed\nfour,0\n", b"\xff\xfe\x00"])
+@pytest.mark.parametrize(
+    "garbage", [b"not,a,metrics\nfile,at,all\n", b"update,seed\nfour,0\n", b"\xff\xfe\x00"]
+)
 def test_a_garbage_metrics_file_is_one_line_and_kept(garbage, finished_run, tmp_path):
     copy = tmp_path / "garbage"
     shutil.copytree(finished_run, copy)
@@ -688,25 +882,40 @@ def test_a_config_that_is_not_utf8_is_one_line(finished_run, tmp_path):
         layers.load_run_config(copy)
 
 
-def test_a_resumed_run_trains_longer_to_the_longer_runs_end_bit_for_bit(finished_run, tmp_path, capsys):
+def test_a_resumed_run_trains_longer_to_the_longer_runs_end_bit_for_bit(
+    finished_run, tmp_path, capsys
+):
     """A run of 2 updates, resumed through the command line with the 4-update budget of
     `finished_run`, ends with its state bit for bit and its logged returns; its config.yaml says
     the new budget. A smaller budget is one line and leaves the folder alone (in-process: the
     command line's parse of the same two settings is the longer resume's)."""
     short = tmp_path / "short"
-    assert run.main_from_values(tiny_values(out_dir=str(tmp_path), name="short", ppo={**tiny_values()["ppo"], "total_env_steps": 128})) == 0
+    assert (
+        run.main_from_values(
+            tiny_values(
+                out_dir=str(tmp_path),
+                name="short",
+                ppo={**tiny_values()["ppo"], "total_env_steps": 128},
+            )
+        )
+        == 0
+    )
     assert checkpoint.latest_update(short) == 2
     capsys.readouterr()
     before = sorted((p.relative_to(short), p.stat().st_mtime_ns) for p in short.rglob("*"))
     assert run.main_from_values({"resume": str(short), "ppo": {"total_env_steps": 64}}) == 2
     assert capsys.readouterr().err.strip().splitlines() == [
-        "error: a resumed run can train longer, not shorter: ppo.total_env_steps must be at least 128 (its budget), got 64"]
+        "error: a resumed run can train longer, not shorter: ppo.total_env_steps must be at least 128 (its budget), got 64"
+    ]
     assert sorted((p.relative_to(short), p.stat().st_mtime_ns) for p in short.rglob("*")) == before
     longer = cli(f"resume={short}", "ppo.total_env_steps=256", cwd=tmp_path)
     assert longer.returncode == 0, longer.stderr[-2000:]
     assert layers.load_run_config(short) == layers.load_run_config(finished_run)
     assert_ends_as(short, finished_run)
-    assert json.loads((short / "eval.json").read_text())["evaluations"] == json.loads((finished_run / "eval.json").read_text())["evaluations"]
+    assert (
+        json.loads((short / "eval.json").read_text())["evaluations"]
+        == json.loads((finished_run / "eval.json").read_text())["evaluations"]
+    )
 
 
 CUTS = ("ppo.clip_eps", "eval_episodes", "gail")
@@ -729,7 +938,10 @@ def cut_resumes(finished_run, tmp_path_factory) -> dict[str, tuple[int, str, Pat
         copies.append(copy)
         befores.append(sorted(p.relative_to(copy) for p in copy.rglob("*")))
     done = command_runs.outcomes("hintsjax.run", [[f"resume={copy}"] for copy in copies], root)
-    return {cut: (status, err, copy, before) for cut, (status, _, err, _), copy, before in zip(CUTS, done, copies, befores, strict=True)}
+    return {
+        cut: (status, err, copy, before)
+        for cut, (status, _, err, _), copy, before in zip(CUTS, done, copies, befores, strict=True)
+    }
 
 
 @pytest.mark.parametrize("cut", CUTS)
@@ -746,12 +958,21 @@ def test_a_config_that_lacks_a_setting_is_not_resumed(cut, cut_resumes):
 def test_seeds_sharded_over_two_devices_give_the_single_device_result(finished_run, tmp_path):
     env = {**os.environ, "XLA_FLAGS": with_xla_flag("--xla_force_host_platform_device_count=2")}
     args = [*TINY, "out_dir=runs", "name=sharded"]
-    out = subprocess.run([sys.executable, "-m", "hintsjax.run", *args], cwd=tmp_path, env=env,
-                         capture_output=True, text=True, timeout=300)
+    out = subprocess.run(
+        [sys.executable, "-m", "hintsjax.run", *args],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert out.returncode == 0, out.stderr
-    assert "on 2 cpu device(s) (1 a device), jax physics, compiled in" in out.stdout  # the pendulum's MJX physics: auto on a CPU
+    # the pendulum's MJX physics: auto on a CPU
+    assert "on 2 cpu device(s) (1 a device), jax physics, compiled in" in out.stdout
     # the first line comes before anything compiles (and the cache is on, as the command line turns it on)
-    assert out.stdout.splitlines()[0].endswith(": compiling its programs (later runs on this machine load most of them from the cache)")
+    assert out.stdout.splitlines()[0].endswith(
+        ": compiling its programs (later runs on this machine load most of them from the cache)"
+    )
     sharded = json.loads((tmp_path / "runs" / "sharded" / "eval.json").read_text())["evaluations"]
     single = json.loads((finished_run / "eval.json").read_text())["evaluations"]
     for a, b in zip(sharded, single):
@@ -760,7 +981,10 @@ def test_seeds_sharded_over_two_devices_give_the_single_device_result(finished_r
 
 def test_a_launcher_whose_plugin_is_missing_is_one_line(monkeypatch):
     monkeypatch.setitem(overrides.LAUNCHERS, "submitit_slurm", "hydra_plugins.no_such_launcher")
-    with pytest.raises(UsageError, match=r"hydra/launcher=submitit_slurm needs hydra-submitit-launcher: pip install -e '\.\[cluster\]'"):
+    with pytest.raises(
+        UsageError,
+        match=r"hydra/launcher=submitit_slurm needs hydra-submitit-launcher: pip install -e '\.\[cluster\]'",
+    ):
         overrides.check_overrides(["-m", "hydra/launcher=submitit_slurm", "scheme=lc,fc"])
 
 
@@ -770,12 +994,24 @@ def test_a_sweep_runs_through_hydras_submitit_launcher(tmp_path):
     """`-m hydra/launcher=submitit_local`: submitit starts each job of the sweep as a process of
     its own (as submitit_slurm submits it to SLURM), and each writes its own run folder, though
     both ask for the same name at once."""
-    out = cli("-m", "hydra/launcher=submitit_local", "env=pendulum", *TINY, "seed=0,1", "out_dir=runs", cwd=tmp_path)
+    out = cli(
+        "-m",
+        "hydra/launcher=submitit_local",
+        "env=pendulum",
+        *TINY,
+        "seed=0,1",
+        "out_dir=runs",
+        cwd=tmp_path,
+    )
     assert out.returncode == 0, out.stderr[-3000:]
-    folders = [p for p in (tmp_path / "runs").iterdir() if p.is_dir() and not p.name.startswith(".")]
+    folders = [
+        p for p in (tmp_path / "runs").iterdir() if p.is_dir() and not p.name.startswith(".")
+    ]
     assert len(folders) == 2 and (tmp_path / "runs" / "multirun.yaml").exists()
     seeds = sorted(yaml.safe_load((f / "config.yaml").read_text())["seed"] for f in folders)
-    assert seeds == [0, 1] and all(json.loads((f / "eval.json").read_text())["evaluations"] for f in folders)
+    assert seeds == [0, 1] and all(
+        json.loads((f / "eval.json").read_text())["evaluations"] for f in folders
+    )
 
 
 def submitit_task(folder: Path) -> int | None:
@@ -803,25 +1039,47 @@ def test_a_preempted_submitit_job_is_requeued_and_goes_on_in_its_folder_bit_for_
     sweep = tmp_path / "sweep"
     args = [f"{k}={v}" for k, v in whole.items() if k not in ("ppo", "out_dir")]
     args += [f"ppo.{k}={v}" for k, v in whole["ppo"].items()]
-    job = subprocess.Popen([sys.executable, "-m", "hintsjax.run", "-m", "hydra/launcher=submitit_local", *args,
-                            f"out_dir={sweep}"], cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    job = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "hintsjax.run",
+            "-m",
+            "hydra/launcher=submitit_local",
+            *args,
+            f"out_dir={sweep}",
+        ],
+        cwd=tmp_path,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     folder = sweep / "run"
-    while job.poll() is None and not any(p.name.isdigit() for p in (folder / "checkpoints").glob("*")):
+    while job.poll() is None and not any(
+        p.name.isdigit() for p in (folder / "checkpoints").glob("*")
+    ):
         time.sleep(0.02)
     task = submitit_task(sweep)
     assert task is not None, "the job ended before its first checkpoint was written"
     os.kill(task, signal.SIGUSR2)
     assert job.wait(timeout=300) == 0
-    assert sorted(p.name for p in sweep.iterdir() if not p.name.startswith(".")) == ["multirun.yaml", "run"]
+    assert sorted(p.name for p in sweep.iterdir() if not p.name.startswith(".")) == [
+        "multirun.yaml",
+        "run",
+    ]
     said = "\n".join(p.read_text() for p in (sweep / ".submitit").rglob("*_log.err"))
     job_id = json.loads((folder / "job.json").read_text())["job_id"]
-    assert re.search(rf"preempted \(SIGUSR2\); checkpoint at update \d+; submitit is asked to requeue job {job_id}, "
-                     rf"which goes on in {re.escape(str(folder))}", said), said[-3000:]
+    assert re.search(
+        rf"preempted \(SIGUSR2\); checkpoint at update \d+; submitit is asked to requeue job {job_id}, "
+        rf"which goes on in {re.escape(str(folder))}",
+        said,
+    ), said[-3000:]
     assert f"requeued job {job_id}: goes on in" in said
     assert_ends_as(folder, tmp_path / "whole" / "run")
 
 
-def test_a_preemption_that_submitit_will_not_requeue_says_so_and_names_the_command(monkeypatch, tmp_path, capsys):
+def test_a_preemption_that_submitit_will_not_requeue_says_so_and_names_the_command(
+    monkeypatch, tmp_path, capsys
+):
     """submitit refuses to requeue a job that timed out more often than max_num_timeout allows
     (its handler raises UncompletedJobError): after the line that asked, one line says so and names
     the command that goes on; exit 143. Outside a submitit job a run writes no job.json."""
@@ -842,14 +1100,19 @@ def test_a_preemption_that_submitit_will_not_requeue_says_so_and_names_the_comma
     def refuse():
         raise UncompletedJobError("Job not requeued because: timed-out too many times.")
 
-    assert requeue.hand_over(requeue.Preempted("SIGUSR2", refuse), folder, "checkpoint at update 2") == errors.TERMINATED
+    assert (
+        requeue.hand_over(requeue.Preempted("SIGUSR2", refuse), folder, "checkpoint at update 2")
+        == errors.TERMINATED
+    )
     assert capsys.readouterr().err.splitlines() == [
         f"preempted (SIGUSR2); checkpoint at update 2; submitit is asked to requeue job 4242, which goes on in {folder}",
         f"submitit did not requeue job 4242 (Job not requeued because: timed-out too many times.); "
-        f"go on with: python -m hintsjax.run resume={folder}"]
+        f"go on with: python -m hintsjax.run resume={folder}",
+    ]
     requeue.record(folder)
     assert requeue.folders_of_this_job(folder.parent) == [folder]
-    monkeypatch.setenv("SUBMITIT_LOCAL_JOB_ID", "4243")  # another job (or the same id on another cluster)
+    # another job (or the same id on another cluster)
+    monkeypatch.setenv("SUBMITIT_LOCAL_JOB_ID", "4243")
     assert requeue.folders_of_this_job(folder.parent) == []
 
 
@@ -858,7 +1121,9 @@ def test_a_preemption_that_submitit_will_not_requeue_says_so_and_names_the_comma
 def test_classic_envs_train_from_the_command_line(env, tmp_path):
     """Every env runs through the same learner: a pixel agent with the mask scheme, end to end
     (slow: compiling an MJX env inside the trainer takes one to two minutes on 2 CPU cores)."""
-    values = tiny_values(env=env, agent="hints", scheme="mc", hint="composite", out_dir=str(tmp_path), name="r")
+    values = tiny_values(
+        env=env, agent="hints", scheme="mc", hint="composite", out_dir=str(tmp_path), name="r"
+    )
     assert run.main_from_values(values) == 0
     result = json.loads((tmp_path / "r" / "eval.json").read_text())
     assert result["env"] == env and np.isfinite(result["evaluations"][0]["mean"])
@@ -873,9 +1138,17 @@ def test_the_checkout_runs_without_the_editable_installs_finder():
 
     root = Path(__file__).resolve().parents[1]
     env = {**os.environ, "PYTHONPATH": site.getsitepackages()[0]}
-    out = subprocess.run([sys.executable, "-S", "-m", "hintsjax.run", "env=nope"], cwd=root, env=env, capture_output=True,
-                         text=True, timeout=300)
-    assert out.returncode == 2 and out.stderr.startswith("error: unknown env 'nope'"), out.stderr[-500:]
+    out = subprocess.run(
+        [sys.executable, "-S", "-m", "hintsjax.run", "env=nope"],
+        cwd=root,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert out.returncode == 2 and out.stderr.startswith("error: unknown env 'nope'"), out.stderr[
+        -500:
+    ]
 
 
 @pytest.mark.parametrize("where", ["root", "elsewhere"])
@@ -887,12 +1160,26 @@ def test_a_built_wheel_runs_from_the_checkout_root_and_from_elsewhere(where, tmp
     target = wheel_install(tmp_path_factory)
     env = {**os.environ, "PYTHONPATH": str(target)}
     cwd = root if where == "root" else tmp_path_factory.mktemp("elsewhere")
-    out = subprocess.run([sys.executable, "-m", "hintsjax.run", "env=nope"], cwd=cwd, env=env, capture_output=True,
-                         text=True, timeout=300)
-    assert out.returncode == 2 and out.stderr.startswith("error: unknown env 'nope'"), out.stderr[-500:]
+    out = subprocess.run(
+        [sys.executable, "-m", "hintsjax.run", "env=nope"],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert out.returncode == 2 and out.stderr.startswith("error: unknown env 'nope'"), out.stderr[
+        -500:
+    ]
     if where == "elsewhere":  # the installed copy, not the checkout's
-        probe = subprocess.run([sys.executable, "-c", "import hintsjax.envs as e; print(e.__file__)"], cwd=cwd, env=env,
-                               capture_output=True, text=True, timeout=300)
+        probe = subprocess.run(
+            [sys.executable, "-c", "import hintsjax.envs as e; print(e.__file__)"],
+            cwd=cwd,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
         assert probe.stdout.strip().startswith(str(target)), probe.stdout + probe.stderr
 
 
@@ -902,15 +1189,28 @@ def test_a_built_wheels_experts_restore_and_hold_only_what_a_restore_reads(tmp_p
     target = wheel_install(tmp_path_factory)
     installed = target / "hintsjax" / "experts"
     assert sorted(p.name for p in installed.iterdir() if (p / "expert.json").is_file()) == sorted(
-        p.name for p in (Path(__file__).resolve().parents[1] / "hintsjax" / "experts").iterdir() if (p / "expert.json").is_file())
+        p.name
+        for p in (Path(__file__).resolve().parents[1] / "hintsjax" / "experts").iterdir()
+        if (p / "expert.json").is_file()
+    )
     assert [p for p in installed.rglob("*") if p.name in ("commit_success.txt", "_sharding")] == []
-    entry_points = "".join(p.read_text() for p in target.glob("hintsjax-*.dist-info/entry_points.txt"))
+    entry_points = "".join(
+        p.read_text() for p in target.glob("hintsjax-*.dist-info/entry_points.txt")
+    )
     assert "[console_scripts]\nhintsjax = hintsjax.console:main" in entry_points
-    script = ("import hintsjax.algorithms.experts as x, jax; assert x.__file__.startswith(%r), x.__file__\n"
-              "for env in x.packaged(): assert jax.numpy.isfinite(x.load(env).log_std).all(), env\n"
-              "print(len(x.packaged()))" % str(target))
-    out = subprocess.run([sys.executable, "-c", script], cwd=tmp_path_factory.mktemp("elsewhere"),
-                         env={**os.environ, "PYTHONPATH": str(target)}, capture_output=True, text=True, timeout=300)
+    script = (
+        "import hintsjax.algorithms.experts as x, jax; assert x.__file__.startswith(%r), x.__file__\n"
+        "for env in x.packaged(): assert jax.numpy.isfinite(x.load(env).log_std).all(), env\n"
+        "print(len(x.packaged()))" % str(target)
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", script],
+        cwd=tmp_path_factory.mktemp("elsewhere"),
+        env={**os.environ, "PYTHONPATH": str(target)},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert out.returncode == 0 and out.stdout.strip() == "7", out.stderr[-2000:]
 
 
@@ -923,15 +1223,40 @@ def wheel_install(tmp_path_factory) -> Path:
         root = Path(__file__).resolve().parents[1]
         wheels, target = tmp_path_factory.mktemp("wheels"), tmp_path_factory.mktemp("site")
         pip = [sys.executable, "-m", "pip", "-q"]
-        subprocess.run([*pip, "wheel", "--no-deps", "-w", str(wheels), str(root)], check=True,
-                       capture_output=True, timeout=600)
-        subprocess.run([*pip, "install", "--no-deps", "--no-compile", "--target", str(target), *map(str, wheels.glob("*.whl"))],
-                       check=True, capture_output=True, timeout=600)
+        subprocess.run(
+            [*pip, "wheel", "--no-deps", "-w", str(wheels), str(root)],
+            check=True,
+            capture_output=True,
+            timeout=600,
+        )
+        subprocess.run(
+            [
+                *pip,
+                "install",
+                "--no-deps",
+                "--no-compile",
+                "--target",
+                str(target),
+                *map(str, wheels.glob("*.whl")),
+            ],
+            check=True,
+            capture_output=True,
+            timeout=600,
+        )
         _WHEEL["target"] = target
     return _WHEEL["target"]
 
 
-SHIPPED_ENVS = ("pendulum", "acrobot", "idp", "ant", "ant_fast", "halfcheetah", "humanoid", "car_racing")
+SHIPPED_ENVS = (
+    "pendulum",
+    "acrobot",
+    "idp",
+    "ant",
+    "ant_fast",
+    "halfcheetah",
+    "humanoid",
+    "car_racing",
+)
 
 
 @pytest.mark.parametrize("name", SHIPPED_ENVS)
@@ -958,13 +1283,21 @@ def test_an_env_registered_at_run_time_takes_one_call():
     from hintsjax.settings.layers import run_config
 
     entry = envs.REGISTRY["pendulum"]
-    envs.REGISTRY["pendulum_copy"] = envs.EnvEntry(entry.cls, entry.variants,
-                                                   training=dict(ppo=dict(hidden=(8, 8)), learners=dict(ppo=dict(epochs=3)),
-                                                                 agents=dict(expert_ppo=dict(ppo=dict(total_env_steps=1234)))))
+    envs.REGISTRY["pendulum_copy"] = envs.EnvEntry(
+        entry.cls,
+        entry.variants,
+        training=dict(
+            ppo=dict(hidden=(8, 8)),
+            learners=dict(ppo=dict(epochs=3)),
+            agents=dict(expert_ppo=dict(ppo=dict(total_env_steps=1234))),
+        ),
+    )
     try:
         cfg = run_config({"env": "pendulum_copy", "agent": "ppo_rgb"})
         assert (cfg.ppo.hidden, cfg.ppo.epochs) == ((8, 8), 3)
-        assert run_config({"env": "pendulum_copy", "agent": "expert_ppo"}).ppo.total_env_steps == 1234
+        assert (
+            run_config({"env": "pendulum_copy", "agent": "expert_ppo"}).ppo.total_env_steps == 1234
+        )
     finally:
         dict.pop(envs.REGISTRY, "pendulum_copy")
         dict.pop(ENV_DEFAULTS, "pendulum_copy", None)
@@ -977,8 +1310,15 @@ def test_a_config_saved_before_the_brax_knobs_resumes_under_their_defaults(tmp_p
     cfg = layers.run_config({k: v for k, v in tiny_values().items() if k != "out_dir"})
     layers.save_run_config(tmp_path, cfg)
     values = yaml.safe_load((tmp_path / "config.yaml").read_text())
-    for key in ("grad_clip", "adam_eps", "gae_segment", "normalize_before_learning", "critic_trains_encoder",
-                "kl_adaptive_lr", "reset_every_update"):
+    for key in (
+        "grad_clip",
+        "adam_eps",
+        "gae_segment",
+        "normalize_before_learning",
+        "critic_trains_encoder",
+        "kl_adaptive_lr",
+        "reset_every_update",
+    ):
         del values["ppo"][key]
     (tmp_path / "config.yaml").write_text(yaml.safe_dump(values))
     assert layers.load_run_config(tmp_path, complete=True) == cfg

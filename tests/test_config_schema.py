@@ -33,7 +33,8 @@ from hintsjax.algorithms.ppo import Hyper
 from hintsjax.cli import overrides
 from hintsjax.training import request
 
-RUN_ONLY = {"out_dir", "name", "resume", "compilation_cache"}  # the command's own keys, not a RunConfig's
+# the command's own keys, not a RunConfig's
+RUN_ONLY = {"out_dir", "name", "resume", "compilation_cache"}
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -41,7 +42,9 @@ def schema_defaults() -> dict[str, object]:
     """Every setting of the dataclasses as the command line names it (section.key), with its
     default as config.yaml would write it (tuples as lists)."""
     flat = {k: v for k, v in to_dict(RunConfig()).items() if k not in SECTIONS}
-    flat.update({f"{name}.{k}": v for name in SECTIONS for k, v in to_dict(RunConfig())[name].items()})
+    flat.update(
+        {f"{name}.{k}": v for name in SECTIONS for k, v in to_dict(RunConfig())[name].items()}
+    )
     return flat
 
 
@@ -49,7 +52,14 @@ def yaml_values() -> dict[str, object]:
     """config.yaml's keys (section.key for a section's) and their values."""
     conf = overrides.defaults()
     flat = {k: v for k, v in conf.items() if not isinstance(v, dict)}
-    flat.update({f"{name}.{k}": v for name, section in conf.items() if isinstance(section, dict) for k, v in section.items()})
+    flat.update(
+        {
+            f"{name}.{k}": v
+            for name, section in conf.items()
+            if isinstance(section, dict)
+            for k, v in section.items()
+        }
+    )
     return flat
 
 
@@ -58,14 +68,19 @@ def mismatches(schema: dict[str, object], written: dict[str, object]) -> list[st
     a key that is no setting, or a default that is neither null nor the dataclass's."""
     found = [f"{k} missing" for k in schema if k not in written]
     found += [f"{k} is no setting" for k in written if k not in schema and k not in RUN_ONLY]
-    found += [f"{k}: {written[k]!r}, the dataclass says {schema[k]!r}" for k in schema
-              if k in written and written[k] is not None and written[k] != schema[k]]
+    found += [
+        f"{k}: {written[k]!r}, the dataclass says {schema[k]!r}"
+        for k in schema
+        if k in written and written[k] is not None and written[k] != schema[k]
+    ]
     return found
 
 
 def test_config_yaml_holds_every_setting_with_no_default_or_the_dataclasses():
     schema = schema_defaults()
-    assert {"ppo.starts_per_rollout", "ppo.num_envs", "gail.grad_penalty", "warp_capacity"} <= set(schema)
+    assert {"ppo.starts_per_rollout", "ppo.num_envs", "gail.grad_penalty", "warp_capacity"} <= set(
+        schema
+    )
     assert mismatches(schema, yaml_values()) == []
     assert set(overrides.config_keys()) - set(RUN_ONLY) - set(SECTIONS) == set(schema)
 
@@ -74,13 +89,20 @@ def test_a_drifted_config_yaml_is_caught():
     schema = schema_defaults()
     drifted = {k: v for k, v in yaml_values().items() if k != "ppo.starts_per_rollout"}
     drifted.update({"seeds": 7, "ppo.num_env": None})
-    assert mismatches(schema, drifted) == ["ppo.starts_per_rollout missing", "ppo.num_env is no setting",
-                                           "seeds: 7, the dataclass says 5"]
+    assert mismatches(schema, drifted) == [
+        "ppo.starts_per_rollout missing",
+        "ppo.num_env is no setting",
+        "seeds: 7, the dataclass says 5",
+    ]
 
 
 def _keys(layer: dict) -> set[str]:
-    return {f"{k}.{sk}" if isinstance(v, dict) else k for k, v in layer.items() if k != "agents"
-            for sk in (v if isinstance(v, dict) else [None])}
+    return {
+        f"{k}.{sk}" if isinstance(v, dict) else k
+        for k, v in layer.items()
+        if k != "agents"
+        for sk in (v if isinstance(v, dict) else [None])
+    }
 
 
 @pytest.mark.parametrize("env", SHIPPED_ENVS)
@@ -108,16 +130,24 @@ def test_every_setting_can_be_given_on_the_command_line():
     """Each dataclass field, as a key=value argument, passes the command line's checks, and a value
     for ppo.starts_per_rollout reaches the run's config (it was once refused as unknown)."""
     for key, value in schema_defaults().items():
-        text = "null" if value is None else str(value).lower() if isinstance(value, bool) else str(value).replace(" ", "")
+        text = (
+            "null"
+            if value is None
+            else str(value).lower()
+            if isinstance(value, bool)
+            else str(value).replace(" ", "")
+        )
         overrides.check_overrides([f"{key}={text}"])
-    asked = request.request({**overrides.defaults(), "ppo": {**overrides.defaults()["ppo"], "starts_per_rollout": True}})
+    asked = request.request(
+        {**overrides.defaults(), "ppo": {**overrides.defaults()["ppo"], "starts_per_rollout": True}}
+    )
     assert asked.cfg.ppo.starts_per_rollout and not run_config({}).ppo.starts_per_rollout
     with pytest.raises(UsageError, match="starts_per_rollout must be bool, got 2"):
         request.request({**overrides.defaults(), "ppo": {"starts_per_rollout": 2}})
 
 
-
 # --- Each setting declared once (hintsjax/settings/fields.py): what is read off the fields follows them.
+
 
 def _other_value(cls, name: str):
     """A valid value of setting `name` other than its default (for a shape, one that changes it)."""
@@ -139,8 +169,15 @@ def _other_value(cls, name: str):
 def test_hyper_holds_every_traced_ppo_setting_and_reads_its_value():
     cfg = run_config({})
     hyper = Hyper.of(cfg)
-    leaves = [key.name for key, _ in jax.tree_util.tree_flatten_with_path(hyper)[0] for key in key[-1:]]
-    assert leaves == [*fields.names(PPOConfig, traced=True), "state_noise", "hint_take", "hint_keep"]
+    leaves = [
+        key.name for key, _ in jax.tree_util.tree_flatten_with_path(hyper)[0] for key in key[-1:]
+    ]
+    assert leaves == [
+        *fields.names(PPOConfig, traced=True),
+        "state_noise",
+        "hint_take",
+        "hint_keep",
+    ]
     assert {"clip_eps", "encoder_lr", "target_kl"} <= set(leaves) and "epochs" not in leaves
     for name in fields.names(PPOConfig, traced=True):
         other = _other_value(PPOConfig, name)
@@ -155,7 +192,11 @@ ALSO = {"kl_adaptive_lr": {"target_kl": 0.05}}  # a setting that needs another t
 def test_a_group_shares_the_traced_settings_and_splits_on_the_others(name):
     """Two configurations that differ only in one PPO setting train in one group if the field is
     declared `traced`, in two otherwise; so group.SHAPES cannot drift from the fields."""
-    base = {"env": "pendulum", "agent": "hints", "ppo": {"total_env_steps": 4096, **ALSO.get(name, {})}}
+    base = {
+        "env": "pendulum",
+        "agent": "hints",
+        "ppo": {"total_env_steps": 4096, **ALSO.get(name, {})},
+    }
     other = {**base, "ppo": {**base["ppo"], name: _other_value(PPOConfig, name)}}
     cfgs = [run_config(base), run_config(other)]
     assert cfgs[0] != cfgs[1]
@@ -179,8 +220,11 @@ def test_a_saved_config_may_lack_exactly_the_settings_declared_so():
         if key in RUN_ONLY:
             continue
         section, _, name = key.rpartition(".")
-        lacking = {k: ({kk: vv for kk, vv in v.items() if kk != name} if k == section else v)
-                   for k, v in saved.items() if k != key}
+        lacking = {
+            k: ({kk: vv for kk, vv in v.items() if kk != name} if k == section else v)
+            for k, v in saved.items()
+            if k != key
+        }
         assert missing_keys(lacking) == ([] if key in declared else [key]), key
         if key in declared:
             assert run_config(lacking, resolved=True) == run_config(saved, resolved=True), key
@@ -190,9 +234,16 @@ def test_every_committed_run_folder_of_every_earlier_layout_still_loads():
     """The run folders kept in experiments/results/runs were saved by hintsjax of many dates (some lack
     physics, warp_capacity, ppo.action_head, hint_source); each still loads (but those whose hints came
     from a generator folder, which is not kept)."""
-    saved = {p.parent: yaml.safe_load(p.read_text()) or {} for p in (ROOT / "experiments" / "results" / "runs").rglob("config.yaml")}
-    folders = sorted(folder for folder, values in saved.items() if "ppo" in values
-                     and {values.get("hint_source"), values.get("eval_hint_source")} <= {None, "programmatic"})
+    saved = {
+        p.parent: yaml.safe_load(p.read_text()) or {}
+        for p in (ROOT / "experiments" / "results" / "runs").rglob("config.yaml")
+    }
+    folders = sorted(
+        folder
+        for folder, values in saved.items()
+        if "ppo" in values
+        and {values.get("hint_source"), values.get("eval_hint_source")} <= {None, "programmatic"}
+    )
     assert len(folders) > 100
     lacking = 0
     for folder in folders:
@@ -205,11 +256,15 @@ def test_every_committed_run_folder_of_every_earlier_layout_still_loads():
 def test_every_setting_has_a_help_line_and_a_type_it_can_be_given_as():
     for cls in (RunConfig, CommandSettings, *SECTIONS.values()):
         declared = fields.settings_of(cls)
-        assert [f.name for f in declared] == [f.name for f in dataclasses.fields(cls) if f.name not in SECTIONS]
+        assert [f.name for f in declared] == [
+            f.name for f in dataclasses.fields(cls) if f.name not in SECTIONS
+        ]
         for f in declared:
             assert f.metadata[fields.HELP] and "\n" not in f.metadata[fields.HELP], f.name
             if f.metadata[fields.TRACED]:
-                assert str(f.type) in ("float", "float | None"), f"{f.name}: a traced setting is a number"
+                assert str(f.type) in ("float", "float | None"), (
+                    f"{f.name}: a traced setting is a number"
+                )
 
 
 def test_settings_md_is_written_from_the_fields():
@@ -228,7 +283,11 @@ def readme_table_drift(readme: str) -> list[str]:
     rows = README_TABLE.search(readme).group(1).splitlines()
     named = {n for row in rows for n in re.findall(r"`([\w.*]+)`", row.split("|")[1])}
     top = [k for k in schema.keys() if "." not in k]
-    found = [f"{n} is no setting" for n in sorted(named) if n not in top and n.removesuffix(".*") not in SECTIONS]
+    found = [
+        f"{n} is no setting"
+        for n in sorted(named)
+        if n not in top and n.removesuffix(".*") not in SECTIONS
+    ]
     found += [f"{k} not in the table" for k in top if k not in named]
     dotted = set(re.findall(rf"`((?:{'|'.join(SECTIONS)})\.\w+)[`=]", readme))
     return found + [f"{k} is no setting" for k in sorted(dotted - set(schema.keys()))]
@@ -237,9 +296,17 @@ def readme_table_drift(readme: str) -> list[str]:
 def test_the_readme_key_table_names_the_settings():
     readme = (ROOT / "README.md").read_text()
     assert readme_table_drift(readme) == []
-    drifted = readme.replace("`seed`, ", "").replace("`ppo.num_envs`", "`ppo.num_env`").replace("| `expert` |", "| `experts` |")
-    assert readme_table_drift(drifted) == ["experts is no setting", "seed not in the table", "expert not in the table",
-                                           "ppo.num_env is no setting"]
+    drifted = (
+        readme.replace("`seed`, ", "")
+        .replace("`ppo.num_envs`", "`ppo.num_env`")
+        .replace("| `expert` |", "| `experts` |")
+    )
+    assert readme_table_drift(drifted) == [
+        "experts is no setting",
+        "seed not in the table",
+        "expert not in the table",
+        "ppo.num_env is no setting",
+    ]
 
 
 def test_an_env_that_sets_a_setting_the_command_line_gives_a_value_is_refused(monkeypatch):
@@ -248,10 +315,16 @@ def test_an_env_that_sets_a_setting_the_command_line_gives_a_value_is_refused(mo
     from hintsjax import envs
 
     entry = envs.REGISTRY["pendulum"]
-    monkeypatch.setitem(envs.REGISTRY, "pendulum_seeds", envs.EnvEntry(entry.cls, entry.variants,
-                                                                      {**entry.training, "seeds": 3}))
+    monkeypatch.setitem(
+        envs.REGISTRY,
+        "pendulum_seeds",
+        envs.EnvEntry(entry.cls, entry.variants, {**entry.training, "seeds": 3}),
+    )
     try:
-        with pytest.raises(TypeError, match="pendulum_seeds's TRAINING sets seeds, which the command line gives a value"):
+        with pytest.raises(
+            TypeError,
+            match="pendulum_seeds's TRAINING sets seeds, which the command line gives a value",
+        ):
             run_config({"env": "pendulum_seeds"})
     finally:
         dict.pop(ENV_DEFAULTS, "pendulum_seeds", None)  # added when first looked up
@@ -262,8 +335,23 @@ def test_the_network_takes_its_ppo_settings_by_name():
     them); renaming one side alone would drop the setting, so the known ones are listed."""
     from hintsjax.algorithms import ppo
 
-    assert {"hint_width", "hidden", "normalize_state", "action_head", "critic_trains_encoder"} <= set(ppo.NETWORK_SETTINGS)
-    cfg = run_config({"agent": "ppo_state", "ppo": {"hidden": [8], "action_head": "sigmoid", "critic_trains_encoder": False}})
+    assert {
+        "hint_width",
+        "hidden",
+        "normalize_state",
+        "action_head",
+        "critic_trains_encoder",
+    } <= set(ppo.NETWORK_SETTINGS)
+    cfg = run_config(
+        {
+            "agent": "ppo_state",
+            "ppo": {"hidden": [8], "action_head": "sigmoid", "critic_trains_encoder": False},
+        }
+    )
     network = ppo.make_network(cfg, cfg.make_env())
     assert all(getattr(network, name) == getattr(cfg.ppo, name) for name in ppo.NETWORK_SETTINGS)
-    assert (network.hidden, network.action_head, network.critic_trains_encoder) == ((8,), "sigmoid", False)
+    assert (network.hidden, network.action_head, network.critic_trains_encoder) == (
+        (8,),
+        "sigmoid",
+        False,
+    )

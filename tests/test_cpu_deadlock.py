@@ -45,11 +45,16 @@ print("finished")
 
 
 def test_two_batched_cholesky_solves_side_by_side_finish():
-    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}  # the flags as hintsjax sets them
+    # the flags as hintsjax sets them
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     env["JAX_PLATFORMS"] = "cpu"
     try:
-        done = subprocess.run([sys.executable, "-c", SCRIPT], env=env, capture_output=True, text=True, timeout=300)
+        done = subprocess.run(
+            [sys.executable, "-c", SCRIPT], env=env, capture_output=True, text=True, timeout=300
+        )
     except subprocess.TimeoutExpired:
-        pytest.fail("two batched Cholesky solves did not finish in 300 s (a few seconds when they do): deadlocked")
+        pytest.fail(
+            "two batched Cholesky solves did not finish in 300 s (a few seconds when they do): deadlocked"
+        )
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.strip().endswith("finished")

@@ -37,16 +37,26 @@ class FakeDevice:
 
 def test_a_layout_pads_seeds_to_a_multiple_of_the_devices():
     four = (FakeDevice(),) * 4
-    assert [(SeedLayout(s, four).padded, SeedLayout(s, four).per_device) for s in (1, 3, 4, 5, 20)] == \
-        [(4, 1), (4, 1), (4, 1), (8, 2), (20, 5)]
+    assert [
+        (SeedLayout(s, four).padded, SeedLayout(s, four).per_device) for s in (1, 3, 4, 5, 20)
+    ] == [(4, 1), (4, 1), (4, 1), (8, 2), (20, 5)]
     assert SeedLayout(5, four[:1]).padded == 5 and SeedLayout(5, four[:1]).sharding is None
 
 
 def _layout_run(folder: Path, devices: int) -> dict:
-    env = {**os.environ, "XLA_FLAGS": with_xla_flag(f"--xla_force_host_platform_device_count={devices}"), "JAX_PLATFORMS": "cpu",
-           "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])}
-    proc = subprocess.run([sys.executable, str(HERE / "layout_run.py"), str(folder)], env=env, capture_output=True,
-                          text=True, timeout=600)
+    env = {
+        **os.environ,
+        "XLA_FLAGS": with_xla_flag(f"--xla_force_host_platform_device_count={devices}"),
+        "JAX_PLATFORMS": "cpu",
+        "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")]),
+    }
+    proc = subprocess.run(
+        [sys.executable, str(HERE / "layout_run.py"), str(folder)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
@@ -57,14 +67,16 @@ def runs(tmp_path_factory):
     return {n: (base / f"d{n}", _layout_run(base / f"d{n}", n)) for n in (1, 4)}
 
 
-@pytest.mark.slow  # with the next: 50 s of the suite; two devices: test_cli's test_seeds_sharded_over_two_devices
+# with the next: 50 s of the suite; two devices: test_cli's test_seeds_sharded_over_two_devices
+@pytest.mark.slow
 def test_three_seeds_on_four_devices_match_one_device(runs):
     (_, one), (folder, four) = runs[1], runs[4]
     assert (one["devices"], four["devices"]) == (1, 4)
     np.testing.assert_allclose(four["alone"], one["alone"], rtol=1e-4)
     np.testing.assert_allclose(four["group"], one["group"], rtol=1e-4)
     metrics = (folder / "alone" / "metrics.csv").read_text().splitlines()
-    assert sorted({line.split(",")[1] for line in metrics[1:]}) == ["0", "1", "2"]  # the padding seed is not logged
+    # the padding seed is not logged
+    assert sorted({line.split(",")[1] for line in metrics[1:]}) == ["0", "1", "2"]
     eval_json = json.loads((folder / "alone" / "eval.json").read_text())
     assert eval_json["devices"] == 4 and eval_json["evaluations"][0]["seeds"] == 3
 
@@ -76,9 +88,11 @@ def test_a_checkpoint_written_on_four_devices_resumes_on_one(runs, tmp_path):
     shutil.copytree(folder / "alone", run_dir)
     cfg = load_run_config(run_dir)
     state, done = checkpoint.restore_latest(run_dir, make_trainer(cfg).abstract_state())
-    assert done == cfg.ppo.num_updates and state.update.shape == (3,)  # the run's own seeds, no padding
+    # the run's own seeds, no padding
+    assert done == cfg.ppo.num_updates and state.update.shape == (3,)
     last = run_dir / "checkpoints" / str(done)
-    assert len([p for p in (run_dir / "checkpoints").iterdir() if p.name.isdigit()]) >= 2  # an earlier one to go on from
+    # an earlier one to go on from
+    assert len([p for p in (run_dir / "checkpoints").iterdir() if p.name.isdigit()]) >= 2
     shutil.rmtree(last)  # as if stopped before the last update: this process (1 device) trains it
     (run_dir / "eval.json").unlink()
     assert run.main_from_values({"resume": str(run_dir)}) == 0
@@ -99,16 +113,30 @@ def _processes(folder: Path, count: int, devices_each: int, *args: str, tries: i
     with socket.socket() as s:
         s.bind(("localhost", 0))
         port = s.getsockname()[1]
-    base = {**os.environ, "XLA_FLAGS": f"--xla_force_host_platform_device_count={devices_each}", "JAX_PLATFORMS": "cpu",
-            "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])}
+    base = {
+        **os.environ,
+        "XLA_FLAGS": f"--xla_force_host_platform_device_count={devices_each}",
+        "JAX_PLATFORMS": "cpu",
+        "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")]),
+    }
     if count > 1:
         base.update(JAX_NUM_PROCESSES=str(count), JAX_COORDINATOR_ADDRESS=f"localhost:{port}")
-    logs = [folder.parent / f"{folder.name}-process{i}{''.join(args)}-try{tries}.log" for i in range(count)]
+    logs = [
+        folder.parent / f"{folder.name}-process{i}{''.join(args)}-try{tries}.log"
+        for i in range(count)
+    ]
     procs = []
     for i, log in enumerate(logs):
-        with log.open("w") as out:  # a file, not a pipe: a process blocked on a full pipe would stall the others
-            procs.append(subprocess.Popen([sys.executable, str(HERE / "process_run.py"), str(folder), *args],
-                                          env={**base, "JAX_PROCESS_ID": str(i)}, stdout=out, stderr=subprocess.STDOUT))
+        # a file, not a pipe: a process blocked on a full pipe would stall the others
+        with log.open("w") as out:
+            procs.append(
+                subprocess.Popen(
+                    [sys.executable, str(HERE / "process_run.py"), str(folder), *args],
+                    env={**base, "JAX_PROCESS_ID": str(i)},
+                    stdout=out,
+                    stderr=subprocess.STDOUT,
+                )
+            )
     for proc in procs:
         try:
             proc.wait(timeout=HUNG_SECONDS + 100)
@@ -117,10 +145,14 @@ def _processes(folder: Path, count: int, devices_each: int, *args: str, tries: i
             proc.wait()
     texts = [log.read_text() for log in logs]
     if tries > 1 and any(p.returncode != 0 for p in procs) and any(HUNG_MARK in t for t in texts):
-        warnings.warn(f"a {count}-process run hung and was started again; its stacks:\n" +
-                      "\n".join(t[-6000:] for t in texts))
+        warnings.warn(
+            f"a {count}-process run hung and was started again; its stacks:\n"
+            + "\n".join(t[-6000:] for t in texts)
+        )
         if "--resume" not in args:
-            shutil.rmtree(folder, ignore_errors=True)  # the hung run's folder (if it got that far): the retry makes it again, not run-1 beside it
+            # the hung run's folder (if it got that far): the retry makes it again, not run-1 beside
+            # it
+            shutil.rmtree(folder, ignore_errors=True)
         return _processes(folder, count, devices_each, *args, tries=tries - 1)
     assert all(p.returncode == 0 for p in procs), "\n".join(t[-6000:] for t in texts)
 
@@ -130,7 +162,8 @@ def test_one_run_over_two_processes_equals_one_process_and_resumes(tmp_path):
     _processes(tmp_path / "one", 1, 4)
     _processes(tmp_path / "two", 2, 2)
     one, two = tmp_path / "one" / "run", tmp_path / "two" / "run"
-    assert sorted(p.name for p in (tmp_path / "two").iterdir()) == ["run"]  # process 0 made the one folder
+    # process 0 made the one folder
+    assert sorted(p.name for p in (tmp_path / "two").iterdir()) == ["run"]
     evals = [json.loads((d / "eval.json").read_text()) for d in (one, two)]
     assert [e["devices"] for e in evals] == [4, 4]
     assert evals[1]["evaluations"][0]["seed_means"] == evals[0]["evaluations"][0]["seed_means"]
@@ -154,7 +187,9 @@ def test_physics_warp_stays_on_one_device_and_in_one_process(monkeypatch):
 
     cfg = run_config({"env": "ant", "physics": "warp"})
     assert loop.seed_layout(cfg).devices == tuple(jax.local_devices()[:1])
-    assert loop.seed_layout(run_config({"env": "ant", "physics": "jax"})).devices == tuple(jax.devices())
+    assert loop.seed_layout(run_config({"env": "ant", "physics": "jax"})).devices == tuple(
+        jax.devices()
+    )
     monkeypatch.setattr(jax, "process_count", lambda: 2)
     with pytest.raises(UsageError, match="physics=warp runs in one process"):
         loop.seed_layout(cfg)
@@ -191,9 +226,22 @@ def test_under_warp_the_evaluation_compiles_before_training_not_beside_it(monkey
         monkeypatch.setattr(pipeline, "compile_evaluator", compiled)
         monkeypatch.setattr(pipeline, "advance", advanced)
         monkeypatch.setattr(pipeline, "evaluation_compiles_first", lambda cfg: first)
-        values = {"env": "linear", "agent": "ppo_state", "seeds": 2, "eval_episodes": 2, "checkpoint_every": 2,
-                  "ppo": {"total_env_steps": 128, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1},
-                  "out_dir": str(tmp_path), "name": f"first-{first}"}
+        values = {
+            "env": "linear",
+            "agent": "ppo_state",
+            "seeds": 2,
+            "eval_episodes": 2,
+            "checkpoint_every": 2,
+            "ppo": {
+                "total_env_steps": 128,
+                "num_envs": 4,
+                "batch_size": 64,
+                "minibatch_size": 32,
+                "epochs": 1,
+            },
+            "out_dir": str(tmp_path),
+            "name": f"first-{first}",
+        }
         assert run.main_from_values(values) == 0
         assert events == (["compiled", "training"] if first else ["training", "compiled"])
 
@@ -219,11 +267,26 @@ def test_a_runs_first_state_waits_for_warp_kernels_built_beside_its_compiles(mon
 
     advance = pipeline.advance
     monkeypatch.setattr(pipeline.warp_kernels, "start", started)
-    monkeypatch.setattr(pipeline, "advance", lambda *a, **k: (events.append("training"), advance(*a, **k))[1])
-    values = {"env": "linear", "agent": "ppo_state", "seeds": 2, "eval_episodes": 2, "checkpoint_every": 2,
-              "warp_capacity": 3.0, "ppo": {"total_env_steps": 128, "num_envs": 4, "batch_size": 64,
-                                            "minibatch_size": 32, "epochs": 1},
-              "out_dir": str(tmp_path), "name": "kernels"}
+    monkeypatch.setattr(
+        pipeline, "advance", lambda *a, **k: (events.append("training"), advance(*a, **k))[1]
+    )
+    values = {
+        "env": "linear",
+        "agent": "ppo_state",
+        "seeds": 2,
+        "eval_episodes": 2,
+        "checkpoint_every": 2,
+        "warp_capacity": 3.0,
+        "ppo": {
+            "total_env_steps": 128,
+            "num_envs": 4,
+            "batch_size": 64,
+            "minibatch_size": 32,
+            "epochs": 1,
+        },
+        "out_dir": str(tmp_path),
+        "name": "kernels",
+    }
     assert run.main_from_values(values) == 0
     assert events[0] == ("start", "linear", "jax", 3.0, "cpu")
     assert events.index("kernels") < events.index("training") < events.index("ended")

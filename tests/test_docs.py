@@ -16,9 +16,12 @@ SNAPSHOT = Path(__file__).parent / "data" / "resolved_configs.json"
 
 @pytest.mark.parametrize("document", DOCUMENTS, ids=lambda p: p.name)
 def test_every_relative_link_resolves(document):
-    missing = [target for target in re.findall(r"\]\(([^)\s]+)\)", document.read_text())
-               if not target.startswith(("http://", "https://", "#", "mailto:"))
-               and not (document.parent / target.split("#")[0]).exists()]
+    missing = [
+        target
+        for target in re.findall(r"\]\(([^)\s]+)\)", document.read_text())
+        if not target.startswith(("http://", "https://", "#", "mailto:"))
+        and not (document.parent / target.split("#")[0]).exists()
+    ]
     assert not missing, f"{document.name}: {missing}"
 
 
@@ -36,7 +39,10 @@ def test_every_envs_resolved_configuration_matches_the_snapshot():
     from hintsjax.settings import layers
 
     snapshot = json.loads(SNAPSHOT.read_text())
-    resolved = {key: layers.to_dict(layers.run_config(dict(zip(("env", "agent"), key.split("/"))))) for key in snapshot}
+    resolved = {
+        key: layers.to_dict(layers.run_config(dict(zip(("env", "agent"), key.split("/")))))
+        for key in snapshot
+    }
     assert json.loads(json.dumps(resolved, sort_keys=True)) == snapshot
 
 
@@ -47,7 +53,11 @@ def write_snapshot() -> None:
     from hintsjax.models.agents import AGENTS
     from hintsjax.settings import layers
 
-    resolved = {f"{e}/{a}": layers.to_dict(layers.run_config({"env": e, "agent": a})) for e in SHIPPED_ENVS for a in AGENTS}
+    resolved = {
+        f"{e}/{a}": layers.to_dict(layers.run_config({"env": e, "agent": a}))
+        for e in SHIPPED_ENVS
+        for a in AGENTS
+    }
     SNAPSHOT.write_text(json.dumps(resolved, indent=1, sort_keys=True) + "\n")
 
 
@@ -59,14 +69,30 @@ def test_the_design_names_every_module_and_script():
     """docs/design.md's file list keeps up with the code: every module of hintsjax/ and envs/ and
     every script of experiments/ is named there (by its file name)."""
     design = (ROOT / "docs" / "design.md").read_text()
-    files = [*(ROOT / "hintsjax").rglob("*.py"), *(ROOT / "envs").glob("*.py"), *(ROOT / "experiments").glob("*.py")]
-    missing = sorted(str(f.relative_to(ROOT)) for f in files if f.name != "__init__.py" and f.name not in design)
+    files = [
+        *(ROOT / "hintsjax").rglob("*.py"),
+        *(ROOT / "envs").glob("*.py"),
+        *(ROOT / "experiments").glob("*.py"),
+    ]
+    missing = sorted(
+        str(f.relative_to(ROOT)) for f in files if f.name != "__init__.py" and f.name not in design
+    )
     assert not missing, f"docs/design.md does not name {missing}"
 
 
-PATH_NAMED = re.compile(r"(?<![\w/.-])((?:hintsjax|envs|experiments|tests|benchmarks)/[\w/]+\.py)\b")
-NAMING = [*DOCUMENTS, ROOT / "CONTRIBUTING.md", *sorted((ROOT / "experiments" / "results").glob("*.md")),
-          *sorted(p for folder in ("hintsjax", "envs", "experiments", "tests") for p in (ROOT / folder).rglob("*.py"))]
+PATH_NAMED = re.compile(
+    r"(?<![\w/.-])((?:hintsjax|envs|experiments|tests|benchmarks)/[\w/]+\.py)\b"
+)
+NAMING = [
+    *DOCUMENTS,
+    ROOT / "CONTRIBUTING.md",
+    *sorted((ROOT / "experiments" / "results").glob("*.md")),
+    *sorted(
+        p
+        for folder in ("hintsjax", "envs", "experiments", "tests")
+        for p in (ROOT / folder).rglob("*.py")
+    ),
+]
 
 
 MODULE_NAMED = re.compile(r"\bhintsjax(?:\.\w+)+")
@@ -86,7 +112,14 @@ def names_something(dotted: str) -> bool:
             return True
         else:
             source = (folder / "__init__.py").read_text()
-            return re.search(rf"^(?:def |class ){part}\b|^{part} *[:=]|^(?:from \S+ )?import .*\b{part}\b", source, re.M) is not None
+            return (
+                re.search(
+                    rf"^(?:def |class ){part}\b|^{part} *[:=]|^(?:from \S+ )?import .*\b{part}\b",
+                    source,
+                    re.M,
+                )
+                is not None
+            )
     return True
 
 
@@ -94,8 +127,16 @@ def test_every_source_path_a_text_names_exists():
     """A module or script named by its path (or a module by its dotted name) in the docs, the
     results' reports or the code (whose strings write those reports) exists: a move renames it
     everywhere. The results' JSON records are left as written: each names the commit it measured."""
-    missing = {f"{p.relative_to(ROOT)}: {name}" for p in NAMING for name in PATH_NAMED.findall(p.read_text())
-               if not (ROOT / name).exists()}
-    missing |= {f"{p.relative_to(ROOT)}: {name}" for p in NAMING for name in MODULE_NAMED.findall(p.read_text())
-                if not names_something(name)}
+    missing = {
+        f"{p.relative_to(ROOT)}: {name}"
+        for p in NAMING
+        for name in PATH_NAMED.findall(p.read_text())
+        if not (ROOT / name).exists()
+    }
+    missing |= {
+        f"{p.relative_to(ROOT)}: {name}"
+        for p in NAMING
+        for name in MODULE_NAMED.findall(p.read_text())
+        if not names_something(name)
+    }
     assert not missing, sorted(missing)

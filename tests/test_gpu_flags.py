@@ -16,10 +16,25 @@ ADDED = "HINTSJAX_XLA_FLAGS_ADDED"  # what a parent hintsjax process added (this
 
 
 def flags_after_import(xla_flags: str | None, cache: str | None) -> list[str]:
-    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "HINTSJAX_COMPILATION_CACHE", ADDED)}
-    env.update({k: v for k, v in (("XLA_FLAGS", xla_flags), ("HINTSJAX_COMPILATION_CACHE", cache)) if v is not None})
-    done = subprocess.run([sys.executable, "-c", "import hintsjax, os; print(os.environ['XLA_FLAGS'])"],
-                          env=env, capture_output=True, text=True, check=True)
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("XLA_FLAGS", "HINTSJAX_COMPILATION_CACHE", ADDED)
+    }
+    env.update(
+        {
+            k: v
+            for k, v in (("XLA_FLAGS", xla_flags), ("HINTSJAX_COMPILATION_CACHE", cache))
+            if v is not None
+        }
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", "import hintsjax, os; print(os.environ['XLA_FLAGS'])"],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     return done.stdout.split()
 
 
@@ -32,15 +47,22 @@ def test_deterministic_ops_by_default_and_no_autotune_folder(tmp_path):
 
 def test_deterministic_ops_off_gets_an_autotune_folder_beside_the_cache(tmp_path):
     flags = flags_after_import("--xla_gpu_deterministic_ops=false", str(tmp_path))
-    (folder,) = [f[len(FLAG):] for f in flags if f.startswith(FLAG)]
-    assert os.path.dirname(folder) == str(tmp_path) and os.path.basename(folder).startswith("autotune-jaxlib-")
+    (folder,) = [f[len(FLAG) :] for f in flags if f.startswith(FLAG)]
+    assert os.path.dirname(folder) == str(tmp_path) and os.path.basename(folder).startswith(
+        "autotune-jaxlib-"
+    )
     assert os.path.isdir(folder)  # XLA wants it made
 
 
-@pytest.mark.parametrize("xla_flags", ["--xla_gpu_deterministic_ops=false", f"--xla_gpu_deterministic_ops=false {FLAG}/mine"])
+@pytest.mark.parametrize(
+    "xla_flags",
+    ["--xla_gpu_deterministic_ops=false", f"--xla_gpu_deterministic_ops=false {FLAG}/mine"],
+)
 def test_no_autotune_folder_of_ours_with_the_cache_off_or_a_folder_named(xla_flags, tmp_path):
     flags = flags_after_import(xla_flags, "off" if FLAG not in xla_flags else str(tmp_path))
-    assert [f for f in flags if f.startswith(FLAG)] == ([f"{FLAG}/mine"] if FLAG in xla_flags else [])
+    assert [f for f in flags if f.startswith(FLAG)] == (
+        [f"{FLAG}/mine"] if FLAG in xla_flags else []
+    )
 
 
 DROP = """
@@ -56,18 +78,29 @@ print(os.environ["XLA_FLAGS"])
 
 
 @pytest.mark.parametrize("case", ["default", "chosen", "started"])
-def test_deterministic_ops_drop_for_warp_only_where_the_user_left_them_and_jax_has_not_started(case, tmp_path):
-    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", ADDED)}  # a fresh process's
+def test_deterministic_ops_drop_for_warp_only_where_the_user_left_them_and_jax_has_not_started(
+    case, tmp_path
+):
+    # a fresh process's
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", ADDED)}
     env.update(HINTSJAX_COMPILATION_CACHE=str(tmp_path), JAX_PLATFORMS="cpu")
     if case == "chosen":
         env["XLA_FLAGS"] = "--xla_gpu_deterministic_ops=true"
-    done = subprocess.run([sys.executable, "-c", DROP, case], env=env, capture_output=True, text=True, check=True)
+    done = subprocess.run(
+        [sys.executable, "-c", DROP, case], env=env, capture_output=True, text=True, check=True
+    )
     dropped, flags = done.stdout.split("\n")[:2]
     if case == "default":
         assert dropped == "True" and "--xla_gpu_deterministic_ops=true" not in flags.split()
-        assert "--xla_gpu_deterministic_ops=false" in flags.split() and FLAG + str(tmp_path) in flags
+        assert (
+            "--xla_gpu_deterministic_ops=false" in flags.split() and FLAG + str(tmp_path) in flags
+        )
     else:  # the user's choice stands; flags read by a started backend are not changed under it
-        assert dropped == "False" and "--xla_gpu_deterministic_ops=true" in flags.split() and FLAG not in flags
+        assert (
+            dropped == "False"
+            and "--xla_gpu_deterministic_ops=true" in flags.split()
+            and FLAG not in flags
+        )
 
 
 def test_a_command_asks_only_for_warp_when_every_job_does(tmp_path, monkeypatch):
@@ -91,7 +124,8 @@ def test_a_command_asks_only_for_warp_when_every_job_does(tmp_path, monkeypatch)
     assert not asks_only_for_warp(["env=ant", "physics=jax"])
     assert not asks_only_for_warp(["-m", "env=ant,pendulum"])  # the pendulum keeps JAX's solver
     assert not asks_only_for_warp(["env=playground:CartpoleSwingup"])
-    assert not asks_only_for_warp(["env=playground:Nope"]) and not asks_only_for_warp(["env=nope"])  # run's check names these
+    # run's check names these
+    assert not asks_only_for_warp(["env=playground:Nope"]) and not asks_only_for_warp(["env=nope"])
     monkeypatch.setattr(physics, "warp_installed", lambda: False)
     assert not asks_only_for_warp(["env=ant"])
 
@@ -107,7 +141,8 @@ def test_a_gpu_is_guessed_only_where_jax_may_use_one(monkeypatch):
     import jax
 
     assert physics.gpu_likely() == (jax.default_backend() == "gpu" and jax.device_count() == 1)
-    monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "0,1")  # two GPUs: auto keeps JAX, which spreads the seeds
+    # two GPUs: auto keeps JAX, which spreads the seeds
+    monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "0,1")
     assert not physics.gpu_likely()
 
 
@@ -115,17 +150,40 @@ def test_a_child_of_a_hintsjax_process_tells_its_parents_flags_from_the_users(tm
     """run_path.py and the sweeps start `python -m hintsjax.run` from a process that imported
     hintsjax: the child inherits XLA_FLAGS with deterministic ops on, set by hintsjax, not by
     the user, so a Warp command there still turns them off; a flag the user set stays theirs."""
-    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", ADDED)}  # a fresh process's
+    # a fresh process's
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", ADDED)}
     env.update(HINTSJAX_COMPILATION_CACHE=str(tmp_path), JAX_PLATFORMS="cpu")
-    parent = subprocess.run([sys.executable, "-c", "import hintsjax, os; print(os.environ['XLA_FLAGS']); "
-                             "print(os.environ['HINTSJAX_XLA_FLAGS_ADDED'])"], env=env, capture_output=True, text=True, check=True)
+    parent = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import hintsjax, os; print(os.environ['XLA_FLAGS']); "
+            "print(os.environ['HINTSJAX_XLA_FLAGS_ADDED'])",
+        ],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     flags, added = parent.stdout.splitlines()
     for user in ("", "--xla_gpu_deterministic_ops=true"):
-        inherited = {**env, "XLA_FLAGS": f"{user} {flags}".strip(), "HINTSJAX_XLA_FLAGS_ADDED": added}
-        child = subprocess.run([sys.executable, "-c", DROP, "child"], env=inherited, capture_output=True, text=True, check=True)
+        inherited = {
+            **env,
+            "XLA_FLAGS": f"{user} {flags}".strip(),
+            "HINTSJAX_XLA_FLAGS_ADDED": added,
+        }
+        child = subprocess.run(
+            [sys.executable, "-c", DROP, "child"],
+            env=inherited,
+            capture_output=True,
+            text=True,
+            check=True,
+        )
         dropped, child_flags = child.stdout.split("\n")[:2]
         assert dropped == str(not user), child_flags
-        assert child_flags.split().count("--xla_cpu_enable_concurrency_optimized_scheduler=false") == 1
+        assert (
+            child_flags.split().count("--xla_cpu_enable_concurrency_optimized_scheduler=false") == 1
+        )
 
 
 def test_a_sweep_worker_drops_determinism_only_when_all_its_runs_get_warp(monkeypatch):

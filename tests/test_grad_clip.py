@@ -19,18 +19,30 @@ from hintsjax.algorithms.ppo import Hyper, make_optimizer
 from hintsjax.settings import layers
 from hintsjax.system.errors import UsageError
 
-PARAMS = {"params": {"actor": {"w": jnp.zeros(4)}, "log_std": jnp.zeros(1), "critic": {"w": jnp.zeros(4)}}}
+PARAMS = {
+    "params": {"actor": {"w": jnp.zeros(4)}, "log_std": jnp.zeros(1), "critic": {"w": jnp.zeros(4)}}
+}
 LR = 1e-3
 
 
 def actor_step(grad_clip: str, critic_gradient: float) -> np.ndarray:
     """The actor's first Adam step (its weights' change) for actor gradients of 1e-3 and critic
     gradients of `critic_gradient`, max_grad_norm 0.5."""
-    cfg = layers.run_config({"env": "pendulum", "agent": "ppo_state",
-                             "ppo": {"max_grad_norm": 0.5, "actor_lr": LR, "critic_lr": LR, "grad_clip": grad_clip}})
+    cfg = layers.run_config(
+        {
+            "env": "pendulum",
+            "agent": "ppo_state",
+            "ppo": {"max_grad_norm": 0.5, "actor_lr": LR, "critic_lr": LR, "grad_clip": grad_clip},
+        }
+    )
     optimizer = make_optimizer(Hyper.of(cfg), PARAMS, cfg.ppo)
-    grads = {"params": {"actor": {"w": jnp.full(4, 1e-3)}, "log_std": jnp.full(1, 1e-3),
-                        "critic": {"w": jnp.full(4, critic_gradient)}}}
+    grads = {
+        "params": {
+            "actor": {"w": jnp.full(4, 1e-3)},
+            "log_std": jnp.full(1, 1e-3),
+            "critic": {"w": jnp.full(4, critic_gradient)},
+        }
+    }
     updates, _ = optimizer.update(grads, optimizer.init(PARAMS), PARAMS)
     return np.asarray(updates["params"]["actor"]["w"])
 
@@ -47,7 +59,9 @@ def test_global_clipping_lets_the_critic_shrink_the_actor_step():
     # A critic gradient of 1e4 per element (norm 2e4) scales every gradient by 0.5 / 2e4: the
     # actor's become 2.5e-8, under Adam's eps, and its step -lr * 2.5e-8 / (2.5e-8 + 1e-5) is 0.25% of lr.
     np.testing.assert_allclose(actor_step("global", 0.0), -LR * 1e-3 / (1e-3 + 1e-5), rtol=1e-5)
-    scaled = 1e-3 * 0.5 / float(jnp.linalg.norm(jnp.concatenate([jnp.full(5, 1e-3), jnp.full(4, 1e4)])))
+    scaled = (
+        1e-3 * 0.5 / float(jnp.linalg.norm(jnp.concatenate([jnp.full(5, 1e-3), jnp.full(4, 1e4)])))
+    )
     np.testing.assert_allclose(actor_step("global", 1e4), -LR * scaled / (scaled + 1e-5), rtol=1e-4)
     assert abs(actor_step("global", 1e4)[0]) < 0.01 * LR
 
@@ -65,12 +79,29 @@ def test_per_part_clipping_trains(tmp_path):
     """A jitted PPO update runs with each new setting and moves the actor."""
     from hintsjax.algorithms.ppo import make_ppo
 
-    cfg = layers.run_config({"env": "pendulum", "agent": "ppo_state", "seeds": 1,
-                             "ppo": {"num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1,
-                                     "total_env_steps": 64, "grad_clip": "per_part", "adam_eps": 1e-8, "gae_segment": 8}})
+    cfg = layers.run_config(
+        {
+            "env": "pendulum",
+            "agent": "ppo_state",
+            "seeds": 1,
+            "ppo": {
+                "num_envs": 4,
+                "batch_size": 64,
+                "minibatch_size": 32,
+                "epochs": 1,
+                "total_env_steps": 64,
+                "grad_clip": "per_part",
+                "adam_eps": 1e-8,
+                "gae_segment": 8,
+            },
+        }
+    )
     ppo = make_ppo(cfg)
     state = jax.jit(ppo.init)(jax.random.key(0))
     rolled, traj, last_value = jax.jit(ppo.rollout)(state, jax.random.key(1))
     learnt, metrics = jax.jit(ppo.learn)(rolled, traj, last_value, traj.reward, jax.random.key(2))
     assert np.isfinite(float(metrics["policy_loss"]))
-    assert not np.allclose(learnt.params["params"]["actor"]["Dense_0"]["kernel"], state.params["params"]["actor"]["Dense_0"]["kernel"])
+    assert not np.allclose(
+        learnt.params["params"]["actor"]["Dense_0"]["kernel"],
+        state.params["params"]["actor"]["Dense_0"]["kernel"],
+    )

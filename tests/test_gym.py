@@ -31,7 +31,8 @@ from hintsjax.gym import SingleEnv, VectorEnv, seed_key
 
 N, SEED, STEPS = 2, 7, 205  # 205 steps cross the pendulum's 200-step time limit once
 ID = "hintsjax/pendulum-v0"
-SETTINGS = dict(hint="composite", variant="swingto")  # swingto: the goal is drawn per episode, so a reset shows
+# swingto: the goal is drawn per episode, so a reset shows
+SETTINGS = dict(hint="composite", variant="swingto")
 
 
 def same_obs(a, b) -> bool:
@@ -40,9 +41,12 @@ def same_obs(a, b) -> bool:
     to float32 rounding."""
     if a is None or b is None:
         return a is None and b is None
-    return (set(a) == set(b) and all(x.dtype == b[k].dtype and x.shape == b[k].shape for k, x in a.items())
-            and np.abs(a["pixels"].astype(int) - b["pixels"]).max() <= 1
-            and np.allclose(a["hint"], b["hint"], rtol=1e-4, atol=1e-5))
+    return (
+        set(a) == set(b)
+        and all(x.dtype == b[k].dtype and x.shape == b[k].shape for k, x in a.items())
+        and np.abs(a["pixels"].astype(int) - b["pixels"]).max() <= 1
+        and np.allclose(a["hint"], b["hint"], rtol=1e-4, atol=1e-5)
+    )
 
 
 def actions(steps: int = STEPS, n: int = N) -> np.ndarray:
@@ -65,39 +69,63 @@ def vector_rollout():
 
 def test_the_vector_env_has_the_envs_spaces_and_declares_its_autoreset():
     env = gymnasium.make_vec(ID, num_envs=3, **SETTINGS)
-    assert isinstance(env.unwrapped, VectorEnv) and env.metadata["autoreset_mode"] is AutoresetMode.SAME_STEP
+    assert (
+        isinstance(env.unwrapped, VectorEnv)
+        and env.metadata["autoreset_mode"] is AutoresetMode.SAME_STEP
+    )
     single = env.single_observation_space
     assert set(single.spaces) == {"pixels", "hint"}
     assert single["pixels"] == gymnasium.spaces.Box(0, 255, (64, 64, 3), np.uint8)
-    assert single["hint"].shape == (2,) and single["hint"].dtype == np.float32  # angular_velocity + goal_distance
+    # angular_velocity + goal_distance
+    assert single["hint"].shape == (2,) and single["hint"].dtype == np.float32
     assert env.observation_space["pixels"].shape == (3, 64, 64, 3)
     assert env.single_action_space == gymnasium.spaces.Box(-2.0, 2.0, (1,), np.float32)
     assert env.action_space.shape == (3, 1)
-    only = VectorEnv("pendulum", 1, hint="state", observe="hint")  # one key as a string: that array alone
+    # one key as a string: that array alone
+    only = VectorEnv("pendulum", 1, hint="state", observe="hint")
     assert only.single_observation_space == gymnasium.spaces.Box(-np.inf, np.inf, (3,), np.float32)
     assert set(VectorEnv("pendulum", 1, hint="none").single_observation_space.spaces) == {"pixels"}
 
 
-@pytest.mark.parametrize("kwargs, says", [
-    (dict(env="pendulm"), "unknown env 'pendulm'; valid choices: "),
-    (dict(env="pendulum", hint="speed"), "unknown hint 'speed' for env 'pendulum'; valid choices: angular_velocity, composite"),
-    (dict(env="pendulum", variant="swingdown"), "unknown variant 'swingdown' for pendulum; valid choices: swingto, swingup"),
-    (dict(env="pendulum", observe=("pixels", "depth")), "unknown observation key 'depth'; valid choices: hint, pixels, state"),
-    (dict(env="pendulum", hint="none", observe=("pixels", "hint")), "asks for the hint, but hint='none' has none"),
-])
+@pytest.mark.parametrize(
+    "kwargs, says",
+    [
+        (dict(env="pendulm"), "unknown env 'pendulm'; valid choices: "),
+        (
+            dict(env="pendulum", hint="speed"),
+            "unknown hint 'speed' for env 'pendulum'; valid choices: angular_velocity, composite",
+        ),
+        (
+            dict(env="pendulum", variant="swingdown"),
+            "unknown variant 'swingdown' for pendulum; valid choices: swingto, swingup",
+        ),
+        (
+            dict(env="pendulum", observe=("pixels", "depth")),
+            "unknown observation key 'depth'; valid choices: hint, pixels, state",
+        ),
+        (
+            dict(env="pendulum", hint="none", observe=("pixels", "hint")),
+            "asks for the hint, but hint='none' has none",
+        ),
+    ],
+)
 def test_a_bad_name_is_one_line_naming_the_valid_choices(kwargs, says):
     with pytest.raises(ValueError) as raised:
         VectorEnv(num_envs=2, **kwargs)
     assert says in str(raised.value) and "\n" not in str(raised.value)
     if kwargs["env"] == "pendulm":
-        assert all(name in str(raised.value) for name in ("ant", "car_racing", "pendulum", "brax:<name>"))
+        assert all(
+            name in str(raised.value) for name in ("ant", "car_racing", "pendulum", "brax:<name>")
+        )
 
 
 def test_every_registered_env_has_an_id():
     # Playground's ids come with `import hintsjax.gym.playground`; another test file may have
     # registered one of its tasks in hintsjax's registry before this runs
     names = [n for n in envs.env_names() if not n.startswith("playground:")]
-    assert {hintsjax.gym.env_id(n) for n in names} <= set(gymnasium.registry) and "hintsjax/ant-v0" in gymnasium.registry
+    assert {hintsjax.gym.env_id(n) for n in names} <= set(
+        gymnasium.registry
+    ) and "hintsjax/ant-v0" in gymnasium.registry
     assert "hintsjax/brax.hopper-v0" in gymnasium.registry  # a colon would read as a module prefix
 
 
@@ -108,7 +136,11 @@ def test_the_single_env_passes_gymnasiums_check_env():
         check_env(env.unwrapped)
     # the hint is a Box without bounds (a velocity has none) and the torque's range is [-2, 2], both as
     # in Gymnasium's Pendulum-v1 (its check warns of the same); nothing else may be warned of
-    unexpected = [str(w.message) for w in caught if not any(s in str(w.message) for s in ("infinity", "symmetric and normalized"))]
+    unexpected = [
+        str(w.message)
+        for w in caught
+        if not any(s in str(w.message) for s in ("infinity", "symmetric and normalized"))
+    ]
     assert not unexpected, unexpected
     env.reset(seed=1)
     picture = gymnasium.make(ID, render_mode="rgb_array", **SETTINGS)
@@ -117,7 +149,10 @@ def test_the_single_env_passes_gymnasiums_check_env():
 
 
 def test_the_vector_env_steps_as_gymnasiums_sync_vector_env_over_single_envs(vector_rollout):
-    sync = SyncVectorEnv([lambda: SingleEnv("pendulum", **SETTINGS) for _ in range(N)], autoreset_mode=AutoresetMode.SAME_STEP)
+    sync = SyncVectorEnv(
+        [lambda: SingleEnv("pendulum", **SETTINGS) for _ in range(N)],
+        autoreset_mode=AutoresetMode.SAME_STEP,
+    )
     obs_list, rewards, terminated, truncated, infos = vector_rollout
     obs, _ = sync.reset(seed=SEED)
     assert same_obs(obs, obs_list[0])
@@ -130,8 +165,11 @@ def test_the_vector_env_steps_as_gymnasiums_sync_vector_env_over_single_envs(vec
         assert info.keys() == infos[t].keys(), t
         if info:  # final_obs (an object array, None where nothing ended), its mask, final_info
             assert all(same_obs(x, y) for x, y in zip(info["final_obs"], infos[t]["final_obs"]))
-            assert data_equivalence({k: v for k, v in info.items() if k != "final_obs"},
-                                    {k: v for k, v in infos[t].items() if k != "final_obs"}, exact=True)
+            assert data_equivalence(
+                {k: v for k, v in info.items() if k != "final_obs"},
+                {k: v for k, v in infos[t].items() if k != "final_obs"},
+                exact=True,
+            )
         ended += int(trunc.any())
     assert ended == 1 and truncated[199].all() and not terminated[199].any()
 
@@ -159,7 +197,8 @@ def test_the_vector_env_equals_hintsjaxs_own_env_step_for_step(vector_rollout):
                 assert same_obs(infos[t]["final_obs"][i], ts.obs)
                 key, sub = jax.random.split(key)
                 ts = reset(sub, params)
-                assert not same_obs(infos[t]["final_obs"][i], ts.obs)  # the next episode starts elsewhere
+                # the next episode starts elsewhere
+                assert not same_obs(infos[t]["final_obs"][i], ts.obs)
             assert same_obs(ts.obs, row(obs_list[t + 1])), t
 
 
@@ -168,14 +207,19 @@ def test_reset_with_a_seed_reproduces_and_another_seed_differs(vector_rollout):
     again, _ = env.reset(seed=SEED)
     assert data_equivalence(again, vector_rollout[0][0], exact=True)
     obs, reward, *_ = env.step(actions()[0])
-    assert data_equivalence(obs, vector_rollout[0][1], exact=True) and np.array_equal(reward, vector_rollout[1][0])
+    assert data_equivalence(obs, vector_rollout[0][1], exact=True) and np.array_equal(
+        reward, vector_rollout[1][0]
+    )
     other, _ = env.reset(seed=SEED + 1)
-    assert np.array_equal(other["pixels"][0], vector_rollout[0][0]["pixels"][1])  # env i is seeded SEED + i
+    # env i is seeded SEED + i
+    assert np.array_equal(other["pixels"][0], vector_rollout[0][0]["pixels"][1])
     assert not np.array_equal(other["pixels"][1], vector_rollout[0][0]["pixels"][1])
 
 
 def test_gymnasiums_episode_statistics_wrapper_reads_the_autoreset(vector_rollout):
-    env = gymnasium.wrappers.vector.RecordEpisodeStatistics(gymnasium.make_vec(ID, num_envs=N, **SETTINGS))
+    env = gymnasium.wrappers.vector.RecordEpisodeStatistics(
+        gymnasium.make_vec(ID, num_envs=N, **SETTINGS)
+    )
     env.reset(seed=SEED)
     for t, a in enumerate(actions(200)):
         *_, info = env.step(a)
@@ -190,12 +234,17 @@ def test_gymnasiums_episode_statistics_wrapper_reads_the_autoreset(vector_rollou
 # ant_fast 165 s), so the slow tier that CI runs checks one env of each kind (classic, MJCF, the car);
 # HINTSJAX_TEST_EVERY_GYM_ENV=1 checks every env and an adapted one of each source (all 9 passed,
 # 2026-11-27: experiments/results/gym.md)
-EVERY_ENV = [n for n in envs.env_names() if n != "pendulum"] + ["brax:hopper", "playground:CartpoleSwingup"]
+EVERY_ENV = [n for n in envs.env_names() if n != "pendulum"] + [
+    "brax:hopper",
+    "playground:CartpoleSwingup",
+]
 CI_ENVS = ["acrobot", "idp", "ant", "car_racing"]
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", EVERY_ENV if os.environ.get("HINTSJAX_TEST_EVERY_GYM_ENV") == "1" else CI_ENVS)
+@pytest.mark.parametrize(
+    "name", EVERY_ENV if os.environ.get("HINTSJAX_TEST_EVERY_GYM_ENV") == "1" else CI_ENVS
+)
 def test_every_env_passes_check_env_and_its_vector_env_steps(name):
     """check_env on each env's single env (its default hint and variant), then two steps of a
     2-env vector env equal to the single env's first step from the same seed."""
@@ -205,7 +254,8 @@ def test_every_env_passes_check_env_and_its_vector_env_steps(name):
     gid = hintsjax.gym.env_id(name)
     single = gymnasium.make(gid)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the bounds of the hints and action ranges (see the pendulum's test)
+        # the bounds of the hints and action ranges (see the pendulum's test)
+        warnings.simplefilter("ignore")
         check_env(single.unwrapped)
     vector = gymnasium.make_vec(gid, num_envs=2)
     assert vector.single_observation_space == single.observation_space
@@ -243,8 +293,11 @@ def test_stable_baselines3_steps_it_as_its_own_dummy_vec_env_and_trains_on_it():
         for info, their in zip(infos, their_infos):
             assert info["TimeLimit.truncated"] == their["TimeLimit.truncated"]
             assert same_obs(info.get("terminal_observation"), their.get("terminal_observation"))
-    model = PPO("MultiInputPolicy", ours, n_steps=32, batch_size=32, n_epochs=1, seed=0, device="cpu")
+    model = PPO(
+        "MultiInputPolicy", ours, n_steps=32, batch_size=32, n_epochs=1, seed=0, device="cpu"
+    )
     model.learn(total_timesteps=2 * 32 * N)
     assert model.num_timesteps == 2 * 32 * N and model._n_updates == 2
     hints = model.rollout_buffer.observations["hint"]
-    assert hints.shape == (32 * N, 2) and np.abs(hints).max() > 0.1  # the last rollout, flattened for its minibatches
+    # the last rollout, flattened for its minibatches
+    assert hints.shape == (32 * N, 2) and np.abs(hints).max() > 0.1

@@ -28,12 +28,16 @@ def rod_centre(picture: np.ndarray) -> np.ndarray:
 def test_the_pendulum_at_40_pixels_draws_the_64_pixel_scene_scaled(theta):
     small, large = envs.make("pendulum", image_size=40), envs.make("pendulum")
     params = small.default_params()
-    state = small.initial_state(jax.random.key(0), params).replace(theta=np.float32(theta), dtheta=np.float32(0))
+    state = small.initial_state(jax.random.key(0), params).replace(
+        theta=np.float32(theta), dtheta=np.float32(0)
+    )
     picture = np.asarray(small.render(state, params))
     assert picture.shape == (40, 40, 3) and picture.dtype == np.uint8
     assert np.asarray(large.render(state, params)).shape == (64, 64, 3)
     # the centroid of the rod within half a pixel of the 40-pixel grid
-    np.testing.assert_allclose(rod_centre(picture), rod_centre(np.asarray(large.render(state, params))), atol=0.5 / 40)
+    np.testing.assert_allclose(
+        rod_centre(picture), rod_centre(np.asarray(large.render(state, params))), atol=0.5 / 40
+    )
 
 
 def test_a_runs_image_size_reaches_its_env_and_memory_bound():
@@ -41,11 +45,23 @@ def test_a_runs_image_size_reaches_its_env_and_memory_bound():
     assert cfg.make_env().image_size == 40 and cfg.make_env(deploy=True).image_size == 40
     assert memory.picture_bytes(cfg) == 3 * 40 * 40
     default = run_config({"env": "pendulum"})
-    assert default.image_size is None and default.make_env().image_size == 64 and memory.picture_bytes(default) == 3 * 64 * 64
+    assert (
+        default.image_size is None
+        and default.make_env().image_size == 64
+        and memory.picture_bytes(default) == 3 * 64 * 64
+    )
 
 
-@pytest.mark.parametrize("values", [{"image_size": 35}, {"image_size": 257}, {"image_size": 40.5}, {"image_size": True},
-                                    {"env": "car_racing", "image_size": 64}])
+@pytest.mark.parametrize(
+    "values",
+    [
+        {"image_size": 35},
+        {"image_size": 257},
+        {"image_size": 40.5},
+        {"image_size": True},
+        {"env": "car_racing", "image_size": 64},
+    ],
+)
 def test_sides_the_encoder_or_the_env_cannot_take_are_refused(values):
     with pytest.raises(UsageError, match="image_size"):
         run_config({"env": "pendulum", **values})

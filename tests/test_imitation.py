@@ -22,12 +22,20 @@ from hintsjax.algorithms import dagger, experts, gail
 from hintsjax.algorithms.registry import make_trainer
 
 # 24 rounds of 128 steps (8 envs x 16) and 64 student steps per round on minibatches of 64.
-DAGGER = dict(env="linear", agent="dagger", seeds=1,
-              ppo=dict(num_envs=8, batch_size=128, minibatch_size=64, total_env_steps=24 * 128),
-              dagger=dict(grad_steps=64, lr=3e-3, buffer_size=1024))
-GAIL = dict(env="linear", agent="gail", seeds=1,
-            ppo=dict(num_envs=8, batch_size=128, minibatch_size=64, epochs=2, total_env_steps=4 * 128),
-            gail=dict(demonstrations=4, disc_hidden=[32, 32], disc_steps=2, normalize_state=True))
+DAGGER = dict(
+    env="linear",
+    agent="dagger",
+    seeds=1,
+    ppo=dict(num_envs=8, batch_size=128, minibatch_size=64, total_env_steps=24 * 128),
+    dagger=dict(grad_steps=64, lr=3e-3, buffer_size=1024),
+)
+GAIL = dict(
+    env="linear",
+    agent="gail",
+    seeds=1,
+    ppo=dict(num_envs=8, batch_size=128, minibatch_size=64, epochs=2, total_env_steps=4 * 128),
+    gail=dict(demonstrations=4, disc_hidden=[32, 32], disc_steps=2, normalize_state=True),
+)
 
 
 def trained(values: dict):
@@ -61,9 +69,15 @@ def test_vmap_over_two_seeds_equals_two_single_runs(agent, request):
     (tests/conftest.py: one of dagger's 32 weights 7e-6 apart, under 2e-6 at XLA's default);
     the other seed's weights, the control below, are far off."""
     _, state, _, alone = request.getfixturevalue(f"{agent}_run")
-    jax.tree.map(lambda b, s: np.testing.assert_allclose(b, s, rtol=2e-5, atol=2e-5), seed(state.params, 1), alone.params)
-    assert not np.allclose(seed(state.params, 0)["params"]["actor"]["Dense_0"]["kernel"],
-                           alone.params["params"]["actor"]["Dense_0"]["kernel"])  # the seeds differ
+    jax.tree.map(
+        lambda b, s: np.testing.assert_allclose(b, s, rtol=2e-5, atol=2e-5),
+        seed(state.params, 1),
+        alone.params,
+    )
+    assert not np.allclose(
+        seed(state.params, 0)["params"]["actor"]["Dense_0"]["kernel"],
+        alone.params["params"]["actor"]["Dense_0"]["kernel"],
+    )  # the seeds differ
 
 
 def test_dagger_student_recovers_the_linear_expert(dagger_run):
@@ -108,7 +122,9 @@ def test_gail_discriminator_separates_expert_from_random_pairs():
     def batch(key, n=256):
         k_s, k_a = jax.random.split(key)
         s = jax.random.uniform(k_s, (n, 2), minval=-1.0, maxval=1.0)
-        return gail.pairs(s, linear_env.EXPERT.mean(s)), gail.pairs(s, jax.random.uniform(k_a, (n, 1), minval=-2.0, maxval=2.0))
+        return gail.pairs(s, linear_env.EXPERT.mean(s)), gail.pairs(
+            s, jax.random.uniform(k_a, (n, 1), minval=-2.0, maxval=2.0)
+        )
 
     params = disc.init(k_init, jnp.zeros((1, 3)))
     opt = optax.adam(3e-3)
@@ -117,13 +133,17 @@ def test_gail_discriminator_separates_expert_from_random_pairs():
     def step(carry, key):
         params, opt_state = carry
         expert_pairs, random_pairs = batch(key)
-        grads, _ = jax.grad(lambda p: gail.discriminator_loss(disc, p, expert_pairs, random_pairs), has_aux=True)(params)
+        grads, _ = jax.grad(
+            lambda p: gail.discriminator_loss(disc, p, expert_pairs, random_pairs), has_aux=True
+        )(params)
         updates, opt_state = opt.update(grads, opt_state, params)
         return (optax.apply_updates(params, updates), opt_state), None
 
     expert_pairs, random_pairs = batch(k_test, 1024)
     _, before = gail.discriminator_loss(disc, params, expert_pairs, random_pairs)
-    (params, _), _ = jax.jit(lambda c, k: jax.lax.scan(step, c, k))((params, opt_state), jax.random.split(k_s, 300))
+    (params, _), _ = jax.jit(lambda c, k: jax.lax.scan(step, c, k))(
+        (params, opt_state), jax.random.split(k_s, 300)
+    )
     _, after = gail.discriminator_loss(disc, params, expert_pairs, random_pairs)
     assert after["disc_loss"] < 0.5 * before["disc_loss"]
     assert after["disc_expert_acc"] > 0.9 and after["disc_policy_acc"] > 0.9
@@ -148,10 +168,12 @@ def test_demonstrations_mask_the_steps_after_an_episode_ended():
     demos = gail.demonstrate(env, params, linear_env.EXPERT, jax.random.key(3), episodes=6)
     valid = np.asarray(demos.valid).reshape(env.max_steps, 6)
     lengths = valid.sum(axis=0)
-    assert (lengths >= 1).all() and (lengths < env.max_steps).any()  # some episodes terminated early
+    # some episodes terminated early
+    assert (lengths >= 1).all() and (lengths < env.max_steps).any()
     assert (np.diff(valid.astype(int), axis=0) <= 0).all()  # once ended, never valid again
     s, a = demos.sample(jax.random.key(0), 512)
-    np.testing.assert_allclose(a, linear_env.EXPERT.mean(s), atol=4 * np.exp(-2.0) + 1e-6)  # expert pairs only
+    # expert pairs only
+    np.testing.assert_allclose(a, linear_env.EXPERT.mean(s), atol=4 * np.exp(-2.0) + 1e-6)
     assert np.all(np.asarray(demos.episode_return) < 0)
     kept = np.asarray(demos.state)[np.asarray(demos.valid)]  # gail.normalize_state's statistics
     np.testing.assert_allclose(demos.state_mean, kept.mean(axis=0), rtol=1e-5, atol=1e-6)
@@ -174,9 +196,21 @@ def test_gail_trains_ppo_on_the_discriminator_reward(gail_run):
 def expert_run(tmp_path_factory, request):
     from hintsjax.training import pipeline
 
-    values = dict(env="linear", agent="expert_ppo", seeds=2, eval_episodes=4, checkpoint_every=2,
-                  ppo=dict(num_envs=8, batch_size=128, minibatch_size=64, epochs=2, total_env_steps=2 * 128,
-                           normalize_state=request.param))
+    values = dict(
+        env="linear",
+        agent="expert_ppo",
+        seeds=2,
+        eval_episodes=4,
+        checkpoint_every=2,
+        ppo=dict(
+            num_envs=8,
+            batch_size=128,
+            minibatch_size=64,
+            epochs=2,
+            total_env_steps=2 * 128,
+            normalize_state=request.param,
+        ),
+    )
     run_dir = tmp_path_factory.mktemp("runs") / "expert-linear"
     run_dir.mkdir()
     cfg = layers.run_config(values)
@@ -193,7 +227,8 @@ def test_export_keeps_the_best_seed_and_load_acts_like_it(expert_run, tmp_path):
     meta = json.loads((out / experts.EXPERT_JSON).read_text())
     seed_means = json.loads((run_dir / "eval.json").read_text())["evaluations"][0]["seed_means"]
     assert meta["seed_index"] == int(np.argmax(seed_means)) and meta["env"] == "linear"
-    assert (out / experts.POLICY / "_METADATA").is_file()  # what orbax wrote is there but its notes of this machine
+    # what orbax wrote is there but its notes of this machine
+    assert (out / experts.POLICY / "_METADATA").is_file()
     assert not [name for name in experts.MACHINE_FILES if (out / experts.POLICY / name).exists()]
     loaded = experts.load("linear", out)
     assert meta["normalize_state"] == cfg.ppo.normalize_state == (loaded.state_norm is not None)
@@ -201,7 +236,9 @@ def test_export_keeps_the_best_seed_and_load_acts_like_it(expert_run, tmp_path):
     best = jax.tree.map(lambda x: x[meta["seed_index"]], state.params)
     states = 3.0 * jax.random.normal(jax.random.key(1), (32, 2))
     network = make_trainer(cfg).network
-    np.testing.assert_allclose(loaded.mean(states), network.apply(best, {"state": states})[0], rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(
+        loaded.mean(states), network.apply(best, {"state": states})[0], rtol=1e-6, atol=1e-7
+    )
     np.testing.assert_array_equal(loaded.log_std, best["params"]["log_std"])
 
 
@@ -214,7 +251,9 @@ def test_an_expert_is_replaced_only_when_asked(expert_run, tmp_path):
     with pytest.raises(UsageError, match="holds an expert already .*--force to replace it"):
         experts.export(run_dir, out)
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
-    assert experts.export(run_dir, out, force=True) == out and experts.load("linear", out) is not None
+    assert (
+        experts.export(run_dir, out, force=True) == out and experts.load("linear", out) is not None
+    )
 
 
 def test_expert_errors_name_the_problem(expert_run, tmp_path):
@@ -225,8 +264,11 @@ def test_expert_errors_name_the_problem(expert_run, tmp_path):
     with pytest.raises(UsageError, match="no expert for linear at .*packaged: .*pendulum"):
         experts.load("linear", tmp_path / "nowhere")
     meta = json.loads((out / experts.EXPERT_JSON).read_text())
-    (out / experts.EXPERT_JSON).write_text(json.dumps({**meta, "hidden": [8, 8]}))  # the policy is wider
-    with pytest.raises(UsageError, match=r"does not match expert.json: its \d+ arrays differ in shape"):
+    # the policy is wider
+    (out / experts.EXPERT_JSON).write_text(json.dumps({**meta, "hidden": [8, 8]}))
+    with pytest.raises(
+        UsageError, match=r"does not match expert.json: its \d+ arrays differ in shape"
+    ):
         experts.load("linear", out)  # refused from the stored shapes, before any array is read
     (out / experts.EXPERT_JSON).write_text(json.dumps(meta))
     for f in (out / experts.POLICY).rglob("*"):
@@ -258,7 +300,11 @@ def test_packaged_experts_load_and_act(env):
     e = experts.load(env)
     meta = experts.describe(env)[1]
     sim = envs.make(env, observe=("state",))
-    assert meta["env"] == env and meta["state_size"] == sim.state_size and meta["action_size"] == sim.action_size
+    assert (
+        meta["env"] == env
+        and meta["state_size"] == sim.state_size
+        and meta["action_size"] == sim.action_size
+    )
     action = e.mean(jax.random.normal(jax.random.key(0), (4, sim.state_size)))
     assert action.shape == (4, sim.action_size) and np.isfinite(action).all()
     assert meta["seed_eval_mean"] >= meta["run_eval_mean"]  # the best seed of its run
@@ -271,8 +317,15 @@ def test_packaged_experts_load_and_act(env):
 # 41 s); car 910 (889, 938, 909, 906), the expert retrained on the per-wheel grip on 2026-11-27;
 # humanoid 5820 (9855, 3925, 4876, 4624; 55 s), where
 # a random policy falls in about 25 steps and standing still for 1000 steps earns about 5000.
-PACKAGED_FLOORS = {"pendulum": -400.0, "acrobot": -120.0, "idp": 9000.0, "halfcheetah": 3000.0, "ant": 2500.0,
-                   "car_racing": 500.0, "humanoid": 3000.0}
+PACKAGED_FLOORS = {
+    "pendulum": -400.0,
+    "acrobot": -120.0,
+    "idp": 9000.0,
+    "halfcheetah": 3000.0,
+    "ant": 2500.0,
+    "car_racing": 500.0,
+    "humanoid": 3000.0,
+}
 
 
 @pytest.mark.slow
@@ -284,7 +337,9 @@ def test_packaged_experts_still_perform(env):
     from hintsjax.algorithms.gail import demonstrate
 
     sim, policy = envs.make(env, observe=("state",)), experts.load(env)
-    demos = jax.jit(lambda k: demonstrate(sim, sim.default_params(), policy, k, 4))(jax.random.key(0))
+    demos = jax.jit(lambda k: demonstrate(sim, sim.default_params(), policy, k, 4))(
+        jax.random.key(0)
+    )
     assert float(demos.episode_return.mean()) > PACKAGED_FLOORS[env], demos.episode_return
 
 
@@ -294,8 +349,14 @@ def pendulum_expert_returns(total_env_steps: int, seeds: int = 3) -> list[float]
     steps it dipped to -186, -419, -179 with it)."""
     from hintsjax.evaluation.evaluator import evaluate_params
 
-    cfg = layers.run_config(dict(env="pendulum", agent="expert_ppo", seeds=seeds,
-                                 ppo=dict(total_env_steps=total_env_steps, ent_coef=0.0)))
+    cfg = layers.run_config(
+        dict(
+            env="pendulum",
+            agent="expert_ppo",
+            seeds=seeds,
+            ppo=dict(total_env_steps=total_env_steps, ent_coef=0.0),
+        )
+    )
     state, _ = jax.jit(jax.vmap(make_trainer(cfg).train))(cfg.seed_keys())
     return evaluate_params(cfg, state.params, None, 20, False)["seed_means"]
 
@@ -323,15 +384,28 @@ def test_gail_gradient_penalty_of_a_linear_discriminator_is_its_weight_norm():
     exactly grad_penalty * |w|^2 to the cross-entropy."""
     disc = gail.MLP((1,))  # no hidden layer: linear
     rng = np.random.default_rng(0)
-    expert_pairs, policy_pairs = jnp.asarray(rng.normal(size=(64, 3))), jnp.asarray(rng.normal(size=(64, 3)))
+    expert_pairs, policy_pairs = (
+        jnp.asarray(rng.normal(size=(64, 3))),
+        jnp.asarray(rng.normal(size=(64, 3))),
+    )
     params = disc.init(jax.random.key(0), expert_pairs[:1])
     w = params["params"]["Dense_0"]["kernel"][:, 0]
     plain, _ = gail.discriminator_loss(disc, params, expert_pairs, policy_pairs)
-    penalised, stats = gail.discriminator_loss(disc, params, expert_pairs, policy_pairs, grad_penalty=10.0)
+    penalised, stats = gail.discriminator_loss(
+        disc, params, expert_pairs, policy_pairs, grad_penalty=10.0
+    )
     np.testing.assert_allclose(stats["disc_grad_penalty"], jnp.sum(w**2), rtol=1e-5)
     np.testing.assert_allclose(penalised, plain + 10.0 * jnp.sum(w**2), rtol=1e-5)
     # and its gradient pulls w towards 0: the penalty's own gradient is 2 * grad_penalty * w
-    g_plain = jax.grad(lambda p: gail.discriminator_loss(disc, p, expert_pairs, policy_pairs)[0])(params)
-    g_pen = jax.grad(lambda p: gail.discriminator_loss(disc, p, expert_pairs, policy_pairs, 10.0)[0])(params)
-    np.testing.assert_allclose(g_pen["params"]["Dense_0"]["kernel"][:, 0] - g_plain["params"]["Dense_0"]["kernel"][:, 0],
-                               20.0 * w, rtol=1e-4, atol=1e-6)
+    g_plain = jax.grad(lambda p: gail.discriminator_loss(disc, p, expert_pairs, policy_pairs)[0])(
+        params
+    )
+    g_pen = jax.grad(
+        lambda p: gail.discriminator_loss(disc, p, expert_pairs, policy_pairs, 10.0)[0]
+    )(params)
+    np.testing.assert_allclose(
+        g_pen["params"]["Dense_0"]["kernel"][:, 0] - g_plain["params"]["Dense_0"]["kernel"][:, 0],
+        20.0 * w,
+        rtol=1e-4,
+        atol=1e-6,
+    )

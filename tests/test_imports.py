@@ -10,14 +10,26 @@ import ast
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = {"hintsjax": ROOT / "hintsjax", "hintsjax.envs": ROOT / "envs"}  # pyproject.toml's package-dir
+# pyproject.toml's package-dir
+PACKAGES = {"hintsjax": ROOT / "hintsjax", "hintsjax.envs": ROOT / "envs"}
 
 # The sub-packages, lowest first: a module may import the modules of its own sub-package and of
 # those before it here, never of one after it. "hintsjax" stands for the package's own modules:
 # its __init__ and the commands (hintsjax/<command>.py, run as python -m hintsjax.<command>).
-LAYERS = ("hintsjax.envs", "hintsjax.gym", "hintsjax.system", "hintsjax.models", "hintsjax.settings", "hintsjax.cli",
-          "hintsjax.algorithms", "hintsjax.evaluation", "hintsjax.training", "hintsjax.hints", "hintsjax",
-          "hintsjax.reproduce")
+LAYERS = (
+    "hintsjax.envs",
+    "hintsjax.gym",
+    "hintsjax.system",
+    "hintsjax.models",
+    "hintsjax.settings",
+    "hintsjax.cli",
+    "hintsjax.algorithms",
+    "hintsjax.evaluation",
+    "hintsjax.training",
+    "hintsjax.hints",
+    "hintsjax",
+    "hintsjax.reproduce",
+)
 
 
 def modules(packages: dict[str, Path]) -> dict[str, Path]:
@@ -28,8 +40,12 @@ def modules(packages: dict[str, Path]) -> dict[str, Path]:
         for path in sorted(folder.rglob("*.py")):
             parts = [p for p in path.relative_to(folder).with_suffix("").parts if p != "__init__"]
             name = ".".join([package, *parts])
-            if not any(other != package and other.startswith(package + ".") and
-                       (name == other or name.startswith(other + ".")) for other in packages):
+            if not any(
+                other != package
+                and other.startswith(package + ".")
+                and (name == other or name.startswith(other + "."))
+                for other in packages
+            ):
                 found[name] = path
     return found
 
@@ -57,7 +73,10 @@ def import_graph(packages: dict[str, Path]) -> dict[str, set[str]]:
                 if node.level:
                     up = package.split(".")[: len(package.split(".")) - node.level + 1]
                     base = ".".join(up + ([base] if base else []))
-                targets = [f"{base}.{alias.name}" if f"{base}.{alias.name}" in known else base for alias in node.names]
+                targets = [
+                    f"{base}.{alias.name}" if f"{base}.{alias.name}" in known else base
+                    for alias in node.names
+                ]
             else:
                 continue
             for target in targets:
@@ -76,15 +95,21 @@ def package_graph(graph: dict[str, set[str]], layers: tuple[str, ...]) -> dict[s
     """The module graph folded onto `layers`: layer -> the other layers its modules import."""
     folded: dict[str, set[str]] = {layer: set() for layer in layers}
     for module, imported in graph.items():
-        folded[layer_of(module, layers)] |= {layer_of(m, layers) for m in imported} - {layer_of(module, layers)}
+        folded[layer_of(module, layers)] |= {layer_of(m, layers) for m in imported} - {
+            layer_of(module, layers)
+        }
     return folded
 
 
 def upward(graph: dict[str, set[str]], layers: tuple[str, ...]) -> list[str]:
     """The imports of a module from a layer after its own in `layers`, as 'module -> module'."""
     rank = {layer: i for i, layer in enumerate(layers)}
-    return sorted(f"{m} -> {t}" for m, imported in graph.items() for t in imported
-                  if rank[layer_of(t, layers)] > rank[layer_of(m, layers)])
+    return sorted(
+        f"{m} -> {t}"
+        for m, imported in graph.items()
+        for t in imported
+        if rank[layer_of(t, layers)] > rank[layer_of(m, layers)]
+    )
 
 
 def circles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -133,7 +158,9 @@ def test_no_module_of_hintsjax_or_envs_is_in_an_import_circle():
 def test_the_sub_packages_import_only_those_below_them():
     graph = import_graph(PACKAGES)
     folders = {f"hintsjax.{p.parent.name}" for p in (ROOT / "hintsjax").glob("*/__init__.py")}
-    assert folders | {"hintsjax.envs", "hintsjax"} == set(LAYERS), "a sub-package missing from LAYERS, or gone"
+    assert folders | {"hintsjax.envs", "hintsjax"} == set(LAYERS), (
+        "a sub-package missing from LAYERS, or gone"
+    )
     wrong = upward(graph, LAYERS)
     assert not wrong, "imports of a sub-package above the importer's: " + "; ".join(wrong)
     assert not circles(package_graph(graph, LAYERS))
@@ -142,7 +169,11 @@ def test_the_sub_packages_import_only_those_below_them():
 def test_envs_import_nothing_of_the_learner():
     graph = import_graph(PACKAGES)
     learner = {m for m in graph if not m.startswith("hintsjax.envs")}
-    wrong = {m: sorted(graph[m] & learner) for m in graph if m.startswith("hintsjax.envs") and graph[m] & learner}
+    wrong = {
+        m: sorted(graph[m] & learner)
+        for m in graph
+        if m.startswith("hintsjax.envs") and graph[m] & learner
+    }
     assert not wrong, f"envs/ imports the learner: {wrong}"
 
 
@@ -155,27 +186,39 @@ def _package(tmp_path: Path, files: dict[str, str]) -> dict[str, Path]:
 
 
 def test_a_circle_held_by_an_import_inside_a_function_is_found(tmp_path):
-    packages = _package(tmp_path, {
-        "__init__.py": "",
-        "settings.py": "def make():\n    from pkg.trainer import train\n    return train\n",
-        "trainer.py": "from pkg import settings\nfrom . import leaf\n",
-        "leaf.py": "import os\n",
-        "sub/__init__.py": "",
-        "sub/tool.py": "from ..leaf import *\nimport pkg.sub\n",
-    })
+    packages = _package(
+        tmp_path,
+        {
+            "__init__.py": "",
+            "settings.py": "def make():\n    from pkg.trainer import train\n    return train\n",
+            "trainer.py": "from pkg import settings\nfrom . import leaf\n",
+            "leaf.py": "import os\n",
+            "sub/__init__.py": "",
+            "sub/tool.py": "from ..leaf import *\nimport pkg.sub\n",
+        },
+    )
     graph = import_graph(packages)
-    assert graph == {"pkg": set(), "pkg.settings": {"pkg.trainer"}, "pkg.trainer": {"pkg.settings", "pkg.leaf"},
-                     "pkg.leaf": set(), "pkg.sub": set(), "pkg.sub.tool": {"pkg.leaf", "pkg.sub"}}
+    assert graph == {
+        "pkg": set(),
+        "pkg.settings": {"pkg.trainer"},
+        "pkg.trainer": {"pkg.settings", "pkg.leaf"},
+        "pkg.leaf": set(),
+        "pkg.sub": set(),
+        "pkg.sub.tool": {"pkg.leaf", "pkg.sub"},
+    }
     assert circles(graph) == [["pkg.settings", "pkg.trainer"]]
 
 
 def test_imports_that_run_one_way_make_no_circle(tmp_path):
-    packages = _package(tmp_path, {
-        "__init__.py": "",
-        "settings.py": "from pkg import leaf\n",
-        "trainer.py": "from pkg.settings import make\ndef go():\n    from pkg import leaf\n",
-        "leaf.py": "",
-    })
+    packages = _package(
+        tmp_path,
+        {
+            "__init__.py": "",
+            "settings.py": "from pkg import leaf\n",
+            "trainer.py": "from pkg.settings import make\ndef go():\n    from pkg import leaf\n",
+            "leaf.py": "",
+        },
+    )
     assert circles(import_graph(packages)) == []
     assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"d"}}) == [["a", "b", "c"], ["d"]]
 
@@ -193,20 +236,27 @@ def test_a_folder_mapped_to_a_subpackage_is_read_once_under_its_own_name(tmp_pat
 
 
 def test_a_circle_between_sub_packages_is_found_where_no_module_circle_is(tmp_path):
-    packages = _package(tmp_path, {
-        "__init__.py": "",
-        "low/__init__.py": "",
-        "low/a.py": "",
-        "low/b.py": "def late():\n    from pkg.high import c\n",
-        "high/__init__.py": "",
-        "high/c.py": "",
-        "high/d.py": "from pkg.low import a\n",
-        "tool.py": "from pkg.high import d\n",
-    })
+    packages = _package(
+        tmp_path,
+        {
+            "__init__.py": "",
+            "low/__init__.py": "",
+            "low/a.py": "",
+            "low/b.py": "def late():\n    from pkg.high import c\n",
+            "high/__init__.py": "",
+            "high/c.py": "",
+            "high/d.py": "from pkg.low import a\n",
+            "tool.py": "from pkg.high import d\n",
+        },
+    )
     graph = import_graph(packages)
     layers = ("pkg.low", "pkg.high", "pkg")
     assert circles(graph) == []
-    assert package_graph(graph, layers) == {"pkg.low": {"pkg.high"}, "pkg.high": {"pkg.low"}, "pkg": {"pkg.high"}}
+    assert package_graph(graph, layers) == {
+        "pkg.low": {"pkg.high"},
+        "pkg.high": {"pkg.low"},
+        "pkg": {"pkg.high"},
+    }
     assert circles(package_graph(graph, layers)) == [["pkg.high", "pkg.low"]]
     assert upward(graph, layers) == ["pkg.low.b -> pkg.high.c"]
     assert layer_of("pkg.tool", layers) == "pkg" and layer_of("pkg.high", layers) == "pkg.high"

@@ -14,7 +14,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import cue_env  # registers the "cue" env, its hint and its defaults (tests/ is on pytest's path: its rootdir conftest)
+# registers the "cue" env, its hint and its defaults (tests/ is on pytest's path: its rootdir
+# conftest)
+import cue_env
 from hintsjax.system.errors import UsageError
 from hintsjax.settings import layers
 from hintsjax.algorithms import ppo
@@ -25,7 +27,13 @@ from hintsjax.algorithms import ppo
 # raised from the env default (1e-3) so that log_std can fall from 0 (std 1, return -2 even
 # with the right mean) to about -1.7 in that many Adam steps; with 1e-3 it only reaches ~-0.3.
 LEARN_PPO = dict(
-    num_envs=64, batch_size=256, minibatch_size=64, epochs=4, total_env_steps=3072, hidden=[64, 64], actor_lr=1e-2
+    num_envs=64,
+    batch_size=256,
+    minibatch_size=64,
+    epochs=4,
+    total_env_steps=3072,
+    hidden=[64, 64],
+    actor_lr=1e-2,
 )
 LAST = 3  # updates averaged for the final return
 
@@ -40,8 +48,11 @@ def learn(agent: str, scheme: str = "fc", seed: int = 0):
 def policy_mean(trainer, params, cues):
     """The policy's mean action for episodes with the given cues (through the env's observation)."""
     env_params = trainer.env.default_params()
-    states = cue_env.CueState(cue=jnp.asarray(cues, jnp.float32), t=jnp.zeros(len(cues), jnp.int32),
-                              distractor=jnp.zeros(len(cues), jnp.float32))
+    states = cue_env.CueState(
+        cue=jnp.asarray(cues, jnp.float32),
+        t=jnp.zeros(len(cues), jnp.int32),
+        distractor=jnp.zeros(len(cues), jnp.float32),
+    )
     obs = jax.vmap(trainer.env.observation, in_axes=(0, None))(states, env_params)
     mean, _, _ = trainer.network.apply(params, obs)
     return np.asarray(mean[:, 0])
@@ -52,7 +63,10 @@ def test_cue_env_hides_the_cue_outside_the_hint():
 
     env = envs.make("cue", "cue")
     params = envs.make_params("cue")
-    states = [cue_env.CueState(cue=jnp.float32(c), t=jnp.int32(0), distractor=jnp.float32(0)) for c in (-1.0, 1.0)]
+    states = [
+        cue_env.CueState(cue=jnp.float32(c), t=jnp.int32(0), distractor=jnp.float32(0))
+        for c in (-1.0, 1.0)
+    ]
     obs = [env.observation(s, params) for s in states]
     np.testing.assert_array_equal(obs[0]["pixels"], obs[1]["pixels"])
     np.testing.assert_array_equal(obs[0]["state"], obs[1]["state"])
@@ -64,7 +78,9 @@ def test_cue_env_hides_the_cue_outside_the_hint():
     assert bool(ts.truncated) and not bool(ts.terminated)
     ts = env.step(jax.random.key(0), states[0], jnp.array([5.0]), params)  # clipped to 2
     np.testing.assert_allclose(ts.reward, -9.0)
-    cues = jax.vmap(lambda k: env.reset(k, params).obs["hint"][0])(jax.random.split(jax.random.key(0), 1000))
+    cues = jax.vmap(lambda k: env.reset(k, params).obs["hint"][0])(
+        jax.random.split(jax.random.key(0), 1000)
+    )
     assert set(np.unique(np.asarray(cues)).tolist()) == {-1.0, 1.0}
     assert abs(float(cues.mean())) < 0.1
 
@@ -75,7 +91,8 @@ def test_hints_agent_learns_the_cue(scheme):
     returns = metrics["episode_return"]
     assert returns.shape == (trainer.cfg.ppo.num_updates,) == (12,)
     assert np.all(metrics["episodes"] == LEARN_PPO["batch_size"])  # every step ends an episode
-    np.testing.assert_allclose(metrics["step_reward"], returns, rtol=1e-5)  # so its reward is its return
+    # so its reward is its return
+    np.testing.assert_allclose(metrics["step_reward"], returns, rtol=1e-5)
     final = returns[-LAST:].mean()
     assert final > -0.3, f"{scheme}: final return {final:.3f}, returns {np.round(returns, 2)}"
     assert final > returns[0] + 1.0
@@ -100,12 +117,17 @@ def test_rgb_agent_cannot_beat_the_best_constant_action():
 
 # -- invariants (the cheap hint-only agent: no pixels, no rendering) ------------------------------
 
-SMALL_PPO = dict(num_envs=4, batch_size=32, minibatch_size=16, epochs=2, total_env_steps=160, hidden=[32, 32])
-RTOL, ATOL = 1e-5, 1e-6  # vmapped vs single runs: measured max abs diff ~1e-7 (params), ~1e-6 (metrics)
+SMALL_PPO = dict(
+    num_envs=4, batch_size=32, minibatch_size=16, epochs=2, total_env_steps=160, hidden=[32, 32]
+)
+# vmapped vs single runs: measured max abs diff ~1e-7 (params), ~1e-6 (metrics)
+RTOL, ATOL = 1e-5, 1e-6
 
 
 def small_trainer(**ppo_overrides):
-    cfg = layers.run_config(dict(env="cue", agent="hints_blind", seeds=2, ppo={**SMALL_PPO, **ppo_overrides}))
+    cfg = layers.run_config(
+        dict(env="cue", agent="hints_blind", seeds=2, ppo={**SMALL_PPO, **ppo_overrides})
+    )
     return ppo.make_trainer(cfg)
 
 
@@ -204,8 +226,20 @@ def test_starts_per_rollout_draw_one_start_per_env_and_rollout(per_rollout):
     """Cue episodes last one step, so every step starts a new one. With `starts_per_rollout`
     every env starts them all from the one start drawn for the rollout (its cue is constant over
     the rollout); without, each step draws its own (cues vary within an env)."""
-    cfg = layers.run_config(dict(env="cue", agent="hints_blind", seeds=1, ppo={
-        **SMALL_PPO, "num_envs": 16, "batch_size": 128, "minibatch_size": 64, "starts_per_rollout": per_rollout}))
+    cfg = layers.run_config(
+        dict(
+            env="cue",
+            agent="hints_blind",
+            seeds=1,
+            ppo={
+                **SMALL_PPO,
+                "num_envs": 16,
+                "batch_size": 128,
+                "minibatch_size": 64,
+                "starts_per_rollout": per_rollout,
+            },
+        )
+    )
     parts = ppo.make_ppo(cfg)
     state = jax.jit(parts.init)(jax.random.key(0))
     _, traj, _ = jax.jit(parts.rollout)(state, jax.random.key(1))
@@ -233,16 +267,33 @@ def test_target_kl_stops_an_update_after_the_first_minibatch_whose_kl_exceeds_it
     the two programs differ by the stop's select, which XLA's CPU emitters may fuse, and so
     round, differently (bit for bit under the fusion emitters, 1.5e-8 apart under the loop
     emitters the default tier compiles with); the stopped update's are far from both."""
+
     def make(target_kl):
-        return ppo.make_ppo(layers.run_config(dict(env="cue", agent="hints_blind", seeds=1,
-                                                   ppo={**SMALL_PPO, "target_kl": target_kl})))
+        return ppo.make_ppo(
+            layers.run_config(
+                dict(
+                    env="cue",
+                    agent="hints_blind",
+                    seeds=1,
+                    ppo={**SMALL_PPO, "target_kl": target_kl},
+                )
+            )
+        )
 
     off = make(None)
     state = jax.jit(off.init)(jax.random.key(0))
     _, traj, last_value = jax.jit(off.rollout)(state, jax.random.key(1))
-    learnt = {target: jax.jit(parts.learn)(state.replace(hyper=jax.jit(parts.init)(jax.random.key(0)).hyper),
-                                           traj, last_value, traj.reward, jax.random.key(2))
-              for target, parts in ((None, off), (1e9, make(1e9)), (1e-12, make(1e-12)))}  # the target: a Hyper leaf
+    learnt = {
+        target: jax.jit(parts.learn)(
+            state.replace(hyper=jax.jit(parts.init)(jax.random.key(0)).hyper),
+            traj,
+            last_value,
+            traj.reward,
+            jax.random.key(2),
+        )
+        # the target: a Hyper leaf
+        for target, parts in ((None, off), (1e9, make(1e9)), (1e-12, make(1e-12)))
+    }
     for target, steps in ((None, 4), (1e9, 4), (1e-12, 1)):
         after, metrics = learnt[target]
         assert set(adam_counts(after.opt_state)) == {steps}
@@ -250,8 +301,10 @@ def test_target_kl_stops_an_update_after_the_first_minibatch_whose_kl_exceeds_it
             assert "kl_stopped" not in metrics
         else:
             np.testing.assert_allclose(metrics["kl_stopped"], 1.0 - steps / 4)
-        apart = max(float(jnp.max(jnp.abs(a - b))) for a, b in zip(jax.tree.leaves(after.params),
-                                                                    jax.tree.leaves(learnt[None][0].params)))
+        apart = max(
+            float(jnp.max(jnp.abs(a - b)))
+            for a, b in zip(jax.tree.leaves(after.params), jax.tree.leaves(learnt[None][0].params))
+        )
         assert apart > 1e-4 if target == 1e-12 else apart < 1e-6, (target, apart)
 
 
@@ -268,8 +321,14 @@ def test_kl_adaptive_rates_follow_rsl_rls_band():
     def after(scale, kl):
         return float(kl_rate.adapted(jnp.float32(scale), jnp.float32(kl), jnp.float32(0.05)))
 
-    assert after(1.0, 0.2) == pytest.approx(1 / 1.5) and after(1.0, np.nan) == after(1.0, np.inf) == after(1.0, 0.2)
-    assert after(0.5, 0.01) == pytest.approx(0.75) and after(0.5, 0.05) == 0.5 and after(0.5, 0.075) == 0.5
+    assert after(1.0, 0.2) == pytest.approx(1 / 1.5) and after(1.0, np.nan) == after(
+        1.0, np.inf
+    ) == after(1.0, 0.2)
+    assert (
+        after(0.5, 0.01) == pytest.approx(0.75)
+        and after(0.5, 0.05) == 0.5
+        and after(0.5, 0.075) == 0.5
+    )
     assert after(0.5, 0.08) == pytest.approx(0.5 / 1.5)
     assert after(1.0, 0.0) == 1.0 and after(0.01, 1.0) == pytest.approx(kl_rate.MIN_SCALE)
 
@@ -283,22 +342,36 @@ def test_kl_adaptive_lr_shrinks_the_rates_an_update_carries_to_the_next():
     from hintsjax.algorithms import kl_rate
 
     def make(target_kl, adaptive):
-        return ppo.make_ppo(layers.run_config(dict(env="cue", agent="hints_blind", seeds=1,
-                                                   ppo={**SMALL_PPO, "target_kl": target_kl, "kl_adaptive_lr": adaptive})))
+        return ppo.make_ppo(
+            layers.run_config(
+                dict(
+                    env="cue",
+                    agent="hints_blind",
+                    seeds=1,
+                    ppo={**SMALL_PPO, "target_kl": target_kl, "kl_adaptive_lr": adaptive},
+                )
+            )
+        )
 
     def one_update(parts, state, key):
         state, traj, last_value = jax.jit(parts.rollout)(state, key)
         return jax.jit(parts.learn)(state, traj, last_value, traj.reward, jax.random.key(2))
 
     fixed, steered, tiny = make(1e9, False), make(1e9, True), make(1e-12, True)
-    (a, _), (b, metrics) = (one_update(p, jax.jit(p.init)(jax.random.key(0)), jax.random.key(1)) for p in (fixed, steered))
-    assert float(kl_rate.scale_of(b.opt_state)) == 1.0 and np.all(np.asarray(metrics["lr_scale"]) == 1.0)
+    (a, _), (b, metrics) = (
+        one_update(p, jax.jit(p.init)(jax.random.key(0)), jax.random.key(1))
+        for p in (fixed, steered)
+    )
+    assert float(kl_rate.scale_of(b.opt_state)) == 1.0 and np.all(
+        np.asarray(metrics["lr_scale"]) == 1.0
+    )
     for x, y in zip(jax.tree.leaves(a.params), jax.tree.leaves(b.params)):
         np.testing.assert_allclose(x, y, atol=1e-6)
     state, metrics = one_update(tiny, jax.jit(tiny.init)(jax.random.key(0)), jax.random.key(1))
     assert set(adam_counts(state.opt_state)) == {1}
     assert float(kl_rate.scale_of(state.opt_state)) == pytest.approx(1 / 1.5)
-    np.testing.assert_allclose(metrics["lr_scale"], (1 + 3 / 1.5) / 4, rtol=1e-6)  # mean over the 4 minibatches
+    # mean over the 4 minibatches
+    np.testing.assert_allclose(metrics["lr_scale"], (1 + 3 / 1.5) / 4, rtol=1e-6)
     state, _ = one_update(tiny, state, jax.random.key(3))
     assert set(adam_counts(state.opt_state)) == {2}
     assert float(kl_rate.scale_of(state.opt_state)) == pytest.approx(1 / 1.5**2)
@@ -311,8 +384,16 @@ def test_reset_every_update_starts_each_rollout_with_fresh_episodes():
     second rollout carries the first one's episodes on, returns and all."""
 
     def second_rollout(reset):
-        parts = ppo.make_ppo(layers.run_config(dict(env="pendulum", agent="ppo_state", seeds=1,
-                                                     ppo={**SMALL_PPO, "reset_every_update": reset})))
+        parts = ppo.make_ppo(
+            layers.run_config(
+                dict(
+                    env="pendulum",
+                    agent="ppo_state",
+                    seeds=1,
+                    ppo={**SMALL_PPO, "reset_every_update": reset},
+                )
+            )
+        )
         state = jax.jit(parts.init)(jax.random.key(0))
         state, _, _ = jax.jit(parts.rollout)(state, jax.random.key(1))
         return jax.jit(parts.rollout)(state, jax.random.key(2))[1]
@@ -326,4 +407,6 @@ def test_reset_every_update_starts_each_rollout_with_fresh_episodes():
 
 def test_kl_adaptive_lr_needs_a_target():
     with pytest.raises(UsageError, match="kl_adaptive_lr needs ppo.target_kl"):
-        layers.run_config(dict(env="cue", agent="hints_blind", ppo={**SMALL_PPO, "kl_adaptive_lr": True}))
+        layers.run_config(
+            dict(env="cue", agent="hints_blind", ppo={**SMALL_PPO, "kl_adaptive_lr": True})
+        )

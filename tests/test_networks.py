@@ -10,10 +10,19 @@ import pytest
 
 from hintsjax.models.agents import AGENTS
 from hintsjax.models.conditioning import SCHEMES
-from hintsjax.models.networks import ActorCritic, Encoder, PatchConv, image_patches, lr_labels, scale_pixels
+from hintsjax.models.networks import (
+    ActorCritic,
+    Encoder,
+    PatchConv,
+    image_patches,
+    lr_labels,
+    scale_pixels,
+)
 
 
-@pytest.mark.parametrize("size,channels,kernel,stride", [(64, 3, 8, 4), (15, 32, 4, 2), (6, 64, 3, 1), (36, 5, 8, 4)])
+@pytest.mark.parametrize(
+    "size,channels,kernel,stride", [(64, 3, 8, 4), (15, 32, 4, 2), (6, 64, 3, 1), (36, 5, 8, 4)]
+)
 def test_patch_conv_equals_nn_conv_with_the_same_params(size, channels, kernel, stride):
     x = jax.random.normal(jax.random.key(0), (2, size, size, channels))
     layer = PatchConv(16, kernel, stride)
@@ -60,7 +69,9 @@ class Features(nn.Module):
         return cond(Encoder(name="encoder"), scale_pixels(obs["pixels"]), obs["hint"])
 
 
-@pytest.mark.parametrize("scheme,width", [("lc", 1024 + 64), ("ac", 1024), ("fc", 1024), ("mc", 1024)])
+@pytest.mark.parametrize(
+    "scheme,width", [("lc", 1024 + 64), ("ac", 1024), ("fc", 1024), ("mc", 1024)]
+)
 def test_scheme_feature_width_and_dependence_on_the_hint(scheme, width):
     net = Features(scheme)
     params = net.init(jax.random.key(0), OBS)
@@ -76,7 +87,10 @@ def test_film_with_a_zero_embedding_passes_the_latent_through():
     net = Features("fc")
     params = net.init(jax.random.key(0), OBS)
     zero_out = jax.tree_util.tree_map_with_path(
-        lambda path, p: jnp.zeros_like(p) if "conditioning" in str(path) and "Dense_1" in str(path) else p, params
+        lambda path, p: jnp.zeros_like(p)
+        if "conditioning" in str(path) and "Dense_1" in str(path)
+        else p,
+        params,
     )
     assert not np.allclose(net.apply(params, OBS), net.apply(zero_out, OBS))  # the zeroing bites
     film = net.apply(zero_out, OBS)
@@ -106,7 +120,10 @@ def test_a_critic_that_does_not_train_the_encoder_leaves_the_shared_features_to_
     with the actor; the actor's gradient still reaches them."""
     spec = AGENTS["hints"]
     obs = {k: OBS[k] for k in spec.observe}
-    shared, own = ActorCritic(spec, "fc", 2), ActorCritic(spec, "fc", 2, critic_trains_encoder=False)
+    shared, own = (
+        ActorCritic(spec, "fc", 2),
+        ActorCritic(spec, "fc", 2, critic_trains_encoder=False),
+    )
     params = shared.init(jax.random.key(0), obs)
     for a, b in zip(shared.apply(params, obs), own.apply(params, obs)):
         np.testing.assert_array_equal(a, b)
@@ -126,7 +143,10 @@ def test_a_log_std_floor_holds_the_std_up_and_leaves_it_alone_above():
     there; one above is as learnt. Without a floor nothing changes."""
     spec = AGENTS["ppo_state"]
     obs = {"state": OBS["state"]}
-    free, floored = ActorCritic(spec, "fc", 2, hidden=(8,)), ActorCritic(spec, "fc", 2, hidden=(8,), min_log_std=-1.0)
+    free, floored = (
+        ActorCritic(spec, "fc", 2, hidden=(8,)),
+        ActorCritic(spec, "fc", 2, hidden=(8,), min_log_std=-1.0),
+    )
     params = free.init(jax.random.key(0), obs)
     params = {**params, "params": {**params["params"], "log_std": jnp.array([-3.0, 0.5])}}
     np.testing.assert_array_equal(free.apply(params, obs)[1], [-3.0, 0.5])

@@ -28,37 +28,82 @@ def row(rng) -> dict:
     """One row's seeds: evaluation episodes on two variants (return, length, progress), and each
     update's training return (NaN where no episode ended) and approx. KL, seed 5 with a KL storm."""
     kl = rng.uniform(0.0, 0.02, (SEEDS, UPDATES))
-    kl[5, 100:100 + 2 * STORM_UPDATES] = 10 * KL_ABOVE
-    returns = np.where(rng.uniform(size=(SEEDS, UPDATES)) < 0.3, np.nan,
-                       rng.normal(100.0, 30.0, (SEEDS, UPDATES)) + np.arange(SEEDS)[:, None] * 50)
+    kl[5, 100 : 100 + 2 * STORM_UPDATES] = 10 * KL_ABOVE
+    returns = np.where(
+        rng.uniform(size=(SEEDS, UPDATES)) < 0.3,
+        np.nan,
+        rng.normal(100.0, 30.0, (SEEDS, UPDATES)) + np.arange(SEEDS)[:, None] * 50,
+    )
     returns[:, :5] = np.nan
-    episodes = [EvalResult(rng.normal(500, 150, (SEEDS, EPISODES)) - 2000 * (np.arange(SEEDS) == 2)[:, None],
-                           rng.integers(100, 1000, (SEEDS, EPISODES)), {"progress": rng.uniform(0, 1, (SEEDS, EPISODES))})
-                for _ in range(2)]
+    episodes = [
+        EvalResult(
+            rng.normal(500, 150, (SEEDS, EPISODES)) - 2000 * (np.arange(SEEDS) == 2)[:, None],
+            rng.integers(100, 1000, (SEEDS, EPISODES)),
+            {"progress": rng.uniform(0, 1, (SEEDS, EPISODES))},
+        )
+        for _ in range(2)
+    ]
     return {"kl": kl, "returns": returns, "episodes": episodes}
 
 
-def write_run(runs: Path, data: dict, seed: int, seeds: int, wall: float, device: str = "NVIDIA H200") -> None:
+def write_run(
+    runs: Path, data: dict, seed: int, seeds: int, wall: float, device: str = "NVIDIA H200"
+) -> None:
     """A finished run folder of seeds seed..seed+seeds-1 of `data`, as a sweep leaves it."""
     folder = runs / RUN
     folder.mkdir(parents=True)
     part = slice(seed, seed + seeds)
     cfg = layers.run_config({"env": "car_racing", "agent": "ppo_rgb", "seed": seed, "seeds": seeds})
     layers.save_run_config(folder, cfg)
-    evaluations = [{"variant": variant, "stochastic": True,
-                    **summarize(EvalResult(e.episode_return[part], e.episode_length[part], {k: v[part] for k, v in e.metrics.items()}))}
-                   for variant, e in zip(("standard", "hairpin"), data["episodes"])]
+    evaluations = [
+        {
+            "variant": variant,
+            "stochastic": True,
+            **summarize(
+                EvalResult(
+                    e.episode_return[part],
+                    e.episode_length[part],
+                    {k: v[part] for k, v in e.metrics.items()},
+                )
+            ),
+        }
+        for variant, e in zip(("standard", "hairpin"), data["episodes"])
+    ]
     with (folder / "metrics.csv").open("w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(["update", "seed", "env_steps", "episode_return", "approx_kl"])
-        writer.writerows([u + 1, s, 1024 * (u + 1), data["returns"][seed + s, u], data["kl"][seed + s, u]]
-                         for u in range(UPDATES) for s in range(seeds))
-    (folder / "eval.json").write_text(json.dumps({  # with each seed's KL storms, as training.outputs writes them
-        "label": "ppo_rgb", "env": "car_racing", "train_seconds": wall - 20, "wall_seconds": wall, "device": device,
-        "train_env_steps_per_s": 1e6 / wall, "env_steps": 1024 * UPDATES, "deterministic": True, "evaluations": evaluations,
-        "kl_storms": runlog.kl_storms(folder / "metrics.csv"),
-        "group": ["ppo_rgb"], "group_dir": f"{runs.name}/car_racing/_groups/0a", "group_env_steps_per_s": 2e6 / wall}))  # trained in a group
-    (runs / "sweeps.jsonl").write_text(json.dumps({"table": "3-car", "seconds": wall, "finished": f"2026-11-29 0{seed % 10}:00:00"}) + "\n")
+        writer.writerows(
+            [u + 1, s, 1024 * (u + 1), data["returns"][seed + s, u], data["kl"][seed + s, u]]
+            for u in range(UPDATES)
+            for s in range(seeds)
+        )
+    # with each seed's KL storms, as training.outputs writes them
+    (folder / "eval.json").write_text(
+        json.dumps(
+            {
+                "label": "ppo_rgb",
+                "env": "car_racing",
+                "train_seconds": wall - 20,
+                "wall_seconds": wall,
+                "device": device,
+                "train_env_steps_per_s": 1e6 / wall,
+                "env_steps": 1024 * UPDATES,
+                "deterministic": True,
+                "evaluations": evaluations,
+                "kl_storms": runlog.kl_storms(folder / "metrics.csv"),
+                # trained in a group
+                "group": ["ppo_rgb"],
+                "group_dir": f"{runs.name}/car_racing/_groups/0a",
+                "group_env_steps_per_s": 2e6 / wall,
+            }
+        )
+    )
+    (runs / "sweeps.jsonl").write_text(
+        json.dumps(
+            {"table": "3-car", "seconds": wall, "finished": f"2026-11-29 0{seed % 10}:00:00"}
+        )
+        + "\n"
+    )
 
 
 @pytest.fixture
@@ -88,14 +133,24 @@ def pool_command(argv: list[str]) -> None:
 
 def test_parts_pool_into_what_archiving_the_whole_row_gives(parts, capsys):
     archive.archive_runs(parts / "whole", [RUN])
-    pool_command(["--pool", f"{parts / 'part4'},{parts / 'part0'}", "--runs", str(parts / "pooled")])  # any order
-    assert capsys.readouterr().out.startswith(f"pooled 1 run(s) finished in every part of {parts / 'part4'}")
+    # any order
+    pool_command(
+        ["--pool", f"{parts / 'part4'},{parts / 'part0'}", "--runs", str(parts / "pooled")]
+    )
+    assert capsys.readouterr().out.startswith(
+        f"pooled 1 run(s) finished in every part of {parts / 'part4'}"
+    )
     whole, pooled = (archive.ARCHIVE / name / RUN for name in ("whole", "pooled"))
-    assert (pooled / "metrics.csv").read_text() == (whole / "metrics.csv").read_text()  # the binned curves, seeds 0-5
-    assert yaml.safe_load((pooled / "config.yaml").read_text()) == yaml.safe_load((whole / "config.yaml").read_text())
+    # the binned curves, seeds 0-5
+    assert (pooled / "metrics.csv").read_text() == (whole / "metrics.csv").read_text()
+    assert yaml.safe_load((pooled / "config.yaml").read_text()) == yaml.safe_load(
+        (whole / "config.yaml").read_text()
+    )
     kept, want = (json.loads((f / "summary.json").read_text()) for f in (pooled, whole))
     assert kept["kl_storms"] == want["kl_storms"] and kept["kl_storms"][5]["first"] == 101
-    np.testing.assert_allclose(kept["training_return_seed_means"], want["training_return_seed_means"], rtol=1e-12)
+    np.testing.assert_allclose(
+        kept["training_return_seed_means"], want["training_return_seed_means"], rtol=1e-12
+    )
     assert kept["kl_share"] == pytest.approx(want["kl_share"], rel=1e-12)
     got, expected = (json.loads((f / "eval.json").read_text()) for f in (pooled, whole))
     for e, w in zip(got["evaluations"], expected["evaluations"], strict=True):
@@ -105,26 +160,51 @@ def test_parts_pool_into_what_archiving_the_whole_row_gives(parts, capsys):
                 assert e[key] == value, key
             else:  # float statistics: pooled from the parts' own
                 np.testing.assert_allclose(e[key], value, rtol=1e-12, err_msg=key)
-    assert got["kl_storms"] == expected["kl_storms"] and len(got["kl_storms"]) == SEEDS and got["kl_storms"][5]["first"] == 101
+    assert (
+        got["kl_storms"] == expected["kl_storms"]
+        and len(got["kl_storms"]) == SEEDS
+        and got["kl_storms"][5]["first"] == 101
+    )
     assert got["wall_seconds"] == 500.0 and got["device"] == "NVIDIA H200 + NVIDIA H100"
-    assert [(p["folder"], p["seed"], p["seeds"], p["train_env_steps_per_s"]) for p in got["parts"]] == \
-        [("part0/car_racing/ppo_rgb", 0, 4, 1e6 / 300), ("part4/car_racing/ppo_rgb", 4, 2, 1e6 / 200)]
-    assert [p["group_dir"] for p in got["parts"]] == ["part0/car_racing/_groups/0a", "part4/car_racing/_groups/0a"]
-    assert "train_env_steps_per_s" not in got and "group_dir" not in got  # a part's own, not the pooled run's
-    cells = [report.cell, report.iqm_cell, lambda r: report.metric_cell(r, "progress", 1, percent=True)]
-    pooled_result, whole_result = (report.load(parts / n, "car_racing", "ppo_rgb") for n in ("pooled", "whole"))
+    assert [
+        (p["folder"], p["seed"], p["seeds"], p["train_env_steps_per_s"]) for p in got["parts"]
+    ] == [
+        ("part0/car_racing/ppo_rgb", 0, 4, 1e6 / 300),
+        ("part4/car_racing/ppo_rgb", 4, 2, 1e6 / 200),
+    ]
+    assert [p["group_dir"] for p in got["parts"]] == [
+        "part0/car_racing/_groups/0a",
+        "part4/car_racing/_groups/0a",
+    ]
+    # a part's own, not the pooled run's
+    assert "train_env_steps_per_s" not in got and "group_dir" not in got
+    cells = [
+        report.cell,
+        report.iqm_cell,
+        lambda r: report.metric_cell(r, "progress", 1, percent=True),
+    ]
+    pooled_result, whole_result = (
+        report.load(parts / n, "car_racing", "ppo_rgb") for n in ("pooled", "whole")
+    )
     assert [c(pooled_result) for c in cells] == [c(whole_result) for c in cells]
-    assert [f(parts / "pooled", "car_racing", "ppo_rgb") for f in (report.training_cell, report.kl_cell)] == \
-        [f(parts / "whole", "car_racing", "ppo_rgb") for f in (report.training_cell, report.kl_cell)]
-    assert archive.sweep_seconds(parts / "pooled", "3-car") == pytest.approx(500.0)  # both parts' sweeps
+    assert [
+        f(parts / "pooled", "car_racing", "ppo_rgb") for f in (report.training_cell, report.kl_cell)
+    ] == [
+        f(parts / "whole", "car_racing", "ppo_rgb") for f in (report.training_cell, report.kl_cell)
+    ]
+    # both parts' sweeps
+    assert archive.sweep_seconds(parts / "pooled", "3-car") == pytest.approx(500.0)
 
 
-@pytest.mark.parametrize("change, message", [
-    ({"seed": 5}, "do not follow on"),  # a gap: seeds 0-3, then 5-6
-    ({"seed": 3}, "do not follow on"),  # an overlap: seed 3 twice
-    ({"ppo": {"epochs": 2}}, "other settings than"),
-    ({"eval_episodes": 10}, "other settings than"),
-])
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"seed": 5}, "do not follow on"),  # a gap: seeds 0-3, then 5-6
+        ({"seed": 3}, "do not follow on"),  # an overlap: seed 3 twice
+        ({"ppo": {"epochs": 2}}, "other settings than"),
+        ({"eval_episodes": 10}, "other settings than"),
+    ],
+)
 def test_parts_that_cannot_be_one_row_are_one_line(parts, capsys, change, message):
     path = parts / "part4" / RUN / "config.yaml"
     values = yaml.safe_load(path.read_text())
@@ -132,18 +212,31 @@ def test_parts_that_cannot_be_one_row_are_one_line(parts, capsys, change, messag
         values[key] = {**values[key], **value} if isinstance(value, dict) else value
     path.write_text(yaml.safe_dump(values))
     with pytest.raises(SystemExit) as e:
-        pool_command(["--pool", f"{parts / 'part0'},{parts / 'part4'}", "--runs", str(parts / "pooled")])
+        pool_command(
+            ["--pool", f"{parts / 'part0'},{parts / 'part4'}", "--runs", str(parts / "pooled")]
+        )
     err = capsys.readouterr().err
-    assert e.value.code == 2 and err.count("\n") == 1 and err.startswith("error: ") and message in err
+    assert (
+        e.value.code == 2 and err.count("\n") == 1 and err.startswith("error: ") and message in err
+    )
     assert not (archive.ARCHIVE / "pooled").exists()  # nothing written
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["--pool", "{runs}/part0", "--runs", "{runs}/pooled"], "give two or more parts"),
-    (["--pool", "{runs}/part0,{runs}/pooled", "--runs", "{runs}/pooled"], "other folder names than --runs (pooled)"),
-    (["--pool", "{runs}/part0,{runs}/nowhere", "--runs", "{runs}/pooled"], "no runs folder at"),
-    (["--pool", "{runs}/part0,{runs}/part4", "--runs", "{runs}/whole"], "the reports would read it rather than the pooled run"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--pool", "{runs}/part0", "--runs", "{runs}/pooled"], "give two or more parts"),
+        (
+            ["--pool", "{runs}/part0,{runs}/pooled", "--runs", "{runs}/pooled"],
+            "other folder names than --runs (pooled)",
+        ),
+        (["--pool", "{runs}/part0,{runs}/nowhere", "--runs", "{runs}/pooled"], "no runs folder at"),
+        (
+            ["--pool", "{runs}/part0,{runs}/part4", "--runs", "{runs}/whole"],
+            "the reports would read it rather than the pooled run",
+        ),
+    ],
+)
 def test_bad_parts_are_one_line(parts, capsys, argv, message):
     argv = [a.format(runs=parts) for a in argv]
     with pytest.raises(SystemExit) as e:
@@ -155,6 +248,8 @@ def test_bad_parts_are_one_line(parts, capsys, argv, message):
 
 def test_a_part_still_training_is_left_out_until_it_finishes(parts, capsys):
     (parts / "part4" / RUN / "eval.json").unlink()  # its seeds are still training
-    pool_command(["--pool", f"{parts / 'part0'},{parts / 'part4'}", "--runs", str(parts / "pooled")])
+    pool_command(
+        ["--pool", f"{parts / 'part0'},{parts / 'part4'}", "--runs", str(parts / "pooled")]
+    )
     assert capsys.readouterr().out.rstrip().endswith(": none")
     assert not (archive.ARCHIVE / "pooled" / RUN).exists()

@@ -12,7 +12,12 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from hintsjax.algorithms.ppo_math import clipped_surrogate_loss, gae, gaussian_entropy, gaussian_log_prob
+from hintsjax.algorithms.ppo_math import (
+    clipped_surrogate_loss,
+    gae,
+    gaussian_entropy,
+    gaussian_log_prob,
+)
 
 GAMMA, LAM = 0.5, 0.5  # gamma * lam = 0.25
 
@@ -99,7 +104,8 @@ def test_truncation_differs_from_termination_by_the_bootstrap():
     # ... and earlier steps see the change discounted by (gamma * lam) per step back.
     np.testing.assert_allclose(diff[1, 1], GAMMA * LAM * bootstrap, rtol=0, atol=1e-6)
     np.testing.assert_allclose(diff[0, 1], (GAMMA * LAM) ** 2 * bootstrap, rtol=0, atol=1e-6)
-    np.testing.assert_allclose(tgt_term[2, 1], -1.0 + 2.0, rtol=0, atol=1e-6)  # target = A + v = -1 + 2
+    # target = A + v = -1 + 2
+    np.testing.assert_allclose(tgt_term[2, 1], -1.0 + 2.0, rtol=0, atol=1e-6)
 
 
 def test_gae_termination_wins_over_truncation():
@@ -110,18 +116,23 @@ def test_gae_termination_wins_over_truncation():
     np.testing.assert_allclose(adv_both[2, 1], 1.0 + 0.0 - 2.0, rtol=0, atol=1e-6)
 
 
-
 def test_gae_segments_cut_the_advantage_but_keep_the_bootstrap():
     # segment=2 cuts after rows 1 and 3 (Brax's unrolls of 2 steps). Column 0 already ends at row 1
     # (terminated) and row 3 is the rollout's end: unchanged. Column 1 is cut after row 1: A_1 is
     # its own delta, 1 (bootstrapped from v_2 = 2 as before), not 1.5, and A_0 = -1.5 + 0.25 * 1.
-    advantage, target = gae(REWARD, VALUE, TERMINATED, TRUNCATED, FINAL_VALUE, LAST_VALUE, GAMMA, LAM, segment=2)
+    advantage, target = gae(
+        REWARD, VALUE, TERMINATED, TRUNCATED, FINAL_VALUE, LAST_VALUE, GAMMA, LAM, segment=2
+    )
     expected = EXPECTED_ADVANTAGE.copy()
     expected[1, 1], expected[0, 1] = 1.0, -1.25
     np.testing.assert_allclose(np.asarray(advantage), expected, rtol=0, atol=1e-6)
     np.testing.assert_allclose(np.asarray(target), expected + VALUE, rtol=0, atol=1e-6)
-    whole, _ = gae(REWARD, VALUE, TERMINATED, TRUNCATED, FINAL_VALUE, LAST_VALUE, GAMMA, LAM, segment=4)
-    np.testing.assert_allclose(np.asarray(whole), EXPECTED_ADVANTAGE, rtol=0, atol=1e-6)  # one segment: GAE as before
+    whole, _ = gae(
+        REWARD, VALUE, TERMINATED, TRUNCATED, FINAL_VALUE, LAST_VALUE, GAMMA, LAM, segment=4
+    )
+    # one segment: GAE as before
+    np.testing.assert_allclose(np.asarray(whole), EXPECTED_ADVANTAGE, rtol=0, atol=1e-6)
+
 
 # -- clipped surrogate --------------------------------------------------------------------------
 
@@ -146,7 +157,15 @@ OLD_LOG_PROB = np.full(6, -0.7, np.float32)
 def surrogate(entropy=0.7, log_prob=None):
     log_prob = OLD_LOG_PROB + np.log(RATIO) if log_prob is None else log_prob
     return clipped_surrogate_loss(
-        jnp.asarray(log_prob), OLD_LOG_PROB, ADVANTAGE, VALUE_PRED, VALUE_TARGET, jnp.float32(entropy), CLIP, VF, ENT
+        jnp.asarray(log_prob),
+        OLD_LOG_PROB,
+        ADVANTAGE,
+        VALUE_PRED,
+        VALUE_TARGET,
+        jnp.float32(entropy),
+        CLIP,
+        VF,
+        ENT,
     )
 
 

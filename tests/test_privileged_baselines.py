@@ -26,12 +26,16 @@ from hintsjax.cli import overrides
 from hintsjax.evaluation import evaluator
 from hintsjax import run
 
-OBS = {"pixels": jax.random.randint(jax.random.key(1), (4, 36, 36, 3), 0, 255).astype(jnp.uint8),
-       "hint": jax.random.normal(jax.random.key(2), (4, 3))}
+OBS = {
+    "pixels": jax.random.randint(jax.random.key(1), (4, 36, 36, 3), 0, 255).astype(jnp.uint8),
+    "hint": jax.random.normal(jax.random.key(2), (4, 3)),
+}
 
 
 def learn(agent: str, env: str = "cue", **settings):
-    cfg = layers.run_config(dict(env=env, agent=agent, scheme="fc", seeds=1, ppo={**LEARN_PPO, **settings}))
+    cfg = layers.run_config(
+        dict(env=env, agent=agent, scheme="fc", seeds=1, ppo={**LEARN_PPO, **settings})
+    )
     trainer = ppo.make_trainer(cfg)
     state, metrics = jax.jit(trainer.train)(jax.random.key(0))
     return trainer, state, jax.tree.map(np.asarray, metrics)
@@ -48,7 +52,8 @@ def test_the_asymmetric_critic_reads_the_hint_and_the_actor_never_does():
         return jax.grad(lambda h: net.apply(params, {**OBS, "hint": h})[output].sum())(OBS["hint"])
 
     np.testing.assert_array_equal(grad_of(0), 0.0)  # the action's mean
-    assert np.all(np.abs(np.asarray(grad_of(2))).sum(axis=-1) > 0)  # every row's value depends on its hint
+    # every row's value depends on its hint
+    assert np.all(np.abs(np.asarray(grad_of(2))).sum(axis=-1) > 0)
 
 
 def test_the_hint_is_dropped_at_the_rate_asked_in_training():
@@ -61,14 +66,19 @@ def test_the_hint_is_dropped_at_the_rate_asked_in_training():
         dropped = (seen == 0).all(axis=-1)
         assert np.all(dropped | (seen == 1).all(axis=-1))  # a whole hint is dropped or kept
         assert abs(dropped.mean() - p) <= 5 * np.sqrt(p * (1 - p) / n) + 1e-9, (p, dropped.mean())
-    np.testing.assert_array_equal(ppo.observe({"hint": hint}, jax.random.key(7), hyper)["hint"], hint)  # no drop
+    # no drop
+    np.testing.assert_array_equal(
+        ppo.observe({"hint": hint}, jax.random.key(7), hyper)["hint"], hint
+    )
 
 
 def test_only_pi_dropout_rolls_out_with_dropped_hints():
     """In a rollout of the cue task (cues are +-1, so a zero is a drop), pi_dropout's batch has the
     asked share of zero hints, HINTS' none."""
     for agent, p in (("pi_dropout", 0.3), ("hints", 0.0)):
-        cfg = layers.run_config(dict(env="cue", agent=agent, seeds=1, ppo={**LEARN_PPO, "hint_dropout": 0.3}))
+        cfg = layers.run_config(
+            dict(env="cue", agent=agent, seeds=1, ppo={**LEARN_PPO, "hint_dropout": 0.3})
+        )
         parts = ppo.make_ppo(cfg)
         state = jax.jit(parts.init)(jax.random.key(0))
         _, traj, _ = jax.jit(parts.rollout)(state, jax.random.key(1))
@@ -83,11 +93,14 @@ def test_pi_dropout_reads_the_hint_in_training_and_acts_without_it_at_deployment
     near 0), where its policy with the hint in view scores far better."""
     trainer, state, metrics = learn("pi_dropout", hint_dropout=0.5)
     assert metrics["episode_return"][-LAST:].mean() > -0.95, np.round(metrics["episode_return"], 2)
-    cues = cue_env.CueState(cue=jnp.array([-1.0, 1.0]), t=jnp.zeros(2, jnp.int32), distractor=jnp.zeros(2))
+    cues = cue_env.CueState(
+        cue=jnp.array([-1.0, 1.0]), t=jnp.zeros(2, jnp.int32), distractor=jnp.zeros(2)
+    )
     obs = jax.vmap(trainer.env.observation, in_axes=(0, None))(cues, trainer.env.default_params())
     deployed = trainer.network.apply(state.params, ppo.deploy_view(obs, trainer.cfg.agent_spec))[0]
     assert float(deployed[0, 0]) == float(deployed[1, 0])
-    low, high = policy_mean(trainer, state.params, [-1.0, 1.0])  # with the hint it does follow the cue
+    # with the hint it does follow the cue
+    low, high = policy_mean(trainer, state.params, [-1.0, 1.0])
     assert low < high, (low, high)
     cfg = trainer.cfg
     params = jax.tree.map(lambda x: x[None], state.params)
@@ -111,8 +124,18 @@ def test_hint_aux_learns_to_predict_a_hint_that_the_picture_shows():
     """On the dot task, whose hint (the dot's position) is a function of the picture, hint_aux's
     prediction error falls below 0.02 (the position's variance is 1/3) when the loss is weighted, and
     stays far above it when its weight is 0 (the head then learns nothing)."""
-    settings = dict(num_envs=32, batch_size=256, minibatch_size=64, epochs=4, total_env_steps=3072, hidden=[64, 64])
-    errors = {coef: learn("hint_aux", "dot", **settings, aux_coef=coef)[2]["hint_loss"] for coef in (1.0, 0.0)}
+    settings = dict(
+        num_envs=32,
+        batch_size=256,
+        minibatch_size=64,
+        epochs=4,
+        total_env_steps=3072,
+        hidden=[64, 64],
+    )
+    errors = {
+        coef: learn("hint_aux", "dot", **settings, aux_coef=coef)[2]["hint_loss"]
+        for coef in (1.0, 0.0)
+    }
     assert errors[1.0][-1] < 0.02 and errors[1.0][-1] < errors[1.0][0] / 5, np.round(errors[1.0], 3)
     assert errors[0.0][-LAST:].mean() > 0.05, np.round(errors[0.0], 3)
 
@@ -120,9 +143,17 @@ def test_hint_aux_learns_to_predict_a_hint_that_the_picture_shows():
 def test_the_baselines_train_in_groups_of_their_own():
     """Same observations and scheme, other networks or views: HINTS, pi_dropout, asym_ac and hint_aux
     never share a group; two pi_dropout runs of other rates do not either (hint_dropout is a shape)."""
-    cfgs = [layers.run_config(dict(env="cue", agent=a, ppo=p)) for a, p in
-            (("hints", {}), ("pi_dropout", {}), ("asym_ac", {}), ("hint_aux", {}), ("pi_dropout", {"hint_dropout": 0.2}),
-             ("asym_ac", {"ent_coef": 0.02}))]
+    cfgs = [
+        layers.run_config(dict(env="cue", agent=a, ppo=p))
+        for a, p in (
+            ("hints", {}),
+            ("pi_dropout", {}),
+            ("asym_ac", {}),
+            ("hint_aux", {}),
+            ("pi_dropout", {"hint_dropout": 0.2}),
+            ("asym_ac", {"ent_coef": 0.02}),
+        )
+    ]
     assert group.plan(cfgs) == [[0], [1], [2, 5], [3], [4]]
 
 
@@ -135,14 +166,25 @@ def test_an_agent_says_what_it_sees_at_deployment():
         AgentSpec(pixels=True, hint=True, hint_use="critc")
 
 
-TINY_PPO = dict(total_env_steps=128, num_envs=4, batch_size=64, minibatch_size=32, epochs=1, hidden=[16])
+TINY_PPO = dict(
+    total_env_steps=128, num_envs=4, batch_size=64, minibatch_size=32, epochs=1, hidden=[16]
+)
 
 
 def command_values(out_dir, env: str, agent: str) -> dict:
     """What Hydra gives `python -m hintsjax.run env=<env> agent=<agent>` at a tiny budget."""
     values = overrides.defaults()
-    return {**values, "env": env, "agent": agent, "seeds": 1, "eval_episodes": 2, "out_dir": str(out_dir),
-            "name": f"{env}-{agent}", "compilation_cache": False, "ppo": {**values["ppo"], **TINY_PPO}}
+    return {
+        **values,
+        "env": env,
+        "agent": agent,
+        "seeds": 1,
+        "eval_episodes": 2,
+        "out_dir": str(out_dir),
+        "name": f"{env}-{agent}",
+        "compilation_cache": False,
+        "ppo": {**values["ppo"], **TINY_PPO},
+    }
 
 
 def train_through_the_command(tmp_path, env: str, agent: str, **more) -> dict:
@@ -154,17 +196,28 @@ def train_through_the_command(tmp_path, env: str, agent: str, **more) -> dict:
 @pytest.mark.parametrize("agent", ["asym_ac", "pi_dropout", "hint_aux"])
 def test_each_baseline_trains_through_the_command_and_says_it_deployed_on_pixels(tmp_path, agent):
     results = train_through_the_command(tmp_path, "pendulum", agent)
-    assert results["seen_at_deploy"] == ["pixels"] and np.isfinite(results["evaluations"][0]["mean"])
+    assert results["seen_at_deploy"] == ["pixels"] and np.isfinite(
+        results["evaluations"][0]["mean"]
+    )
 
 
 # The slow tier trains one baseline on each other env (the three share everything an env gives them:
 # pictures and a hint), the locomotion ones with the state as their signal, as privileged_baselines.py
 # does; HINTSJAX_TEST_EVERY_BASELINE=1 trains all three on every shipped env (24 runs, 877 s on 2 cores).
 EVERY = os.environ.get("HINTSJAX_TEST_EVERY_BASELINE", "") not in ("", "0")
-ROTATION = {"acrobot": "asym_ac", "idp": "pi_dropout", "halfcheetah": "hint_aux", "ant": "asym_ac",
-            "humanoid": "pi_dropout", "car_racing": "hint_aux"}
-CASES = ([(env, agent) for env in SHIPPED_ENVS for agent in ("asym_ac", "pi_dropout", "hint_aux")] if EVERY
-         else list(ROTATION.items()))
+ROTATION = {
+    "acrobot": "asym_ac",
+    "idp": "pi_dropout",
+    "halfcheetah": "hint_aux",
+    "ant": "asym_ac",
+    "humanoid": "pi_dropout",
+    "car_racing": "hint_aux",
+}
+CASES = (
+    [(env, agent) for env in SHIPPED_ENVS for agent in ("asym_ac", "pi_dropout", "hint_aux")]
+    if EVERY
+    else list(ROTATION.items())
+)
 
 
 @pytest.mark.slow
@@ -172,7 +225,9 @@ CASES = ([(env, agent) for env in SHIPPED_ENVS for agent in ("asym_ac", "pi_drop
 def test_a_baseline_trains_on_each_env(tmp_path, env, agent):
     hint = {"hint": "state"} if env in ("halfcheetah", "ant", "ant_fast", "humanoid") else {}
     results = train_through_the_command(tmp_path, env, agent, **hint)
-    assert results["seen_at_deploy"] == ["pixels"] and np.isfinite(results["evaluations"][0]["mean"])
+    assert results["seen_at_deploy"] == ["pixels"] and np.isfinite(
+        results["evaluations"][0]["mean"]
+    )
 
 
 # hint_aux is compared after 1 update: on the cue task's constant pictures its encoder and hint head
@@ -186,20 +241,31 @@ def test_a_baseline_in_a_group_of_hint_widths_trains_as_it_does_alone(agent, upd
     gradients; hint_aux's error counts its own positions only), another member's far off."""
     from test_group import SEEDS, TINY_PPO, max_difference
 
-    cfgs = [layers.run_config({"env": "cue", "agent": agent, "hint": h, "seeds": SEEDS, "ppo": TINY_PPO})
-            for h in ("cue", "cue_pair")]
+    cfgs = [
+        layers.run_config(
+            {"env": "cue", "agent": agent, "hint": h, "seeds": SEEDS, "ppo": TINY_PPO}
+        )
+        for h in ("cue", "cue_pair")
+    ]
     g = group.make_group(cfgs)
 
     def trained(trainer, cfg):
-        return jax.jit(jax.vmap(lambda s: trainer.run(s, updates)[0]))(jax.jit(jax.vmap(trainer.init))(cfg.seed_keys()))
+        return jax.jit(jax.vmap(lambda s: trainer.run(s, updates)[0]))(
+            jax.jit(jax.vmap(trainer.init))(cfg.seed_keys())
+        )
 
     together = trained(group.make_group_trainer(g), cfgs[0])
     alone = [trained(ppo.make_trainer(c), c) for c in cfgs]
     for k in range(2):
         member = group.cell_state(g, together, k)
         assert max_difference(member.params, alone[k].params) < 1e-6, (agent, k)
-    assert max_difference(group.cell_state(g, together, 0).params["params"]["critic"],
-                          alone[1].params["params"]["critic"]) > 1e-3
+    assert (
+        max_difference(
+            group.cell_state(g, together, 0).params["params"]["critic"],
+            alone[1].params["params"]["critic"],
+        )
+        > 1e-3
+    )
 
 
 def test_the_hint_error_counts_a_members_own_positions_only():
@@ -209,4 +275,6 @@ def test_the_hint_error_counts_a_members_own_positions_only():
     assert float(ppo.hint_error(prediction, hint, jnp.array([True]))) == 5.0
     padded = jnp.concatenate([prediction, jnp.full((2, 2), 7.0)], axis=1)
     assert float(ppo.hint_error(padded, jnp.zeros((2, 3)), jnp.array([True, False, False]))) == 5.0
-    assert float(ppo.hint_error(padded, jnp.zeros((2, 3)), jnp.ones(3, bool))) == pytest.approx((1 + 9 + 4 * 49) / 6)
+    assert float(ppo.hint_error(padded, jnp.zeros((2, 3)), jnp.ones(3, bool))) == pytest.approx(
+        (1 + 9 + 4 * 49) / 6
+    )

@@ -17,13 +17,19 @@ import pytest
 from xla_tier import without_optimisation_level
 
 ROOT = Path(__file__).resolve().parents[1]
-PROMISE = 500  # the README: "at least 500 better than the random policy" (16 seeds on two CPU kinds: 995 to 1130)
+# the README: "at least 500 better than the random policy" (16 seeds on two CPU kinds: 995 to 1130)
+PROMISE = 500
 
 
 def readme_block() -> list[str]:
     """The quickstart's last lines as the README shows them (its first fenced block after `make run (`)."""
     text = (ROOT / "README.md").read_text()
-    return text[text.index("`make run` (`python -m hintsjax.quickstart`)"):].split("```")[1].strip().splitlines()
+    return (
+        text[text.index("`make run` (`python -m hintsjax.quickstart`)") :]
+        .split("```")[1]
+        .strip()
+        .splitlines()
+    )
 
 
 def shape(line: str) -> str:
@@ -34,19 +40,34 @@ def shape(line: str) -> str:
 def test_the_readme_states_the_promise():
     readme = (ROOT / "README.md").read_text()
     assert f"at least {PROMISE} better than the random policy" in readme
-    assert [shape(line) for line in readme_block()][1].startswith("  trained agent (hints-fc-composite, # env steps):")
+    assert [shape(line) for line in readme_block()][1].startswith(
+        "  trained agent (hints-fc-composite, # env steps):"
+    )
 
 
 @pytest.mark.slow
 def test_make_run_ends_as_the_readme_promises(tmp_path):
-    env = {**os.environ, "XLA_FLAGS": without_optimisation_level(), "HINTSJAX_COMPILATION_CACHE": "off", "JAX_PLATFORMS": "cpu"}
+    env = {
+        **os.environ,
+        "XLA_FLAGS": without_optimisation_level(),
+        "HINTSJAX_COMPILATION_CACHE": "off",
+        "JAX_PLATFORMS": "cpu",
+    }
     env.pop("HINTSJAX_DEBUG", None)
-    done = subprocess.run([sys.executable, "-m", "hintsjax.quickstart", "--out-dir", str(tmp_path)], env=env,
-                          capture_output=True, text=True, timeout=1800)
+    done = subprocess.run(
+        [sys.executable, "-m", "hintsjax.quickstart", "--out-dir", str(tmp_path)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=1800,
+    )
     assert done.returncode == 0, done.stderr[-3000:]
     run = next(tmp_path.glob("quickstart-*"))
     trained = json.loads((run / "eval.json").read_text())["evaluations"][0]["mean"]
     random = json.loads((run / "random_policy.json").read_text())["mean"]
     assert trained - random >= PROMISE, (trained, random)
-    shown = [line.replace(str(tmp_path) + "/", "runs/") for line in done.stdout.strip().splitlines()[-len(readme_block()):]]
+    shown = [
+        line.replace(str(tmp_path) + "/", "runs/")
+        for line in done.stdout.strip().splitlines()[-len(readme_block()) :]
+    ]
     assert [shape(line) for line in shown] == [shape(line) for line in readme_block()]

@@ -18,11 +18,22 @@ from xla_tier import without_optimisation_level
 from hintsjax.hints import ranking
 from hintsjax import envs
 
-TINY = ["env=cue", "hints=distractor,cue", "seeds=2", "info_envs=64", "info_steps=8", "info_held_out_envs=32",
-        "info_epochs=3", "info_minibatch_size=64", "info_lr=1e-3", "probe_fraction=0.02"]
+TINY = [
+    "env=cue",
+    "hints=distractor,cue",
+    "seeds=2",
+    "info_envs=64",
+    "info_steps=8",
+    "info_held_out_envs=32",
+    "info_epochs=3",
+    "info_minibatch_size=64",
+    "info_lr=1e-3",
+    "probe_fraction=0.02",
+]
 
 
-@pytest.mark.slow  # 80 s of the suite on 2 cores: the probe trains pixel agents; ranking's pieces are checked below
+# 80 s of the suite on 2 cores: the probe trains pixel agents; ranking's pieces are checked below
+@pytest.mark.slow
 def test_every_score_ranks_the_informative_hint_first(tmp_path):
     """The command in a process of its own, under XLA's default optimisation: the probe trains 4
     pixel agents, which the suite's LLVM -O0 (tests/conftest.py) runs slower than it compiles
@@ -30,19 +41,29 @@ def test_every_score_ranks_the_informative_hint_first(tmp_path):
     every seed still put the cue far above the noise (about -1.26 against -1.86)."""
     flags = without_optimisation_level()
     script = "import sys, cue_env; from hintsjax import rank; sys.exit(rank.main(sys.argv[1:]))"
-    out = subprocess.run([sys.executable, "-c", script, *TINY, f"out_dir={tmp_path}", "name=r"], cwd=Path(__file__).parent,
-                         env={**os.environ, "XLA_FLAGS": flags}, capture_output=True, text=True, timeout=600)
+    out = subprocess.run(
+        [sys.executable, "-c", script, *TINY, f"out_dir={tmp_path}", "name=r"],
+        cwd=Path(__file__).parent,
+        env={**os.environ, "XLA_FLAGS": flags},
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert out.returncode == 0, out.stderr[-3000:]
     folder = tmp_path / "r"
     result = json.loads((folder / "scores.json").read_text())
-    assert result["candidates"] == ["distractor", "cue"] and set(result["scores"]) == {"information", "probe"}
+    assert result["candidates"] == ["distractor", "cue"] and set(result["scores"]) == {
+        "information",
+        "probe",
+    }
     assert result["probe_measure"] == "episode_return"  # every step of the cue task ends an episode
     for name, values in result["scores"].items():
         values = np.asarray(values)  # [seeds, candidates]
         assert values.shape == (2, 2)
         assert np.all(values[:, 1] > values[:, 0]), name  # every seed: cue above the noise
     info = np.asarray(result["scores"]["information"])
-    assert np.all(info[:, 1] > 0.2) and np.all(np.abs(info[:, 0]) < 0.1)  # noise adds nothing to the return's R^2
+    # noise adds nothing to the return's R^2
+    assert np.all(info[:, 1] > 0.2) and np.all(np.abs(info[:, 0]) < 0.1)
     rows = (folder / "ranking.csv").read_text().splitlines()
     assert rows[0] == "score,hint,rank,mean,std_over_seeds" and "information,cue,1," in rows[2]
     assert (folder / "ranking.png").stat().st_size > 0
@@ -68,7 +89,8 @@ def test_learning_curve_area_by_hand():
     area, measure = ranking.learning_curve_area({"episode_return": returns, "step_reward": step})
     assert measure == "episode_return"
     np.testing.assert_allclose(area, [[2.0, 2.0], [5.0, 5.0]])  # the updates where episodes ended
-    returns[1, :, 0] = nan  # seed 1's first candidate saw no episode end: every run by its reward per step
+    # seed 1's first candidate saw no episode end: every run by its reward per step
+    returns[1, :, 0] = nan
     area, measure = ranking.learning_curve_area({"episode_return": returns, "step_reward": step})
     assert measure == "step_reward"
     np.testing.assert_allclose(area, [[0.2, 0.3], [0.6, 0.7]])

@@ -21,15 +21,33 @@ from hintsjax.settings.layers import run_config, save_run_config
 from hintsjax.algorithms.ppo import make_network
 from hintsjax.algorithms.registry import make_trainer
 from hintsjax.evaluation.evaluator import eval_keys
-from hintsjax.evaluation.recording import Rollout, compose_frame, hint_labels, policy_action, rollout, step_keys
+from hintsjax.evaluation.recording import (
+    Rollout,
+    compose_frame,
+    hint_labels,
+    policy_action,
+    rollout,
+    step_keys,
+)
 from hintsjax.training import pipeline
 from hintsjax.video import main
 
 STEPS = 20
 TINY_HINTS = {
-    "env": "pendulum", "agent": "hints", "hint": "composite", "scheme": "fc", "seeds": 2, "eval_episodes": 2,
+    "env": "pendulum",
+    "agent": "hints",
+    "hint": "composite",
+    "scheme": "fc",
+    "seeds": 2,
+    "eval_episodes": 2,
     "eval_variants": [],
-    "ppo": {"total_env_steps": 256, "num_envs": 4, "batch_size": 64, "minibatch_size": 32, "epochs": 1},
+    "ppo": {
+        "total_env_steps": 256,
+        "num_envs": 4,
+        "batch_size": 64,
+        "minibatch_size": 32,
+        "epochs": 1,
+    },
 }
 
 
@@ -61,9 +79,14 @@ def tiny_run(tmp_path_factory) -> TinyRun:
             return jax.random.wrap_key_data(np.zeros((*a.shape, 2), np.uint32))
         return np.zeros(a.shape, a.dtype)
 
-    def weights(a):  # [S, ..., fan_in, fan_out] kernels drawn at 1/sqrt(fan_in); biases and log_std 0
+    # [S, ..., fan_in, fan_out] kernels drawn at 1/sqrt(fan_in); biases and log_std 0
+    def weights(a):
         fan_in = math.prod(a.shape[1:-1])
-        return (rng.normal(size=a.shape) / np.sqrt(fan_in)).astype(a.dtype) if len(a.shape) > 2 else np.zeros(a.shape, a.dtype)
+        return (
+            (rng.normal(size=a.shape) / np.sqrt(fan_in)).astype(a.dtype)
+            if len(a.shape) > 2
+            else np.zeros(a.shape, a.dtype)
+        )
 
     state = jax.tree.map(blank, abstract).replace(params=jax.tree.map(weights, abstract.params))
     checkpoint.save(path, state, 4)
@@ -81,7 +104,9 @@ def test_rollout_matches_a_step_by_step_loop(tiny_run):
     # hint of each state, so the step's own observation is what the rollout must have drawn.
     env, task_params = cfg.make_env(), envs.make_params("pendulum")
     network = make_network(cfg, env)
-    env_step = jax.jit(lambda p, k, state, obs: env.step(k, state, policy_action(network, p, obs), task_params))
+    env_step = jax.jit(
+        lambda p, k, state, obs: env.step(k, state, policy_action(network, p, obs), task_params)
+    )
     k_reset, k_run = step_keys(key)
     ts = jax.jit(env.reset)(k_reset, task_params)
     rewards, hints, frames = [], [], []
@@ -114,18 +139,32 @@ def test_a_run_evaluated_with_sampled_actions_is_filmed_with_them(tiny_run):
 def test_composed_frame_is_the_upscaled_picture_beside_the_panel():
     env = envs.make("pendulum", hint="composite")
     assert hint_labels(env.hint) == ["angular_velocity[0] (rad/s)", "goal_distance[0] (m)"]
-    assert hint_labels(envs.make("pendulum", hint="state").hint) == ["state[0] (1)", "state[1] (1)", "state[2] (rad/s)"]
+    assert hint_labels(envs.make("pendulum", hint="state").hint) == [
+        "state[0] (1)",
+        "state[1] (1)",
+        "state[2] (rad/s)",
+    ]
     picture = np.random.default_rng(0).integers(0, 256, (64, 64, 3), dtype=np.uint8)
-    frame = compose_frame(picture, np.array([1.5, -0.3]), hint_labels(env.hint), step=3, episode_return=-4.2, scale=2)
-    assert frame.shape == (176, 128 + 240, 3) and frame.dtype == np.uint8  # a small picture is padded to 176
-    np.testing.assert_array_equal(frame[:128, :128], np.repeat(np.repeat(picture, 2, axis=0), 2, axis=1))
+    frame = compose_frame(
+        picture, np.array([1.5, -0.3]), hint_labels(env.hint), step=3, episode_return=-4.2, scale=2
+    )
+    # a small picture is padded to 176
+    assert frame.shape == (176, 128 + 240, 3) and frame.dtype == np.uint8
+    np.testing.assert_array_equal(
+        frame[:128, :128], np.repeat(np.repeat(picture, 2, axis=0), 2, axis=1)
+    )
     assert (frame[128:, :128] == 255).all()
 
 
 def test_cut_keeps_the_steps_up_to_the_episode_end():
     valid = np.array([True, True, True, False, False])
-    episode = Rollout(np.zeros((5, 4, 4, 3), np.uint8), np.arange(10, dtype=np.float32).reshape(5, 2),
-                      np.arange(5, dtype=np.float32), np.array([False, False, True, False, True]), valid).cut()
+    episode = Rollout(
+        np.zeros((5, 4, 4, 3), np.uint8),
+        np.arange(10, dtype=np.float32).reshape(5, 2),
+        np.arange(5, dtype=np.float32),
+        np.array([False, False, True, False, True]),
+        valid,
+    ).cut()
     assert episode.frames.shape == (3, 4, 4, 3) and episode.hints.shape == (3, 2)
     np.testing.assert_array_equal(episode.rewards, [0, 1, 2])
     assert episode.done[-1] and episode.valid.all()
@@ -137,7 +176,8 @@ def test_command_writes_one_gif_frame_per_step(tiny_run, capsys):
     line = capsys.readouterr().out.strip()
     assert line.startswith(f"{out}: {STEPS} frames, return ") and len(line.splitlines()) == 1
     cfg = tiny_run.cfg
-    expected = rollout(cfg, tiny_run.seed(1), None, STEPS, eval_keys(cfg)[1]).cut().rewards.sum()  # compiled once, shared
+    # compiled once, shared
+    expected = rollout(cfg, tiny_run.seed(1), None, STEPS, eval_keys(cfg)[1]).cut().rewards.sum()
     assert f"return {expected:.2f} " in line
     with Image.open(out) as gif:
         assert gif.n_frames == STEPS
@@ -145,7 +185,9 @@ def test_command_writes_one_gif_frame_per_step(tiny_run, capsys):
     assert out.stat().st_size < 200_000
 
 
-UNWRITABLE = yaml.safe_load((Path(__file__).parent / "data" / "bad_inputs.yaml").read_text())["unwritable"]
+UNWRITABLE = yaml.safe_load((Path(__file__).parent / "data" / "bad_inputs.yaml").read_text())[
+    "unwritable"
+]
 
 
 @pytest.mark.parametrize("case", list(UNWRITABLE))
@@ -195,6 +237,21 @@ def test_video_of_a_trained_run(tmp_path):
     save_run_config(tmp_path, cfg)
     pipeline.train(cfg, tmp_path, progress=False)
     out = tmp_path / "v.gif"
-    assert main([str(tmp_path), "--variant", "swingto", "--steps", str(STEPS), "--scale", "2", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                str(tmp_path),
+                "--variant",
+                "swingto",
+                "--steps",
+                str(STEPS),
+                "--scale",
+                "2",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     with Image.open(out) as gif:
         assert gif.n_frames == STEPS and gif.size == (128 + 240, 176)

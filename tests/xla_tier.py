@@ -22,4 +22,6 @@ def at_o0() -> bool:
 
 def without_optimisation_level() -> str:
     """XLA_FLAGS without the LLVM level, for a subprocess that runs at XLA's default."""
-    return " ".join(f for f in os.environ.get("XLA_FLAGS", "").split() if not f.startswith(OPTIMIZATION))
+    return " ".join(
+        f for f in os.environ.get("XLA_FLAGS", "").split() if not f.startswith(OPTIMIZATION)
+    )

@@ -41,7 +41,9 @@ class Dataset:
     @classmethod
     def empty(cls, capacity: int, state_size: int, action_size: int) -> "Dataset":
         zero = jnp.zeros((), jnp.int32)
-        return cls(jnp.zeros((capacity, state_size)), jnp.zeros((capacity, action_size)), zero, zero)
+        return cls(
+            jnp.zeros((capacity, state_size)), jnp.zeros((capacity, action_size)), zero, zero
+        )
 
     def add(self, state: jax.Array, action: jax.Array) -> "Dataset":
         """Append M <= C rows, overwriting the oldest once the buffer is full."""
@@ -90,12 +92,16 @@ def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
     expert = experts.load(cfg.env, cfg.expert) if expert is None else expert
     experts.check_state_size(expert, cfg, env.state_size)
     network = make_network(cfg, env)
-    optimizer = optax.chain(optax.clip_by_global_norm(ppo.max_grad_norm), optax.adam(dagger.lr, eps=1e-5))
+    optimizer = optax.chain(
+        optax.clip_by_global_norm(ppo.max_grad_norm), optax.adam(dagger.lr, eps=1e-5)
+    )
     T, N = ppo.rollout_length, ppo.num_envs
 
     def init(key: jax.Array) -> DaggerState:
         runner = start_runner(key, env, env_params, network, N, optimizer.init, Hyper.of(cfg))
-        return DaggerState(runner, Dataset.empty(dagger.buffer_size, env.state_size, env.action_size))
+        return DaggerState(
+            runner, Dataset.empty(dagger.buffer_size, env.state_size, env.action_size)
+        )
 
     def student(params: Any, obs: dict[str, jax.Array]) -> jax.Array:
         return network.apply(params, obs)[0]
@@ -111,8 +117,16 @@ def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
             label = expert.mean(obs["state"])
             by_expert = jax.random.uniform(k_mix, (N, 1)) < beta
             action = jnp.where(by_expert, label, student(state.params, obs))
-            ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(jax.random.split(k_env, N), env_state, action, env_params)
-            visited = (obs["state"], label, ts.terminated | ts.truncated, ts.info["episode_return"], by_expert[:, 0])
+            ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
+                jax.random.split(k_env, N), env_state, action, env_params
+            )
+            visited = (
+                obs["state"],
+                label,
+                ts.terminated | ts.truncated,
+                ts.info["episode_return"],
+                by_expert[:, 0],
+            )
             return (ts.state, ts.obs), visited
 
         (env_state, obs), (states, labels, done, returns, by_expert) = jax.lax.scan(
@@ -123,11 +137,15 @@ def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
         def fit(carry, key):
             params, opt_state = carry
             batch_state, batch_label = data.sample(key, ppo.minibatch_size)
-            loss, grads = jax.value_and_grad(lambda p: imitation_loss(student(p, {"state": batch_state}), batch_label))(params)
+            loss, grads = jax.value_and_grad(
+                lambda p: imitation_loss(student(p, {"state": batch_state}), batch_label)
+            )(params)
             updates, opt_state = optimizer.update(grads, opt_state, params)
             return (optax.apply_updates(params, updates), opt_state), loss
 
-        (params, opt_state), losses = jax.lax.scan(fit, (runner.params, runner.opt_state), jax.random.split(k_fit, dagger.grad_steps))
+        (params, opt_state), losses = jax.lax.scan(
+            fit, (runner.params, runner.opt_state), jax.random.split(k_fit, dagger.grad_steps)
+        )
         params = normalization.update(params, {"state": states})  # with ppo.normalize_state
         metrics = {
             **episode_metrics(done, returns),
@@ -137,7 +155,9 @@ def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
             "dataset_size": data.size,
             "env_steps": (state.update + 1) * ppo.batch_size,
         }
-        runner = RunnerState(params, opt_state, env_state, obs, key, runner.update + 1, runner.hyper)
+        runner = RunnerState(
+            params, opt_state, env_state, obs, key, runner.update + 1, runner.hyper
+        )
         return DaggerState(runner, data), metrics
 
     return Trainer(cfg, env, network, init, update)

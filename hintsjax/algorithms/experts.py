@@ -31,7 +31,8 @@ from hintsjax.settings.config import RunConfig
 from hintsjax.settings.layers import load_run_config, to_dict
 from hintsjax.algorithms import ppo
 
-EXPERTS_DIR = Path(__file__).resolve().parents[1] / "experts"  # the packaged experts, one folder per env
+# the packaged experts, one folder per env
+EXPERTS_DIR = Path(__file__).resolve().parents[1] / "experts"
 EXPERT_JSON = "expert.json"
 POLICY = "policy"  # the orbax checkpoint inside an expert folder
 # What orbax writes into a checkpoint about the machine that wrote it, which a restore here does not
@@ -62,12 +63,17 @@ class Expert:
 
 
 def _actor(hidden: tuple[int, ...], action_size: int) -> MLP:
-    return MLP((*hidden, action_size), out_scale=0.01)  # ActorCritic's actor, parameter for parameter
+    # ActorCritic's actor, parameter for parameter
+    return MLP((*hidden, action_size), out_scale=0.01)
 
 
 def packaged() -> list[str]:
     """The envs that have a packaged expert."""
-    return sorted(p.name for p in EXPERTS_DIR.iterdir() if (p / EXPERT_JSON).is_file()) if EXPERTS_DIR.is_dir() else []
+    return (
+        sorted(p.name for p in EXPERTS_DIR.iterdir() if (p / EXPERT_JSON).is_file())
+        if EXPERTS_DIR.is_dir()
+        else []
+    )
 
 
 def best_seed(evaluation: dict) -> int:
@@ -81,22 +87,30 @@ def export(run_dir: Path, out_dir: Path | None = None, force: bool = False) -> P
     An expert that is there already (a packaged one, by default) is replaced only with `force`."""
     cfg = load_run_config(run_dir)
     if cfg.agent_spec.observe != ("state",) or cfg.agent_spec.algorithm != "ppo":
-        raise UsageError(f"{run_dir} trained {cfg.agent}; an expert comes from a state PPO run (agent=expert_ppo)")
+        raise UsageError(
+            f"{run_dir} trained {cfg.agent}; an expert comes from a state PPO run (agent=expert_ppo)"
+        )
     eval_json = Path(run_dir) / "eval.json"
     if not eval_json.is_file():
-        raise UsageError(f"{run_dir} has no eval.json: let the run finish (or resume it) before exporting")
+        raise UsageError(
+            f"{run_dir} has no eval.json: let the run finish (or resume it) before exporting"
+        )
     out = Path(out_dir or EXPERTS_DIR / cfg.env).absolute()
     paths.check_folder(out, "--out")
     if (out / EXPERT_JSON).exists() and not force:
-        raise UsageError(f"{out} holds an expert already ({cfg.env}'s{' packaged' if out.parent == EXPERTS_DIR.absolute() else ''} "
-                         f"one); give --out another folder, or --force to replace it")
+        raise UsageError(
+            f"{out} holds an expert already ({cfg.env}'s{' packaged' if out.parent == EXPERTS_DIR.absolute() else ''} "
+            f"one); give --out another folder, or --force to replace it"
+        )
     evaluation = json.loads(eval_json.read_text())["evaluations"][0]
     best = best_seed(evaluation)
     state, update = checkpoint.restore_latest(run_dir, ppo.make_trainer(cfg).abstract_state())
     params = jax.tree.map(lambda x: x[best], state.params["params"])
     policy = {"actor": params["actor"], "log_std": params["log_std"]}
     if normalization.COLLECTION in state.params:
-        stats = jax.tree.map(lambda x: x[best], state.params[normalization.COLLECTION][normalization.NAME])
+        stats = jax.tree.map(
+            lambda x: x[best], state.params[normalization.COLLECTION][normalization.NAME]
+        )
         policy["state_norm"] = {"mean": stats["mean"], "var": stats["var"]}
     out.mkdir(parents=True, exist_ok=True)
     with ocp.StandardCheckpointer() as saver:
@@ -126,15 +140,25 @@ def describe(env: str, path: str | Path | None = None) -> tuple[Path, dict]:
     """The folder and expert.json of `env`'s expert at `path` (None: the packaged one);
     UsageError if it is missing, unreadable or for another env."""
     folder = Path(path) if path is not None else EXPERTS_DIR / env
-    retrain = (f"train one with: python -m hintsjax.run env={env} agent=expert_ppo name=expert-{env} "
-               f"&& python -m hintsjax.expert runs/expert-{env}")
+    retrain = (
+        f"train one with: python -m hintsjax.run env={env} agent=expert_ppo name=expert-{env} "
+        f"&& python -m hintsjax.expert runs/expert-{env}"
+    )
     if not (folder / EXPERT_JSON).is_file():
-        raise UsageError(f"no expert for {env} at {folder} (packaged: {', '.join(packaged()) or 'none'}); {retrain}")
+        raise UsageError(
+            f"no expert for {env} at {folder} (packaged: {', '.join(packaged()) or 'none'}); {retrain}"
+        )
     try:
         meta = json.loads((folder / EXPERT_JSON).read_text())
-        meta["hidden"], meta["state_size"], meta["action_size"] = tuple(meta["hidden"]), int(meta["state_size"]), int(meta["action_size"])
+        meta["hidden"], meta["state_size"], meta["action_size"] = (
+            tuple(meta["hidden"]),
+            int(meta["state_size"]),
+            int(meta["action_size"]),
+        )
     except (ValueError, KeyError, TypeError) as e:
-        raise UsageError(f"{folder / EXPERT_JSON} is not an expert's description: {type(e).__name__}") from None
+        raise UsageError(
+            f"{folder / EXPERT_JSON} is not an expert's description: {type(e).__name__}"
+        ) from None
     if meta.get("env") != env:
         raise UsageError(f"the expert at {folder} is for {meta.get('env')}, not {env}; {retrain}")
     return folder, meta
@@ -145,19 +169,31 @@ def load(env: str, path: str | Path | None = None) -> Expert:
     folder, meta = describe(env, path)
     hidden, sizes = meta["hidden"], (meta["state_size"], meta["action_size"])
     shapes = {
-        "actor": jax.eval_shape(lambda: _actor(hidden, sizes[1]).init(jax.random.key(0), jnp.zeros((1, sizes[0])))["params"]),
+        "actor": jax.eval_shape(
+            lambda: _actor(hidden, sizes[1]).init(jax.random.key(0), jnp.zeros((1, sizes[0])))[
+                "params"
+            ]
+        ),
         "log_std": jax.ShapeDtypeStruct((sizes[1],), jnp.float32),
     }
     if meta.get("normalize_state"):
-        shapes["state_norm"] = {k: jax.ShapeDtypeStruct((sizes[0],), jnp.float32) for k in ("mean", "var")}
+        shapes["state_norm"] = {
+            k: jax.ShapeDtypeStruct((sizes[0],), jnp.float32) for k in ("mean", "var")
+        }
     abstract = on_this_device(shapes)
     try:
         with ocp.StandardCheckpointer() as loader:
-            require_same_arrays(loader.metadata((folder / POLICY).absolute()).item_metadata, abstract, "it describes")
+            require_same_arrays(
+                loader.metadata((folder / POLICY).absolute()).item_metadata,
+                abstract,
+                "it describes",
+            )
             params = loader.restore((folder / POLICY).absolute(), abstract)
     except Exception as e:  # orbax raises many types for unreadable or mismatched files
         reason = str(e).strip().splitlines()[0][:200] if str(e).strip() else type(e).__name__
-        raise UsageError(f"the expert checkpoint in {folder} is corrupt or does not match {EXPERT_JSON}: {reason}") from None
+        raise UsageError(
+            f"the expert checkpoint in {folder} is corrupt or does not match {EXPERT_JSON}: {reason}"
+        ) from None
     return Expert(params["actor"], params["log_std"], hidden, params.get("state_norm"))
 
 

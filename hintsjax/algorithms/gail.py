@@ -68,7 +68,9 @@ class GailState:
         return self.ppo.update
 
 
-def demonstrate(env: Any, env_params: Any, expert: Any, key: jax.Array, episodes: int) -> Demonstrations:
+def demonstrate(
+    env: Any, env_params: Any, expert: Any, key: jax.Array, episodes: int
+) -> Demonstrations:
     """Roll the expert out for `episodes` whole episodes of a plain (not auto-resetting) env."""
     k_reset, k_run = jax.random.split(key)
     ts = envs.fresh_episodes(k_reset, env, env_params, episodes)
@@ -77,13 +79,21 @@ def demonstrate(env: Any, env_params: Any, expert: Any, key: jax.Array, episodes
         env_state, obs, alive, ret = carry
         k_act, k_env = jax.random.split(key)
         action = expert.sample(k_act, obs["state"])
-        ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(jax.random.split(k_env, episodes), env_state, action, env_params)
-        pair = (jnp.where(alive[:, None], obs["state"], 0.0), jnp.where(alive[:, None], action, 0.0), alive)
+        ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
+            jax.random.split(k_env, episodes), env_state, action, env_params
+        )
+        pair = (
+            jnp.where(alive[:, None], obs["state"], 0.0),
+            jnp.where(alive[:, None], action, 0.0),
+            alive,
+        )
         ret = ret + jnp.where(alive, ts.reward, 0.0)
         return (ts.state, ts.obs, alive & ~(ts.terminated | ts.truncated), ret), pair
 
     init = (ts.state, ts.obs, jnp.ones(episodes, bool), jnp.zeros(episodes))
-    (_, _, _, ret), (state, action, valid) = jax.lax.scan(step, init, jax.random.split(k_run, env.max_steps))
+    (_, _, _, ret), (state, action, valid) = jax.lax.scan(
+        step, init, jax.random.split(k_run, env.max_steps)
+    )
     flat = lambda x: x.reshape((-1,) + x.shape[2:])  # noqa: E731
     state, valid = flat(state), flat(valid)
     weight = valid[:, None] / valid.sum()
@@ -97,8 +107,9 @@ def make_discriminator(gail: GailConfig) -> MLP:
     return MLP((*gail.disc_hidden, 1))
 
 
-def discriminator_loss(disc: MLP, params: Any, expert: jax.Array, policy: jax.Array,
-                       grad_penalty: float = 0.0) -> tuple[jax.Array, dict]:
+def discriminator_loss(
+    disc: MLP, params: Any, expert: jax.Array, policy: jax.Array, grad_penalty: float = 0.0
+) -> tuple[jax.Array, dict]:
     """Binary cross-entropy with expert pairs labelled 1 and the policy's 0; inputs [B, n + A].
 
     With `grad_penalty` > 0 it adds grad_penalty * E_expert |d logit / d input|^2, the
@@ -107,7 +118,11 @@ def discriminator_loss(disc: MLP, params: Any, expert: jax.Array, policy: jax.Ar
     perfectly (the humanoid's GAIL, whose reward went to 0 within 200 updates)."""
     logit_e, logit_p = disc.apply(params, expert)[..., 0], disc.apply(params, policy)[..., 0]
     loss = -jnp.mean(jax.nn.log_sigmoid(logit_e)) - jnp.mean(jax.nn.log_sigmoid(-logit_p))
-    stats = {"disc_loss": loss, "disc_expert_acc": jnp.mean(logit_e > 0), "disc_policy_acc": jnp.mean(logit_p < 0)}
+    stats = {
+        "disc_loss": loss,
+        "disc_expert_acc": jnp.mean(logit_e > 0),
+        "disc_policy_acc": jnp.mean(logit_p < 0),
+    }
     if grad_penalty:
         slope = jax.vmap(jax.grad(lambda x: disc.apply(params, x[None])[0, 0]))(expert)
         penalty = jnp.mean(jnp.sum(slope**2, axis=-1))
@@ -133,7 +148,9 @@ def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
     expert = experts.load(cfg.env, cfg.expert) if expert is None else expert
     experts.check_state_size(expert, cfg, parts.env.state_size)
     disc = make_discriminator(gail)
-    disc_opt = optax.chain(optax.clip_by_global_norm(ppo.max_grad_norm), optax.adam(gail.disc_lr, eps=1e-5))
+    disc_opt = optax.chain(
+        optax.clip_by_global_norm(ppo.max_grad_norm), optax.adam(gail.disc_lr, eps=1e-5)
+    )
 
     def disc_input(demos: Demonstrations, state: jax.Array, action: jax.Array) -> jax.Array:
         if gail.normalize_state:
@@ -157,19 +174,31 @@ def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
             params, opt_state = carry
             k_e, k_p = jax.random.split(key)
             expert_batch = disc_input(state.demos, *state.demos.sample(k_e, ppo.minibatch_size))
-            policy_batch = flat_policy[jax.random.randint(k_p, (ppo.minibatch_size,), 0, flat_policy.shape[0])]
-            grads, stats = jax.grad(lambda p: discriminator_loss(disc, p, expert_batch, policy_batch, gail.grad_penalty),
-                                    has_aux=True)(params)
+            policy_batch = flat_policy[
+                jax.random.randint(k_p, (ppo.minibatch_size,), 0, flat_policy.shape[0])
+            ]
+            grads, stats = jax.grad(
+                lambda p: discriminator_loss(
+                    disc, p, expert_batch, policy_batch, gail.grad_penalty
+                ),
+                has_aux=True,
+            )(params)
             updates, opt_state = disc_opt.update(grads, opt_state, params)
             return (optax.apply_updates(params, updates), opt_state), stats
 
         (disc_params, disc_opt_state), disc_stats = jax.lax.scan(
-            disc_step, (state.disc_params, state.disc_opt_state), jax.random.split(k_disc, gail.disc_steps)
+            disc_step,
+            (state.disc_params, state.disc_opt_state),
+            jax.random.split(k_disc, gail.disc_steps),
         )
         reward = gail_reward(disc.apply(disc_params, policy_pairs)[..., 0], gail.reward)
         runner, metrics = parts.learn(runner, traj, last_value, reward, k_epochs)
-        metrics = {**metrics, **jax.tree.map(jnp.mean, disc_stats), "gail_reward": reward.mean(),
-                   "demo_return": state.demos.episode_return.mean()}
+        metrics = {
+            **metrics,
+            **jax.tree.map(jnp.mean, disc_stats),
+            "gail_reward": reward.mean(),
+            "demo_return": state.demos.episode_return.mean(),
+        }
         new = GailState(runner.replace(key=key), disc_params, disc_opt_state, state.demos)
         return new, metrics
 

@@ -34,23 +34,38 @@ from hintsjax.algorithms.trainer import Trainer, program_identity
 # declared `traced`): the members of a group agree on these; every traced one is a Hyper leaf and may
 # differ, but whether an optional one is set at all (ppo.target_kl) is the program's structure too.
 SHAPES = fields.names(PPOConfig, traced=False)
-OPTIONAL_TRACED = tuple(f.name for f in fields.settings_of(PPOConfig) if f.metadata[fields.TRACED] and fields.allows_none(f))
+OPTIONAL_TRACED = tuple(
+    f.name
+    for f in fields.settings_of(PPOConfig)
+    if f.metadata[fields.TRACED] and fields.allows_none(f)
+)
 
 
 def signature(cfg: RunConfig) -> dict[str, Any]:
     """What configurations must share to train in one group (a dict, to name what differs)."""
     spec = cfg.agent_spec
-    return {"env": cfg.env, "variant": cfg.variant, "algorithm": spec.algorithm, "observe": spec.observe,
-            "hint_use": spec.hint_use, "drops_hint": spec.drops_hint,
-            "scheme": cfg.scheme if spec.conditioned else None, "seeds": cfg.seeds, "seed": cfg.seed,
-            **{f"ppo.{k}": getattr(cfg.ppo, k) for k in SHAPES},
-            **{f"ppo.{k} is set": getattr(cfg.ppo, k) is not None for k in OPTIONAL_TRACED}}
+    return {
+        "env": cfg.env,
+        "variant": cfg.variant,
+        "algorithm": spec.algorithm,
+        "observe": spec.observe,
+        "hint_use": spec.hint_use,
+        "drops_hint": spec.drops_hint,
+        "scheme": cfg.scheme if spec.conditioned else None,
+        "seeds": cfg.seeds,
+        "seed": cfg.seed,
+        **{f"ppo.{k}": getattr(cfg.ppo, k) for k in SHAPES},
+        **{f"ppo.{k} is set": getattr(cfg.ppo, k) is not None for k in OPTIONAL_TRACED},
+    }
 
 
 def groupable(cfg: RunConfig) -> bool:
     """Whether `cfg` may share a group: PPO's agents with programmatic hints; the imitation agents,
     and agents whose hints come from a learned generator (hintsjax.generator), train alone."""
-    return cfg.agent_spec.algorithm == "ppo" and {cfg.hint_source_for(False), cfg.hint_source_for(True)} == {PROGRAMMATIC}
+    return cfg.agent_spec.algorithm == "ppo" and {
+        cfg.hint_source_for(False),
+        cfg.hint_source_for(True),
+    } == {PROGRAMMATIC}
 
 
 def check_group(cfgs: Sequence[RunConfig]) -> None:
@@ -60,12 +75,16 @@ def check_group(cfgs: Sequence[RunConfig]) -> None:
     first = signature(cfgs[0])
     for cfg in cfgs:
         if not groupable(cfg) and len(cfgs) > 1:
-            raise UsageError(f"{cfg.env}/{cfg.label} trains alone (algorithm {cfg.agent_spec.algorithm}); "
-                             "only PPO's agents share a group")
+            raise UsageError(
+                f"{cfg.env}/{cfg.label} trains alone (algorithm {cfg.agent_spec.algorithm}); "
+                "only PPO's agents share a group"
+            )
         differ = [k for k, v in signature(cfg).items() if v != first[k]]
         if differ:
-            raise UsageError(f"{cfg.env}/{cfg.label} cannot share a group with {cfgs[0].env}/{cfgs[0].label}: "
-                             f"they differ in {', '.join(differ)}")
+            raise UsageError(
+                f"{cfg.env}/{cfg.label} cannot share a group with {cfgs[0].env}/{cfgs[0].label}: "
+                f"they differ in {', '.join(differ)}"
+            )
 
 
 def plan(cfgs: Sequence[RunConfig]) -> list[list[int]]:
@@ -79,7 +98,9 @@ def plan(cfgs: Sequence[RunConfig]) -> list[list[int]]:
 
 def pad_to(tree: Any, shapes: Any) -> Any:
     """Every leaf zero-padded at the end of each axis to the shape of `shapes`' leaf."""
-    return jax.tree.map(lambda x, s: jnp.pad(x, [(0, t - n) for n, t in zip(x.shape, s.shape)]), tree, shapes)
+    return jax.tree.map(
+        lambda x, s: jnp.pad(x, [(0, t - n) for n, t in zip(x.shape, s.shape)]), tree, shapes
+    )
 
 
 def crop_to(tree: Any, shapes: Any) -> Any:
@@ -127,16 +148,26 @@ def make_group_trainer(group: Group) -> Trainer:
 
     def init(key: jax.Array) -> RunnerState:
         k_net, k_run, ts = ppo.start_envs(key, base.env, env_params, cfg.ppo.num_envs)
-        padded = jax.eval_shape(lambda: ppo.start_params(k_net, base.network, ts.obs, hypers[0], group.width))
+        padded = jax.eval_shape(
+            lambda: ppo.start_params(k_net, base.network, ts.obs, hypers[0], group.width)
+        )
         states = []
         for member, hyper in zip(group.cfgs, hypers):  # each drawn at its own width, as alone
-            params = pad_to(ppo.start_params(k_net, base.network, ts.obs, hyper, ppo.hint_width(member)), padded)
+            params = pad_to(
+                ppo.start_params(k_net, base.network, ts.obs, hyper, ppo.hint_width(member)), padded
+            )
             opt_state = ppo.make_optimizer(hyper, params, cfg.ppo).init(params)
-            states.append(RunnerState(params, opt_state, ts.state, ts.obs, k_run, jnp.zeros((), jnp.int32), hyper))
+            states.append(
+                RunnerState(
+                    params, opt_state, ts.state, ts.obs, k_run, jnp.zeros((), jnp.int32), hyper
+                )
+            )
         return jax.tree.map(lambda *x: jnp.stack(x), *states)
 
     cacheable = all(program_identity(member) is not None for member in group.cfgs)
-    return Trainer(cfg, base.env, base.network, init, jax.vmap(base.update), repr(group) if cacheable else None)
+    return Trainer(
+        cfg, base.env, base.network, init, jax.vmap(base.update), repr(group) if cacheable else None
+    )
 
 
 def cell_state(group: Group, state: RunnerState, k: int) -> RunnerState:

@@ -16,11 +16,13 @@ import jax.numpy as jnp
 import optax
 
 STEP = 1.5  # rsl_rl's factor
-STOP = 1.5  # the KL early stop's bound, x ppo.target_kl (ppo.py: no step once a minibatch's KL is past it)
+# the KL early stop's bound, x ppo.target_kl (ppo.py: no step once a minibatch's KL is past it)
+STOP = 1.5
 # rsl_rl's band around the desired KL (here ppo.target_kl) is 2 and 0.5; the upper edge here is
 # the stop's, so every step the stop ends also shrinks the rate
 TOO_FAR, TOO_CLOSE = STOP, 0.5
-MIN_SCALE = 0.01  # rsl_rl keeps its rate in [1e-5, 1e-2] around 1e-3; the floor here is the same ratio
+# rsl_rl keeps its rate in [1e-5, 1e-2] around 1e-3; the floor here is the same ratio
+MIN_SCALE = 0.01
 
 
 class KLRateState(NamedTuple):
@@ -30,6 +32,7 @@ class KLRateState(NamedTuple):
 def scale_by_kl_rate() -> optax.GradientTransformation:
     """Multiplies the (Adam) updates by the state's scale, which `adapt` sets; last in the chain,
     it scales every part's learning rate alike."""
+
     def init(params: Any) -> KLRateState:
         del params
         return KLRateState(jnp.ones((), jnp.float32))
@@ -55,8 +58,11 @@ def _is_state(x: Any) -> bool:
 
 def adapt(opt_state: Any, kl: jax.Array, target: jax.Array) -> Any:
     """`opt_state` with its KLRateState adapted to `kl`."""
-    return jax.tree.map(lambda s: KLRateState(adapted(s.scale, kl, target)) if _is_state(s) else s,
-                        opt_state, is_leaf=_is_state)
+    return jax.tree.map(
+        lambda s: KLRateState(adapted(s.scale, kl, target)) if _is_state(s) else s,
+        opt_state,
+        is_leaf=_is_state,
+    )
 
 
 def scale_of(opt_state: Any) -> jax.Array:

@@ -29,13 +29,21 @@ from hintsjax.models.networks import ActorCritic, lr_labels
 from hintsjax.settings import fields
 from hintsjax.settings.algorithm_settings import PPOConfig
 from hintsjax.settings.config import RunConfig
-from hintsjax.algorithms.ppo_math import (Batch, Transition, clipped_surrogate_loss, gae, gaussian_entropy, gaussian_log_prob,
-                                          gaussian_sample)
+from hintsjax.algorithms.ppo_math import (
+    Batch,
+    Transition,
+    clipped_surrogate_loss,
+    gae,
+    gaussian_entropy,
+    gaussian_log_prob,
+    gaussian_sample,
+)
 from hintsjax.algorithms import kl_rate
 from hintsjax.algorithms.trainer import Trainer, episode_metrics, program_identity
 
 
-TRACED = fields.names(PPOConfig, traced=True)  # the PPO settings that are Hyper leaves (`traced=True` on the field)
+# the PPO settings that are Hyper leaves (`traced=True` on the field)
+TRACED = fields.names(PPOConfig, traced=True)
 
 
 @jax.tree_util.register_pytree_with_keys_class
@@ -61,14 +69,18 @@ class Hyper:
         try:
             return object.__getattribute__(self, "_leaves")[name]
         except KeyError:
-            raise AttributeError(f"Hyper has no {name!r}; its leaves: {', '.join(self._leaves)}") from None
+            raise AttributeError(
+                f"Hyper has no {name!r}; its leaves: {', '.join(self._leaves)}"
+            ) from None
 
     def __repr__(self) -> str:
         return f"Hyper({', '.join(f'{k}={v!r}' for k, v in self._leaves.items())})"
 
     def tree_flatten_with_keys(self):
         """Leaves keyed by name, as a dataclass's fields are (checkpoints store them by these names)."""
-        return [(jax.tree_util.GetAttrKey(k), v) for k, v in self._leaves.items()], tuple(self._leaves)
+        return [(jax.tree_util.GetAttrKey(k), v) for k, v in self._leaves.items()], tuple(
+            self._leaves
+        )
 
     @classmethod
     def tree_unflatten(cls, names: tuple[str, ...], leaves: Any) -> "Hyper":
@@ -80,14 +92,17 @@ class Hyper:
         padded to `width` (default: d, its own hint's width)."""
         d = hint_width(cfg)
         take = list(range(d)) if hint_take is None else list(hint_take)
-        width = max(d if width is None else width, 1)  # never empty: orbax stores no zero-size array
+        # never empty: orbax stores no zero-size array
+        width = max(d if width is None else width, 1)
         f32 = lambda x: np.asarray(np.nan if x is None else x, np.float32)  # noqa: E731  (numpy: constants, also inside a trace)
-        return cls({
-            **{name: f32(getattr(cfg.ppo, name)) for name in TRACED},
-            "state_noise": f32(cfg.agent_spec.state_noise),
-            "hint_take": np.asarray(take + [0] * (width - d), np.int32),
-            "hint_keep": np.arange(width) < d,
-        })
+        return cls(
+            {
+                **{name: f32(getattr(cfg.ppo, name)) for name in TRACED},
+                "state_noise": f32(cfg.agent_spec.state_noise),
+                "hint_take": np.asarray(take + [0] * (width - d), np.int32),
+                "hint_keep": np.arange(width) < d,
+            }
+        )
 
 
 def hint_width(cfg: RunConfig) -> int:
@@ -110,13 +125,19 @@ class RunnerState:
 
 # The network's fields that are PPO settings of the same name (ppo.hidden, ppo.action_head, ...): a
 # setting the network reads is a field on each side, and nothing between them names it.
-NETWORK_SETTINGS = tuple(f.name for f in dataclasses.fields(ActorCritic) if f.name in fields.names(PPOConfig))
+NETWORK_SETTINGS = tuple(
+    f.name for f in dataclasses.fields(ActorCritic) if f.name in fields.names(PPOConfig)
+)
 
 
 def make_network(cfg: RunConfig, env: envs.Env) -> ActorCritic:
     """The policy's ActorCritic for `cfg`'s agent and `env`'s actions, with its PPO settings."""
-    return ActorCritic(cfg.agent_spec, cfg.scheme, env.action_size,
-                       **{name: getattr(cfg.ppo, name) for name in NETWORK_SETTINGS})
+    return ActorCritic(
+        cfg.agent_spec,
+        cfg.scheme,
+        env.action_size,
+        **{name: getattr(cfg.ppo, name) for name in NETWORK_SETTINGS},
+    )
 
 
 def make_optimizer(hyper: Hyper, params: Any, ppo: PPOConfig) -> optax.GradientTransformation:
@@ -131,13 +152,18 @@ def make_optimizer(hyper: Hyper, params: Any, ppo: PPOConfig) -> optax.GradientT
 
     def part(lr):
         adam = optax.adam(lr, eps=ppo.adam_eps)
-        return optax.chain(optax.clip_by_global_norm(hyper.max_grad_norm), adam) if per_part else adam
+        return (
+            optax.chain(optax.clip_by_global_norm(hyper.max_grad_norm), adam) if per_part else adam
+        )
 
     groups = {g: part(lr) for g, lr in rates.items()}
-    if normalization.COLLECTION in params:  # only then: older checkpoints keep their optimiser state's shape
+    # only then: older checkpoints keep their optimiser state's shape
+    if normalization.COLLECTION in params:
         groups["frozen"] = optax.set_to_zero()
     parts = optax.multi_transform(groups, lr_labels(params))
-    optimizer = parts if per_part else optax.chain(optax.clip_by_global_norm(hyper.max_grad_norm), parts)
+    optimizer = (
+        parts if per_part else optax.chain(optax.clip_by_global_norm(hyper.max_grad_norm), parts)
+    )
     return optax.chain(optimizer, kl_rate.scale_by_kl_rate()) if ppo.kl_adaptive_lr else optimizer
 
 
@@ -148,10 +174,13 @@ def pick_hint(obs: dict[str, jax.Array], hyper: Hyper) -> dict[str, jax.Array]:
     return {**obs, "hint": jnp.where(hyper.hint_keep, obs["hint"][..., hyper.hint_take], 0.0)}
 
 
-DROP_TAG = 0xD809  # folded into a step's noise key for its hint dropout (leaves the noise as it was)
+# folded into a step's noise key for its hint dropout (leaves the noise as it was)
+DROP_TAG = 0xD809
 
 
-def observe(obs: dict[str, jax.Array], key: jax.Array, hyper: Hyper, drop: float | None = None) -> dict[str, jax.Array]:
+def observe(
+    obs: dict[str, jax.Array], key: jax.Array, hyper: Hyper, drop: float | None = None
+) -> dict[str, jax.Array]:
     """The agent's view of obs ([N, ...]) in training: its hint, each env's replaced by zeros with
     probability `drop` (an agent that drops its hint; None: kept), and the state plus N(0, s^2) (s is 0
     but for PPO-x+N(0,1); adding 0 x noise leaves the state as it was)."""
@@ -161,7 +190,10 @@ def observe(obs: dict[str, jax.Array], key: jax.Array, hyper: Hyper, drop: float
         obs = {**obs, "hint": jnp.where(kept[..., None], obs["hint"], 0.0)}
     if "state" not in obs:
         return obs
-    return {**obs, "state": obs["state"] + hyper.state_noise * jax.random.normal(key, obs["state"].shape)}
+    return {
+        **obs,
+        "state": obs["state"] + hyper.state_noise * jax.random.normal(key, obs["state"].shape),
+    }
 
 
 def deploy_view(obs: dict[str, jax.Array], spec: AgentSpec) -> dict[str, jax.Array]:
@@ -176,17 +208,22 @@ def hint_error(prediction: jax.Array, hint: jax.Array, keep: jax.Array) -> jax.A
     return squared.sum() / (prediction.shape[0] * jnp.maximum(keep.sum(), 1))
 
 
-STARTS_TAG = 0x57A7  # folded into a rollout's key for its per-rollout starts (leaves the step keys as they were)
+# folded into a rollout's key for its per-rollout starts (leaves the step keys as they were)
+STARTS_TAG = 0x57A7
 RESET_TAG = 0x5E7A  # folded into a rollout's key for its fresh episodes (ppo.reset_every_update)
 
 
-def start_envs(key: jax.Array, env: Any, env_params: Any, num_envs: int) -> tuple[jax.Array, jax.Array, envs.Timestep]:
+def start_envs(
+    key: jax.Array, env: Any, env_params: Any, num_envs: int
+) -> tuple[jax.Array, jax.Array, envs.Timestep]:
     """A run's start from its seed key: (network key, run key, `num_envs` fresh episodes)."""
     k_net, k_env, k_run = jax.random.split(key, 3)
     return k_net, k_run, envs.fresh_episodes(k_env, env, env_params, num_envs)
 
 
-def start_params(k_net: jax.Array, network: ActorCritic, obs: dict[str, jax.Array], hyper: Hyper, width: int) -> Any:
+def start_params(
+    k_net: jax.Array, network: ActorCritic, obs: dict[str, jax.Array], hyper: Hyper, width: int
+) -> Any:
     """Fresh network params for observations like `obs` ([N, ...]) at hint width `width` (the
     configuration's own: its first `width` picked hint positions)."""
     seen = pick_hint(jax.tree.map(lambda x: x[:1], obs), hyper)
@@ -195,16 +232,27 @@ def start_params(k_net: jax.Array, network: ActorCritic, obs: dict[str, jax.Arra
     return network.init(k_net, seen)
 
 
-def start_runner(key: jax.Array, env: Any, env_params: Any, network: ActorCritic, num_envs: int,
-                 init_opt: Callable[[Any], Any], hyper: Hyper) -> RunnerState:
+def start_runner(
+    key: jax.Array,
+    env: Any,
+    env_params: Any,
+    network: ActorCritic,
+    num_envs: int,
+    init_opt: Callable[[Any], Any],
+    hyper: Hyper,
+) -> RunnerState:
     """A run's start: `num_envs` fresh episodes, fresh network params and `init_opt(params)`."""
     k_net, k_run, ts = start_envs(key, env, env_params, num_envs)
-    params = start_params(k_net, network, ts.obs, hyper, int(np.sum(hyper.hint_keep)))  # a concrete Hyper (Hyper.of's)
-    return RunnerState(params, init_opt(params), ts.state, ts.obs, k_run, jnp.zeros((), jnp.int32), hyper)
+    # a concrete Hyper (Hyper.of's)
+    params = start_params(k_net, network, ts.obs, hyper, int(np.sum(hyper.hint_keep)))
+    return RunnerState(
+        params, init_opt(params), ts.state, ts.obs, k_run, jnp.zeros((), jnp.int32), hyper
+    )
 
 
 class StepCarry(NamedTuple):
     """What one minibatch step hands the next, through an update's epochs."""
+
     params: Any
     opt_state: Any
     stopped: jax.Array  # bool: the KL early stop has ended this update's steps
@@ -223,7 +271,10 @@ class PPO:
     # (state, key) -> (state after T steps of N envs, [T, N] transitions, [N] value after them)
     rollout: Callable[[RunnerState, jax.Array], tuple[RunnerState, Transition, jax.Array]]
     # (state, transitions, last value, [T, N] reward to learn from, key) -> (state one update on, metrics)
-    learn: Callable[[RunnerState, Transition, jax.Array, jax.Array, jax.Array], tuple[RunnerState, dict[str, jax.Array]]]
+    learn: Callable[
+        [RunnerState, Transition, jax.Array, jax.Array, jax.Array],
+        tuple[RunnerState, dict[str, jax.Array]],
+    ]
 
 
 def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
@@ -239,7 +290,15 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
 
     def init(key: jax.Array) -> RunnerState:
         hyper = Hyper.of(cfg)
-        return start_runner(key, env, env_params, network, N, lambda params: make_optimizer(hyper, params, ppo).init(params), hyper)
+        return start_runner(
+            key,
+            env,
+            env_params,
+            network,
+            N,
+            lambda params: make_optimizer(hyper, params, ppo).init(params),
+            hyper,
+        )
 
     def rollout(state: RunnerState, key: jax.Array) -> tuple[RunnerState, Transition, jax.Array]:
         if ppo.reset_every_update:  # every env begins a fresh episode here (its own key)
@@ -248,7 +307,9 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
         starts = None
         if ppo.starts_per_rollout:  # one next start per env for the whole rollout (its own key)
             k_starts = jax.random.fold_in(key, STARTS_TAG)
-            starts = jax.vmap(env.fresh_start, in_axes=(0, None))(jax.random.split(k_starts, N), env_params)
+            starts = jax.vmap(env.fresh_start, in_axes=(0, None))(
+                jax.random.split(k_starts, N), env_params
+            )
 
         def step(carry, key):
             env_state, obs = carry
@@ -256,8 +317,12 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
             seen = observe(obs, k_noise, state.hyper, drop)
             mean, log_std, value = network.apply(state.params, seen)
             action = gaussian_sample(k_act, mean, log_std)
-            ts = jax.vmap(env.step, in_axes=(0, 0, 0, None, 0))(jax.random.split(k_env, N), env_state, action, env_params, starts)
-            final_value = network.apply(state.params, observe(ts.final_obs, k_final, state.hyper, drop))[2]
+            ts = jax.vmap(env.step, in_axes=(0, 0, 0, None, 0))(
+                jax.random.split(k_env, N), env_state, action, env_params, starts
+            )
+            final_value = network.apply(
+                state.params, observe(ts.final_obs, k_final, state.hyper, drop)
+            )[2]
             transition = Transition(
                 seen,
                 action,
@@ -272,7 +337,9 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
             return (ts.state, ts.obs), transition
 
         k_steps, k_last = jax.random.split(key)
-        (env_state, obs), traj = jax.lax.scan(step, (state.env_state, state.obs), jax.random.split(k_steps, T))
+        (env_state, obs), traj = jax.lax.scan(
+            step, (state.env_state, state.obs), jax.random.split(k_steps, T)
+        )
         last_value = network.apply(state.params, observe(obs, k_last, state.hyper, drop))[2]
         return state.replace(env_state=env_state, obs=obs), traj, last_value
 
@@ -296,7 +363,13 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
         error = hint_error(prediction[0], batch.obs["hint"], hyper.hint_keep)
         return loss + ppo.aux_coef * error, {**parts, "hint_loss": error}
 
-    def learn(state: RunnerState, traj: Transition, last_value: jax.Array, reward: jax.Array, key: jax.Array):
+    def learn(
+        state: RunnerState,
+        traj: Transition,
+        last_value: jax.Array,
+        reward: jax.Array,
+        key: jax.Array,
+    ):
         hyper = state.hyper
         if ppo.normalize_before_learning:
             state = state.replace(params=normalization.update(state.params, traj.obs))
@@ -318,32 +391,47 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
         def minibatch_step(carry: StepCarry, mb: Batch):
             params, opt_state, stopped, stepped = carry
             (_, parts), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, mb, hyper)
-            if ppo.kl_adaptive_lr:  # this step's rate from the KL of the steps before it in this update
-                informative = stepped & ~stopped  # not the rollout policy's own KL of 0, not after a stop
-                opt_state = jax.tree.map(lambda old, new: jnp.where(informative, new, old), opt_state,
-                                         kl_rate.adapt(opt_state, parts["approx_kl"], hyper.target_kl))
+            # this step's rate from the KL of the steps before it in this update
+            if ppo.kl_adaptive_lr:
+                # not the rollout policy's own KL of 0, not after a stop
+                informative = stepped & ~stopped
+                opt_state = jax.tree.map(
+                    lambda old, new: jnp.where(informative, new, old),
+                    opt_state,
+                    kl_rate.adapt(opt_state, parts["approx_kl"], hyper.target_kl),
+                )
                 parts = {**parts, "lr_scale": kl_rate.scale_of(opt_state)}
             updates, new_opt_state = optimizer.update(grads, opt_state, params)
             new = (optax.apply_updates(params, updates), new_opt_state)
             if ppo.target_kl is not None:  # KL early stop: no step from here to the update's end
-                stopped = stopped | ~(parts["approx_kl"] <= kl_rate.STOP * hyper.target_kl)  # NaN stops too
-                new = jax.tree.map(lambda old, step: jnp.where(stopped, old, step), (params, opt_state), new)
+                # NaN stops too
+                stopped = stopped | ~(parts["approx_kl"] <= kl_rate.STOP * hyper.target_kl)
+                new = jax.tree.map(
+                    lambda old, step: jnp.where(stopped, old, step), (params, opt_state), new
+                )
                 parts = {**parts, "kl_stopped": stopped.astype(jnp.float32)}
             return StepCarry(*new, stopped, jnp.ones((), bool)), parts
 
         def epoch(carry, key):
             order = jax.random.permutation(key, T * N)
-            shaped = lambda x: x[order].reshape((ppo.num_minibatches, ppo.minibatch_size) + x.shape[1:])  # noqa: E731
+
+            def shaped(x):
+                return x[order].reshape((ppo.num_minibatches, ppo.minibatch_size) + x.shape[1:])
+
             return jax.lax.scan(minibatch_step, carry, jax.tree.map(shaped, batch))
 
         start = StepCarry(state.params, state.opt_state, jnp.zeros((), bool), jnp.zeros((), bool))
-        (params, opt_state, _, _), parts = jax.lax.scan(epoch, start, jax.random.split(key, ppo.epochs))
+        (params, opt_state, _, _), parts = jax.lax.scan(
+            epoch, start, jax.random.split(key, ppo.epochs)
+        )
         if not ppo.normalize_before_learning:
-            params = normalization.update(params, traj.obs)  # after learning: the next rollout's statistics
+            # after learning: the next rollout's statistics
+            params = normalization.update(params, traj.obs)
         metrics = {
             **jax.tree.map(jnp.mean, parts),
             **episode_metrics(traj.terminated | traj.truncated, traj.episode_return),
-            "step_reward": jnp.mean(traj.reward),  # the env's reward per step, unscaled: defined where no episode ends
+            # the env's reward per step, unscaled: defined where no episode ends
+            "step_reward": jnp.mean(traj.reward),
             "env_steps": (state.update + 1) * ppo.batch_size,
         }
         return state.replace(params=params, opt_state=opt_state, update=state.update + 1), metrics
@@ -359,7 +447,9 @@ def make_trainer(cfg: RunConfig, hint: str | None = None) -> Trainer:
     def update(state: RunnerState) -> tuple[RunnerState, dict[str, jax.Array]]:
         key, k_roll, k_epochs = jax.random.split(state.key, 3)
         state, traj, last_value = parts.rollout(state, k_roll)
-        state, metrics = parts.learn(state, traj, last_value, state.hyper.reward_scale * traj.reward, k_epochs)
+        state, metrics = parts.learn(
+            state, traj, last_value, state.hyper.reward_scale * traj.reward, k_epochs
+        )
         return state.replace(key=key), metrics
 
     return Trainer(cfg, parts.env, parts.network, parts.init, update, program_identity(cfg, hint))

@@ -120,7 +120,8 @@ def clipped_surrogate_loss(
         "policy_loss": policy_loss,
         "value_loss": value_loss,
         "entropy": entropy,
-        "approx_kl": jnp.mean((ratio - 1.0) - log_ratio),  # not ln(ratio): inf, not NaN, on overflow
+        # not ln(ratio): inf, not NaN, on overflow
+        "approx_kl": jnp.mean((ratio - 1.0) - log_ratio),
         "clip_fraction": jnp.mean((jnp.abs(ratio - 1.0) > clip_eps).astype(jnp.float32)),
     }
     return loss, parts

@@ -40,13 +40,20 @@ class Trainer:
         """Advance `num_updates` updates; metrics are [num_updates]-stacked."""
         return jax.lax.scan(lambda s, _: self.update(s), state, None, length=num_updates)
 
-    def run_chunk(self, state: Any, count: jax.Array, length: int) -> tuple[Any, dict[str, jax.Array]]:
+    def run_chunk(
+        self, state: Any, count: jax.Array, length: int
+    ) -> tuple[Any, dict[str, jax.Array]]:
         """The first `count` of `length` updates (`count` may be traced); metrics are [length]-stacked,
         those after `count` filled with NaN (0 for integer metrics) and the state left as it was."""
-        update = jax.jit(self.update)  # traced once: its shapes below and the branch reuse the trace
+        # traced once: its shapes below and the branch reuse the trace
+        update = jax.jit(self.update)
         shapes = jax.eval_shape(lambda s: update(s)[1], state)
-        blank = jax.tree.map(lambda x: jnp.full(x.shape, jnp.nan if jnp.issubdtype(x.dtype, jnp.floating) else 0,
-                                                x.dtype), shapes)
+        blank = jax.tree.map(
+            lambda x: jnp.full(
+                x.shape, jnp.nan if jnp.issubdtype(x.dtype, jnp.floating) else 0, x.dtype
+            ),
+            shapes,
+        )
 
         def body(s, i):
             # Under vmap over seeds `count` and `i` stay unbatched, so this is a real branch: a
@@ -62,7 +69,9 @@ class Trainer:
     def abstract_state(self) -> Any:
         """The shapes and types of the run's seed-batched state ([S, ...] for cfg's seeds), computed
         without any arrays: what a checkpoint of the run restores into (hintsjax.system.checkpoint)."""
-        return jax.eval_shape(jax.vmap(self.init), jax.random.split(jax.random.key(0), self.cfg.seeds))
+        return jax.eval_shape(
+            jax.vmap(self.init), jax.random.split(jax.random.key(0), self.cfg.seeds)
+        )
 
 
 def program_identity(cfg: RunConfig, *more: Any) -> str | None:
@@ -71,7 +80,9 @@ def program_identity(cfg: RunConfig, *more: Any) -> str | None:
     files that no configuration value digests (an imitation agent's expert, a learned hint
     generator), which are then traced every time; and None for MJX-Warp physics, whose programs
     call Warp's kernels through handlers that the tracing process registers."""
-    if cfg.agent_spec.imitates or {cfg.hint_source_for(False), cfg.hint_source_for(True)} != {PROGRAMMATIC}:
+    if cfg.agent_spec.imitates or {cfg.hint_source_for(False), cfg.hint_source_for(True)} != {
+        PROGRAMMATIC
+    }:
         return None
     if cfg.physics == WARP:
         return None

@@ -15,9 +15,21 @@ T = TypeVar("T")
 
 def help_page(cls: type, prog: str, about: str) -> str:
     """The --help page of a `key=value` command: what it does, its settings and their defaults, the choices."""
-    settings = [f"  {f.name}={'null' if f.default is None else f.default}" for f in dataclasses.fields(cls)]
-    return "\n".join([f"usage: {prog} [key=value ...]", "", about, "", "Settings (key=default):", *settings, "",
-                      choices.text()])
+    settings = [
+        f"  {f.name}={'null' if f.default is None else f.default}" for f in dataclasses.fields(cls)
+    ]
+    return "\n".join(
+        [
+            f"usage: {prog} [key=value ...]",
+            "",
+            about,
+            "",
+            "Settings (key=default):",
+            *settings,
+            "",
+            choices.text(),
+        ]
+    )
 
 
 def parse_key_values(cls: type[T], argv: list[str], prog: str = "", about: str = "") -> T:
@@ -32,7 +44,9 @@ def parse_key_values(cls: type[T], argv: list[str], prog: str = "", about: str =
     for arg in argv:
         key, eq, raw = arg.partition("=")
         if not eq or key not in kinds:
-            raise UsageError(f"unexpected argument {arg!r}: give key=value with a key of {', '.join(kinds)}")
+            raise UsageError(
+                f"unexpected argument {arg!r}: give key=value with a key of {', '.join(kinds)}"
+            )
         kind = kinds[key]
         if kind.endswith("None") and (raw == "null" or (raw == "" and not kind.startswith("str"))):
             values[key] = None

@@ -25,23 +25,47 @@ from hintsjax.system.errors import UsageError
 from hintsjax.settings import schema
 
 # Hydra's own flags that take the next argument as their value.
-HYDRA_VALUE_FLAGS = {"--config-name", "-cn", "--config-path", "-cp", "--config-dir", "-cd", "--cfg", "-c",
-                     "--package", "-p", "--experimental-rerun"}
+HYDRA_VALUE_FLAGS = {
+    "--config-name",
+    "-cn",
+    "--config-path",
+    "-cp",
+    "--config-dir",
+    "-cd",
+    "--cfg",
+    "-c",
+    "--package",
+    "-p",
+    "--experimental-rerun",
+}
 MULTIRUN_FLAGS = {"-m", "--multirun"}
 
 # Hydra's launchers that run a sweep's jobs elsewhere: the package that provides them (the cluster extra).
-LAUNCHERS = {"submitit_slurm": "hydra_plugins.hydra_submitit_launcher", "submitit_local": "hydra_plugins.hydra_submitit_launcher",
-             "basic": "hydra._internal.core_plugins.basic_launcher"}
+LAUNCHERS = {
+    "submitit_slurm": "hydra_plugins.hydra_submitit_launcher",
+    "submitit_local": "hydra_plugins.hydra_submitit_launcher",
+    "basic": "hydra._internal.core_plugins.basic_launcher",
+}
 GRAMMAR = "https://hydra.cc/docs/advanced/override_grammar/basic"
-LIST_KEYS = {"eval_variants", "ppo.hidden", "gail.disc_hidden"}  # settings whose value is a list: key=[a,b]
-TEXT_KEYS = {"name", "out_dir", "resume", "expert", "hints_from", "hint_source", "eval_hint_source"}  # names, paths
+# settings whose value is a list: key=[a,b]
+LIST_KEYS = {"eval_variants", "ppo.hidden", "gail.disc_hidden"}
+# names, paths
+TEXT_KEYS = {"name", "out_dir", "resume", "expert", "hints_from", "hint_source", "eval_hint_source"}
 
 
 # Hydra's own sections of the run command's config: no log files or output folders of its own (a run
 # makes its folder), a sweep's multirun.yaml in out_dir.
 HYDRA_SECTIONS = {
-    "defaults": ["_self_", {"override hydra/hydra_logging": "disabled"}, {"override hydra/job_logging": "disabled"}],
-    "hydra": {"output_subdir": None, "run": {"dir": "."}, "sweep": {"dir": "${out_dir}", "subdir": "."}},
+    "defaults": [
+        "_self_",
+        {"override hydra/hydra_logging": "disabled"},
+        {"override hydra/job_logging": "disabled"},
+    ],
+    "hydra": {
+        "output_subdir": None,
+        "run": {"dir": "."},
+        "sweep": {"dir": "${out_dir}", "subdir": "."},
+    },
 }
 
 
@@ -65,8 +89,13 @@ def check_launcher(name: str) -> None:
     plugin not installed)."""
     if name not in LAUNCHERS:
         raise UsageError(f"unknown hydra/launcher {name!r}; valid choices: {', '.join(LAUNCHERS)}")
-    if importlib.util.find_spec(LAUNCHERS[name].rsplit(".", 1)[0]) is None or importlib.util.find_spec(LAUNCHERS[name]) is None:
-        raise UsageError(f"hydra/launcher={name} needs hydra-submitit-launcher: pip install -e '.[cluster]'")
+    if (
+        importlib.util.find_spec(LAUNCHERS[name].rsplit(".", 1)[0]) is None
+        or importlib.util.find_spec(LAUNCHERS[name]) is None
+    ):
+        raise UsageError(
+            f"hydra/launcher={name} needs hydra-submitit-launcher: pip install -e '.[cluster]'"
+        )
 
 
 def overrides_of(argv: list[str]) -> list[str]:
@@ -91,10 +120,14 @@ def check_overrides(argv: list[str]) -> None:
     overrides = overrides_of(argv)
     for arg in overrides:
         if "=" not in arg and not arg.startswith("~"):
-            raise UsageError(f"unexpected argument {arg!r}: give key=value pairs (e.g. env=pendulum)")
+            raise UsageError(
+                f"unexpected argument {arg!r}: give key=value pairs (e.g. env=pendulum)"
+            )
         key, _, value = arg.partition("=")
         if key.startswith("~"):
-            raise UsageError(f"{arg!r} would delete a setting; give {key.lstrip('~')}=<value> instead")
+            raise UsageError(
+                f"{arg!r} would delete a setting; give {key.lstrip('~')}=<value> instead"
+            )
         if key.startswith("+") and not key.startswith("++") and key.lstrip("+") in keys:
             raise UsageError(f"{arg!r} adds a key that exists already; write {arg.lstrip('+')}")
         key = key.lstrip("+")
@@ -105,8 +138,10 @@ def check_overrides(argv: list[str]) -> None:
         if key not in keys:
             close = difflib.get_close_matches(key, keys, n=1)
             hint = f"did you mean {close[0]!r}? " if close else ""
-            raise UsageError(f"unknown config key {key!r}; {hint}valid: {', '.join(k for k in keys if '.' not in k)}, "
-                             "ppo.<key>, dagger.<key>, gail.<key> (docs/settings.md)")
+            raise UsageError(
+                f"unknown config key {key!r}; {hint}valid: {', '.join(k for k in keys if '.' not in k)}, "
+                "ppo.<key>, dagger.<key>, gail.<key> (docs/settings.md)"
+            )
     parsed = parse(overrides)
     if not MULTIRUN_FLAGS & set(argv):
         for arg, override in zip(overrides, parsed, strict=True):
@@ -139,10 +174,17 @@ def parse(overrides: list[str]) -> list[Any]:
         try:
             parsed += parser.parse_overrides([arg])
         except OverrideParseException as e:
-            lines = [line.strip() for line in str(e).splitlines()[:-1] if line.strip() and line.strip() != "^"]
-            reason = lines[-1].split(" expecting ")[0] if lines else "Hydra's grammar"  # not its list of tokens
-            raise UsageError(f"cannot read {arg!r} ({reason[:120]}); quote a value with other characters, "
-                             f"key='value' ({GRAMMAR})") from None
+            lines = [
+                line.strip()
+                for line in str(e).splitlines()[:-1]
+                if line.strip() and line.strip() != "^"
+            ]
+            # not its list of tokens
+            reason = lines[-1].split(" expecting ")[0] if lines else "Hydra's grammar"
+            raise UsageError(
+                f"cannot read {arg!r} ({reason[:120]}); quote a value with other characters, "
+                f"key='value' ({GRAMMAR})"
+            ) from None
     return parsed
 
 
@@ -196,7 +238,9 @@ def asks_only_for_warp(argv: list[str]) -> bool:
                 return "warp"
             return values.get("physics")
         try:
-            return yaml.safe_load((Path(str(values["resume"])) / "config.yaml").read_text()).get("physics")
+            return yaml.safe_load((Path(str(values["resume"])) / "config.yaml").read_text()).get(
+                "physics"
+            )
         except (OSError, UnicodeDecodeError, yaml.YAMLError, AttributeError):
             return None  # request() says what is wrong with the folder
 

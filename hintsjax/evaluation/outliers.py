@@ -23,7 +23,8 @@ from typing import Any, Sequence
 import numpy as np
 
 K = 3.0  # spreads below the median
-MAD_TO_STD = 1.4826  # 1 / the normal's 75th percentile: MAD times this estimates its standard deviation
+# 1 / the normal's 75th percentile: MAD times this estimates its standard deviation
+MAD_TO_STD = 1.4826
 
 
 def spread(seed_means: Sequence[float]) -> tuple[float, float]:
@@ -53,6 +54,7 @@ def far_below_text(summary: dict[str, Any], run: str | Path) -> str:
     median, width = spread(summary["seed_means"])
     means = ", ".join(f"{summary['seed_means'][i]:.0f}" for i in seeds)
     which = f"seed {seeds[0]}" if len(seeds) == 1 else "seeds " + ", ".join(map(str, seeds))
-    return (f"{which} ended far below the others ({means} against a median of {median:.0f}, more than "
-            f"{K:g} x {width:.0f} short): one episode: python -m hintsjax.video {run} --seed {seeds[0]}")
-
+    return (
+        f"{which} ended far below the others ({means} against a median of {median:.0f}, more than "
+        f"{K:g} x {width:.0f} short): one episode: python -m hintsjax.video {run} --seed {seeds[0]}"
+    )

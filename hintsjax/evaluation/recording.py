@@ -59,7 +59,9 @@ def step_keys(key: jax.Array) -> tuple[jax.Array, jax.Array]:
     return k_reset, k_run
 
 
-def policy_action(network: Any, params: Any, obs: dict[str, jax.Array], key: jax.Array | None = None) -> jax.Array:
+def policy_action(
+    network: Any, params: Any, obs: dict[str, jax.Array], key: jax.Array | None = None
+) -> jax.Array:
     """The policy mean for one unbatched observation, or with `key` an action sampled around it."""
     mean, log_std, _ = network.apply(params, jax.tree.map(lambda x: x[None], obs))
     if key is None:
@@ -67,7 +69,9 @@ def policy_action(network: Any, params: Any, obs: dict[str, jax.Array], key: jax
     return gaussian_sample(key, mean[0], log_std)
 
 
-def rollout(cfg: RunConfig, params: Any, variant: str | None, steps: int, key: jax.Array) -> Rollout:
+def rollout(
+    cfg: RunConfig, params: Any, variant: str | None, steps: int, key: jax.Array
+) -> Rollout:
     """One episode of one seed's `params` on `variant`, `steps` steps long at most, acting as the
     run is evaluated (sampled actions where `cfg.stochastic_eval`)."""
     variant = envs.variant_names(cfg.env)[0] if variant is None else variant
@@ -89,8 +93,11 @@ def make_rollout(cfg: RunConfig, variant: str, steps: int) -> Callable[[Any, jax
         def step(carry, t):
             state, obs, alive = carry
             k_env = jax.random.fold_in(k_run, t)
-            seen = deploy_view(obs, cfg.agent_spec)  # its privileged inputs (a baseline's hint) are zeros
-            action = policy_action(network, params, seen, jax.random.fold_in(k_env, 1) if cfg.stochastic_eval else None)
+            # its privileged inputs (a baseline's hint) are zeros
+            seen = deploy_view(obs, cfg.agent_spec)
+            action = policy_action(
+                network, params, seen, jax.random.fold_in(k_env, 1) if cfg.stochastic_eval else None
+            )
             ts = env.step(k_env, state, action, task_params)
             done = ts.terminated | ts.truncated
             record = Rollout(
@@ -136,7 +143,14 @@ def frame_shape(image_size: int, scale: int) -> tuple[int, int]:
 class FrameComposer:
     """Draws frames of one video: a matplotlib figure (Agg, no pyplot) built once, updated per frame."""
 
-    def __init__(self, labels: Sequence[str], limits: np.ndarray, image_size: int, scale: int, max_steps: int | None = None):
+    def __init__(
+        self,
+        labels: Sequence[str],
+        limits: np.ndarray,
+        image_size: int,
+        scale: int,
+        max_steps: int | None = None,
+    ):
         # here: matplotlib takes about a second to import, and only a video draws with it
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
@@ -145,15 +159,28 @@ class FrameComposer:
         self.height, _ = frame_shape(image_size, scale)
         self.labels = list(labels)[:MAX_BARS]
         self.limits = np.asarray(limits, np.float32)[:MAX_BARS]
-        self.fig = Figure(figsize=(PANEL_WIDTH / DPI, self.height / DPI), dpi=DPI, facecolor="white")
+        self.fig = Figure(
+            figsize=(PANEL_WIDTH / DPI, self.height / DPI), dpi=DPI, facecolor="white"
+        )
         self.canvas = FigureCanvasAgg(self.fig)
         top = 1.0 - 42.0 / self.height  # two text lines at the top
-        self.step_text = self.fig.text(0.04, 1.0 - 6.0 / self.height, "", fontsize=9, va="top", family="monospace")
-        self.return_text = self.fig.text(0.04, 1.0 - 22.0 / self.height, "", fontsize=9, va="top", family="monospace")
+        self.step_text = self.fig.text(
+            0.04, 1.0 - 6.0 / self.height, "", fontsize=9, va="top", family="monospace"
+        )
+        self.return_text = self.fig.text(
+            0.04, 1.0 - 22.0 / self.height, "", fontsize=9, va="top", family="monospace"
+        )
         self.bars, self.bar_texts = [], []
         n = len(self.labels)
         if not n:
-            self.fig.text(0.04, 1.0 - 44.0 / self.height, "(the agent sees no hint)", fontsize=7, va="top", color="0.4")
+            self.fig.text(
+                0.04,
+                1.0 - 44.0 / self.height,
+                "(the agent sees no hint)",
+                fontsize=7,
+                va="top",
+                color="0.4",
+            )
         else:
             ax = self.fig.add_axes((0.04, 0.03, 0.92, top - 0.05))
             ax.set_xlim(-1.0, 1.0)
@@ -166,20 +193,33 @@ class FrameComposer:
             self.bars = list(ax.barh(np.arange(n), np.zeros(n), height=0.35, color=BAR_COLOR))
             self.bar_texts = [ax.text(-1.0, i - 0.3, "", fontsize=7, va="bottom") for i in range(n)]
             if len(labels) > MAX_BARS:
-                self.fig.text(0.96, 0.01, f"+{len(labels) - MAX_BARS} more", fontsize=6, ha="right", color="0.4")
+                self.fig.text(
+                    0.96,
+                    0.01,
+                    f"+{len(labels) - MAX_BARS} more",
+                    fontsize=6,
+                    ha="right",
+                    color="0.4",
+                )
 
-    def __call__(self, picture: np.ndarray, hint: np.ndarray, step: int, episode_return: float) -> np.ndarray:
+    def __call__(
+        self, picture: np.ndarray, hint: np.ndarray, step: int, episode_return: float
+    ) -> np.ndarray:
         """uint8[H, W, 3]: the upscaled `picture` beside the panel for this step."""
         total = f"/{self.max_steps}" if self.max_steps else ""
         self.step_text.set_text(f"step {step}{total}")
         self.return_text.set_text(f"return {episode_return:.2f}")
-        for bar, text, label, value, limit in zip(self.bars, self.bar_texts, self.labels, hint, self.limits):
+        for bar, text, label, value, limit in zip(
+            self.bars, self.bar_texts, self.labels, hint, self.limits
+        ):
             bar.set_width(float(np.clip(value / limit, -1.0, 1.0)))
             text.set_text(f"{label}: {value:+.3f}")
         self.canvas.draw()
         panel = np.asarray(self.canvas.buffer_rgba())[..., :3]
         panel = _fit(panel, self.height, PANEL_WIDTH)
-        big = np.repeat(np.repeat(np.asarray(picture, np.uint8), self.scale, axis=0), self.scale, axis=1)
+        big = np.repeat(
+            np.repeat(np.asarray(picture, np.uint8), self.scale, axis=0), self.scale, axis=1
+        )
         return np.concatenate([_fit(big, self.height, big.shape[1]), panel], axis=1)
 
 
@@ -192,8 +232,13 @@ def _fit(image: np.ndarray, height: int, width: int) -> np.ndarray:
 
 
 def compose_frame(
-    picture: np.ndarray, hint: np.ndarray, labels: Sequence[str], step: int, episode_return: float,
-    scale: int = 4, limits: np.ndarray | None = None,
+    picture: np.ndarray,
+    hint: np.ndarray,
+    labels: Sequence[str],
+    step: int,
+    episode_return: float,
+    scale: int = 4,
+    limits: np.ndarray | None = None,
 ) -> np.ndarray:
     """One frame on its own (a video reuses a FrameComposer instead): uint8[H, W, 3].
 
@@ -201,14 +246,23 @@ def compose_frame(
     """
     hint = np.asarray(hint, np.float32)
     limits = np.maximum(np.abs(hint), 1e-6) if limits is None else limits
-    return FrameComposer(labels, limits, picture.shape[0], scale)(picture, hint, step, episode_return)
+    return FrameComposer(labels, limits, picture.shape[0], scale)(
+        picture, hint, step, episode_return
+    )
 
 
-def compose_frames(episode: Rollout, labels: Sequence[str], scale: int, max_steps: int | None = None) -> list[np.ndarray]:
+def compose_frames(
+    episode: Rollout, labels: Sequence[str], scale: int, max_steps: int | None = None
+) -> list[np.ndarray]:
     """Every frame of a cut rollout (host arrays); frame t shows the state after step t + 1."""
-    composer = FrameComposer(labels, hint_limits(episode.hints), episode.frames.shape[1], scale, max_steps)
+    composer = FrameComposer(
+        labels, hint_limits(episode.hints), episode.frames.shape[1], scale, max_steps
+    )
     returns = np.cumsum(episode.rewards, dtype=np.float64)
-    return [composer(episode.frames[t], episode.hints[t], t + 1, float(returns[t])) for t in range(len(episode.frames))]
+    return [
+        composer(episode.frames[t], episode.hints[t], t + 1, float(returns[t]))
+        for t in range(len(episode.frames))
+    ]
 
 
 def write_gif(frames: Sequence[np.ndarray], path: Path, fps: int = 25) -> None:
@@ -217,5 +271,10 @@ def write_gif(frames: Sequence[np.ndarray], path: Path, fps: int = 25) -> None:
 
     images = [Image.fromarray(np.asarray(f, np.uint8)) for f in frames]
     images[0].save(
-        path, format="GIF", save_all=True, append_images=images[1:], duration=max(1, round(1000 / fps)), loop=0
+        path,
+        format="GIF",
+        save_all=True,
+        append_images=images[1:],
+        duration=max(1, round(1000 / fps)),
+        loop=0,
     )

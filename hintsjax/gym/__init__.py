@@ -36,8 +36,13 @@ def register(name: str) -> str:
     hintsjax.envs.REGISTRY) with Gymnasium: its single env for `gymnasium.make`, its vector env
     for `gymnasium.make_vec`. Its id. The env itself is made (and checked) at `make`."""
     gid = env_id(name)
-    gymnasium.register(gid, entry_point=SingleEnv, vector_entry_point=VectorEnv, kwargs={"env": name},
-                       disable_env_checker=False)
+    gymnasium.register(
+        gid,
+        entry_point=SingleEnv,
+        vector_entry_point=VectorEnv,
+        kwargs={"env": name},
+        disable_env_checker=False,
+    )
     return gid
 
 
@@ -49,5 +54,15 @@ def register_all(names: list[str]) -> list[str]:
 SUITE_IDS = register_all(envs.env_names())
 BRAX_IDS = register_all([f"{brax_env.SOURCE}:{name}" for name in brax_env.names()])
 
-__all__ = ["BRAX_IDS", "NAMESPACE", "SUITE_IDS", "SingleEnv", "VectorEnv", "default_hint", "env_id", "register",
-           "register_all", "seed_key"]
+__all__ = [
+    "BRAX_IDS",
+    "NAMESPACE",
+    "SUITE_IDS",
+    "SingleEnv",
+    "VectorEnv",
+    "default_hint",
+    "env_id",
+    "register",
+    "register_all",
+    "seed_key",
+]

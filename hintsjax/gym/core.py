@@ -57,10 +57,14 @@ def _observe(observe: str | Sequence[str] | None, hint: envs.Hint) -> tuple[tupl
     for key in keys:
         envs.choose("observation key", key, dict.fromkeys(envs.OBS_KEYS))
     if not keys or len(set(keys)) != len(keys):
-        raise ValueError(f"observe={observe!r}: name each of {', '.join(envs.OBS_KEYS)} at most once, at least one")
+        raise ValueError(
+            f"observe={observe!r}: name each of {', '.join(envs.OBS_KEYS)} at most once, at least one"
+        )
     if "hint" in keys and not hint.dim:
-        raise ValueError(f"observe={observe!r} asks for the hint, but hint='{hint.name}' has none; "
-                         f"valid hints: {', '.join(envs.hint_names(hint.env))}")
+        raise ValueError(
+            f"observe={observe!r} asks for the hint, but hint='{hint.name}' has none; "
+            f"valid hints: {', '.join(envs.hint_names(hint.env))}"
+        )
     return keys, not isinstance(observe, str)
 
 
@@ -74,8 +78,10 @@ class Programs:
     reset: Callable  # the env's own reset, jitted: (key, params) -> Timestep
     step: Callable  # the env's own step, jitted: (key, state, action, params) -> Timestep
     picture: Callable  # the env's own render, jitted: (state, params) -> uint8[S, S, 3]
-    vector_reset: Callable  # (keys [N, 2], params) -> (keys, states, obs): split, then reset, per env
-    vector_step: Callable  # (keys, states, actions [N, A], params) -> (keys, states, obs, reward [N],
+    # (keys [N, 2], params) -> (keys, states, obs): split, then reset, per env
+    vector_reset: Callable
+    # (keys, states, actions [N, A], params) -> (keys, states, obs, reward [N],
+    vector_step: Callable
     #   terminated [N], truncated [N], final_obs): split, then step, per env; SAME_STEP autoreset
 
 
@@ -85,7 +91,9 @@ def _split(key: jax.Array) -> tuple[jax.Array, jax.Array]:
 
 
 @lru_cache(maxsize=None)
-def programs(name: str, hint: str, observe: tuple[str, ...], image_size: int | None, physics: str) -> Programs:
+def programs(
+    name: str, hint: str, observe: tuple[str, ...], image_size: int | None, physics: str
+) -> Programs:
     """The env `name` with `hint`, observing `observe`, and its jitted reset and step (one env: the
     env's own, so the single env runs hintsjax's programs as they are; N envs: vmapped, in one
     call), cached by these settings."""
@@ -102,28 +110,47 @@ def programs(name: str, hint: str, observe: tuple[str, ...], image_size: int | N
         return key, ts.state, ts.obs, ts.reward, ts.terminated, ts.truncated
 
     def vector_step(keys, states, actions, params):
-        keys, states, obs, reward, terminated, truncated = jax.vmap(step, (0, 0, 0, None))(keys, states, actions, params)
+        keys, states, obs, reward, terminated, truncated = jax.vmap(step, (0, 0, 0, None))(
+            keys, states, actions, params
+        )
         done = terminated | truncated
 
         def restart(keys, states, obs):
             # only where some episode ended: a vmapped reset costs a picture per env
             fresh_keys, fresh_states, fresh_obs = jax.vmap(reset, (0, None))(keys, params)
             pick = lambda a, b: jax.tree.map(  # noqa: E731
-                lambda x, y: jnp.where(done.reshape(done.shape + (1,) * (x.ndim - 1)), x, y), a, b)
+                lambda x, y: jnp.where(done.reshape(done.shape + (1,) * (x.ndim - 1)), x, y), a, b
+            )
             return pick(fresh_keys, keys), pick(fresh_states, states), pick(fresh_obs, obs)
 
-        next_keys, next_states, next_obs = jax.lax.cond(done.any(), restart, lambda *a: a, keys, states, obs)
+        next_keys, next_states, next_obs = jax.lax.cond(
+            done.any(), restart, lambda *a: a, keys, states, obs
+        )
         return next_keys, next_states, next_obs, reward, terminated, truncated, obs
 
-    return Programs(env, jax.jit(_split), jax.jit(env.reset), jax.jit(env.step), jax.jit(env.render),
-                    jax.jit(jax.vmap(reset, (0, None))), jax.jit(vector_step))
+    return Programs(
+        env,
+        jax.jit(_split),
+        jax.jit(env.reset),
+        jax.jit(env.step),
+        jax.jit(env.render),
+        jax.jit(jax.vmap(reset, (0, None))),
+        jax.jit(vector_step),
+    )
 
 
 class _Settings:
     """What both Gymnasium envs resolve from their arguments: the programs, params, spaces."""
 
-    def __init__(self, env: str, hint: str | None, variant: str | None, observe: str | Sequence[str] | None,
-                 image_size: int | None, physics: str):
+    def __init__(
+        self,
+        env: str,
+        hint: str | None,
+        variant: str | None,
+        observe: str | Sequence[str] | None,
+        image_size: int | None,
+        physics: str,
+    ):
         self.name = env
         self.hint = default_hint(env) if hint is None else hint
         resolved = envs.make_hint(env, self.hint)
@@ -138,8 +165,11 @@ class _Settings:
             "state": lambda: spaces.Box(-np.inf, np.inf, (made.state_size,), np.float32),
             "hint": lambda: spaces.Box(-np.inf, np.inf, (resolved.dim,), np.float32),
         }
-        self.observation_space = (spaces.Dict({k: boxes[k]() for k in self.keys}) if self.as_dict
-                                  else boxes[self.keys[0]]())
+        self.observation_space = (
+            spaces.Dict({k: boxes[k]() for k in self.keys})
+            if self.as_dict
+            else boxes[self.keys[0]]()
+        )
         low, high = (np.asarray(x, np.float32) for x in made.action_range(self.params))
         self.action_space = spaces.Box(low, high, (made.action_size,), np.float32)
 
@@ -158,7 +188,11 @@ def _seeds(seed: int | Sequence[int] | None, num_envs: int) -> list[int] | None:
     """Each env's seed: s + i for a seed s, a list as given (one per env), None for none."""
     if seed is None:
         return None
-    seeds = [int(seed) + i for i in range(num_envs)] if isinstance(seed, (int, np.integer)) else [int(s) for s in seed]
+    seeds = (
+        [int(seed) + i for i in range(num_envs)]
+        if isinstance(seed, (int, np.integer))
+        else [int(s) for s in seed]
+    )
     if len(seeds) != num_envs or min(seeds) < 0:
         raise ValueError(f"seed={seed!r}: give one non-negative int, or a list of {num_envs}")
     return seeds
@@ -166,7 +200,9 @@ def _seeds(seed: int | Sequence[int] | None, num_envs: int) -> list[int] | None:
 
 def _no_options(options: dict[str, Any] | None) -> None:
     if options:
-        raise ValueError(f"reset options {sorted(options)} are not supported: hintsjax's envs take none")
+        raise ValueError(
+            f"reset options {sorted(options)} are not supported: hintsjax's envs take none"
+        )
 
 
 class VectorEnv(gymnasium.vector.VectorEnv):
@@ -182,8 +218,16 @@ class VectorEnv(gymnasium.vector.VectorEnv):
 
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
 
-    def __init__(self, env: str, num_envs: int = 1, hint: str | None = None, variant: str | None = None,
-                 observe: str | Sequence[str] | None = None, image_size: int | None = None, physics: str = envs.AUTO):
+    def __init__(
+        self,
+        env: str,
+        num_envs: int = 1,
+        hint: str | None = None,
+        variant: str | None = None,
+        observe: str | Sequence[str] | None = None,
+        image_size: int | None = None,
+        physics: str = envs.AUTO,
+    ):
         if int(num_envs) < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
         self.settings = _Settings(env, hint, variant, observe, image_size, physics)
@@ -192,18 +236,26 @@ class VectorEnv(gymnasium.vector.VectorEnv):
         self.single_action_space = self.settings.action_space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self.metadata = dict(self.metadata, env=env, hint=self.settings.hint, variant=self.settings.variant)
+        self.metadata = dict(
+            self.metadata, env=env, hint=self.settings.hint, variant=self.settings.variant
+        )
         self._keys = self._states = None
 
-    def reset(self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None):
+    def reset(
+        self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None
+    ):
         """obs of N fresh episodes, {}; seed s (or a list of N seeds) seeds env i with s + i."""
         _no_options(options)
         super().reset(seed=seed if isinstance(seed, (int, np.integer)) or seed is None else None)
         seeds = _seeds(seed, self.num_envs)
         if seeds is None and self._keys is None:
             seeds = [int(s) for s in self.np_random.integers(0, 2**63, self.num_envs)]
-        keys = jnp.asarray(np.stack([seed_key(s) for s in seeds])) if seeds is not None else self._keys
-        self._keys, self._states, obs = self.settings.programs.vector_reset(keys, self.settings.params)
+        keys = (
+            jnp.asarray(np.stack([seed_key(s) for s in seeds])) if seeds is not None else self._keys
+        )
+        self._keys, self._states, obs = self.settings.programs.vector_reset(
+            keys, self.settings.params
+        )
         return self.settings.to_numpy(_host(obs)), {}
 
     def step(self, actions):
@@ -213,7 +265,8 @@ class VectorEnv(gymnasium.vector.VectorEnv):
             raise gymnasium.error.ResetNeeded("call reset() before step()")
         actions = jnp.asarray(np.asarray(actions, np.float32).reshape(self.action_space.shape))
         self._keys, self._states, *out = self.settings.programs.vector_step(
-            self._keys, self._states, actions, self.settings.params)
+            self._keys, self._states, actions, self.settings.params
+        )
         obs, reward, terminated, truncated, final_obs = _host(out)  # the one transfer
         done = terminated | truncated
         info: dict[str, Any] = {}
@@ -221,9 +274,19 @@ class VectorEnv(gymnasium.vector.VectorEnv):
             final = np.full(self.num_envs, None, dtype=object)
             for i in np.flatnonzero(done):
                 final[i] = self.settings.to_numpy({k: v[i] for k, v in final_obs.items()})
-            info = {"final_obs": final, "_final_obs": done, "final_info": {}, "_final_info": done.copy()}
-        return (self.settings.to_numpy(obs), reward.astype(np.float64), terminated.astype(bool),
-                truncated.astype(bool), info)
+            info = {
+                "final_obs": final,
+                "_final_obs": done,
+                "final_info": {},
+                "_final_info": done.copy(),
+            }
+        return (
+            self.settings.to_numpy(obs),
+            reward.astype(np.float64),
+            terminated.astype(bool),
+            truncated.astype(bool),
+            info,
+        )
 
 
 class SingleEnv(gymnasium.Env):
@@ -233,9 +296,16 @@ class SingleEnv(gymnasium.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
 
-    def __init__(self, env: str, hint: str | None = None, variant: str | None = None,
-                 observe: str | Sequence[str] | None = None, image_size: int | None = None, physics: str = envs.AUTO,
-                 render_mode: str | None = None):
+    def __init__(
+        self,
+        env: str,
+        hint: str | None = None,
+        variant: str | None = None,
+        observe: str | Sequence[str] | None = None,
+        image_size: int | None = None,
+        physics: str = envs.AUTO,
+        render_mode: str | None = None,
+    ):
         if render_mode not in (None, "rgb_array"):
             raise ChoiceError("render_mode", str(render_mode), ["rgb_array"])
         self.settings = _Settings(env, hint, variant, observe, image_size, physics)

@@ -31,7 +31,13 @@ from flax import struct
 from hintsjax import envs
 from hintsjax.envs.errors import ChoiceError, choose
 from hintsjax.system.errors import UsageError, require_positive, require_range
-from hintsjax.settings.hint_sources import GENERATOR_JSON, Generator, GeneratorParams, PARAMS, stored
+from hintsjax.settings.hint_sources import (
+    GENERATOR_JSON,
+    Generator,
+    GeneratorParams,
+    PARAMS,
+    stored,
+)
 from hintsjax.algorithms import experts
 from hintsjax.training.runlog import fresh_folder
 from hintsjax.hints import rollouts
@@ -56,7 +62,8 @@ class GeneratorConfig:
     num_envs: int = 64
     steps: int = 500
     held_out_envs: int = 16
-    policy: str = "random"  # who acts in the rollouts: random (N(0, 1) actions) or expert (in part of the envs)
+    # who acts in the rollouts: random (N(0, 1) actions) or expert (in part of the envs)
+    policy: str = "random"
     expert_fraction: float = 0.5  # with policy=expert, the share of envs the packaged expert drives
     epochs: int = 10
     minibatch_size: int = 256
@@ -78,14 +85,30 @@ class GeneratorConfig:
         except ChoiceError as e:
             raise UsageError(str(e)) from None
         if hint.dim == 0:
-            raise UsageError(f"hint '{self.hint}' is empty: give a registered hint of {self.env} "
-                             f"({', '.join(envs.hint_names(self.env))})")
-        require_positive(self, ("frames", "seeds", "num_envs", "steps", "held_out_envs", "epochs", "minibatch_size",
-                                "lr", "hidden"))
+            raise UsageError(
+                f"hint '{self.hint}' is empty: give a registered hint of {self.env} "
+                f"({', '.join(envs.hint_names(self.env))})"
+            )
+        require_positive(
+            self,
+            (
+                "frames",
+                "seeds",
+                "num_envs",
+                "steps",
+                "held_out_envs",
+                "epochs",
+                "minibatch_size",
+                "lr",
+                "hidden",
+            ),
+        )
         require_range(self, {"expert_fraction": (0.0, 1.0)})
         if self.minibatch_size > self.num_envs * self.steps:
-            raise UsageError(f"minibatch_size ({self.minibatch_size}) exceeds the {self.num_envs * self.steps} "
-                             "training samples (num_envs x steps)")
+            raise UsageError(
+                f"minibatch_size ({self.minibatch_size}) exceeds the {self.num_envs * self.steps} "
+                "training samples (num_envs x steps)"
+            )
         if self.policy == "expert":
             experts.describe(self.env)
         return self
@@ -120,8 +143,16 @@ def make_collect(cfg: GeneratorConfig) -> Callable[[jax.Array, int], Rollouts]:
         return Rollouts(obs["pixels"], state.episode_length, obs["hint"])
 
     def collect(key: jax.Array, num_envs: int) -> Rollouts:
-        return rollouts.rollout(env, params, key, num_envs, cfg.steps, record, policy,
-                                driven=round(cfg.expert_fraction * num_envs))
+        return rollouts.rollout(
+            env,
+            params,
+            key,
+            num_envs,
+            cfg.steps,
+            record,
+            policy,
+            driven=round(cfg.expert_fraction * num_envs),
+        )
 
     return collect
 
@@ -138,7 +169,9 @@ class GeneratorMetrics:
     heldout_r2: jax.Array
 
 
-def make_train(cfg: GeneratorConfig) -> Callable[[jax.Array], tuple[GeneratorParams, GeneratorMetrics]]:
+def make_train(
+    cfg: GeneratorConfig,
+) -> Callable[[jax.Array], tuple[GeneratorParams, GeneratorMetrics]]:
     """`train(key) -> (params, metrics)`: one generator, from collecting its data to its held-out
     R^2, as one pure function (vmap it over seeds)."""
     generator, collect = cfg.generator, make_collect(cfg)
@@ -179,7 +212,9 @@ def make_train(cfg: GeneratorConfig) -> Callable[[jax.Array], tuple[GeneratorPar
 
         def minibatch(carry, idx):
             net, opt_state = carry
-            loss, grads = jax.value_and_grad(loss_fn)(net, *targets(data, idx // N, idx % N, mean, std))
+            loss, grads = jax.value_and_grad(loss_fn)(
+                net, *targets(data, idx // N, idx % N, mean, std)
+            )
             updates, opt_state = optimizer.update(grads, opt_state, net)
             return (optax.apply_updates(net, updates), opt_state), loss
 
@@ -188,10 +223,14 @@ def make_train(cfg: GeneratorConfig) -> Callable[[jax.Array], tuple[GeneratorPar
             carry, losses = jax.lax.scan(minibatch, carry, order)
             return carry, losses.mean()
 
-        (net, _), loss = jax.lax.scan(epoch, (net, optimizer.init(net)), jax.random.split(k_epochs, cfg.epochs))
+        (net, _), loss = jax.lax.scan(
+            epoch, (net, optimizer.init(net)), jax.random.split(k_epochs, cfg.epochs)
+        )
         train_mse, train_r2 = errors(net, data, N, mean, std)
         heldout_mse, heldout_r2 = errors(net, held, cfg.held_out_envs, mean, std)
-        return GeneratorParams(net, mean, std), GeneratorMetrics(loss, train_mse, heldout_mse, train_r2, heldout_r2)
+        return GeneratorParams(net, mean, std), GeneratorMetrics(
+            loss, train_mse, heldout_mse, train_r2, heldout_r2
+        )
 
     return train
 
@@ -201,27 +240,58 @@ def dimension_names(hint: envs.Hint) -> list[str]:
     return [p.name if p.dim == 1 else f"{p.name}[{i}]" for p in hint.parts for i in range(p.dim)]
 
 
-def write_folder(folder: Path, cfg: GeneratorConfig, params: GeneratorParams, metrics: GeneratorMetrics,
-                 seconds: dict[str, float]) -> dict[str, Any]:
+def write_folder(
+    folder: Path,
+    cfg: GeneratorConfig,
+    params: GeneratorParams,
+    metrics: GeneratorMetrics,
+    seconds: dict[str, float],
+) -> dict[str, Any]:
     """Write a trained generator's folder; generator.json last (a folder without it is incomplete)."""
     names = dimension_names(cfg.generator.spec)
     m = jax.tree.map(np.asarray, metrics)
     with (folder / "metrics.csv").open("w", newline="") as f:
         writer = csv.writer(f)
-        writer.writerow(["seed", "dimension", "train_mse", "heldout_mse", "train_r2", "heldout_r2", "final_loss"])
+        writer.writerow(
+            [
+                "seed",
+                "dimension",
+                "train_mse",
+                "heldout_mse",
+                "train_r2",
+                "heldout_r2",
+                "final_loss",
+            ]
+        )
         for s in range(cfg.seeds):
             for i, name in enumerate(names):
-                writer.writerow([s, name, *(f"{float(getattr(m, a)[s, i]):.6g}" for a in
-                                            ("train_mse", "heldout_mse", "train_r2", "heldout_r2")), f"{m.loss[s, -1]:.6g}"])
+                writer.writerow(
+                    [
+                        s,
+                        name,
+                        *(
+                            f"{float(getattr(m, a)[s, i]):.6g}"
+                            for a in ("train_mse", "heldout_mse", "train_r2", "heldout_r2")
+                        ),
+                        f"{m.loss[s, -1]:.6g}",
+                    ]
+                )
     with ocp.StandardCheckpointer() as saver:
         saver.save((folder / PARAMS).absolute(), stored(params), force=True)
     meta = {
-        "env": cfg.env, "hint": cfg.hint, "frames": cfg.frames, "hidden": cfg.hidden, "seeds": cfg.seeds,
+        "env": cfg.env,
+        "hint": cfg.hint,
+        "frames": cfg.frames,
+        "hidden": cfg.hidden,
+        "seeds": cfg.seeds,
         "dimensions": names,
-        "heldout_r2_mean": m.heldout_r2.mean(axis=0).tolist(), "heldout_r2_min": m.heldout_r2.min(axis=0).tolist(),
+        "heldout_r2_mean": m.heldout_r2.mean(axis=0).tolist(),
+        "heldout_r2_min": m.heldout_r2.min(axis=0).tolist(),
         "train_r2_mean": m.train_r2.mean(axis=0).tolist(),
-        "env_steps": (cfg.num_envs + cfg.held_out_envs) * cfg.steps, "seconds": seconds,
-        "device": jax.devices()[0].device_kind, "config": dataclasses.asdict(cfg),
+        "env_steps": (cfg.num_envs + cfg.held_out_envs) * cfg.steps,
+        "seconds": seconds,
+        "device": jax.devices()[0].device_kind,
+        "config": dataclasses.asdict(cfg),
     }
     (folder / GENERATOR_JSON).write_text(json.dumps(meta, indent=1))
     return meta

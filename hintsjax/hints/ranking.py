@@ -35,10 +35,14 @@ from hintsjax.algorithms import experts
 from hintsjax.algorithms.group import make_group, make_group_trainer
 from hintsjax.hints import rollouts
 
-SCORES = {"information": "the return's R^2 gained by the hint over one picture",
-          "probe": "area under a short training run's learning curve"}
-POLICIES = {"auto": "the packaged expert in half the envs where the env has one, N(0, 1) actions in the rest",
-            "random": "N(0, 1) actions"}
+SCORES = {
+    "information": "the return's R^2 gained by the hint over one picture",
+    "probe": "area under a short training run's learning curve",
+}
+POLICIES = {
+    "auto": "the packaged expert in half the envs where the env has one, N(0, 1) actions in the rest",
+    "random": "N(0, 1) actions",
+}
 
 
 @dataclass(frozen=True)
@@ -52,7 +56,8 @@ class RankConfig:
     scores: str = "information,probe"
     seeds: int = 5
     seed: int = 0
-    probe_fraction: float = 0.1  # of the env's HINTS budget (ENV_DEFAULTS), rounded to whole updates
+    # of the env's HINTS budget (ENV_DEFAULTS), rounded to whole updates
+    probe_fraction: float = 0.1
     info_envs: int = 64
     info_steps: int = 250
     info_held_out_envs: int = 16
@@ -60,7 +65,9 @@ class RankConfig:
     info_epochs: int = 5
     info_minibatch_size: int = 256
     info_lr: float = 3e-4
-    policy: str = "auto"  # the information rollouts' actions: auto (the packaged expert in half the envs where there is one), random
+    # the information rollouts' actions: auto (the packaged expert in half the envs where there is
+    # one), random
+    policy: str = "auto"
     out_dir: str = "runs"
     name: str | None = None  # folder name (default: rank-<env>-<timestamp>)
 
@@ -82,23 +89,39 @@ class RankConfig:
                 choose("score", name, SCORES)
             choose("policy", self.policy, POLICIES)
             if not self.candidates or "" in self.candidates:
-                raise UsageError(f"hints is empty: give a comma-separated list of {self.env}'s hints "
-                                 f"({', '.join(envs.hint_names(self.env))})")
+                raise UsageError(
+                    f"hints is empty: give a comma-separated list of {self.env}'s hints "
+                    f"({', '.join(envs.hint_names(self.env))})"
+                )
             for hint in self.candidates:
                 if envs.make_hint(self.env, hint).dim == 0:
-                    raise UsageError(f"hint '{hint}' is empty: give hints of {self.env} ({', '.join(envs.hint_names(self.env))})")
+                    raise UsageError(
+                        f"hint '{hint}' is empty: give hints of {self.env} ({', '.join(envs.hint_names(self.env))})"
+                    )
         except ChoiceError as e:
             raise UsageError(str(e)) from None
         if len(set(self.candidates)) < len(self.candidates):
             raise UsageError(f"hints lists a hint twice: {self.hints}")
-        require_positive(self, ("seeds", "info_envs", "info_steps", "info_held_out_envs", "info_epochs",
-                                "info_minibatch_size", "info_lr"))
+        require_positive(
+            self,
+            (
+                "seeds",
+                "info_envs",
+                "info_steps",
+                "info_held_out_envs",
+                "info_epochs",
+                "info_minibatch_size",
+                "info_lr",
+            ),
+        )
         require_range(self, {"probe_fraction": (0.0, 1.0), "info_gamma": (0.0, 1.0)})
         if self.probe_fraction == 0:
             raise UsageError("probe_fraction must be above 0")
         if self.info_minibatch_size > self.info_held_out_envs * self.info_steps:
-            raise UsageError(f"info_minibatch_size ({self.info_minibatch_size}) exceeds the held-out samples "
-                             f"(info_held_out_envs x info_steps = {self.info_held_out_envs * self.info_steps})")
+            raise UsageError(
+                f"info_minibatch_size ({self.info_minibatch_size}) exceeds the held-out samples "
+                f"(info_held_out_envs x info_steps = {self.info_held_out_envs * self.info_steps})"
+            )
         return self
 
 
@@ -126,12 +149,15 @@ class Samples:
 def discounted_returns(reward: jax.Array, done: jax.Array, gamma: float) -> jax.Array:
     """[T, N] rewards and episode ends -> the discounted return from each step to its episode's
     end (or to the end of the data)."""
+
     def back(acc, x):
         r, d = x
         acc = r + gamma * (1.0 - d) * acc
         return acc, acc
 
-    return jax.lax.scan(back, jnp.zeros_like(reward[0]), (reward, done.astype(jnp.float32)), reverse=True)[1]
+    return jax.lax.scan(
+        back, jnp.zeros_like(reward[0]), (reward, done.astype(jnp.float32)), reverse=True
+    )[1]
 
 
 def make_information(cfg: RankConfig, policy: Any = None) -> Callable[[jax.Array], jax.Array]:
@@ -141,7 +167,8 @@ def make_information(cfg: RankConfig, policy: Any = None) -> Callable[[jax.Array
     candidates = cfg.candidates
     union, takes = envs.hints.side_by_side(cfg.env, candidates)
     width = max(len(t) for t in takes)
-    take = jnp.asarray([list(t) + [0] * (width - len(t)) for t in takes + [()]], jnp.int32)  # the last: no hint
+    # the last: no hint
+    take = jnp.asarray([list(t) + [0] * (width - len(t)) for t in takes + [()]], jnp.int32)
     keep = jnp.asarray([[i < len(t) for i in range(width)] for t in takes + [()]])
     if policy is None and cfg.policy == "auto":
         policy = experts.load(cfg.env) if cfg.env in experts.packaged() else None
@@ -153,8 +180,9 @@ def make_information(cfg: RankConfig, policy: Any = None) -> Callable[[jax.Array
         return obs["pixels"], obs["hint"], action, ts.reward, ts.terminated | ts.truncated
 
     def collect(key: jax.Array, n: int) -> Samples:
-        pixels, hint, action, reward, done = rollouts.rollout(env, params, key, n, cfg.info_steps, record, policy,
-                                                              driven=n // 2)
+        pixels, hint, action, reward, done = rollouts.rollout(
+            env, params, key, n, cfg.info_steps, record, policy, driven=n // 2
+        )
         ret = discounted_returns(reward, done, cfg.info_gamma)
         flat = lambda x: x.reshape((-1,) + x.shape[2:])  # noqa: E731
         return Samples(flat(pixels), flat(hint), flat(action), flat(ret))
@@ -162,7 +190,9 @@ def make_information(cfg: RankConfig, policy: Any = None) -> Callable[[jax.Array
     def r2(net, data: Samples, pick, mean, std) -> jax.Array:
         count = data.ret.shape[0] // B * B
         idx = jnp.arange(count).reshape(-1, B)
-        pred = jax.lax.map(lambda i: probe.apply(net, data.pixels[i], pick(data.hint[i]), data.action[i]), idx).reshape(-1)
+        pred = jax.lax.map(
+            lambda i: probe.apply(net, data.pixels[i], pick(data.hint[i]), data.action[i]), idx
+        ).reshape(-1)
         y = (data.ret[:count] - mean) / std
         return 1.0 - jnp.sum((pred - y) ** 2) / jnp.maximum(jnp.sum((y - y.mean()) ** 2), 1e-12)
 
@@ -175,7 +205,9 @@ def make_information(cfg: RankConfig, policy: Any = None) -> Callable[[jax.Array
 
         def loss_fn(net, i):
             y = (data.ret[i] - mean) / std
-            return jnp.mean((probe.apply(net, data.pixels[i], pick(data.hint[i]), data.action[i]) - y) ** 2)
+            return jnp.mean(
+                (probe.apply(net, data.pixels[i], pick(data.hint[i]), data.action[i]) - y) ** 2
+            )
 
         def minibatch(carry, i):
             net, opt_state = carry
@@ -187,13 +219,16 @@ def make_information(cfg: RankConfig, policy: Any = None) -> Callable[[jax.Array
             order = jax.random.permutation(key, m)[: m // B * B].reshape(-1, B)
             return jax.lax.scan(minibatch, carry, order)[0], None
 
-        (net, _), _ = jax.lax.scan(epoch, (net, optimizer.init(net)), jax.random.split(k_epochs, cfg.info_epochs))
+        (net, _), _ = jax.lax.scan(
+            epoch, (net, optimizer.init(net)), jax.random.split(k_epochs, cfg.info_epochs)
+        )
         return r2(net, held, pick, mean, std)
 
     def information(key: jax.Array) -> jax.Array:
         k_data, k_held, k_fit = jax.random.split(key, 3)
         data, held = collect(k_data, cfg.info_envs), collect(k_held, cfg.info_held_out_envs)
-        scores = jax.vmap(fit, in_axes=(None, None, None, 0, 0))(k_fit, data, held, take, keep)  # same seed, data and init for all
+        # same seed, data and init for all
+        scores = jax.vmap(fit, in_axes=(None, None, None, 0, 0))(k_fit, data, held, take, keep)
         return scores[:-1] - scores[-1]
 
     return information
@@ -204,11 +239,25 @@ def make_information(cfg: RankConfig, policy: Any = None) -> Callable[[jax.Array
 
 def probe_configs(cfg: RankConfig) -> list:
     """The HINTS runs of the probe: every candidate at probe_fraction of the env's budget."""
-    base = run_config({"env": cfg.env, "agent": "hints", "scheme": cfg.scheme, "hint": cfg.candidates[0]})
+    base = run_config(
+        {"env": cfg.env, "agent": "hints", "scheme": cfg.scheme, "hint": cfg.candidates[0]}
+    )
     updates = max(1, round(cfg.probe_fraction * base.ppo.num_updates))
     ppo = {"total_env_steps": updates * base.ppo.batch_size}
-    return [run_config({"env": cfg.env, "agent": "hints", "scheme": cfg.scheme, "hint": h, "seeds": cfg.seeds,
-                        "seed": cfg.seed, "ppo": ppo}) for h in cfg.candidates]
+    return [
+        run_config(
+            {
+                "env": cfg.env,
+                "agent": "hints",
+                "scheme": cfg.scheme,
+                "hint": h,
+                "seeds": cfg.seeds,
+                "seed": cfg.seed,
+                "ppo": ppo,
+            }
+        )
+        for h in cfg.candidates
+    ]
 
 
 def probe_scores(cfg: RankConfig) -> tuple[np.ndarray, str]:

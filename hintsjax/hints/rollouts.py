@@ -17,8 +17,16 @@ def observed(expert: Any) -> tuple[str, ...]:
     return ("pixels", "hint", "state") if expert is not None else ("pixels", "hint")
 
 
-def rollout(env: Any, params: Any, key: jax.Array, num_envs: int, steps: int, record: Callable[..., Any],
-            expert: Any = None, driven: int = 0) -> Any:
+def rollout(
+    env: Any,
+    params: Any,
+    key: jax.Array,
+    num_envs: int,
+    steps: int,
+    record: Callable[..., Any],
+    expert: Any = None,
+    driven: int = 0,
+) -> Any:
     """`steps` steps of `num_envs` fresh episodes of an AutoReset env observing `observed(expert)`;
     the expert's sampled actions in the first `driven` envs, N(0, 1) in the others. Returns
     `record(state, obs, action, ts)` of every step (the state and observation the action was taken
@@ -34,7 +42,9 @@ def rollout(env: Any, params: Any, key: jax.Array, num_envs: int, steps: int, re
         if expert is not None:
             expert_action = jax.vmap(expert.mean)(obs["state"]) + jnp.exp(expert.log_std) * action
             action = jnp.where(by_expert[:, None], expert_action, action)
-        ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(jax.random.split(k_env, num_envs), state, action, params)
+        ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
+            jax.random.split(k_env, num_envs), state, action, params
+        )
         return (ts.state, ts.obs), record(state, obs, action, ts)
 
     return jax.lax.scan(step, (ts.state, ts.obs), jax.random.split(k_run, steps))[1]

@@ -45,7 +45,11 @@ class AgentSpec:
     @property
     def observe(self) -> tuple[str, ...]:
         """The env observation keys this agent needs."""
-        return tuple(k for k, used in (("pixels", self.pixels), ("state", self.state), ("hint", self.hint)) if used)
+        return tuple(
+            k
+            for k, used in (("pixels", self.pixels), ("state", self.state), ("hint", self.hint))
+            if used
+        )
 
     @property
     def conditioned(self) -> bool:
@@ -80,27 +84,48 @@ class AgentSpec:
         return "-".join(parts)
 
 
-EXPERT_AGENT = "expert_ppo"  # the agent whose trained policy is exported as an env's expert (hintsjax.expert)
+# the agent whose trained policy is exported as an env's expert (hintsjax.expert)
+EXPERT_AGENT = "expert_ppo"
 # The converged references (tier 3): an env's `learners` layer is every other agent's (env_defaults).
 REFERENCES = (EXPERT_AGENT, "dagger", "gail")
 AGENTS: dict[str, AgentSpec] = {
     "ppo_rgb": AgentSpec(pixels=True, about="PPO-RGB: PPO on the pictures"),
     "ppo_state": AgentSpec(state=True, about="PPO-x: PPO on the state"),
-    "ppo_noisy_state": AgentSpec(state=True, state_noise=1.0, about="PPO-x+N(0,1): the state, noised in training"),
+    "ppo_noisy_state": AgentSpec(
+        state=True, state_noise=1.0, about="PPO-x+N(0,1): the state, noised in training"
+    ),
     "hints_blind": AgentSpec(hint=True, about="the hint alone, no pictures"),
-    "hints_state": AgentSpec(pixels=True, hint=True, hint_override="state", about="HINTS-x: pictures and the state"),
-    "hints": AgentSpec(pixels=True, hint=True, about="HINTS: pictures conditioned on the hint (scheme=)"),
+    "hints_state": AgentSpec(
+        pixels=True, hint=True, hint_override="state", about="HINTS-x: pictures and the state"
+    ),
+    "hints": AgentSpec(
+        pixels=True, hint=True, about="HINTS: pictures conditioned on the hint (scheme=)"
+    ),
     # The baselines that use the hint's privileged signal in training only (pictures at deployment);
     # hint=state makes the state their privileged signal.
-    "asym_ac": AgentSpec(pixels=True, hint=True, hint_use="critic",
-                         about="asymmetric actor-critic: the critic sees the hint beside the pictures"),
-    "pi_dropout": AgentSpec(pixels=True, hint=True, drops_hint=True,
-                            about="HINTS with the hint dropped (ppo.hint_dropout) in training, always at deploy"),
-    "hint_aux": AgentSpec(pixels=True, hint=True, hint_use="target",
-                          about="PPO-RGB whose features predict the hint, an extra loss (ppo.aux_coef)"),
+    "asym_ac": AgentSpec(
+        pixels=True,
+        hint=True,
+        hint_use="critic",
+        about="asymmetric actor-critic: the critic sees the hint beside the pictures",
+    ),
+    "pi_dropout": AgentSpec(
+        pixels=True,
+        hint=True,
+        drops_hint=True,
+        about="HINTS with the hint dropped (ppo.hint_dropout) in training, always at deploy",
+    ),
+    "hint_aux": AgentSpec(
+        pixels=True,
+        hint=True,
+        hint_use="target",
+        about="PPO-RGB whose features predict the hint, an extra loss (ppo.aux_coef)",
+    ),
     # The references. expert_ppo is PPO on the state at the env's expert budget (its TRAINING's
     # `agents` layer); dagger and gail learn from its exported policy.
     EXPERT_AGENT: AgentSpec(state=True, about="the expert: PPO on the state at its own budget"),
     "dagger": AgentSpec(state=True, algorithm="dagger", about="DAgger from the packaged expert"),
-    "gail": AgentSpec(state=True, algorithm="gail", about="GAIL from the packaged expert's demonstrations"),
+    "gail": AgentSpec(
+        state=True, algorithm="gail", about="GAIL from the packaged expert's demonstrations"
+    ),
 }

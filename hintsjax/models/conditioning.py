@@ -69,4 +69,9 @@ class MaskedInput(nn.Module):
         return encoder(jnp.concatenate([x, masks.astype(x.dtype)], axis=-1))
 
 
-SCHEMES: dict[str, type[nn.Module]] = {"lc": LatentConcat, "ac": LatentAdd, "fc": FiLM, "mc": MaskedInput}
+SCHEMES: dict[str, type[nn.Module]] = {
+    "lc": LatentConcat,
+    "ac": LatentAdd,
+    "fc": FiLM,
+    "mc": MaskedInput,
+}

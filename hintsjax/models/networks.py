@@ -38,7 +38,9 @@ def image_patches(x: jax.Array, kernel: int, stride: int) -> jax.Array:
     w = (x.shape[-2] - kernel) // stride + 1
     span_h, span_w = stride * (h - 1) + 1, stride * (w - 1) + 1
     slices = [
-        x[..., i : i + span_h : stride, j : j + span_w : stride, :] for i in range(kernel) for j in range(kernel)
+        x[..., i : i + span_h : stride, j : j + span_w : stride, :]
+        for i in range(kernel)
+        for j in range(kernel)
     ]
     return jnp.concatenate(slices, axis=-1)
 
@@ -132,20 +134,32 @@ class ActorCritic(nn.Module):
             return Encoder(name="encoder")(scale_pixels(obs["pixels"]))
         if agent.hint and agent.hint_use == "input":
             return HintEmbedding(self.hint_width, name="conditioning")(obs["hint"])
-        return StateNorm(name=normalization.NAME)(obs["state"]) if self.normalize_state else obs["state"]
+        return (
+            StateNorm(name=normalization.NAME)(obs["state"])
+            if self.normalize_state
+            else obs["state"]
+        )
 
     @nn.compact
-    def __call__(self, obs: dict[str, jax.Array], predict_hint: bool = False) -> tuple[jax.Array, ...]:
+    def __call__(
+        self, obs: dict[str, jax.Array], predict_hint: bool = False
+    ) -> tuple[jax.Array, ...]:
         z = self.features(obs)
         mean = MLP((*self.hidden, self.action_size), out_scale=0.01, name="actor")(z)
         log_std = self.param("log_std", nn.initializers.zeros, (self.action_size,))
         if self.action_head == "sigmoid":
-            mean, log_std = 2.0 * nn.sigmoid(mean) - 1.0, jnp.maximum(log_std, jnp.log(SIGMOID_MIN_STD))
+            mean, log_std = (
+                2.0 * nn.sigmoid(mean) - 1.0,
+                jnp.maximum(log_std, jnp.log(SIGMOID_MIN_STD)),
+            )
         if self.min_log_std is not None:
             log_std = jnp.maximum(log_std, self.min_log_std)
         critic_in = z if self.critic_trains_encoder else jax.lax.stop_gradient(z)
-        if self.agent.hint_use == "critic":  # the privileged hint beside the features, the critic's alone
-            critic_in = jnp.concatenate([critic_in, HintEmbedding(self.hint_width, name="critic_hint")(obs["hint"])], -1)
+        # the privileged hint beside the features, the critic's alone
+        if self.agent.hint_use == "critic":
+            critic_in = jnp.concatenate(
+                [critic_in, HintEmbedding(self.hint_width, name="critic_hint")(obs["hint"])], -1
+            )
         value = MLP((*self.hidden, 1), out_scale=1.0, name="critic")(critic_in)[..., 0]
         if self.agent.hint_use != "target":
             return mean, log_std, value
@@ -156,8 +170,16 @@ class ActorCritic(nn.Module):
 
 # "frozen": the normaliser's statistics, which the optimiser leaves alone (normalization.update sets them).
 # The hint's head trains with the encoder it shapes; the critic's hint embedding with the critic.
-LR_GROUPS = {"encoder": "encoder", "conditioning": "encoder", "actor": "actor", "log_std": "actor", "critic": "critic",
-             "critic_hint": "critic", "hint_head": "encoder", normalization.NAME: "frozen"}
+LR_GROUPS = {
+    "encoder": "encoder",
+    "conditioning": "encoder",
+    "actor": "actor",
+    "log_std": "actor",
+    "critic": "critic",
+    "critic_hint": "critic",
+    "hint_head": "encoder",
+    normalization.NAME: "frozen",
+}
 
 
 def lr_labels(params) -> dict:

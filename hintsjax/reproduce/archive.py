@@ -65,7 +65,7 @@ def _tail_means(values, last: float = 0.1) -> list[float] | None:
     updates; None when no episode ended there."""
     import numpy as np
 
-    tail = values[:, -max(1, int(last * values.shape[1])):]
+    tail = values[:, -max(1, int(last * values.shape[1])) :]
     if np.isnan(tail).all():
         return None
     return [float(x) for x in np.nanmean(tail, axis=1)]
@@ -95,7 +95,15 @@ def _share_above(kl, above: float = KL_ABOVE) -> float:
 
 def unique_lines(*paths: Path) -> list[str]:
     """The non-empty lines of the files that exist among `paths`, each once, in order."""
-    return list(dict.fromkeys(line for path in paths if path.exists() for line in path.read_text().splitlines() if line.strip()))
+    return list(
+        dict.fromkeys(
+            line
+            for path in paths
+            if path.exists()
+            for line in path.read_text().splitlines()
+            if line.strip()
+        )
+    )
 
 
 def sweep_records(runs: Path, table: int | str) -> list[dict]:
@@ -104,7 +112,11 @@ def sweep_records(runs: Path, table: int | str) -> list[dict]:
     for each. Sweeps run on a CPU (recorded with "device": "cpu") are left out: their runs are
     marked (CPU)."""
     lines = unique_lines(runs / "sweeps.jsonl", ARCHIVE / runs.name / "sweeps.jsonl")
-    return [r for r in map(json.loads, lines) if str(table) in str(r["table"]).split("+") and r.get("device") != "cpu"]
+    return [
+        r
+        for r in map(json.loads, lines)
+        if str(table) in str(r["table"]).split("+") and r.get("device") != "cpu"
+    ]
 
 
 def sweep_seconds(runs: Path, table: int | str) -> float:
@@ -113,8 +125,12 @@ def sweep_seconds(runs: Path, table: int | str) -> float:
     records = sweep_records(runs, table)
     total = sum(r["seconds"] for r in records if "finished" not in r)  # no timestamp: counted alone
     reach = -float("inf")  # the end of the union so far
-    for start, end in sorted((end - r["seconds"], end) for r in records if "finished" in r
-                             for end in [time.mktime(time.strptime(r["finished"], "%Y-%m-%d %H:%M:%S"))]):
+    for start, end in sorted(
+        (end - r["seconds"], end)
+        for r in records
+        if "finished" in r
+        for end in [time.mktime(time.strptime(r["finished"], "%Y-%m-%d %H:%M:%S"))]
+    ):
         total += max(0.0, end - max(start, reach))
         reach = max(reach, end)
     return total
@@ -148,13 +164,19 @@ def archive_run(runs: Path, env: str, label: str) -> Path:
     if (src / "eval.json").exists():
         shutil.copyfile(src / "eval.json", dest / "eval.json")
     if not (src / "metrics.csv").exists():
-        (dest / SUMMARY_JSON).write_text(json.dumps({"training_return_seed_means": None, "kl_share": None, "kl_storms": None}) + "\n")
+        (dest / SUMMARY_JSON).write_text(
+            json.dumps({"training_return_seed_means": None, "kl_share": None, "kl_storms": None})
+            + "\n"
+        )
         return dest
     log = read_log(src / "metrics.csv")  # the one pass over the run's full log
     returns = carried(log.columns["episode_return"])
     kl = log.columns.get("approx_kl")
-    kept = {"training_return_seed_means": _tail_means(returns), "kl_share": None if kl is None else _share_above(kl),
-            "kl_storms": storms_of(log)}
+    kept = {
+        "training_return_seed_means": _tail_means(returns),
+        "kl_share": None if kl is None else _share_above(kl),
+        "kl_storms": storms_of(log),
+    }
     logged = [c for c in DIAGNOSTICS if c in log.columns]
     extra = [bin_means(log.steps, carried(log.columns[c]))[1] for c in logged]
     # metrics.csv's updates count from 1 without gaps (a resumed run goes on from its checkpoint);
@@ -164,8 +186,17 @@ def archive_run(runs: Path, env: str, label: str) -> Path:
     with (dest / "metrics.csv").open("w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(["update", "seed", "env_steps", "episode_return", *logged])
-        writer.writerows([updates[i], s, f"{steps[i]:.0f}", f"{values[s, i]:.6g}", *(f"{e[s, i]:.4g}" for e in extra)]
-                         for i in range(len(steps)) for s in range(values.shape[0]))
+        writer.writerows(
+            [
+                updates[i],
+                s,
+                f"{steps[i]:.0f}",
+                f"{values[s, i]:.6g}",
+                *(f"{e[s, i]:.4g}" for e in extra),
+            ]
+            for i in range(len(steps))
+            for s in range(values.shape[0])
+        )
     (dest / SUMMARY_JSON).write_text(json.dumps(kept, indent=1) + "\n")
     return dest
 

@@ -30,7 +30,9 @@ def params_digest(params: Any) -> str:
     import numpy as np
     from jax import tree
 
-    return hashlib.sha256(b"".join(np.asarray(x).tobytes() for x in tree.leaves(params))).hexdigest()[:16]
+    return hashlib.sha256(
+        b"".join(np.asarray(x).tobytes() for x in tree.leaves(params))
+    ).hexdigest()[:16]
 
 
 def report(result: dict) -> None:
@@ -47,4 +49,4 @@ def run(script: str, flags: str, argv: list[str]) -> dict | None:
     if not lines:
         print(f"{' '.join(argv)}: failed\n{out.stderr[-3000:]}", flush=True)
         return None
-    return json.loads(lines[-1][len(PREFIX):])
+    return json.loads(lines[-1][len(PREFIX) :])

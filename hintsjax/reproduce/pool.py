@@ -31,11 +31,33 @@ from hintsjax.reproduce.archive import SUMMARY_JSON, archive_runs, unique_lines
 from hintsjax.settings.layers import CONFIG_YAML
 
 SUMMED = ("train_seconds", "wall_seconds")  # an eval.json's seconds: the parts' total
-PER_PART = ("train_seconds_this_call", "compile_seconds", "trace_seconds", "traced_programs_loaded", "train_env_steps_per_s",
-            "chunks_env_steps_per_s", "wall_split_seconds", "device", "devices", "parts",
-            "group_dir", "group_env_steps_per_s")  # each part's own: in "parts" (group_*: a run trained in a group)
-PER_SEED = ("kl_storms",)  # an eval.json's lists of one entry a seed: the parts' joined in seed order
-POOLED_EVAL = ("mean", "std", "seed_means", "seed_std", "outlier_seeds", "seeds", "mean_length", "returns")
+PER_PART = (
+    "train_seconds_this_call",
+    "compile_seconds",
+    "trace_seconds",
+    "traced_programs_loaded",
+    "train_env_steps_per_s",
+    "chunks_env_steps_per_s",
+    "wall_split_seconds",
+    "device",
+    "devices",
+    "parts",
+    # each part's own: in "parts" (group_*: a run trained in a group)
+    "group_dir",
+    "group_env_steps_per_s",
+)
+# an eval.json's lists of one entry a seed: the parts' joined in seed order
+PER_SEED = ("kl_storms",)
+POOLED_EVAL = (
+    "mean",
+    "std",
+    "seed_means",
+    "seed_std",
+    "outlier_seeds",
+    "seeds",
+    "mean_length",
+    "returns",
+)
 
 
 class PoolError(ValueError):
@@ -49,25 +71,35 @@ def pool_runs(parts: list[Path], into: Path, run_ids: list[str]) -> list[str]:
     kept = archive.ARCHIVE
     names = [p.name for p in parts]
     if len(parts) < 2 or len(set(names)) < len(names) or into.name in names:
-        raise PoolError(f"give two or more parts with other folder names than --runs ({into.name}); got {', '.join(names) or 'none'}")
+        raise PoolError(
+            f"give two or more parts with other folder names than --runs ({into.name}); got {', '.join(names) or 'none'}"
+        )
     missing = [part for part in parts if not part.is_dir() and not (kept / part.name).is_dir()]
     if missing:
-        raise PoolError(f"no runs folder at {missing[0]} and no archived one at {kept / missing[0].name}")
+        raise PoolError(
+            f"no runs folder at {missing[0]} and no archived one at {kept / missing[0].name}"
+        )
     for part in parts:
         archive_runs(part, run_ids)
     pooled = [r for r in run_ids if all((kept / p.name / r / "eval.json").exists() for p in parts)]
     shadowed = [r for r in pooled if (into / r / "eval.json").exists()]
     if shadowed:
-        raise PoolError(f"{into / shadowed[0]} finished there, and the reports would read it rather than the pooled run: "
-                        "give --runs another folder")
-    files = {run: pool_run([kept / p.name / run for p in parts]) for run in pooled}  # every run checked before any is written
+        raise PoolError(
+            f"{into / shadowed[0]} finished there, and the reports would read it rather than the pooled run: "
+            "give --runs another folder"
+        )
+    # every run checked before any is written
+    files = {run: pool_run([kept / p.name / run for p in parts]) for run in pooled}
     for run, contents in files.items():
         dest = kept / into.name / run
         dest.mkdir(parents=True, exist_ok=True)
-        (dest / "metrics.csv").unlink(missing_ok=True)  # the archive mirrors the pooled run as it stands
+        # the archive mirrors the pooled run as it stands
+        (dest / "metrics.csv").unlink(missing_ok=True)
         for name, text in contents.items():
             (dest / name).write_text(text)
-    records = unique_lines(*(kept / p.name / "sweeps.jsonl" for p in parts), kept / into.name / "sweeps.jsonl")
+    records = unique_lines(
+        *(kept / p.name / "sweeps.jsonl" for p in parts), kept / into.name / "sweeps.jsonl"
+    )
     if pooled and records:
         (kept / into.name / "sweeps.jsonl").write_text("".join(line + "\n" for line in records))
     return pooled
@@ -81,18 +113,31 @@ def pool_run(folders: list[Path]) -> dict[str, str]:
     folders, configs = [folders[i] for i in order], [configs[i] for i in order]
     first = configs[0]
     for folder, cfg in zip(folders[1:], configs[1:]):
-        other = sorted(k for k in set(cfg) | set(first) if k not in ("seed", "seeds") and cfg.get(k) != first.get(k))
+        other = sorted(
+            k
+            for k in set(cfg) | set(first)
+            if k not in ("seed", "seeds") and cfg.get(k) != first.get(k)
+        )
         if other:
-            raise PoolError(f"{folder} was trained with other settings than {folders[0]}: {', '.join(other)}")
+            raise PoolError(
+                f"{folder} was trained with other settings than {folders[0]}: {', '.join(other)}"
+            )
     for (a, ca), (b, cb) in zip(zip(folders, configs), zip(folders[1:], configs[1:])):
         if ca["seed"] + ca["seeds"] != cb["seed"]:
-            raise PoolError(f"the seeds of {a} ({ca['seed']} to {ca['seed'] + ca['seeds'] - 1}) and of {b} "
-                            f"({cb['seed']} to {cb['seed'] + cb['seeds'] - 1}) do not follow on")
+            raise PoolError(
+                f"the seeds of {a} ({ca['seed']} to {ca['seed'] + ca['seeds'] - 1}) and of {b} "
+                f"({cb['seed']} to {cb['seed'] + cb['seeds'] - 1}) do not follow on"
+            )
     seeds = [c["seeds"] for c in configs]
     results = [json.loads((f / "eval.json").read_text()) for f in folders]
-    files = {CONFIG_YAML: yaml.safe_dump({**first, "seeds": sum(seeds)}, sort_keys=False),
-             "eval.json": json.dumps(pooled_eval(results, folders, configs), indent=1) + "\n",
-             SUMMARY_JSON: json.dumps(pooled_summary([f / SUMMARY_JSON for f in folders], seeds), indent=1) + "\n"}
+    files = {
+        CONFIG_YAML: yaml.safe_dump({**first, "seeds": sum(seeds)}, sort_keys=False),
+        "eval.json": json.dumps(pooled_eval(results, folders, configs), indent=1) + "\n",
+        SUMMARY_JSON: json.dumps(
+            pooled_summary([f / SUMMARY_JSON for f in folders], seeds), indent=1
+        )
+        + "\n",
+    }
     metrics = [f / "metrics.csv" for f in folders]
     if any(m.exists() for m in metrics):
         files["metrics.csv"] = pooled_metrics(metrics, seeds)
@@ -102,20 +147,36 @@ def pool_run(folders: list[Path]) -> dict[str, str]:
 def pooled_eval(results: list[dict], folders: list[Path], configs: list[dict]) -> dict:
     """One eval.json of the parts' results (in seed order)."""
     first = results[0]
-    shared = {k: v for k, v in first.items() if k not in (*SUMMED, *PER_PART, *PER_SEED, "evaluations")}
+    shared = {
+        k: v for k, v in first.items() if k not in (*SUMMED, *PER_PART, *PER_SEED, "evaluations")
+    }
     for folder, result in zip(folders[1:], results[1:]):
         other = [k for k in shared if result.get(k) != shared[k]]
         if other or len(result["evaluations"]) != len(first["evaluations"]):
-            raise PoolError(f"{folder}'s eval.json differs from {folders[0]}'s: {', '.join(other) or 'the evaluations'}")
-    parts = [{"folder": f"{f.parent.parent.name}/{f.parent.name}/{f.name}", "seed": c["seed"], "seeds": c["seeds"],
-              **{k: r[k] for k in (*SUMMED, *PER_PART) if k in r}} for f, c, r in zip(folders, configs, results)]
+            raise PoolError(
+                f"{folder}'s eval.json differs from {folders[0]}'s: {', '.join(other) or 'the evaluations'}"
+            )
+    parts = [
+        {
+            "folder": f"{f.parent.parent.name}/{f.parent.name}/{f.name}",
+            "seed": c["seed"],
+            "seeds": c["seeds"],
+            **{k: r[k] for k in (*SUMMED, *PER_PART) if k in r},
+        }
+        for f, c, r in zip(folders, configs, results)
+    ]
     devices = list(dict.fromkeys(r["device"] for r in results if "device" in r))
-    return {**shared, **{k: sum(r[k] for r in results) for k in SUMMED if all(k in r for r in results)},
-            **({"device": " + ".join(devices)} if devices else {}),
-            **{k: joined([r.get(k) for r in results]) for k in PER_SEED if k in first},
-            "evaluations": [pooled_evaluation([r["evaluations"][i] for r in results])
-                            for i in range(len(first["evaluations"]))],
-            "parts": parts}
+    return {
+        **shared,
+        **{k: sum(r[k] for r in results) for k in SUMMED if all(k in r for r in results)},
+        **({"device": " + ".join(devices)} if devices else {}),
+        **{k: joined([r.get(k) for r in results]) for k in PER_SEED if k in first},
+        "evaluations": [
+            pooled_evaluation([r["evaluations"][i] for r in results])
+            for i in range(len(first["evaluations"]))
+        ],
+        "parts": parts,
+    }
 
 
 def joined(lists: list[list | None]) -> list | None:
@@ -128,19 +189,35 @@ def pooled_evaluation(parts: list[dict]) -> dict:
     from the episodes' returns, each env metric's mean and std over all episodes from the parts'
     (population) means and stds, its seed means in seed order."""
     first = parts[0]
-    fixed = {k: v for k, v in first.items() if k not in POOLED_EVAL and not k.endswith(("_mean", "_std", "_seed_means"))}
+    fixed = {
+        k: v
+        for k, v in first.items()
+        if k not in POOLED_EVAL and not k.endswith(("_mean", "_std", "_seed_means"))
+    }
     for part in parts[1:]:
         if any(part.get(k) != v for k, v in fixed.items()):
-            raise PoolError(f"evaluations of other kinds cannot be pooled: {first.get('variant')} against {part.get('variant')}")
+            raise PoolError(
+                f"evaluations of other kinds cannot be pooled: {first.get('variant')} against {part.get('variant')}"
+            )
     returns = np.concatenate([np.asarray(p["returns"], np.float64) for p in parts])
     seeds = np.array([p["seeds"] for p in parts])
-    out = {**fixed, **return_summary(returns), "mean_length": float(np.average([p["mean_length"] for p in parts], weights=seeds))}
+    out = {
+        **fixed,
+        **return_summary(returns),
+        "mean_length": float(np.average([p["mean_length"] for p in parts], weights=seeds)),
+    }
     for name in (k[: -len("_seed_means")] for k in first if k.endswith("_seed_means")):
         means, stds = (np.array([p[f"{name}_{s}"] for p in parts]) for s in ("mean", "std"))
         mean = float(np.average(means, weights=seeds))
-        out.update({f"{name}_mean": mean,
-                    f"{name}_std": float(np.sqrt(max(np.average(stds**2 + means**2, weights=seeds) - mean**2, 0.0))),
-                    f"{name}_seed_means": [m for p in parts for m in p[f"{name}_seed_means"]]})
+        out.update(
+            {
+                f"{name}_mean": mean,
+                f"{name}_std": float(
+                    np.sqrt(max(np.average(stds**2 + means**2, weights=seeds) - mean**2, 0.0))
+                ),
+                f"{name}_seed_means": [m for p in parts for m in p[f"{name}_seed_means"]],
+            }
+        )
     return {**out, "returns": returns.tolist()}
 
 
@@ -150,18 +227,26 @@ def pooled_metrics(paths: list[Path], seeds: list[int]) -> str:
     tables = []
     for path in paths:
         if not path.exists():
-            raise PoolError(f"{path} is missing: {paths[0].parent} has a learning curve, {path.parent} none")
+            raise PoolError(
+                f"{path} is missing: {paths[0].parent} has a learning curve, {path.parent} none"
+            )
         with path.open(newline="") as f:
             tables.append(list(csv.reader(f)))
     header = tables[0][0]
     bins = [[(row[0], row[2]) for row in table[1:]] for table in tables]
     for path, table, b, n in zip(paths, tables, bins, seeds):
-        if table[0] != header or header[:3] != ["update", "seed", "env_steps"] or b[::n] != bins[0][::seeds[0]]:
+        if (
+            table[0] != header
+            or header[:3] != ["update", "seed", "env_steps"]
+            or b[::n] != bins[0][:: seeds[0]]
+        ):
             raise PoolError(f"{path} does not have {paths[0]}'s columns and updates")
     rows, offset = {}, 0
     for table, n in zip(tables, seeds):
         for row in table[1:]:
-            rows.setdefault((row[0], row[2]), []).append([row[0], str(int(row[1]) + offset), *row[2:]])
+            rows.setdefault((row[0], row[2]), []).append(
+                [row[0], str(int(row[1]) + offset), *row[2:]]
+            )
         offset += n
     out = io.StringIO(newline="")
     writer = csv.writer(out)
@@ -176,7 +261,8 @@ def pooled_summary(paths: list[Path], seeds: list[int]) -> dict:
     kept = [json.loads(p.read_text()) for p in paths]
     tails = [k["training_return_seed_means"] for k in kept]
     shares = [k["kl_share"] for k in kept]
-    return {"training_return_seed_means": joined(tails),
-            "kl_share": None if None in shares else float(np.average(shares, weights=seeds)),
-            "kl_storms": joined([k.get("kl_storms") for k in kept])}
-
+    return {
+        "training_return_seed_means": joined(tails),
+        "kl_share": None if None in shares else float(np.average(shares, weights=seeds)),
+        "kl_storms": joined([k.get("kl_storms") for k in kept]),
+    }

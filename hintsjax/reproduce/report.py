@@ -12,7 +12,15 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from hintsjax.reproduce.archive import KL_ABOVE, kl_share, run_folder, sweep_records, sweep_seconds, training_seed_means
+from hintsjax.reproduce.archive import (
+    KL_ABOVE,
+    kl_share,
+    run_folder,
+    sweep_records,
+    sweep_seconds,
+    training_seed_means,
+)
+
 
 def load(runs: Path, env: str, label: str) -> dict | None:
     path = run_folder(runs, env, label) / "eval.json"
@@ -35,14 +43,18 @@ def iqm_cell(result: dict | None, variant: int = 0) -> str:
     return "-" if result is None else stats.iqm_cell(seed_means(result, variant))
 
 
-def ordering(name_x: str, x: dict | None, name_y: str, y: dict | None, variant: int = 0) -> str | None:
+def ordering(
+    name_x: str, x: dict | None, name_y: str, y: dict | None, variant: int = 0
+) -> str | None:
     """'P(x > y) = p [low, high]: decided|undecided' over the two runs' per-seed mean returns (95%
     bootstrap CI; decided when it excludes 0.5), or None when either was not run."""
     from hintsjax.reproduce import stats
 
     if x is None or y is None:
         return None
-    return stats.ordering_text(name_x, name_y, stats.poi_ci(seed_means(x, variant), seed_means(y, variant)))
+    return stats.ordering_text(
+        name_x, name_y, stats.poi_ci(seed_means(x, variant), seed_means(y, variant))
+    )
 
 
 def seed_means(result: dict, variant: int = 0) -> list[float]:
@@ -65,7 +77,11 @@ def poi_cell(x: dict | None, y: dict | None, variant: int = 0) -> str:
     """'P [low, high]' of P(x > y) over seeds, or '-'."""
     from hintsjax.reproduce import stats
 
-    return "-" if x is None or y is None else interval_text(stats.poi_ci(seed_means(x, variant), seed_means(y, variant)))
+    return (
+        "-"
+        if x is None or y is None
+        else interval_text(stats.poi_ci(seed_means(x, variant), seed_means(y, variant)))
+    )
 
 
 def ordering_line(tag: str, name_x: str, x: dict, name_y: str, y: dict, variant: int = 0) -> str:
@@ -80,21 +96,26 @@ ORDERINGS_ABOUT = (
     "Orderings: probabilities of improvement P(X > Y) over the per-seed mean returns with 95 % bootstrap intervals "
     "(hintsjax/reproduce/stats.py). Decided for: the interval lies above 0.5; decided against: below 0.5; undecided: it "
     "contains 0.5. The best hint is the hint row with the highest IQM, chosen on the same seeds, which favours "
-    "it a little.")
+    "it a little."
+)
 
 
 def ppo_text(ppo) -> str:
     """A line of the PPO settings (config.PPOConfig) that a report states beside its rows."""
-    return (f"{ppo.num_envs} envs per seed, batches of {ppo.batch_size}, {ppo.epochs} epochs of minibatches of "
-            f"{ppo.minibatch_size}, learning rates encoder {ppo.encoder_lr:g}, actor {ppo.actor_lr:g}, critic {ppo.critic_lr:g}"
-            + (f", KL early stop at {ppo.target_kl:g}" if ppo.target_kl else "")
-            + (" with the learning rates adapted to the KL" if ppo.kl_adaptive_lr else "")
-            + (", the encoder trained by the actor alone" if not ppo.critic_trains_encoder else "")
-            + (f", rewards x {ppo.reward_scale:g}" if ppo.reward_scale != 1.0 else "")
-            + (", the state normalised" if ppo.normalize_state else ""))
+    return (
+        f"{ppo.num_envs} envs per seed, batches of {ppo.batch_size}, {ppo.epochs} epochs of minibatches of "
+        f"{ppo.minibatch_size}, learning rates encoder {ppo.encoder_lr:g}, actor {ppo.actor_lr:g}, critic {ppo.critic_lr:g}"
+        + (f", KL early stop at {ppo.target_kl:g}" if ppo.target_kl else "")
+        + (" with the learning rates adapted to the KL" if ppo.kl_adaptive_lr else "")
+        + (", the encoder trained by the actor alone" if not ppo.critic_trains_encoder else "")
+        + (f", rewards x {ppo.reward_scale:g}" if ppo.reward_scale != 1.0 else "")
+        + (", the state normalised" if ppo.normalize_state else "")
+    )
 
 
-def metric_of(result: dict | None, name: str, variant: int = 0) -> tuple[float, float, float] | None:
+def metric_of(
+    result: dict | None, name: str, variant: int = 0
+) -> tuple[float, float, float] | None:
     """(mean, std, std of the per-seed means) of an env metric (e.g. progress) of one
     evaluation; None when not run or not recorded."""
     e = None if result is None else result["evaluations"][variant]
@@ -148,7 +169,11 @@ def trained_config(runs: Path, env: str, label: str):
     from hintsjax.settings.layers import CONFIG_YAML, load_run_config
 
     folder = run_folder(runs, env, label)
-    return load_run_config(folder) if (folder / "eval.json").exists() and (folder / CONFIG_YAML).exists() else None
+    return (
+        load_run_config(folder)
+        if (folder / "eval.json").exists() and (folder / CONFIG_YAML).exists()
+        else None
+    )
 
 
 def trained_ppo(runs: Path, env: str, label: str):
@@ -165,29 +190,44 @@ def references_note(runs: Path, env: str, references: tuple[str, ...]) -> str:
     from hintsjax.settings.layers import run_config
     from hintsjax.algorithms.experts import EXPERT_JSON, EXPERTS_DIR, best_seed
 
-    cfg = {a: trained_config(runs, env, a) or run_config({"env": env, "agent": a}) for a in references}
+    cfg = {
+        a: trained_config(runs, env, a) or run_config({"env": env, "agent": a}) for a in references
+    }
     expert = cfg["expert_ppo"].ppo
     source = "its best seed"
     if (result := load(runs, env, "expert_ppo")) is not None:  # the one its sweep exported
         evaluation = result["evaluations"][0]
         best = best_seed(evaluation)
         source += f" (seed {best}, {evaluation['seed_means'][best]:.0f} over {evaluation['episodes_per_seed']} episodes)"
-    elif (meta := EXPERTS_DIR / env / EXPERT_JSON).exists():  # not trained here: the packaged expert
+    # not trained here: the packaged expert
+    elif (meta := EXPERTS_DIR / env / EXPERT_JSON).exists():
         m = json.loads(meta.read_text())
         source += f" (seed {m['seed_index']}, {m['seed_eval_mean']:.0f} over {m['episodes_per_seed']} episodes; hintsjax/experts/{env})"
-    text = (f"References (no budget limit): expert_ppo is PPO on the state for {expert.total_env_steps / 1e6:g} M steps "
-            f"({expert.num_envs} envs per seed, batches of {expert.batch_size}, {expert.epochs} epochs of minibatches of "
-            f"{expert.minibatch_size}); dagger learns from {source} over {cfg['dagger'].ppo.total_env_steps / 1e3:g} K "
-            f"expert-labelled steps")
+    text = (
+        f"References (no budget limit): expert_ppo is PPO on the state for {expert.total_env_steps / 1e6:g} M steps "
+        f"({expert.num_envs} envs per seed, batches of {expert.batch_size}, {expert.epochs} epochs of minibatches of "
+        f"{expert.minibatch_size}); dagger learns from {source} over {cfg['dagger'].ppo.total_env_steps / 1e3:g} K "
+        f"expert-labelled steps"
+    )
     if "gail" in cfg:
         gail = cfg["gail"]
-        reward = "-log(1 - D)" if gail.gail.reward == "original" else "the log odds log D - log(1 - D)"
-        text += (f"; gail learns from {gail.gail.demonstrations} of that expert's episodes, by PPO for "
-                 f"{gail.ppo.total_env_steps / 1e6:g} M steps on the discriminator's reward {reward}"
-                 + (", the discriminator reading the state standardised by the demonstrations' statistics"
-                    if gail.gail.normalize_state else "")
-                 + (f" and held smooth by an R1 penalty of {gail.gail.grad_penalty:g} on the expert's pairs"
-                    if gail.gail.grad_penalty else ""))
+        reward = (
+            "-log(1 - D)" if gail.gail.reward == "original" else "the log odds log D - log(1 - D)"
+        )
+        text += (
+            f"; gail learns from {gail.gail.demonstrations} of that expert's episodes, by PPO for "
+            f"{gail.ppo.total_env_steps / 1e6:g} M steps on the discriminator's reward {reward}"
+            + (
+                ", the discriminator reading the state standardised by the demonstrations' statistics"
+                if gail.gail.normalize_state
+                else ""
+            )
+            + (
+                f" and held smooth by an R1 penalty of {gail.gail.grad_penalty:g} on the expert's pairs"
+                if gail.gail.grad_penalty
+                else ""
+            )
+        )
     return text + "."
 
 
@@ -209,7 +249,9 @@ def wall_clock(result: dict | None) -> str:
 ARCHIVED_SUFFIX = "_archived"  # curve_lines' figure of the runs beside kept ones
 
 
-def curve_lines(runs: Path, env: str, labels: list[str], out: Path, title: str, kept: tuple[str, ...] = ()) -> list[str]:
+def curve_lines(
+    runs: Path, env: str, labels: list[str], out: Path, title: str, kept: tuple[str, ...] = ()
+) -> list[str]:
     """Plot the learning curves of `labels`' runs (those with a metrics.csv) into `out`; the
     report's markdown lines for it ([] when none has started). While some rows are `kept` (runs
     that predate the archive, with no curve to draw), `out` is their figure and stays; the other
@@ -218,7 +260,12 @@ def curve_lines(runs: Path, env: str, labels: list[str], out: Path, title: str, 
 
     paths = {label: metrics_path(runs, env, label) for label in labels}
     curves = {label: read_curves(path) for label, path in paths.items() if path is not None}
-    old = [f"![{env} learning curves]({out.name})", "", "(The curves of the runs kept from the previous report.)", ""]
+    old = [
+        f"![{env} learning curves]({out.name})",
+        "",
+        "(The curves of the runs kept from the previous report.)",
+        "",
+    ]
     if not curves:  # a figure of runs that predate the archive stays, said to be theirs
         return old if out.exists() else []
     if kept and out.exists():
@@ -237,14 +284,23 @@ def sweep_hardware(runs: Path, table: str, run_ids: list[str]) -> str:
     devices = sorted({result.get("device", "") for result in results} - {"", "cpu", "Cpu"})
     if not records or not devices:
         return ""
-    setups = sorted({("1 run at a time" if r["workers"] == 1 else f"{r['workers']} runs at once")
-                     + (f" over {len(r['gpus'])} GPUs" if len(r.get("gpus", ())) > 1 else " on one GPU") for r in records})
+    setups = sorted(
+        {
+            ("1 run at a time" if r["workers"] == 1 else f"{r['workers']} runs at once")
+            + (f" over {len(r['gpus'])} GPUs" if len(r.get("gpus", ())) > 1 else " on one GPU")
+            for r in records
+        }
+    )
     # Runs recorded before this key existed ran with deterministic GPU ops (hintsjax's default).
     fast = [result for result in results if result.get("deterministic", True) is False]
-    return f"{', '.join(devices)}; {'; '.join(setups)}" + (f"; deterministic GPU ops off ({len(fast)} runs)" if fast else "")
+    return f"{', '.join(devices)}; {'; '.join(setups)}" + (
+        f"; deterministic GPU ops off ({len(fast)} runs)" if fast else ""
+    )
 
 
 def footer(runs: Path, table: str, run_ids: list[str]) -> str:
     """The report's last line: the sweeps' GPU wall-clock and hardware."""
-    return (f"Sweep wall-clock recorded in {runs}/sweeps.jsonl on the GPU: {sweep_seconds(runs, table):.0f} s"
-            f" ({sweep_hardware(runs, table, run_ids) or 'none yet'}).")
+    return (
+        f"Sweep wall-clock recorded in {runs}/sweeps.jsonl on the GPU: {sweep_seconds(runs, table):.0f} s"
+        f" ({sweep_hardware(runs, table, run_ids) or 'none yet'})."
+    )

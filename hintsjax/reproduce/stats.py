@@ -68,7 +68,7 @@ def _iqm_rows(rows: np.ndarray) -> np.ndarray:
     # the same cut as scipy.stats.trim_mean(x, 0.25): int(0.25 n) values off each end, so for
     # n < 4 nothing is cut and the IQM is the mean
     cut = int(0.25 * n)
-    return np.sort(rows, axis=-1)[:, cut:n - cut].mean(axis=-1)
+    return np.sort(rows, axis=-1)[:, cut : n - cut].mean(axis=-1)
 
 
 def iqm(scores) -> float:
@@ -93,8 +93,13 @@ def _percentile_interval(point: float, stats: np.ndarray, level: float) -> Inter
     return Interval(point=float(point), low=float(low), high=float(high))
 
 
-def bootstrap_ci(scores, statistic: Callable[[np.ndarray], float] = iqm, level: float = LEVEL,
-                 resamples: int = RESAMPLES, seed: int = 0) -> Interval:
+def bootstrap_ci(
+    scores,
+    statistic: Callable[[np.ndarray], float] = iqm,
+    level: float = LEVEL,
+    resamples: int = RESAMPLES,
+    seed: int = 0,
+) -> Interval:
     """[seeds] or [seeds, tasks] -> Interval: percentile bootstrap CI of statistic(scores), seeds resampled per task."""
     a = _scores(scores)
     _check_bootstrap_args(level, resamples)
@@ -142,7 +147,9 @@ def poi_ci(x, y, level: float = LEVEL, resamples: int = RESAMPLES, seed: int = 0
     return _percentile_interval(probability_of_improvement(a, b), _poi_rows(xs, ys), level)
 
 
-def difference_ci(x, y, level: float = LEVEL, resamples: int = RESAMPLES, seed: int = 0) -> Interval:
+def difference_ci(
+    x, y, level: float = LEVEL, resamples: int = RESAMPLES, seed: int = 0
+) -> Interval:
     """[n], [m] -> Interval: percentile bootstrap CI of mean(X) - mean(Y), x and y resampled
     independently (a difference in the units of the scores, e.g. the car's hairpin progress)."""
     a, b, xs, ys = _two_agent_resamples(x, y, level, resamples, seed)
@@ -177,11 +184,15 @@ def _fmt(value: float, digits: int) -> str:
 def ordering_text(name_x: str, name_y: str, interval: Interval, digits: int = 2) -> str:
     """Interval of P(X > Y) -> 'P(x > y) = 0.92 [0.78, 1.00]: decided' (or ': undecided')."""
     verdict = "decided" if decided(interval) else "undecided"
-    return (f"P({name_x} > {name_y}) = {_fmt(interval.point, digits)} "
-            f"[{_fmt(interval.low, digits)}, {_fmt(interval.high, digits)}]: {verdict}")
+    return (
+        f"P({name_x} > {name_y}) = {_fmt(interval.point, digits)} "
+        f"[{_fmt(interval.low, digits)}, {_fmt(interval.high, digits)}]: {verdict}"
+    )
 
 
-def iqm_cell(scores, digits: int = 1, level: float = LEVEL, resamples: int = RESAMPLES, seed: int = 0) -> str:
+def iqm_cell(
+    scores, digits: int = 1, level: float = LEVEL, resamples: int = RESAMPLES, seed: int = 0
+) -> str:
     """[seeds] or [seeds, tasks] -> 'IQM [low, high]' table cell, e.g. '412.3 [398.1, 430.0]'."""
     ci = bootstrap_ci(scores, iqm, level=level, resamples=resamples, seed=seed)
     return f"{_fmt(ci.point, digits)} [{_fmt(ci.low, digits)}, {_fmt(ci.high, digits)}]"

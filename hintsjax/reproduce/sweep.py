@@ -33,7 +33,8 @@ from hintsjax.reproduce.sweep_settings import add_settings, worker_settings
 # A sweep's runs save at most once a minute: fast runs finish 50 updates in seconds, and a big
 # run's checkpoint (every env's MJX state) can reach a GB; an interruption loses at most a minute.
 CHECKPOINT_SECONDS = 60
-CHILD_ENVIRON = dict(os.environ)  # the workers' environment: a sweep's parent process keeps off the GPU
+# the workers' environment: a sweep's parent process keeps off the GPU
+CHILD_ENVIRON = dict(os.environ)
 EXPERT_RUN = EXPERT_AGENT  # the run whose best seed becomes its env's expert for dagger and gail
 GROUPS = "_groups"  # under runs/<sweep>/<env>: the groups' checkpoints and logs
 WORKER = "hintsjax.reproduce.sweep"  # the module a worker process runs (`main`)
@@ -44,18 +45,38 @@ def hints_run(scheme: str, hint: str) -> str:
 
 
 # --smoke: a tiny budget to check the sweep's plumbing on a CPU (the numbers mean nothing).
-SMOKE = {"eval_episodes": 2, "ppo": {"total_env_steps": 1024, "num_envs": 8, "batch_size": 512,
-                                     "minibatch_size": 256, "epochs": 1}}
+SMOKE = {
+    "eval_episodes": 2,
+    "ppo": {
+        "total_env_steps": 1024,
+        "num_envs": 8,
+        "batch_size": 512,
+        "minibatch_size": 256,
+        "epochs": 1,
+    },
+}
 
 
-def run_values(env: str, label: str, seeds: int, smoke: bool = False, experts: Path | None = None,
-               settings: dict | None = None) -> dict:
+def run_values(
+    env: str,
+    label: str,
+    seeds: int,
+    smoke: bool = False,
+    experts: Path | None = None,
+    settings: dict | None = None,
+) -> dict:
     """Config values of a run label (the inverse of RunConfig.label); `settings` (top-level keys
     given with --set, e.g. physics or the first seed) apply to every run of the sweep."""
     from hintsjax.models.agents import AGENTS
 
-    values = {"env": env, "seeds": seeds, "checkpoint_every": 50, "checkpoint_seconds": CHECKPOINT_SECONDS,
-              **(SMOKE if smoke else {}), **(settings or {})}
+    values = {
+        "env": env,
+        "seeds": seeds,
+        "checkpoint_every": 50,
+        "checkpoint_seconds": CHECKPOINT_SECONDS,
+        **(SMOKE if smoke else {}),
+        **(settings or {}),
+    }
     if label in AGENTS and AGENTS[label].imitates:
         return {**values, "agent": label, "expert": None if experts is None else str(experts / env)}
     agent, _, rest = label.partition("-")  # agent[-scheme][-hint]: agents' names have no '-'
@@ -86,8 +107,14 @@ def group_folder(runs: Path, run_ids: list[str]) -> Path:
     return runs / env / GROUPS / digest
 
 
-def train_one(runs: Path, run_ids: list[str], seeds: int, smoke: bool, experts: Path | None,
-              settings: dict | None = None) -> None:
+def train_one(
+    runs: Path,
+    run_ids: list[str],
+    seeds: int,
+    smoke: bool,
+    experts: Path | None,
+    settings: dict | None = None,
+) -> None:
     """Train and evaluate runs `env/label` (one, or a group that shares a program) into
     runs/env/label; export an expert's. A group that does not fit in memory is split in halves."""
     import jax
@@ -114,17 +141,24 @@ def train_one(runs: Path, run_ids: list[str], seeds: int, smoke: bool, experts: 
         save_run_config(runs / run_id, cfg)
     before, t = loop.seconds_trained(folder) if resume else 0.0, time.time()
     if resume:
-        print(f"resuming {', '.join(run_ids)} from update {checkpoint.latest_update(folder)}", flush=True)
+        print(
+            f"resuming {', '.join(run_ids)} from update {checkpoint.latest_update(folder)}",
+            flush=True,
+        )
     if len(run_ids) == 1:
         results = [pipeline.train(cfgs[0], folder, resume=resume, progress=False)]
     else:
         folder.mkdir(parents=True, exist_ok=True)
         (folder / "group.json").write_text(json.dumps({"runs": run_ids, "seeds": seeds}))
         try:
-            results = pipeline.train_group(cfgs, folder, [runs / r for r in run_ids], resume=resume, progress=False)
+            results = pipeline.train_group(
+                cfgs, folder, [runs / r for r in run_ids], resume=resume, progress=False
+            )
         except compilation.GroupTooBig as e:
             half = len(run_ids) // 2
-            print(f"{e}: splitting the group into {half} and {len(run_ids) - half} runs", flush=True)
+            print(
+                f"{e}: splitting the group into {half} and {len(run_ids) - half} runs", flush=True
+            )
             for part in (run_ids[:half], run_ids[half:]):
                 train_one(runs, part, seeds, smoke, experts, settings)
             return
@@ -133,11 +167,17 @@ def train_one(runs: Path, run_ids: list[str], seeds: int, smoke: bool, experts: 
         (runs / run_id / "eval.json").write_text(json.dumps({**result, **extra}, indent=1))
     for run_id in run_ids:
         if run_id.split("/")[1] == EXPERT_RUN:
-            exported = experts.export(runs / run_id, None if experts is None else experts / run_id.split("/")[0], force=True)
+            exported = experts.export(
+                runs / run_id,
+                None if experts is None else experts / run_id.split("/")[0],
+                force=True,
+            )
             print(f"exported the expert to {exported}", flush=True)
 
 
-def plan_jobs(run_ids: list[str], seeds: int, smoke: bool, group_size: int = 0, settings: dict | None = None) -> list[list[str]]:
+def plan_jobs(
+    run_ids: list[str], seeds: int, smoke: bool, group_size: int = 0, settings: dict | None = None
+) -> list[list[str]]:
     """The runs partitioned into groups that train together, each cut into parts of at most
     `group_size` runs (0: no limit; 1: every run its own job). Smaller groups suit calls with a
     time limit: each part is a job that finishes on its own."""
@@ -146,7 +186,11 @@ def plan_jobs(run_ids: list[str], seeds: int, smoke: bool, group_size: int = 0, 
 
     cfgs = [run_config(run_values(*r.split("/"), seeds, smoke, settings=settings)) for r in run_ids]
     size = group_size or len(run_ids)
-    return [[run_ids[i] for i in members[k:k + size]] for members in plan(cfgs) for k in range(0, len(members), size)]
+    return [
+        [run_ids[i] for i in members[k : k + size]]
+        for members in plan(cfgs)
+        for k in range(0, len(members), size)
+    ]
 
 
 def begun_groups(runs: Path, run_ids: list[str], seeds: int) -> list[list[str]]:
@@ -162,16 +206,26 @@ def begun_groups(runs: Path, run_ids: list[str], seeds: int) -> list[list[str]]:
     for path in sorted(runs.glob(f"*/{GROUPS}/*/group.json")):
         record = json.loads(path.read_text())
         members = record["runs"]
-        if (record.get("seeds") != seeds or all(r not in run_ids or finished(r) for r in members)
-                or any(r not in run_ids and not finished(r) for r in members)
-                or any(r in job for job in jobs for r in members) or checkpoint.latest_update(path.parent) is None):
+        if (
+            record.get("seeds") != seeds
+            or all(r not in run_ids or finished(r) for r in members)
+            or any(r not in run_ids and not finished(r) for r in members)
+            or any(r in job for job in jobs for r in members)
+            or checkpoint.latest_update(path.parent) is None
+        ):
             continue
         jobs.append(members)
     return jobs
 
 
-def todo_jobs(runs: Path, run_ids: list[str], seeds: int, smoke: bool, group_size: int = 0,
-              settings: dict | None = None) -> list[list[str]]:
+def todo_jobs(
+    runs: Path,
+    run_ids: list[str],
+    seeds: int,
+    smoke: bool,
+    group_size: int = 0,
+    settings: dict | None = None,
+) -> list[list[str]]:
     """The jobs that train the unfinished runs of `run_ids`: the groups begun earlier
     (`begun_groups`), resumed as they were, then the other unfinished runs grouped by `plan_jobs`."""
     begun = begun_groups(runs, run_ids, seeds)
@@ -205,9 +259,19 @@ def stopped(*_: Any) -> None:
     sys.exit(143)
 
 
-def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int | str, smoke: bool,
-          launch_until: float = float("inf"), experts: Path | None = None, gpus: tuple[str, ...] = (),
-          group_size: int = 0, settings: dict | None = None) -> None:
+def sweep(
+    runs: Path,
+    run_ids: list[str],
+    workers: int,
+    seeds: int,
+    table: int | str,
+    smoke: bool,
+    launch_until: float = float("inf"),
+    experts: Path | None = None,
+    gpus: tuple[str, ...] = (),
+    group_size: int = 0,
+    settings: dict | None = None,
+) -> None:
     """Train every unfinished run, grouped (`todo_jobs`: a group begun earlier resumes whole),
     `workers` groups at a time, starting none after `launch_until` seconds (so that a
     time-limited call ends with finished runs, not killed ones); append the sweep's wall-clock to runs/sweeps.jsonl. With `gpus` (CUDA device
@@ -215,10 +279,16 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int |
     workers share the visible devices. `group_size` caps the runs of a group (`plan_jobs`);
     `settings` (--set) go to every run."""
     unfinished = [r for r in run_ids if not (runs / r / "eval.json").exists()]
-    todo = sorted(todo_jobs(runs, run_ids, seeds, smoke, group_size, settings), key=lambda job: sum(map(budget, job)),
-                  reverse=True)
-    print(f"table {table}: {len(run_ids) - len(unfinished)} of {len(run_ids)} runs done already; "
-          f"training {len(unfinished)} in {len(todo)} group(s), {workers} at a time, {seeds} seeds each", flush=True)
+    todo = sorted(
+        todo_jobs(runs, run_ids, seeds, smoke, group_size, settings),
+        key=lambda job: sum(map(budget, job)),
+        reverse=True,
+    )
+    print(
+        f"table {table}: {len(run_ids) - len(unfinished)} of {len(run_ids)} runs done already; "
+        f"training {len(unfinished)} in {len(todo)} group(s), {workers} at a time, {seeds} seeds each",
+        flush=True,
+    )
     launched = 0
     per_gpu = -(-workers // max(len(gpus), 1))  # workers sharing one device
     env = {**CHILD_ENVIRON, "XLA_PYTHON_CLIENT_MEM_FRACTION": f"{0.9 / per_gpu:.3f}"}
@@ -231,8 +301,11 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int |
     try:
         while todo or active:
             if todo and time.time() - start > launch_until:
-                print(f"[{time.time() - start:6.0f} s] --launch-until reached: {sum(map(len, todo))} runs left for "
-                      "the next sweep", flush=True)
+                print(
+                    f"[{time.time() - start:6.0f} s] --launch-until reached: {sum(map(len, todo))} runs left for "
+                    "the next sweep",
+                    flush=True,
+                )
                 todo = []
             waiting = {r for job in todo for r in job} | {r for job, _ in active for r in job}
             todo = [job for job in todo if prerequisite(job[0]) not in failed]
@@ -242,15 +315,33 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int |
                 todo.remove(job)
                 name = ",".join(job)
                 log_of(job).parent.mkdir(parents=True, exist_ok=True)
-                cmd = [sys.executable, "-m", WORKER, "--runs", str(runs), "--seeds", str(seeds), "--one", name,
-                       *(["--smoke"] if smoke else []), *(["--experts", str(experts)] if experts else []),
-                       *(f"--set={k}={v}" for k, v in (settings or {}).items())]
+                cmd = [
+                    sys.executable,
+                    "-m",
+                    WORKER,
+                    "--runs",
+                    str(runs),
+                    "--seeds",
+                    str(seeds),
+                    "--one",
+                    name,
+                    *(["--smoke"] if smoke else []),
+                    *(["--experts", str(experts)] if experts else []),
+                    *(f"--set={k}={v}" for k, v in (settings or {}).items()),
+                ]
                 if gpus:
                     busy = [gpu_of[",".join(j)] for j, _ in active]
                     gpu_of[name] = min(gpus, key=busy.count)
                 child_env = {**env, "CUDA_VISIBLE_DEVICES": gpu_of[name]} if gpus else env
                 with open(log_of(job), "w") as log:  # the child keeps its own copy
-                    active.append((job, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=child_env)))
+                    active.append(
+                        (
+                            job,
+                            subprocess.Popen(
+                                cmd, stdout=log, stderr=subprocess.STDOUT, env=child_env
+                            ),
+                        )
+                    )
                 launched += len(job)
             time.sleep(2)
             for job, proc in list(active):
@@ -259,34 +350,57 @@ def sweep(runs: Path, run_ids: list[str], workers: int, seeds: int, table: int |
                 active.remove((job, proc))
                 if proc.returncode:
                     failed += job
-                print(f"[{time.time() - start:6.0f} s] {', '.join(job)}: "
-                      f"{'FAILED (see ' + str(log_of(job)) + ')' if proc.returncode else 'done'}", flush=True)
+                print(
+                    f"[{time.time() - start:6.0f} s] {', '.join(job)}: "
+                    f"{'FAILED (see ' + str(log_of(job)) + ')' if proc.returncode else 'done'}",
+                    flush=True,
+                )
     finally:
         interrupted = [r for job, _ in active for r in job]
         for _, proc in active:  # interrupted: these runs are retrained by the next sweep
             proc.terminate()
         seconds = time.time() - start
-        record = {"table": table, "runs": len(run_ids), "trained": launched - len(failed) - len(interrupted),
-                  "failed": failed, "interrupted": interrupted, "workers": workers, "seconds": seconds,
-                  "seeds": seeds, "grouped": group_size != 1, "finished": time.strftime("%Y-%m-%d %H:%M:%S"),
-                  "gpus": list(gpus), **({"settings": settings} if settings else {})}
-        devices = {(load(runs, *r.split("/")) or {}).get("device", "").lower() for r in run_ids} - {""}
-        if devices == {"cpu"}:  # the workers' device (the parent keeps off it): CPU sweeps leave the GPU totals
+        record = {
+            "table": table,
+            "runs": len(run_ids),
+            "trained": launched - len(failed) - len(interrupted),
+            "failed": failed,
+            "interrupted": interrupted,
+            "workers": workers,
+            "seconds": seconds,
+            "seeds": seeds,
+            "grouped": group_size != 1,
+            "finished": time.strftime("%Y-%m-%d %H:%M:%S"),
+            "gpus": list(gpus),
+            **({"settings": settings} if settings else {}),
+        }
+        devices = {(load(runs, *r.split("/")) or {}).get("device", "").lower() for r in run_ids} - {
+            ""
+        }
+        # the workers' device (the parent keeps off it): CPU sweeps leave the GPU totals
+        if devices == {"cpu"}:
             record["device"] = "cpu"
         with open(runs / "sweeps.jsonl", "a") as f:
             f.write(json.dumps(record) + "\n")
-        print(f"table {table}: {seconds:.0f} s wall-clock" + (f", {len(interrupted)} runs interrupted" if active else ""),
-              flush=True)
+        print(
+            f"table {table}: {seconds:.0f} s wall-clock"
+            + (f", {len(interrupted)} runs interrupted" if active else ""),
+            flush=True,
+        )
     if failed:
         sys.exit(1)
 
 
 def main() -> None:
     """A worker: train and evaluate one run, or one group, of a sweep (`WORKER`, launched by `sweep`)."""
-    parser = argparse.ArgumentParser(description="train and evaluate one run of a sweep (a worker process)")
+    parser = argparse.ArgumentParser(
+        description="train and evaluate one run of a sweep (a worker process)"
+    )
     parser.add_argument("--runs", type=Path, required=True)
     parser.add_argument("--seeds", type=int, default=5)
-    parser.add_argument("--one", required=True, help="env/label, or comma-separated env/labels of one group")
+    parser.add_argument(
+        "--one", required=True, help="env/label, or comma-separated env/labels of one group"
+    )
     parser.add_argument("--smoke", action="store_true")
     parser.add_argument("--experts", type=Path, default=None)
     add_settings(parser)

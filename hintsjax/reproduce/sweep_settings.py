@@ -12,9 +12,15 @@ import argparse
 
 def add_settings(parser: argparse.ArgumentParser) -> None:
     """The --set option (a table script's and a worker's)."""
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="settings",
-                        help="a top-level run setting for every run, e.g. --set physics=warp --set seed=10 "
-                             "(give each part of a row's seeds its own --runs folder)")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        dest="settings",
+        help="a top-level run setting for every run, e.g. --set physics=warp --set seed=10 "
+        "(give each part of a row's seeds its own --runs folder)",
+    )
 
 
 def parsed_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict:

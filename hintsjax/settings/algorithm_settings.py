@@ -29,7 +29,9 @@ class PPOConfig:
     """PPO settings (SPEC section 5). The budget is counted in environment steps."""
 
     total_env_steps: int = setting(200_000, "the budget: env steps a seed")
-    num_envs: int = setting(16, "envs stepped side by side, a speed choice: it does not change the budget")
+    num_envs: int = setting(
+        16, "envs stepped side by side, a speed choice: it does not change the budget"
+    )
     batch_size: int = setting(1024, "transitions an update: num_envs x the rollout's length")
     epochs: int = setting(8, "passes over an update's batch")
     minibatch_size: int = setting(256, "transitions a gradient step")
@@ -38,52 +40,110 @@ class PPOConfig:
     clip_eps: float = setting(0.2, "the policy ratio's clip", traced=True)
     vf_coef: float = setting(0.5, "the value loss's weight", traced=True)
     ent_coef: float = setting(0.01, "the entropy bonus's weight", traced=True)
-    max_grad_norm: float = setting(0.5, "the gradient's norm is clipped to this (ppo.grad_clip says whose)", traced=True)
-    encoder_lr: float = setting(1e-3, "Adam's rate for the encoder and the hint's conditioning", traced=True)
+    max_grad_norm: float = setting(
+        0.5, "the gradient's norm is clipped to this (ppo.grad_clip says whose)", traced=True
+    )
+    encoder_lr: float = setting(
+        1e-3, "Adam's rate for the encoder and the hint's conditioning", traced=True
+    )
     actor_lr: float = setting(3e-4, "Adam's rate for the policy's head", traced=True)
     critic_lr: float = setting(1e-3, "Adam's rate for the value head", traced=True)
-    hint_width: int = setting(64, "the width the hint is embedded to before it conditions the features")
+    hint_width: int = setting(
+        64, "the width the hint is embedded to before it conditions the features"
+    )
     hidden: tuple[int, ...] = setting((256, 256), "the actor's and critic's hidden layer widths")
-    reward_scale: float = setting(1.0, "rewards are multiplied by this for learning (not for logging)", traced=True)
+    reward_scale: float = setting(
+        1.0, "rewards are multiplied by this for learning (not for logging)", traced=True
+    )
     # For envs whose reset is dear (the car's track is 800 sequential trace steps): AutoReset.step's `fresh`.
-    starts_per_rollout: bool = setting(False, "each env's next episode start is drawn once a rollout, not at every reset")
+    starts_per_rollout: bool = setting(
+        False, "each env's next episode start is drawn once a rollout, not at every reset"
+    )
     # As Stable-Baselines3's target_kl; None: off (Table 5 has none).
-    target_kl: float | None = setting(None, "KL early stop: no more steps in an update once a minibatch's approx. KL "
-                                            "from the rollout policy exceeds 1.5 x this (null: off)", traced=True)
-    normalize_state: bool = setting(False, "state agents: normalise the state by its running mean and std")
-    action_head: str = setting("gaussian", "the policy's action distribution: gaussian (clipped by the env), tanh "
-                                               "(squashed into the action range) or sigmoid (the authors')",
-                                   choices=ACTION_HEADS)
-    grad_clip: str = setting("global", "global: max_grad_norm over every part's gradient together; per_part: the "
-                                       "encoder's, actor's and critic's each alone", choices=GRAD_CLIPS, saved_may_lack=True)
-    adam_eps: float = setting(1e-5, "Adam's epsilon (optax's default is 1e-8; CleanRL's PPO and ours 1e-5)",
-                              saved_may_lack=True)
-    gae_segment: int = setting(0, "0: GAE over the whole rollout; L: over segments of L steps, each bootstrapped from "
-                                  "the value after it (Brax's unrolls)", saved_may_lack=True)
-    normalize_before_learning: bool = setting(False, "normalize_state: merge a rollout's states into the statistics "
-                                                     "before learning on it (Brax's order), not after", saved_may_lack=True)
+    target_kl: float | None = setting(
+        None,
+        "KL early stop: no more steps in an update once a minibatch's approx. KL "
+        "from the rollout policy exceeds 1.5 x this (null: off)",
+        traced=True,
+    )
+    normalize_state: bool = setting(
+        False, "state agents: normalise the state by its running mean and std"
+    )
+    action_head: str = setting(
+        "gaussian",
+        "the policy's action distribution: gaussian (clipped by the env), tanh "
+        "(squashed into the action range) or sigmoid (the authors')",
+        choices=ACTION_HEADS,
+    )
+    grad_clip: str = setting(
+        "global",
+        "global: max_grad_norm over every part's gradient together; per_part: the "
+        "encoder's, actor's and critic's each alone",
+        choices=GRAD_CLIPS,
+        saved_may_lack=True,
+    )
+    adam_eps: float = setting(
+        1e-5,
+        "Adam's epsilon (optax's default is 1e-8; CleanRL's PPO and ours 1e-5)",
+        saved_may_lack=True,
+    )
+    gae_segment: int = setting(
+        0,
+        "0: GAE over the whole rollout; L: over segments of L steps, each bootstrapped from "
+        "the value after it (Brax's unrolls)",
+        saved_may_lack=True,
+    )
+    normalize_before_learning: bool = setting(
+        False,
+        "normalize_state: merge a rollout's states into the statistics "
+        "before learning on it (Brax's order), not after",
+        saved_may_lack=True,
+    )
     # The ant's KL storms, experiments/results/locomotion_ppo_stability.md.
-    critic_trains_encoder: bool = setting(True, "false: the critic reads the features it shares with the actor "
-                                                "through a stop-gradient, so only the policy's loss moves them",
-                                          saved_may_lack=True)
+    critic_trains_encoder: bool = setting(
+        True,
+        "false: the critic reads the features it shares with the actor "
+        "through a stop-gradient, so only the policy's loss moves them",
+        saved_may_lack=True,
+    )
     # hintsjax/algorithms/kl_rate.py: divided by 1.5 while a minibatch's approx. KL is above 2 x target_kl,
     # multiplied by 1.5 (up to 1) while below 0.5 x.
-    kl_adaptive_lr: bool = setting(False, "scale the learning rates by the steps' KL against target_kl (rsl_rl's "
-                                          "adaptive schedule, shrink-only; needs target_kl)", saved_may_lack=True)
+    kl_adaptive_lr: bool = setting(
+        False,
+        "scale the learning rates by the steps' KL against target_kl (rsl_rl's "
+        "adaptive schedule, shrink-only; needs target_kl)",
+        saved_may_lack=True,
+    )
     # A batch then holds its episodes' first T steps only; an episode cut by the rollout's end is
     # bootstrapped from its value, as any continuing one.
-    reset_every_update: bool = setting(False, "every env starts a fresh episode at each rollout's start (Brax's "
-                                              "resets as Playground's DM Control settings give them)", saved_may_lack=True)
+    reset_every_update: bool = setting(
+        False,
+        "every env starts a fresh episode at each rollout's start (Brax's "
+        "resets as Playground's DM Control settings give them)",
+        saved_may_lack=True,
+    )
     # Bears on the KL storms of experiments/results/locomotion_ppo_stability.md: a std that collapses
     # makes the ratio of the next update's steps explode.
-    min_log_std: float | None = setting(None, "a floor on the policy's log std (Brax's networks floor the std at "
-                                              "0.001, log -6.9); null: none", saved_may_lack=True)
+    min_log_std: float | None = setting(
+        None,
+        "a floor on the policy's log std (Brax's networks floor the std at "
+        "0.001, log -6.9); null: none",
+        saved_may_lack=True,
+    )
     # The privileged-signal baselines (hintsjax/models/agents.py). Shapes, not traced: a Hyper leaf more
     # would keep the checkpoints saved before it from restoring.
-    hint_dropout: float = setting(0.5, "pi_dropout: the chance that a training step's hint is replaced by zeros "
-                                       "(at deployment it always is)", saved_may_lack=True)
-    aux_coef: float = setting(1.0, "hint_aux: the weight of the hint's regression loss (mean squared error in the "
-                                   "hint's units)", saved_may_lack=True)
+    hint_dropout: float = setting(
+        0.5,
+        "pi_dropout: the chance that a training step's hint is replaced by zeros "
+        "(at deployment it always is)",
+        saved_may_lack=True,
+    )
+    aux_coef: float = setting(
+        1.0,
+        "hint_aux: the weight of the hint's regression loss (mean squared error in the "
+        "hint's units)",
+        saved_may_lack=True,
+    )
 
     @property
     def rollout_length(self) -> int:
@@ -98,9 +158,15 @@ class PPOConfig:
         return self.batch_size // self.minibatch_size
 
     def validate(self) -> None:
-        require_positive(self, ("total_env_steps", "num_envs", "batch_size", "epochs", "minibatch_size", "hint_width"), "ppo.")
+        require_positive(
+            self,
+            ("total_env_steps", "num_envs", "batch_size", "epochs", "minibatch_size", "hint_width"),
+            "ppo.",
+        )
         if self.batch_size % self.num_envs:
-            raise UsageError(f"ppo.batch_size ({self.batch_size}) must be a multiple of ppo.num_envs ({self.num_envs})")
+            raise UsageError(
+                f"ppo.batch_size ({self.batch_size}) must be a multiple of ppo.num_envs ({self.num_envs})"
+            )
         if self.batch_size % self.minibatch_size:
             raise UsageError(
                 f"ppo.batch_size ({self.batch_size}) must be a multiple of ppo.minibatch_size ({self.minibatch_size})"
@@ -109,23 +175,52 @@ class PPOConfig:
             raise UsageError(
                 f"ppo.total_env_steps ({self.total_env_steps}) is less than one update's batch ({self.batch_size})"
             )
-        require_positive(self, ("hidden", "encoder_lr", "actor_lr", "critic_lr", "max_grad_norm", "clip_eps", "reward_scale"),
-                         "ppo.")
-        require_range(self, {"gamma": (0.0, 1.0), "gae_lambda": (0.0, 1.0), "vf_coef": (0.0, math.inf),
-                             "ent_coef": (0.0, math.inf), "hint_dropout": (0.0, 1.0), "aux_coef": (0.0, math.inf)}, "ppo.")
+        require_positive(
+            self,
+            (
+                "hidden",
+                "encoder_lr",
+                "actor_lr",
+                "critic_lr",
+                "max_grad_norm",
+                "clip_eps",
+                "reward_scale",
+            ),
+            "ppo.",
+        )
+        require_range(
+            self,
+            {
+                "gamma": (0.0, 1.0),
+                "gae_lambda": (0.0, 1.0),
+                "vf_coef": (0.0, math.inf),
+                "ent_coef": (0.0, math.inf),
+                "hint_dropout": (0.0, 1.0),
+                "aux_coef": (0.0, math.inf),
+            },
+            "ppo.",
+        )
         check_choices(self, "ppo.")
         if not self.adam_eps > 0:
             raise UsageError(f"ppo.adam_eps ({self.adam_eps}) must be positive")
         if self.gae_segment < 0 or (self.gae_segment and self.rollout_length % self.gae_segment):
-            raise UsageError(f"ppo.gae_segment ({self.gae_segment}) must be 0 or divide the rollout length "
-                             f"({self.rollout_length} = batch_size / num_envs)")
+            raise UsageError(
+                f"ppo.gae_segment ({self.gae_segment}) must be 0 or divide the rollout length "
+                f"({self.rollout_length} = batch_size / num_envs)"
+            )
         if self.min_log_std is not None and not math.isfinite(self.min_log_std):
-            raise UsageError(f"ppo.min_log_std must be a finite number, or null for no floor, got {self.min_log_std}")
+            raise UsageError(
+                f"ppo.min_log_std must be a finite number, or null for no floor, got {self.min_log_std}"
+            )
         if self.target_kl is not None and not self.target_kl > 0:
-            raise UsageError(f"ppo.target_kl ({self.target_kl}) must be positive, or null for no KL early stop")
+            raise UsageError(
+                f"ppo.target_kl ({self.target_kl}) must be positive, or null for no KL early stop"
+            )
         if self.kl_adaptive_lr and self.target_kl is None:
-            raise UsageError("ppo.kl_adaptive_lr needs ppo.target_kl (the KL it steers the rates to): set ppo.target_kl, "
-                             "or ppo.kl_adaptive_lr=false")
+            raise UsageError(
+                "ppo.kl_adaptive_lr needs ppo.target_kl (the KL it steers the rates to): set ppo.target_kl, "
+                "or ppo.kl_adaptive_lr=false"
+            )
 
 
 @dataclass(frozen=True)
@@ -135,8 +230,12 @@ class DaggerConfig:
     action, adds them to the aggregated dataset and regresses the student on it."""
 
     beta_decay: float = setting(0.5, "beta_i = beta_decay ** i: round 0 acts as the expert alone")
-    buffer_size: int = setting(200_000, "the aggregated dataset's capacity; the oldest rows go first when full")
-    grad_steps: int = setting(32, "student minibatch steps a round (minibatches of ppo.minibatch_size)")
+    buffer_size: int = setting(
+        200_000, "the aggregated dataset's capacity; the oldest rows go first when full"
+    )
+    grad_steps: int = setting(
+        32, "student minibatch steps a round (minibatches of ppo.minibatch_size)"
+    )
     lr: float = setting(1e-3, "the student's Adam rate")
 
     def validate(self) -> None:
@@ -156,18 +255,26 @@ class GailConfig:
     demonstrations: int = setting(16, "expert episodes, rolled out once at the start of training")
     disc_hidden: tuple[int, ...] = setting((256, 256), "the discriminator's hidden layer widths")
     disc_lr: float = setting(3e-4, "the discriminator's Adam rate")
-    disc_steps: int = setting(4, "discriminator minibatch steps a PPO update (minibatches of ppo.minibatch_size)")
+    disc_steps: int = setting(
+        4, "discriminator minibatch steps a PPO update (minibatches of ppo.minibatch_size)"
+    )
     # "logit" is mostly negative while the discriminator wins, so ending an episode early pays (idp's
     # agents learn to fall); "original" pays for every step alive (an agent then avoids a task's
     # terminating goal, e.g. acrobot's).
-    reward: str = setting("logit", "the policy's reward: logit, log D - log(1 - D); original, -log(1 - D) (Ho and "
-                                   "Ermon's)", choices=GAIL_REWARDS)
-    normalize_state: bool = setting(False, "D reads the state standardised by the demonstrations' mean and variance")
-    grad_penalty: float = setting(0.0, "the weight of D's R1 gradient penalty on the expert's pairs")
+    reward: str = setting(
+        "logit",
+        "the policy's reward: logit, log D - log(1 - D); original, -log(1 - D) (Ho and Ermon's)",
+        choices=GAIL_REWARDS,
+    )
+    normalize_state: bool = setting(
+        False, "D reads the state standardised by the demonstrations' mean and variance"
+    )
+    grad_penalty: float = setting(
+        0.0, "the weight of D's R1 gradient penalty on the expert's pairs"
+    )
 
     def validate(self) -> None:
         require_positive(self, ("demonstrations", "disc_steps", "disc_lr", "disc_hidden"), "gail.")
         if self.grad_penalty < 0:
             raise UsageError(f"gail.grad_penalty must be 0 or more, got {self.grad_penalty}")
         check_choices(self, "gail.")
-

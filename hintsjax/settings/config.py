@@ -43,31 +43,54 @@ class RunConfig:
     env: str = setting("pendulum", "the task (the choices below)")
     agent: str = setting("hints", "the learner and what it sees (the choices below)")
     scheme: str = setting("fc", "how the hint conditions the picture's features: lc, ac, fc or mc")
-    hint: str = setting("composite", "a registered hint, a composite, or names joined by '+' (null: the env's)",
-                        per_env=True)
+    hint: str = setting(
+        "composite",
+        "a registered hint, a composite, or names joined by '+' (null: the env's)",
+        per_env=True,
+    )
     variant: str | None = setting(None, "the env's training variant (null: its default)")
     seeds: int = setting(5, "seeds trained side by side")
     seed: int = setting(0, "seed i of the run is PRNGKey(seed + i)")
     eval_episodes: int = setting(50, "episodes a seed in the evaluation after training")
-    eval_variants: tuple[str, ...] = setting((), "deploy variants evaluated after training (null: the env's)",
-                                             per_env=True)
-    stochastic_eval: bool = setting(False, "sample actions in evaluation (null: the env's; the car samples)",
-                                    per_env=True)
+    eval_variants: tuple[str, ...] = setting(
+        (), "deploy variants evaluated after training (null: the env's)", per_env=True
+    )
+    stochastic_eval: bool = setting(
+        False, "sample actions in evaluation (null: the env's; the car samples)", per_env=True
+    )
     checkpoint_every: int = setting(10, "updates between progress reports and checkpoints")
-    checkpoint_seconds: float = setting(30.0, "at least this long between checkpoints (0: at every report); the "
-                                              "last update is always saved")
-    expert: str | None = setting(None, "dagger and gail: an exported expert folder (null: the env's packaged one)")
-    hints_from: str | None = setting(None, "a Python file or module whose register_hint calls add hints",
-                                     saved_may_lack=True)
-    hint_source: str = setting("programmatic", "the hints in training: programmatic, or a generator folder")
-    eval_hint_source: str | None = setting(None, "the hints at deploy (evaluation, videos); null: as hint_source")
+    checkpoint_seconds: float = setting(
+        30.0,
+        "at least this long between checkpoints (0: at every report); the "
+        "last update is always saved",
+    )
+    expert: str | None = setting(
+        None, "dagger and gail: an exported expert folder (null: the env's packaged one)"
+    )
+    hints_from: str | None = setting(
+        None, "a Python file or module whose register_hint calls add hints", saved_may_lack=True
+    )
+    hint_source: str = setting(
+        "programmatic", "the hints in training: programmatic, or a generator folder"
+    )
+    eval_hint_source: str | None = setting(
+        None, "the hints at deploy (evaluation, videos); null: as hint_source"
+    )
     # Resolved when the config is built (layers.run_config), so a run folder keeps what it stepped with.
-    physics: str = setting("auto", "MJCF envs: auto (warp on an NVIDIA GPU with warp-lang, else jax), jax "
-                                   "(bit-reproducible) or warp")
-    warp_capacity: float = setting(2.0, "physics=warp: contact and constraint buffers, this many times the "
-                                        "model's most per world")
-    image_size: int | None = setting(None, "the pictures' side in pixels, 36 to 256 (null: the env's own, 64; the "
-                                           "car's 96)", saved_may_lack=True)
+    physics: str = setting(
+        "auto",
+        "MJCF envs: auto (warp on an NVIDIA GPU with warp-lang, else jax), jax "
+        "(bit-reproducible) or warp",
+    )
+    warp_capacity: float = setting(
+        2.0,
+        "physics=warp: contact and constraint buffers, this many times the model's most per world",
+    )
+    image_size: int | None = setting(
+        None,
+        "the pictures' side in pixels, 36 to 256 (null: the env's own, 64; the car's 96)",
+        saved_may_lack=True,
+    )
     ppo: PPOConfig = field(default_factory=PPOConfig)
     dagger: DaggerConfig = field(default_factory=DaggerConfig)
     gail: GailConfig = field(default_factory=GailConfig)
@@ -94,17 +117,31 @@ class RunConfig:
         """The hint source of training, or of deployment (evaluation, videos) with `deploy`."""
         return (self.eval_hint_source or self.hint_source) if deploy else self.hint_source
 
-    def make_env(self, observe: tuple[str, ...] | None = None, hint: str | None = None, deploy: bool = False) -> envs.Env:
+    def make_env(
+        self, observe: tuple[str, ...] | None = None, hint: str | None = None, deploy: bool = False
+    ) -> envs.Env:
         """The env the agent acts in (its hint `hint`, default its own, from the hint source of
         training or of deployment); its params are `task_params`'."""
         observe = self.agent_spec.observe if observe is None else observe
-        env = hinted_env(self.env, self.effective_hint if hint is None else hint, observe, self.hint_source_for(deploy),
-                         physics=self.physics, warp_capacity=self.warp_capacity, image_size=self.image_size)
+        env = hinted_env(
+            self.env,
+            self.effective_hint if hint is None else hint,
+            observe,
+            self.hint_source_for(deploy),
+            physics=self.physics,
+            warp_capacity=self.warp_capacity,
+            image_size=self.image_size,
+        )
         return envs.SquashedActions(env) if self.ppo.action_head == "tanh" else env
 
     def task_params(self, variant: str | None, deploy: bool = False) -> Any:
         """The params of `make_env(deploy=deploy)`'s env on `variant` (None: the training variant's default)."""
-        return hinted_params(self.env, env_params(self.env, variant), self.agent_spec.observe, self.hint_source_for(deploy))
+        return hinted_params(
+            self.env,
+            env_params(self.env, variant),
+            self.agent_spec.observe,
+            self.hint_source_for(deploy),
+        )
 
     def validate(self) -> "RunConfig":
         try:
@@ -114,7 +151,8 @@ class RunConfig:
                 envs.check_drawable(self.env)
             choose("scheme", self.scheme, SCHEMES)
             if self.hint not in (RunConfig.hint, ENV_DEFAULTS.get(self.env, {}).get("hint")):
-                envs.make_hint(self.env, self.hint)  # a hint asked for is named right, even where the agent sees none
+                # a hint asked for is named right, even where the agent sees none
+                envs.make_hint(self.env, self.hint)
             hint = envs.make_hint(self.env, self.effective_hint)
             envs.resolve_physics(self.env, self.physics)
         except (ChoiceError, envs.PhysicsUnavailable) as e:
@@ -122,31 +160,45 @@ class RunConfig:
         names = [part.name for part in hint.parts]
         twice = sorted({name for name in names if names.count(name) > 1})
         if twice:
-            raise UsageError(f"hint '{self.hint}' gives {', '.join(twice)} more than once; name each hint once")
+            raise UsageError(
+                f"hint '{self.hint}' gives {', '.join(twice)} more than once; name each hint once"
+            )
         if self.agent_spec.hint and not names:
-            raise UsageError(f"agent={self.agent} sees a hint, so hint=none leaves it nothing; valid for {self.env}: "
-                             f"{', '.join(envs.hint_names(self.env))} (or agent=ppo_rgb, which sees none)")
+            raise UsageError(
+                f"agent={self.agent} sees a hint, so hint=none leaves it nothing; valid for {self.env}: "
+                f"{', '.join(envs.hint_names(self.env))} (or agent=ppo_rgb, which sees none)"
+            )
         if self.hints_from is not None:
             self._check_hint_widths(hint)
         if not 1 <= self.warp_capacity < float("inf"):
-            raise UsageError(f"warp_capacity must be a number of at least 1, got {self.warp_capacity}")
+            raise UsageError(
+                f"warp_capacity must be a number of at least 1, got {self.warp_capacity}"
+            )
         self._check_image_size()
         for v in (self.variant, *self.eval_variants):
             env_params(self.env, v)
         self._check_hint_sources()
         require_positive(self, ("seeds", "eval_episodes", "checkpoint_every"))
         if not 0 <= self.seed <= INT_MAX - self.seeds + 1:  # seed i's key is key(seed + i): 32 bits
-            raise UsageError(f"seed must be 0 to {INT_MAX - self.seeds + 1} (seed + i for each of {self.seeds} seeds "
-                             f"is a 32-bit key), got {self.seed}")
+            raise UsageError(
+                f"seed must be 0 to {INT_MAX - self.seeds + 1} (seed + i for each of {self.seeds} seeds "
+                f"is a 32-bit key), got {self.seed}"
+            )
         if not self.checkpoint_seconds >= 0:  # NaN too
             raise UsageError(f"checkpoint_seconds must be 0 or more, got {self.checkpoint_seconds}")
         for section in SECTIONS:
             getattr(self, section).validate()
-        if self.ppo.action_head != "gaussian" and (self.agent_spec.imitates or self.agent == EXPERT_AGENT):
-            raise UsageError(f"ppo.action_head={self.ppo.action_head} is for PPO's learners; {self.agent} keeps the "
-                             "gaussian head (an expert's policy drives dagger and gail as a Gaussian's mean)")
+        if self.ppo.action_head != "gaussian" and (
+            self.agent_spec.imitates or self.agent == EXPERT_AGENT
+        ):
+            raise UsageError(
+                f"ppo.action_head={self.ppo.action_head} is for PPO's learners; {self.agent} keeps the "
+                "gaussian head (an expert's policy drives dagger and gail as a Gaussian's mean)"
+            )
         if self.agent_spec.algorithm == "dagger" and self.dagger.buffer_size < self.ppo.batch_size:
-            raise UsageError(f"dagger.buffer_size ({self.dagger.buffer_size}) must hold one round, ppo.batch_size ({self.ppo.batch_size})")
+            raise UsageError(
+                f"dagger.buffer_size ({self.dagger.buffer_size}) must hold one round, ppo.batch_size ({self.ppo.batch_size})"
+            )
         return self
 
     def _check_hint_widths(self, hint: envs.Hint) -> None:
@@ -164,16 +216,26 @@ class RunConfig:
         if self.image_size is None:
             return
         own = envs.REGISTRY[self.env].cls
-        if isinstance(self.image_size, bool) or not isinstance(self.image_size, int) or not MIN_IMAGE_SIZE <= self.image_size <= MAX_IMAGE_SIZE:
-            raise UsageError(f"image_size must be a whole number of pixels from {MIN_IMAGE_SIZE} (the encoder's smallest) "
-                             f"to {MAX_IMAGE_SIZE}, or null for the env's own ({own.image_size}); got {self.image_size!r}")
+        if (
+            isinstance(self.image_size, bool)
+            or not isinstance(self.image_size, int)
+            or not MIN_IMAGE_SIZE <= self.image_size <= MAX_IMAGE_SIZE
+        ):
+            raise UsageError(
+                f"image_size must be a whole number of pixels from {MIN_IMAGE_SIZE} (the encoder's smallest) "
+                f"to {MAX_IMAGE_SIZE}, or null for the env's own ({own.image_size}); got {self.image_size!r}"
+            )
         try:
             own.check_image_size(self.image_size)
         except ValueError as e:
             raise UsageError(str(e)) from None
-        if self.image_size != own.image_size and any(s not in (None, PROGRAMMATIC) for s in (self.hint_source, self.eval_hint_source)):
-            raise UsageError(f"image_size={self.image_size}: a generator's hints are read off the env's own "
-                             f"{own.image_size}x{own.image_size} pictures; leave image_size null with hint_source=<generator folder>")
+        if self.image_size != own.image_size and any(
+            s not in (None, PROGRAMMATIC) for s in (self.hint_source, self.eval_hint_source)
+        ):
+            raise UsageError(
+                f"image_size={self.image_size}: a generator's hints are read off the env's own "
+                f"{own.image_size}x{own.image_size} pictures; leave image_size null with hint_source=<generator folder>"
+            )
 
     def _check_hint_sources(self) -> None:
         for name in ("hint_source", "eval_hint_source"):
@@ -181,12 +243,15 @@ class RunConfig:
             if source in (None, PROGRAMMATIC):
                 continue
             if not self.agent_spec.hint:
-                raise UsageError(f"{name} applies to agents that see a hint "
-                                 f"({', '.join(a for a, s in AGENTS.items() if s.hint)}), not {self.agent}")
+                raise UsageError(
+                    f"{name} applies to agents that see a hint "
+                    f"({', '.join(a for a, s in AGENTS.items() if s.hint)}), not {self.agent}"
+                )
             check_matches(source, self.env, self.effective_hint)
 
 
-SECTIONS = {"ppo": PPOConfig, "dagger": DaggerConfig, "gail": GailConfig}  # RunConfig's nested settings
+# RunConfig's nested settings
+SECTIONS = {"ppo": PPOConfig, "dagger": DaggerConfig, "gail": GailConfig}
 
 
 @dataclass(frozen=True)
@@ -197,7 +262,8 @@ class CommandSettings:
     out_dir: str = setting("runs", "the folder run folders are made in")
     name: str | None = setting(None, "the run folder's name (null: env-label-timestamp)")
     resume: str | None = setting(None, "a run folder to go on with from its last checkpoint")
-    compilation_cache: bool | str = setting(True, "persistent XLA cache: $HINTSJAX_COMPILATION_CACHE or "
-                                                  "~/.cache/hintsjax/xla, a folder, or false")
-
-
+    compilation_cache: bool | str = setting(
+        True,
+        "persistent XLA cache: $HINTSJAX_COMPILATION_CACHE or "
+        "~/.cache/hintsjax/xla, a folder, or false",
+    )

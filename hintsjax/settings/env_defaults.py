@@ -23,7 +23,10 @@ def stack_layers(*layers: Mapping[str, Any]) -> dict[str, Any]:
             if v is None:
                 continue
             if isinstance(v, Mapping):
-                merged[k] = {**merged.get(k, {}), **{sk: sv for sk, sv in v.items() if sv is not None}}
+                merged[k] = {
+                    **merged.get(k, {}),
+                    **{sk: sv for sk, sv in v.items() if sv is not None},
+                }
             else:
                 merged[k] = v
     return merged
@@ -36,8 +39,13 @@ def _env_defaults(training: Mapping[str, Any]) -> dict[str, Any]:
     learners, own = training.pop("learners", {}), dict(training.pop("agents", {}))
     unknown = sorted(set(own) - set(AGENTS))
     if unknown:
-        raise ValueError(f"TRAINING's agents names {', '.join(unknown)}; valid: {', '.join(AGENTS)}")
-    agents = {name: stack_layers(learners if name not in REFERENCES else {}, own.get(name, {})) for name in AGENTS}
+        raise ValueError(
+            f"TRAINING's agents names {', '.join(unknown)}; valid: {', '.join(AGENTS)}"
+        )
+    agents = {
+        name: stack_layers(learners if name not in REFERENCES else {}, own.get(name, {}))
+        for name in AGENTS
+    }
     return {**training, "agents": {name: layer for name, layer in agents.items() if layer}}
 
 
@@ -47,7 +55,8 @@ class EnvDefaults(dict):
     or an entry registered at run time, from its `training`), added when first looked up."""
 
     def __contains__(self, name: object) -> bool:
-        if not dict.__contains__(self, name) and name in envs.REGISTRY:  # adapts a `<source>:<task>`
+        # adapts a `<source>:<task>`
+        if not dict.__contains__(self, name) and name in envs.REGISTRY:
             self[name] = _env_defaults(envs.REGISTRY[name].training)
         return dict.__contains__(self, name)
 
@@ -65,4 +74,6 @@ class EnvDefaults(dict):
 
 
 # Per env, defaults over the dataclasses' (hintsjax.settings.algorithm_settings, hintsjax.settings.config.RunConfig).
-ENV_DEFAULTS: EnvDefaults = EnvDefaults({name: _env_defaults(entry.training) for name, entry in envs.REGISTRY.items()})
+ENV_DEFAULTS: EnvDefaults = EnvDefaults(
+    {name: _env_defaults(entry.training) for name, entry in envs.REGISTRY.items()}
+)

@@ -12,11 +12,24 @@ from typing import Any
 
 from hintsjax.system.errors import UsageError
 
-HELP, TRACED, SAVED_MAY_LACK, CHOICES, PER_ENV = "help", "traced", "saved_may_lack", "choices", "per_env"
+HELP, TRACED, SAVED_MAY_LACK, CHOICES, PER_ENV = (
+    "help",
+    "traced",
+    "saved_may_lack",
+    "choices",
+    "per_env",
+)
 
 
-def setting(default: Any = dataclasses.MISSING, help: str = "", *, traced: bool = False, saved_may_lack: bool = False,
-            choices: tuple[str, ...] | None = None, per_env: bool = False) -> Any:
+def setting(
+    default: Any = dataclasses.MISSING,
+    help: str = "",
+    *,
+    traced: bool = False,
+    saved_may_lack: bool = False,
+    choices: tuple[str, ...] | None = None,
+    per_env: bool = False,
+) -> Any:
     """A settings dataclass's field. `help`: one line for --help and docs/settings.md. `traced`: a
     number carried as an array in the runner state (PPO's `Hyper`), so a group's members may differ
     in it; otherwise it fixes shapes or the program's structure and they must agree. `saved_may_lack`:
@@ -25,7 +38,13 @@ def setting(default: Any = dataclasses.MISSING, help: str = "", *, traced: bool 
     `TRAINING` may set (every section's setting may), so the command line's schema leaves it null."""
     if not help:
         raise TypeError("a setting needs its help line")
-    metadata = {HELP: help, TRACED: traced, SAVED_MAY_LACK: saved_may_lack, CHOICES: choices, PER_ENV: per_env}
+    metadata = {
+        HELP: help,
+        TRACED: traced,
+        SAVED_MAY_LACK: saved_may_lack,
+        CHOICES: choices,
+        PER_ENV: per_env,
+    }
     return dataclasses.field(default=default, metadata=metadata)
 
 
@@ -36,7 +55,9 @@ def settings_of(cls: type) -> tuple[dataclasses.Field, ...]:
 
 def names(cls: type, **wanted: Any) -> tuple[str, ...]:
     """The names of `cls`'s settings whose metadata has the values `wanted` (e.g. traced=True)."""
-    return tuple(f.name for f in settings_of(cls) if all(f.metadata[k] == v for k, v in wanted.items()))
+    return tuple(
+        f.name for f in settings_of(cls) if all(f.metadata[k] == v for k, v in wanted.items())
+    )
 
 
 def allows_none(f: dataclasses.Field) -> bool:

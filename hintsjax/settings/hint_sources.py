@@ -86,7 +86,9 @@ class Generator:
         return params.mean + params.std * self.network.apply(params.net, frames)
 
     def init(self, key: jax.Array, image_size: int) -> Any:
-        return self.network.init(key, jnp.zeros((1, self.frames, image_size, image_size, 3), jnp.uint8))
+        return self.network.init(
+            key, jnp.zeros((1, self.frames, image_size, image_size, 3), jnp.uint8)
+        )
 
 
 # -- the env that shows the agent the generator's hint ---------------------------------------------
@@ -140,14 +142,19 @@ class GeneratedHintEnv(Env):
     def initial_state(self, key: jax.Array, params: GeneratedParams) -> FramedState:
         state = self.inner.initial_state(key, params.task)
         frame = self.inner._render(state, params.task)
-        return FramedState(state, jnp.repeat(frame[None], self.hint.generator.frames, axis=0), state.t)
+        return FramedState(
+            state, jnp.repeat(frame[None], self.hint.generator.frames, axis=0), state.t
+        )
 
     def action_range(self, params: GeneratedParams) -> tuple[jax.Array, jax.Array]:
         return self.inner.action_range(params.task)
 
-    def transition(self, key: jax.Array, state: FramedState, action: jax.Array, params: GeneratedParams) -> Step:
+    def transition(
+        self, key: jax.Array, state: FramedState, action: jax.Array, params: GeneratedParams
+    ) -> Step:
         out = self.inner.transition(key, state.env_state, action, params.task)
-        inner = out.state.replace(t=state.env_state.t + 1)  # as Env.step advances the wrapped env's count
+        # as Env.step advances the wrapped env's count
+        inner = out.state.replace(t=state.env_state.t + 1)
         frames = push_frame(state.frames, self.inner._render(inner, params.task))
         return Step(FramedState(inner, frames, state.t), out.reward, out.terminated)
 
@@ -168,11 +175,17 @@ def describe(folder: str | Path) -> dict[str, Any]:
     """generator.json of a generator folder; UsageError if it is missing or unreadable."""
     path = Path(folder) / GENERATOR_JSON
     if not path.is_file():
-        raise UsageError(f"no generator at {folder} (expected {GENERATOR_JSON}; train one with "
-                         "python -m hintsjax.generator env=<env> hint=<hint>)")
+        raise UsageError(
+            f"no generator at {folder} (expected {GENERATOR_JSON}; train one with "
+            "python -m hintsjax.generator env=<env> hint=<hint>)"
+        )
     try:
         meta = json.loads(path.read_text())
-        meta["frames"], meta["hidden"], meta["seeds"] = int(meta["frames"]), int(meta["hidden"]), int(meta["seeds"])
+        meta["frames"], meta["hidden"], meta["seeds"] = (
+            int(meta["frames"]),
+            int(meta["hidden"]),
+            int(meta["seeds"]),
+        )
         str(meta["env"]), str(meta["hint"])
     except (ValueError, KeyError, TypeError) as e:
         raise UsageError(f"{path} is not a generator's description: {type(e).__name__}") from None
@@ -186,7 +199,9 @@ def check_matches(folder: str | Path, env: str, hint: str) -> dict[str, Any]:
     meta = describe(folder)
     parts = lambda e, h: [p.name for p in envs.make_hint(e, h).parts]  # noqa: E731
     if meta["env"] != env or parts(meta["env"], meta["hint"]) != parts(env, hint):
-        raise UsageError(f"the generator at {folder} generates {meta['env']}/{meta['hint']}, not {env}/{hint}")
+        raise UsageError(
+            f"the generator at {folder} generates {meta['env']}/{meta['hint']}, not {env}/{hint}"
+        )
     load(folder)
     return meta
 
@@ -207,17 +222,23 @@ def _load(folder: str, mtime: float) -> tuple[Generator, GeneratorParams]:
     meta = describe(folder)
     generator = Generator(meta["env"], meta["hint"], meta["frames"], meta["hidden"])
     image_size = envs.make(meta["env"]).image_size
-    abstract = jax.eval_shape(jax.vmap(lambda k: fresh_params(generator, k, image_size)),
-                              jax.random.split(jax.random.key(0), meta["seeds"]))
+    abstract = jax.eval_shape(
+        jax.vmap(lambda k: fresh_params(generator, k, image_size)),
+        jax.random.split(jax.random.key(0), meta["seeds"]),
+    )
     abstract = on_this_device(abstract)
     try:
         with ocp.StandardCheckpointer() as loader:
             path = (Path(folder) / PARAMS).absolute()
-            require_same_arrays(loader.metadata(path).item_metadata, abstract, f"{GENERATOR_JSON} gives")
+            require_same_arrays(
+                loader.metadata(path).item_metadata, abstract, f"{GENERATOR_JSON} gives"
+            )
             params = GeneratorParams(**loader.restore(path, stored(abstract)))
     except Exception as e:  # orbax raises many types for unreadable or mismatched files
         reason = str(e).strip().splitlines()[0][:200] if str(e).strip() else type(e).__name__
-        raise UsageError(f"the generator checkpoint in {folder} is corrupt or does not match {GENERATOR_JSON}: {reason}") from None
+        raise UsageError(
+            f"the generator checkpoint in {folder} is corrupt or does not match {GENERATOR_JSON}: {reason}"
+        ) from None
     return generator, params
 
 

@@ -62,16 +62,29 @@ def run_config(values: Mapping[str, Any], resolved: bool = False) -> RunConfig:
     per_agent = defaults.pop("agents", {})
     _check_env_layers(env, [defaults, *per_agent.values()])
     if resolved:
-        merged = {k: dict(v) if k in SECTIONS and isinstance(v, Mapping) else v for k, v in values.items()}
-        merged.setdefault("physics", envs.JAX)  # a run saved before the setting was stepped by MJX's JAX solver
+        merged = {
+            k: dict(v) if k in SECTIONS and isinstance(v, Mapping) else v for k, v in values.items()
+        }
+        # a run saved before the setting was stepped by MJX's JAX solver
+        merged.setdefault("physics", envs.JAX)
     else:
-        merged = stack_layers(defaults, per_agent.get(values.get("agent") or RunConfig.agent, {}), values)
+        merged = stack_layers(
+            defaults, per_agent.get(values.get("agent") or RunConfig.agent, {}), values
+        )
     unknown = {k for k in merged if k not in SECTIONS} - _fields(RunConfig)
-    unknown |= {f"{name}.{k}" for name, cls in SECTIONS.items() for k in merged.get(name, {}) if k not in _fields(cls)}
+    unknown |= {
+        f"{name}.{k}"
+        for name, cls in SECTIONS.items()
+        for k in merged.get(name, {})
+        if k not in _fields(cls)
+    }
     if unknown:
         raise UsageError(f"unknown config keys {sorted(unknown)}")
     try:
-        for prefix, section in [("", merged), *((f"{name}.", merged.get(name, {})) for name in SECTIONS)]:
+        for prefix, section in [
+            ("", merged),
+            *((f"{name}.", merged.get(name, {})) for name in SECTIONS),
+        ]:
             for k in TUPLES & set(section):
                 section[k] = _as_tuple(prefix + k, section[k])
         sections = {name: cls(**merged.pop(name, {})) for name, cls in SECTIONS.items()}
@@ -82,11 +95,14 @@ def run_config(values: Mapping[str, Any], resolved: bool = False) -> RunConfig:
     except (TypeError, ValueError) as e:
         raise UsageError(f"bad config value: {e}") from None
     cfg = cfg.validate()
-    return dataclasses.replace(cfg, physics=envs.resolve_physics(cfg.env, cfg.physics))  # what the run steps with, kept
+    # what the run steps with, kept
+    return dataclasses.replace(cfg, physics=envs.resolve_physics(cfg.env, cfg.physics))
 
 
 # The top-level settings the command line gives a value, not null (schema.command_line_defaults).
-VALUED_ON_THE_COMMAND_LINE = {k for k, v in schema.command_line_defaults().items() if v is not None and k not in SECTIONS}
+VALUED_ON_THE_COMMAND_LINE = {
+    k for k, v in schema.command_line_defaults().items() if v is not None and k not in SECTIONS
+}
 
 
 def _check_env_layers(env: str, layers: list[Mapping[str, Any]]) -> None:
@@ -95,8 +111,10 @@ def _check_env_layers(env: str, layers: list[Mapping[str, Any]]) -> None:
     but not in run_config, so the two would train differently."""
     fixed = sorted({k for layer in layers for k in layer if k in VALUED_ON_THE_COMMAND_LINE})
     if fixed:
-        raise TypeError(f"env {env}'s TRAINING sets {', '.join(fixed)}, which the command line gives a value; "
-                        "an env may set a section's settings and those declared per_env (hintsjax/settings/config.py)")
+        raise TypeError(
+            f"env {env}'s TRAINING sets {', '.join(fixed)}, which the command line gives a value; "
+            "an env may set a section's settings and those declared per_env (hintsjax/settings/config.py)"
+        )
 
 
 def hint_file(source: str) -> str:
@@ -117,7 +135,9 @@ def _check_types(cfg: RunConfig) -> None:
         for f in dataclasses.fields(obj):
             value = getattr(obj, f.name)
             kind = {"int": int, "float": (int, float), "bool": bool, "str": str}.get(str(f.type))
-            if kind is not None and (not isinstance(value, kind) or (kind is int and isinstance(value, bool))):
+            if kind is not None and (
+                not isinstance(value, kind) or (kind is int and isinstance(value, bool))
+            ):
                 raise UsageError(f"{f.name} must be {f.type}, got {value!r}")
             if str(f.type).startswith(("int", "tuple[int")):
                 require_int32(obj, (f.name,), prefix)
@@ -151,8 +171,12 @@ OPTIONAL_IN_SAVED = schema.saved_may_lack()
 def missing_keys(values: Mapping[str, Any]) -> list[str]:
     """The settings of today's RunConfig that a saved config (to_dict's layout) lacks."""
     missing = sorted(_fields(RunConfig) - set(SECTIONS) - OPTIONAL_IN_SAVED - set(values))
-    return missing + [f"{name}.{k}" for name, cls in SECTIONS.items()
-                      for k in sorted(_fields(cls) - set(values.get(name) or {})) if f"{name}.{k}" not in OPTIONAL_IN_SAVED]
+    return missing + [
+        f"{name}.{k}"
+        for name, cls in SECTIONS.items()
+        for k in sorted(_fields(cls) - set(values.get(name) or {}))
+        if f"{name}.{k}" not in OPTIONAL_IN_SAVED
+    ]
 
 
 def load_run_config(run_dir: Path, complete: bool = False) -> RunConfig:
@@ -164,13 +188,18 @@ def load_run_config(run_dir: Path, complete: bool = False) -> RunConfig:
         raise UsageError(f"no run folder at {run_dir}")
     try:
         values = yaml.safe_load(path.read_text())
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as e:  # missing, unreadable, not UTF-8, not YAML
+    # missing, unreadable, not UTF-8, not YAML
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as e:
         raise UsageError(f"cannot read {path}: {type(e).__name__}") from None
     if not isinstance(values, dict):
         raise UsageError(f"{path} is not a run config")
     missing = missing_keys(values) if complete else []
     if missing:
-        shown = " ".join(missing[:6]) + (f" and {len(missing) - 6} more" if len(missing) > 6 else "")
-        raise UsageError(f"{path} lacks {shown}: cut short, or written by another hintsjax version; "
-                         f"it cannot be resumed as it was trained (start a new run)")
+        shown = " ".join(missing[:6]) + (
+            f" and {len(missing) - 6} more" if len(missing) > 6 else ""
+        )
+        raise UsageError(
+            f"{path} lacks {shown}: cut short, or written by another hintsjax version; "
+            f"it cannot be resumed as it was trained (start a new run)"
+        )
     return run_config(values, resolved=True)

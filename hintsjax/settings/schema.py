@@ -12,7 +12,8 @@ from typing import Any
 from hintsjax.settings.config import SECTIONS, CommandSettings, RunConfig
 from hintsjax.settings.fields import HELP, PER_ENV, SAVED_MAY_LACK, settings_of
 
-SETTINGS_MD = Path(__file__).resolve().parents[2] / "docs" / "settings.md"  # in a checkout (not in a wheel)
+# in a checkout (not in a wheel)
+SETTINGS_MD = Path(__file__).resolve().parents[2] / "docs" / "settings.md"
 
 
 def _plain(value: Any) -> Any:
@@ -23,16 +24,24 @@ def command_line_defaults() -> dict[str, Any]:
     """What the run command starts from before its arguments: every setting, nested by section; null
     where an env may set it (every section's setting, and a top-level one marked `per_env`), so
     that the env's layer decides (hintsjax.settings.layers.run_config), else the dataclass's default."""
-    top = {f.name: None if f.metadata[PER_ENV] else _plain(f.default) for f in settings_of(RunConfig)}
+    top = {
+        f.name: None if f.metadata[PER_ENV] else _plain(f.default) for f in settings_of(RunConfig)
+    }
     own = {f.name: _plain(f.default) for f in settings_of(CommandSettings)}
-    return {**top, **own, **{name: {f.name: None for f in settings_of(cls)} for name, cls in SECTIONS.items()}}
+    return {
+        **top,
+        **own,
+        **{name: {f.name: None for f in settings_of(cls)} for name, cls in SECTIONS.items()},
+    }
 
 
 def declared() -> list[tuple[str, dataclasses.Field]]:
     """(key as the command line names it, its field) for every setting, in the command line's order:
     a run's, the command's own, then each section's as section.key."""
     top = [(f.name, f) for cls in (RunConfig, CommandSettings) for f in settings_of(cls)]
-    return top + [(f"{name}.{f.name}", f) for name, cls in SECTIONS.items() for f in settings_of(cls)]
+    return top + [
+        (f"{name}.{f.name}", f) for name, cls in SECTIONS.items() for f in settings_of(cls)
+    ]
 
 
 def keys() -> list[str]:
@@ -64,25 +73,44 @@ def help_text() -> str:
     rows = all_rows()
     width = max(len(f"{k}={d}") for k, d, _ in rows)
     lines = [f"  {f'{k}={d}':<{width}}  {h}" for k, d, h in rows]
-    return "\n".join(["Settings (key=default; an env's TRAINING may set its own, docs/settings.md):", *lines])
+    return "\n".join(
+        ["Settings (key=default; an env's TRAINING may set its own, docs/settings.md):", *lines]
+    )
 
 
 def markdown() -> str:
     """docs/settings.md: every setting, its default and its help, one table a section."""
-    def table(rows: list[tuple[str, str, str]]) -> list[str]:
-        return ["| key | default | what it does |", "|---|---|---|",
-                *(f"| `{k}` | `{d}` | {h.replace('|', '/')} |" for k, d, h in rows)]
 
-    lines = ["# Settings", "",
-             "Every setting of `python -m hintsjax.run key=value`, its default and what it does, written by",
-             "`python -m hintsjax.settings.schema` from the fields that declare them (hintsjax/settings/config.py,",
-             "hintsjax/settings/algorithm_settings.py); `tests/test_config_schema.py` fails when this page is stale.",
-             "A default here is the dataclass's: an env's `TRAINING` (envs/<env>.py) sets its own over it, and",
-             "`null` on the command line takes the env's. A resumed run keeps the settings it was started with.", "",
-             "## The run", "", *table([row for row in all_rows() if "." not in row[0]])]
+    def table(rows: list[tuple[str, str, str]]) -> list[str]:
+        return [
+            "| key | default | what it does |",
+            "|---|---|---|",
+            *(f"| `{k}` | `{d}` | {h.replace('|', '/')} |" for k, d, h in rows),
+        ]
+
+    lines = [
+        "# Settings",
+        "",
+        "Every setting of `python -m hintsjax.run key=value`, its default and what it does, written by",
+        "`python -m hintsjax.settings.schema` from the fields that declare them (hintsjax/settings/config.py,",
+        "hintsjax/settings/algorithm_settings.py); `tests/test_config_schema.py` fails when this page is stale.",
+        "A default here is the dataclass's: an env's `TRAINING` (envs/<env>.py) sets its own over it, and",
+        "`null` on the command line takes the env's. A resumed run keeps the settings it was started with.",
+        "",
+        "## The run",
+        "",
+        *table([row for row in all_rows() if "." not in row[0]]),
+    ]
     for name, cls in SECTIONS.items():
         rows = [row for row in all_rows() if row[0].startswith(f"{name}.")]
-        lines += ["", f"## `{name}.*`", "", (cls.__doc__ or "").strip().splitlines()[0], "", *table(rows)]
+        lines += [
+            "",
+            f"## `{name}.*`",
+            "",
+            (cls.__doc__ or "").strip().splitlines()[0],
+            "",
+            *table(rows),
+        ]
     return "\n".join(lines) + "\n"
 
 

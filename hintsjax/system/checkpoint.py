@@ -85,7 +85,9 @@ def _unretrieved_reads(record: logging.LogRecord) -> bool:
     """A logging filter that drops asyncio's "Task exception was never retrieved" for a read of
     tensorstore's (orbax's reads of a checkpoint's other arrays, left when one failed)."""
     text = record.getMessage()
-    return not (text.startswith("Task exception was never retrieved") and "tensorstore" in text.lower())
+    return not (
+        text.startswith("Task exception was never retrieved") and "tensorstore" in text.lower()
+    )
 
 
 class CheckpointWriteError(RuntimeError):
@@ -94,9 +96,14 @@ class CheckpointWriteError(RuntimeError):
 
 
 def _manager(run_dir: Path, create: bool, background: bool = False) -> ocp.CheckpointManager:
-    options = ocp.CheckpointManagerOptions(max_to_keep=2, create=create, enable_async_checkpointing=background)
-    return ocp.CheckpointManager((Path(run_dir) / CHECKPOINTS).absolute(), options=options,
-                                 item_handlers=ocp.StandardCheckpointHandler())
+    options = ocp.CheckpointManagerOptions(
+        max_to_keep=2, create=create, enable_async_checkpointing=background
+    )
+    return ocp.CheckpointManager(
+        (Path(run_dir) / CHECKPOINTS).absolute(),
+        options=options,
+        item_handlers=ocp.StandardCheckpointHandler(),
+    )
 
 
 _WRITERS: dict[Path, ocp.CheckpointManager] = {}  # folders inside `writing`: their async managers
@@ -136,7 +143,9 @@ def require_same_arrays(stored, expected, source: str) -> None:
     other reads pending (pages of tracebacks at exit)."""
     saved, wanted = _array_specs(stored), _array_specs(expected)
     if saved != wanted:
-        raise ValueError(f"its {len(saved)} arrays differ in shape or type from the {len(wanted)} that {source}")
+        raise ValueError(
+            f"its {len(saved)} arrays differ in shape or type from the {len(wanted)} that {source}"
+        )
 
 
 def on_this_device(abstract):
@@ -161,7 +170,12 @@ def _quiet():
 
 def _raw_keys(state):
     """Typed PRNG keys as their uint32 data: what orbax can store."""
-    return jax.tree.map(lambda x: jax.random.key_data(x) if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key) else x, state)
+    return jax.tree.map(
+        lambda x: jax.random.key_data(x)
+        if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key)
+        else x,
+        state,
+    )
 
 
 def save(run_dir: Path, state, update: int) -> None:
@@ -176,16 +190,21 @@ def save(run_dir: Path, state, update: int) -> None:
                 blocking.save(update, args=ocp.args.StandardSave(_raw_keys(state)))
                 blocking.wait_until_finished()
             return
-        manager.wait_until_finished()  # the write handed over last (the run loop saves only once it is done)
+        # the write handed over last (the run loop saves only once it is done)
+        manager.wait_until_finished()
         manager.check_for_errors()
     except Exception as e:
         failed = _HANDED.get(key, update) if manager is not None else update
-        raise CheckpointWriteError(f"could not write checkpoint {failed} in {key / CHECKPOINTS}: {_first_line(e)}") from None
+        raise CheckpointWriteError(
+            f"could not write checkpoint {failed} in {key / CHECKPOINTS}: {_first_line(e)}"
+        ) from None
     try:
         manager.save(update, args=ocp.args.StandardSave(_raw_keys(state)))
         _HANDED[key] = update
     except Exception as e:
-        raise CheckpointWriteError(f"could not write checkpoint {update} in {key / CHECKPOINTS}: {_first_line(e)}") from None
+        raise CheckpointWriteError(
+            f"could not write checkpoint {update} in {key / CHECKPOINTS}: {_first_line(e)}"
+        ) from None
 
 
 def saving(run_dir: Path) -> bool:
@@ -205,7 +224,9 @@ def flush(run_dir: Path) -> None:
         manager.wait_until_finished()
         manager.check_for_errors()
     except Exception as e:
-        raise CheckpointWriteError(f"could not write checkpoint {handed} in {key / CHECKPOINTS}: {_first_line(e)}") from None
+        raise CheckpointWriteError(
+            f"could not write checkpoint {handed} in {key / CHECKPOINTS}: {_first_line(e)}"
+        ) from None
     finally:
         with contextlib.suppress(Exception):
             manager.close()
@@ -235,7 +256,8 @@ def latest_update(run_dir: Path) -> int | None:
         return manager.latest_step()
 
 
-CORRUPT = "checkpoints-corrupt"  # where a resumed run sets aside the checkpoints it could not restore
+# where a resumed run sets aside the checkpoints it could not restore
+CORRUPT = "checkpoints-corrupt"
 
 
 def restore_latest(run_dir: Path, abstract, set_aside: bool = False):
@@ -256,35 +278,49 @@ def restore_latest(run_dir: Path, abstract, set_aside: bool = False):
     with _quiet(), _manager(run_dir, create=False) as manager:
         steps = sorted(manager.all_steps(), reverse=True)
     failed: list[tuple[int, str]] = []
-    _drop_closed_loop_noise()  # before the first read: an unreadable one's noise starts while it fails
+    # before the first read: an unreadable one's noise starts while it fails
+    _drop_closed_loop_noise()
     for update in steps:
         try:
             raw = _restore(run_dir, update, expected)
             break
         except _Mismatch as e:
-            if not failed:  # the newest is readable and of another shape: its config.yaml is the wrong one
-                raise UsageError(f"checkpoint {update} in {run_dir} does not match its config.yaml: {e}") from None
+            # the newest is readable and of another shape: its config.yaml is the wrong one
+            if not failed:
+                raise UsageError(
+                    f"checkpoint {update} in {run_dir} does not match its config.yaml: {e}"
+                ) from None
             failed.append((update, str(e)))
         except Exception as e:  # orbax raises many types for unreadable files
             failed.append((update, _first_line(e)))
     else:
         newest, reason = failed[0]
-        raise UsageError(f"checkpoint {newest} in {run_dir} is corrupt or does not match its config.yaml: {reason}"
-                         + (f" (and the {len(failed) - 1} before it)" if len(failed) > 1 else ""))
+        raise UsageError(
+            f"checkpoint {newest} in {run_dir} is corrupt or does not match its config.yaml: {reason}"
+            + (f" (and the {len(failed) - 1} before it)" if len(failed) > 1 else "")
+        )
     if failed:
         kept = ""
         if set_aside:
             aside = Path(run_dir) / CORRUPT
             aside.mkdir(exist_ok=True)
             for step, _ in failed:
-                (Path(run_dir) / CHECKPOINTS / str(step)).replace(aside / f"{step}-{time.strftime('%Y%m%d-%H%M%S')}")
+                (Path(run_dir) / CHECKPOINTS / str(step)).replace(
+                    aside / f"{step}-{time.strftime('%Y%m%d-%H%M%S')}"
+                )
             kept = f"; set aside in {aside}"
         newest, reason = failed[0]
-        print(f"warning: checkpoint {newest} in {Path(run_dir) / CHECKPOINTS} cannot be restored ({reason[:120]}); "
-              f"using checkpoint {update}, the newest that restores{kept}", file=sys.stderr)
+        print(
+            f"warning: checkpoint {newest} in {Path(run_dir) / CHECKPOINTS} cannot be restored ({reason[:120]}); "
+            f"using checkpoint {update}, the newest that restores{kept}",
+            file=sys.stderr,
+        )
     state = jax.tree.map(
-        lambda a, r: jax.random.wrap_key_data(r) if jax.dtypes.issubdtype(a.dtype, jax.dtypes.prng_key) else r,
-        abstract, raw,
+        lambda a, r: jax.random.wrap_key_data(r)
+        if jax.dtypes.issubdtype(a.dtype, jax.dtypes.prng_key)
+        else r,
+        abstract,
+        raw,
     )
     return state, update
 

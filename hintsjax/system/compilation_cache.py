@@ -30,11 +30,17 @@ def folder(setting: bool | str | None) -> str | None:
     set to 'off')."""
     if setting is None or setting is False or str(setting).strip().lower() in OFF:
         return None
-    value = os.environ.get(ENV_VAR, str(DEFAULT)) if setting is True or str(setting).lower() == "true" else str(setting)
+    value = (
+        os.environ.get(ENV_VAR, str(DEFAULT))
+        if setting is True or str(setting).lower() == "true"
+        else str(setting)
+    )
     return None if value.strip().lower() in OFF else value
 
 
-def enable(folder: str | os.PathLike | None, min_compile_seconds: float = MIN_COMPILE_SECONDS) -> Path | None:
+def enable(
+    folder: str | os.PathLike | None, min_compile_seconds: float = MIN_COMPILE_SECONDS
+) -> Path | None:
     """Turn the persistent cache on in `folder` (None: leave it off); returns the folder in use,
     or None (with one warning line on stderr) when it cannot be made or written."""
     if folder is None:
@@ -46,7 +52,10 @@ def enable(folder: str | os.PathLike | None, min_compile_seconds: float = MIN_CO
         probe.write_bytes(b"")
         probe.unlink()
     except OSError as e:
-        print(f"warning: compilation cache off: cannot write {path} ({e.strerror or type(e).__name__})", file=sys.stderr)
+        print(
+            f"warning: compilation cache off: cannot write {path} ({e.strerror or type(e).__name__})",
+            file=sys.stderr,
+        )
         return None
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", min_compile_seconds)

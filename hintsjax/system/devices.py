@@ -42,8 +42,11 @@ def join_processes() -> int:
     if (count > 1 or slurm > 1) and not jax.distributed.is_initialized():
         jax.config.update("jax_cpu_collectives_implementation", "gloo")
         if count > 1:
-            jax.distributed.initialize(os.environ.get("JAX_COORDINATOR_ADDRESS"), count,
-                                       int(os.environ.get("JAX_PROCESS_ID", "0")))
+            jax.distributed.initialize(
+                os.environ.get("JAX_COORDINATOR_ADDRESS"),
+                count,
+                int(os.environ.get("JAX_PROCESS_ID", "0")),
+            )
         else:
             jax.distributed.initialize()  # JAX's own detection of SLURM's variables
     return jax.process_count()
@@ -83,7 +86,9 @@ def _place(x: Any, sharding: NamedSharding) -> jax.Array:
     if jax.process_count() == 1:
         return jax.device_put(x, sharding)
     if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key):
-        return jax.random.wrap_key_data(_place(jax.random.key_data(x), sharding), impl=jax.random.key_impl(x))
+        return jax.random.wrap_key_data(
+            _place(jax.random.key_data(x), sharding), impl=jax.random.key_impl(x)
+        )
     host = np.asarray(x)
     return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
 
@@ -133,7 +138,11 @@ class SeedLayout:
         if self.padded != self.seeds:
             take = np.arange(self.padded) % self.seeds
             tree = jax.tree.map(lambda x: x[take], tree)
-        return tree if self.sharding is None else jax.tree.map(lambda x: _place(x, self.sharding), tree)
+        return (
+            tree
+            if self.sharding is None
+            else jax.tree.map(lambda x: _place(x, self.sharding), tree)
+        )
 
     def crop(self, tree: Any) -> Any:
         """[padded, ...] leaves -> their first S seeds (the run's own), on every device.
@@ -156,13 +165,17 @@ class SeedLayout:
         if self.count == 1:
             return fn
         seeds = self.sharding
-        return jax.jit(fn, in_shardings=(seeds,) * batched + (self.everywhere,) * shared, out_shardings=seeds)
+        return jax.jit(
+            fn, in_shardings=(seeds,) * batched + (self.everywhere,) * shared, out_shardings=seeds
+        )
 
     def fetch(self, tree: Any) -> Any:
         """Leaves as numpy arrays on this host, the run's S seeds of each (gathered from every
         process's devices when they are not all this process's)."""
+
         def host(x: Any) -> np.ndarray:
-            if isinstance(x, jax.Array) and not x.is_fully_addressable:  # replicated by `crop`: any copy
+            # replicated by `crop`: any copy
+            if isinstance(x, jax.Array) and not x.is_fully_addressable:
                 x = x.addressable_data(0)
             return np.asarray(x)[: self.seeds]
 

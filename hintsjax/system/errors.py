@@ -25,14 +25,25 @@ from typing import Any, Callable
 
 INTERRUPTED = 130  # the exit status of a command stopped by Ctrl-C (128 + SIGINT), as a shell's
 TERMINATED = 143  # the exit status of a command stopped by SIGTERM (128 + SIGTERM), as a shell's
-CLOSED_PIPE = 141  # the exit status of a command whose reader closed its output (128 + SIGPIPE), as a shell's
+# the exit status of a command whose reader closed its output (128 + SIGPIPE), as a shell's
+CLOSED_PIPE = 141
 BUG = 1
 MACHINE = 1  # the exit status of a command the machine stopped: a write it refused, memory it lacks
-INT_MAX = 2**31 - 1  # the largest integer setting: what JAX's int32 (its integers without x64) holds
+# the largest integer setting: what JAX's int32 (its integers without x64) holds
+INT_MAX = 2**31 - 1
 INT_MIN = -(2**31)
 # A write that fails with one of these is the machine's doing (its disk, mount or permissions), not a bug.
-WRITE_ERRNOS = {errno.ENOSPC, errno.EROFS, errno.EACCES, errno.EPERM, errno.EDQUOT, errno.EFBIG, errno.EIO}
-DEBUG = "HINTSJAX_DEBUG"  # set (to anything but 0): a bug's traceback on stderr, as Python prints it
+WRITE_ERRNOS = {
+    errno.ENOSPC,
+    errno.EROFS,
+    errno.EACCES,
+    errno.EPERM,
+    errno.EDQUOT,
+    errno.EFBIG,
+    errno.EIO,
+}
+# set (to anything but 0): a bug's traceback on stderr, as Python prints it
+DEBUG = "HINTSJAX_DEBUG"
 
 
 class UsageError(ValueError):
@@ -79,7 +90,9 @@ def signal_as_interrupt(number: int, make: Callable[[int, Any], KeyboardInterrup
     finally:
         signal.signal(number, signal.SIG_DFL if previous is None else previous)
         _blocks.pop()
-        if not _blocks:  # the outermost block: a stop taken in an inner one still holds off the outer's signal till here
+        # the outermost block: a stop taken in an inner one still holds off the outer's signal till
+        # here
+        if not _blocks:
             _stops.clear()
 
 
@@ -124,7 +137,9 @@ def require_range(obj: Any, ranges: dict[str, tuple[float, float]], prefix: str 
     for name, (low, high) in ranges.items():
         value = getattr(obj, name)
         if not (low <= value <= high and math.isfinite(value)):
-            raise UsageError(f"{prefix}{name} must be a finite number in [{low}, {high}], got {value}")
+            raise UsageError(
+                f"{prefix}{name} must be a finite number in [{low}, {high}], got {value}"
+            )
 
 
 def beyond_int32(value: int) -> str | None:
@@ -170,9 +185,16 @@ def machine_write(error: OSError, path: Any = None) -> WriteFailed | None:
         return None
     where = error.filename or path
     # A refused permission or a failed disk may have been a read, where nothing says it was a write
-    verb = "read or write" if path is None and error.errno in (errno.EACCES, errno.EPERM, errno.EIO) else "write"
-    return WriteFailed(error.errno, f"could not {verb} {where if where is not None else 'a file'}: "
-                                    f"{error.strerror or os.strerror(error.errno)}")
+    verb = (
+        "read or write"
+        if path is None and error.errno in (errno.EACCES, errno.EPERM, errno.EIO)
+        else "write"
+    )
+    return WriteFailed(
+        error.errno,
+        f"could not {verb} {where if where is not None else 'a file'}: "
+        f"{error.strerror or os.strerror(error.errno)}",
+    )
 
 
 @contextlib.contextmanager
@@ -195,7 +217,11 @@ def out_of_memory(error: BaseException) -> bool:
     """Whether `error` is an allocation that failed (XLA's RESOURCE_EXHAUSTED or "Out of memory",
     Python's MemoryError): the machine's limit, not a bug."""
     text = str(error)
-    return isinstance(error, (MemoryError, OutOfMemory)) or "RESOURCE_EXHAUSTED" in text or "Out of memory" in text
+    return (
+        isinstance(error, (MemoryError, OutOfMemory))
+        or "RESOURCE_EXHAUSTED" in text
+        or "Out of memory" in text
+    )
 
 
 @contextlib.contextmanager
@@ -212,7 +238,11 @@ def sized_by(lower: str):
 
 def _memory_line(error: BaseException, lower: str) -> str:
     text = str(error)
-    amount = text[text.find("Out of memory"):].splitlines()[0][:80] if "Out of memory" in text else type(error).__name__
+    amount = (
+        text[text.find("Out of memory") :].splitlines()[0][:80]
+        if "Out of memory" in text
+        else type(error).__name__
+    )
     return f"the device ran out of memory ({amount}); lower {lower} and run again"
 
 
@@ -222,8 +252,10 @@ def report_machine(error: BaseException, path: Any = None) -> int:
     if isinstance(error, OSError) and machine_write(error) is not None:
         print(f"error: {machine_write(error, path).strerror}", file=sys.stderr)
     else:
-        print(f"error: {error if isinstance(error, OutOfMemory) else _memory_line(error, 'the sizes you gave')}",
-              file=sys.stderr)
+        print(
+            f"error: {error if isinstance(error, OutOfMemory) else _memory_line(error, 'the sizes you gave')}",
+            file=sys.stderr,
+        )
     return MACHINE
 
 
@@ -247,16 +279,25 @@ def report_bug(error: BaseException, folder: Path | None = None) -> int:
     text = "".join(traceback.format_exception(error))
     path = None
     for place in ([Path(folder) / "traceback.txt"] if folder is not None else []) + [
-            Path(tempfile.gettempdir()) / f"hintsjax-traceback-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.txt"]:
+        Path(tempfile.gettempdir())
+        / f"hintsjax-traceback-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.txt"
+    ]:
         try:
             place.write_text(text)
             path = place
             break
         except OSError:
             continue
-    what = f"{type(error).__name__}: {str(error).strip().splitlines()[0][:200]}" if str(error).strip() else type(error).__name__
+    what = (
+        f"{type(error).__name__}: {str(error).strip().splitlines()[0][:200]}"
+        if str(error).strip()
+        else type(error).__name__
+    )
     where = f"its traceback is in {path}" if path else f"{DEBUG}=1 prints its traceback"
-    print(f"error: a bug in hintsjax ({what}); {where}; please report it with that traceback", file=sys.stderr)
+    print(
+        f"error: a bug in hintsjax ({what}); {where}; please report it with that traceback",
+        file=sys.stderr,
+    )
     return BUG
 
 
@@ -271,7 +312,8 @@ def command(main: Callable[..., int]) -> Callable[..., int]:
             try:
                 return main(*args, **kwargs)
             finally:
-                sys.stdout.flush()  # a closed pipe shows here, in the boundary, not at the interpreter's exit
+                # a closed pipe shows here, in the boundary, not at the interpreter's exit
+                sys.stdout.flush()
         except UsageError as e:
             return fail(e)
         except Terminated:
@@ -281,7 +323,8 @@ def command(main: Callable[..., int]) -> Callable[..., int]:
             print("interrupted", file=sys.stderr)
             return INTERRUPTED
         except BrokenPipeError:  # `... --help | head`: the reader has what it wanted
-            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nor fail flushing at exit
+            # nor fail flushing at exit
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             return CLOSED_PIPE
         except Exception as e:  # noqa: BLE001  the boundary: the machine's refusals, else a bug
             return report_machine(e) if machines(e) else report_bug(e)

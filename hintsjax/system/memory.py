@@ -24,6 +24,7 @@ import jax
 from hintsjax import envs
 from hintsjax.system.errors import UsageError
 
+
 def sized(n: float) -> str:
     """Bytes as the largest unit that keeps the number at least 1 (binary units)."""
     for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
@@ -63,12 +64,16 @@ def check_run(cfg: Any, seeds_per_device: int) -> None:
     have, step = device_bytes(), transition_bytes(cfg)
     seed = cfg.ppo.batch_size * step
     if seed > have:
-        raise UsageError(f"ppo.batch_size={cfg.ppo.batch_size} cannot fit: one seed's rollout holds at least "
-                         f"{sized(seed)}, a device has {sized(have)} (at most {have // step} transitions a seed)")
+        raise UsageError(
+            f"ppo.batch_size={cfg.ppo.batch_size} cannot fit: one seed's rollout holds at least "
+            f"{sized(seed)}, a device has {sized(have)} (at most {have // step} transitions a seed)"
+        )
     if seeds_per_device * seed > have:
-        raise UsageError(f"seeds={cfg.seeds} cannot fit: {seeds_per_device} seeds a device hold at least "
-                         f"{sized(seeds_per_device * seed)} of rollouts ({sized(seed)} a seed), a device has "
-                         f"{sized(have)} (at most {have // seed} seeds a device)")
+        raise UsageError(
+            f"seeds={cfg.seeds} cannot fit: {seeds_per_device} seeds a device hold at least "
+            f"{sized(seeds_per_device * seed)} of rollouts ({sized(seed)} a seed), a device has "
+            f"{sized(have)} (at most {have // seed} seeds a device)"
+        )
     check_episodes(cfg, seeds_per_device, cfg.eval_episodes, "eval_episodes")
 
 
@@ -83,12 +88,15 @@ def episode_bytes(cfg: Any) -> int:
 def check_episodes(cfg: Any, seeds_per_device: int, episodes: int, key: str) -> None:
     """UsageError where evaluating `episodes` episodes of each of `seeds_per_device` seeds at
     once cannot fit on a device (`key` names the setting in the message)."""
-    have, one = device_bytes(), episode_bytes(cfg)  # at least an action, reward, value and flag: never 0
+    # at least an action, reward, value and flag: never 0
+    have, one = device_bytes(), episode_bytes(cfg)
     need = seeds_per_device * episodes * one
     if need > have:
-        raise UsageError(f"{key}={episodes} cannot fit: evaluating {seeds_per_device} seeds x {episodes} episodes at once "
-                         f"holds at least {sized(need)} of pictures, actions and activations, a device has {sized(have)} "
-                         f"(at most {have // (seeds_per_device * one)} episodes)")
+        raise UsageError(
+            f"{key}={episodes} cannot fit: evaluating {seeds_per_device} seeds x {episodes} episodes at once "
+            f"holds at least {sized(need)} of pictures, actions and activations, a device has {sized(have)} "
+            f"(at most {have // (seeds_per_device * one)} episodes)"
+        )
 
 
 def check_video(scale: int, frames: int, frame_shape: Callable[[int], tuple[int, int]]) -> None:
@@ -105,5 +113,7 @@ def check_video(scale: int, frames: int, frame_shape: Callable[[int], tuple[int,
         while over - most > 1:
             mid = (most + over) // 2
             most, over = (mid, over) if need(mid) <= have else (most, mid)
-        raise UsageError(f"--scale {scale} cannot fit: {frames} frames hold {sized(need(scale))}, the host has "
-                         f"{sized(have)} (at most --scale {most})")
+        raise UsageError(
+            f"--scale {scale} cannot fit: {frames} frames hold {sized(need(scale))}, the host has "
+            f"{sized(have)} (at most --scale {most})"
+        )

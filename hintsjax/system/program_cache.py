@@ -33,10 +33,28 @@ from jax.api_util import shaped_abstractify
 from hintsjax import envs
 from hintsjax.envs import hints
 
-ENV_VAR = "HINTSJAX_TRACE_CACHE"  # "off" turns the traced-program cache off (the compile cache stays)
+# "off" turns the traced-program cache off (the compile cache stays)
+ENV_VAR = "HINTSJAX_TRACE_CACHE"
 FOLDER = "traced"
-LIBRARIES = ("jax", "jaxlib", "flax", "optax", "chex", "numpy", "mujoco", "mujoco-mjx", "orbax-checkpoint", "brax", "playground")
-NUMERIC_SETTINGS = ("jax_enable_x64", "jax_default_matmul_precision", "jax_default_prng_impl", "jax_threefry_partitionable")
+LIBRARIES = (
+    "jax",
+    "jaxlib",
+    "flax",
+    "optax",
+    "chex",
+    "numpy",
+    "mujoco",
+    "mujoco-mjx",
+    "orbax-checkpoint",
+    "brax",
+    "playground",
+)
+NUMERIC_SETTINGS = (
+    "jax_enable_x64",
+    "jax_default_matmul_precision",
+    "jax_default_prng_impl",
+    "jax_threefry_partitionable",
+)
 _OFF = ("off", "0", "false", "no", "none")
 PACKAGE = Path(__file__).resolve().parents[1]  # the hintsjax folder, wherever it is installed
 
@@ -83,7 +101,12 @@ def sources_digest() -> str | None:
         path = getattr(module, "__file__", None)
         # most modules are the libraries', recognised by their path as it stands; only the rest
         # are resolved (links) before the same test
-        if path and path.endswith(".py") and not path.startswith(roots) and not str(Path(path).resolve()).startswith(roots):
+        if (
+            path
+            and path.endswith(".py")
+            and not path.startswith(roots)
+            and not str(Path(path).resolve()).startswith(roots)
+        ):
             files.add(Path(path).resolve())
     digest = hashlib.sha256()
     for path in sorted(files):
@@ -124,9 +147,20 @@ def program_key(name: str, context: str, leaves: list[Any], tree: Any) -> str | 
         return None
     device = jax.devices()[0]
     settings = ",".join(f"{s}={getattr(jax.config, s, None)}" for s in NUMERIC_SETTINGS)
-    parts = [name, context, str(tree), repr([(s.shape, str(s.dtype), s.weak_type) for s in map(_spec, leaves)]), sources, _versions(),
-             sys.version, device.platform, getattr(device, "device_kind", ""), str(len(jax.devices())),
-             os.environ.get("XLA_FLAGS", ""), settings]
+    parts = [
+        name,
+        context,
+        str(tree),
+        repr([(s.shape, str(s.dtype), s.weak_type) for s in map(_spec, leaves)]),
+        sources,
+        _versions(),
+        sys.version,
+        device.platform,
+        getattr(device, "device_kind", ""),
+        str(len(jax.devices())),
+        os.environ.get("XLA_FLAGS", ""),
+        settings,
+    ]
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:32]
 
 
@@ -142,8 +176,13 @@ class Program:
     def __call__(self, *args: Any) -> Any:
         leaves, tree = jax.tree.flatten(args)
         if tree != self.in_tree:
-            raise TypeError(f"arguments of another structure than the program was traced for: {tree} != {self.in_tree}")
-        leaves = [x if isinstance(x, jax.Array) else np.asarray(x, a.dtype) for x, a in zip(leaves, self.compiled.in_avals[0])]
+            raise TypeError(
+                f"arguments of another structure than the program was traced for: {tree} != {self.in_tree}"
+            )
+        leaves = [
+            x if isinstance(x, jax.Array) else np.asarray(x, a.dtype)
+            for x, a in zip(leaves, self.compiled.in_avals[0])
+        ]
         return jax.tree.unflatten(self.out_tree, self.compiled(*leaves))
 
     @property
@@ -171,7 +210,9 @@ class Traced:
 
     def compile(self) -> Program:
         specs = [_shape_of(a) for a in self.exported.in_avals]
-        return Program(jax.jit(self.exported.call).lower(*specs).compile(), self.in_tree, self.out_tree)
+        return Program(
+            jax.jit(self.exported.call).lower(*specs).compile(), self.in_tree, self.out_tree
+        )
 
 
 def trace(fn: Callable[..., Any], leaves: list[Any], in_tree: Any) -> Traced:
@@ -193,7 +234,10 @@ def _load(path: Path) -> Traced | None:
             blob, in_tree, out_tree = pickle.load(f)
         return Traced(export.deserialize(bytearray(blob)), in_tree, out_tree, loaded=True)
     except Exception as e:  # noqa: BLE001  an unreadable entry of any kind is traced afresh
-        print(f"warning: traced program {path.name} unreadable ({type(e).__name__}); tracing it again", file=sys.stderr)
+        print(
+            f"warning: traced program {path.name} unreadable ({type(e).__name__}); tracing it again",
+            file=sys.stderr,
+        )
         return None
 
 
@@ -218,7 +262,11 @@ def lower(fn: Callable[..., Any], *args: Any, name: str, context: str | None) ->
     leaves, in_tree = jax.tree.flatten(args)
     where = folder()
     single = all(len(getattr(getattr(x, "sharding", None), "device_set", ())) <= 1 for x in leaves)
-    key = program_key(name, context, leaves, in_tree) if where is not None and context is not None and single else None
+    key = (
+        program_key(name, context, leaves, in_tree)
+        if where is not None and context is not None and single
+        else None
+    )
     if key is None:
         return jax.jit(fn).lower(*args)
     path = where / f"{name}-{key}.bin"

@@ -23,7 +23,8 @@ from typing import Any, Callable
 from hintsjax.system import paths
 from hintsjax.system.errors import TERMINATED, Terminated, signal_as_interrupt
 
-JOB_JSON = "job.json"  # {"job_id", "executor", "cluster"}: the submitit job that made the run folder
+# {"job_id", "executor", "cluster"}: the submitit job that made the run folder
+JOB_JSON = "job.json"
 
 
 class Preempted(Terminated):
@@ -64,14 +65,22 @@ def _job() -> dict[str, str] | None:
     """What names this job in a run folder's job.json: its id, the executor, and SLURM's cluster
     (job ids of clusters that share a file system may meet); None outside a submitit job."""
     job = job_id()
-    return None if job is None else {"job_id": job, "executor": executor(),
-                                     "cluster": os.environ.get("SLURM_CLUSTER_NAME", "")}
+    return (
+        None
+        if job is None
+        else {
+            "job_id": job,
+            "executor": executor(),
+            "cluster": os.environ.get("SLURM_CLUSTER_NAME", ""),
+        }
+    )
 
 
 def record(run_dir: Path) -> None:
     """Write this job's names into a new run folder (nothing outside a submitit job)."""
     if (job := _job()) is not None:
-        paths.write_whole(Path(run_dir) / JOB_JSON, lambda p: p.write_text(json.dumps(job) + "\n"))  # a full disk: one line
+        # a full disk: one line
+        paths.write_whole(Path(run_dir) / JOB_JSON, lambda p: p.write_text(json.dumps(job) + "\n"))
 
 
 def folders_of_this_job(out_dir: str | Path) -> list[Path]:
@@ -99,8 +108,11 @@ def hand_over(stop: Preempted, folder: Path | None, saved: str) -> int:
     left running by submitit's handler: it waits for the requeue to end it (2 minutes at most)."""
     job = job_id()
     goes_on = f"; go on with: python -m hintsjax.run resume={folder}" if folder else ""
-    print(f"preempted ({stop.name}); {saved}; submitit is asked to requeue job {job}"
-          + (f", which goes on in {folder}" if folder else ""), file=sys.stderr)
+    print(
+        f"preempted ({stop.name}); {saved}; submitit is asked to requeue job {job}"
+        + (f", which goes on in {folder}" if folder else ""),
+        file=sys.stderr,
+    )
     from submitit.core.utils import UncompletedJobError
 
     try:
@@ -119,7 +131,8 @@ def preemption_as_interrupt() -> contextlib.AbstractContextManager:
     submitit = _submitit()
     if submitit is None:
         return contextlib.nullcontext()
-    number = submitit.JobEnvironment._usr_sig()  # the signal submitit's handler is set on (USR2 unless told)
+    # the signal submitit's handler is set on (USR2 unless told)
+    number = submitit.JobEnvironment._usr_sig()
     submitits = signal.getsignal(number)
 
     def preempted(signum: int, frame: Any) -> Preempted:

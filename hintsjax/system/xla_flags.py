@@ -37,7 +37,9 @@ def _add(flag: str) -> None:
 
 def _drop(prefix: str) -> None:
     for name in ("XLA_FLAGS", ADDED):
-        os.environ[name] = " ".join(f for f in os.environ.get(name, "").split() if not f.startswith(prefix))
+        os.environ[name] = " ".join(
+            f for f in os.environ.get(name, "").split() if not f.startswith(prefix)
+        )
 
 
 def deterministic_gpu_ops() -> bool:
@@ -88,7 +90,8 @@ def set_defaults() -> None:
 def drop_determinism() -> bool:
     """Deterministic GPU ops off (with the autotune folder), unless the user chose them or JAX's
     backend has started (its flags are read); whether they are now off."""
-    from jax._src import xla_bridge  # here: hintsjax/__init__ imports this module to set XLA's flags, before jax
+    # here: hintsjax/__init__ imports this module to set XLA's flags, before jax
+    from jax._src import xla_bridge
 
     started = getattr(xla_bridge, "backends_are_initialized", lambda: True)()
     if not (user_chose_determinism or started):

@@ -33,23 +33,35 @@ class Compiled:
     run_chunk: Callable[[Any, np.int32], tuple[Any, dict[str, jax.Array]]]
     chunk: int
     seconds: float  # spent tracing and compiling both
-    trace_seconds: float  # of which tracing and lowering to XLA (Python), or loading both as traced before
+    # of which tracing and lowering to XLA (Python), or loading both as traced before
+    trace_seconds: float
     loaded: bool  # both programs were read from the traced-program cache, not traced
-    layout: SeedLayout  # the seeds over the devices (their count padded to a multiple of the devices)
+    # the seeds over the devices (their count padded to a multiple of the devices)
+    layout: SeedLayout
 
 
-def compile_training(trainer: Trainer, keys: jax.Array, chunk: int, layout: SeedLayout | None = None) -> Compiled:
+def compile_training(
+    trainer: Trainer, keys: jax.Array, chunk: int, layout: SeedLayout | None = None
+) -> Compiled:
     """Compile `trainer`'s init and its chunk of `chunk` updates for the seed keys' batch; with a
     `layout` of several devices (keys from its `pad`), each device runs its share of the seeds."""
     t = time.perf_counter()
     layout = layout or SeedLayout.of(keys.shape[0], sorted(keys.devices(), key=lambda d: d.id))
     init_fn = layout.spread(jax.vmap(trainer.init), batched=1)
-    chunk_fn = layout.spread(jax.vmap(partial(trainer.run_chunk, length=chunk), in_axes=(0, None)), batched=1, shared=1)
+    chunk_fn = layout.spread(
+        jax.vmap(partial(trainer.run_chunk, length=chunk), in_axes=(0, None)), batched=1, shared=1
+    )
     # traced, or loaded as traced by an earlier process (hintsjax/system/program_cache.py: one device's programs only)
     identity = trainer.identity if layout.count == 1 else None
     init = program_cache.lower(init_fn, keys, name="init", context=identity)
-    run_chunk = program_cache.lower(chunk_fn, init.out_info, np.int32(chunk), name=f"chunk{chunk}",
-                                    context=identity)  # the state's shapes as init's lowering found them
+    run_chunk = program_cache.lower(
+        chunk_fn,
+        init.out_info,
+        np.int32(chunk),
+        name=f"chunk{chunk}",
+        # the state's shapes as init's lowering found them
+        context=identity,
+    )
     traced = time.perf_counter() - t
     loaded = all(getattr(program, "loaded", False) for program in (init, run_chunk))
     init, run_chunk = init.compile(), run_chunk.compile()
@@ -60,7 +72,9 @@ class GroupTooBig(RuntimeError):
     """A group's compiled training program needs more memory than the device has."""
 
 
-FITS = 0.9  # of a device's memory, the most a compiled program may need: the rest is the runtime's, other buffers'
+# of a device's memory, the most a compiled program may need: the rest is the runtime's, other
+# buffers'
+FITS = 0.9
 
 
 def needs(compiled: Any) -> tuple[int, int] | None:
@@ -70,8 +84,12 @@ def needs(compiled: Any) -> tuple[int, int] | None:
     analysis = compiled.memory_analysis()
     if analysis is None:
         return None
-    need = (analysis.temp_size_in_bytes + analysis.argument_size_in_bytes + analysis.output_size_in_bytes
-            - analysis.alias_size_in_bytes)
+    need = (
+        analysis.temp_size_in_bytes
+        + analysis.argument_size_in_bytes
+        + analysis.output_size_in_bytes
+        - analysis.alias_size_in_bytes
+    )
     return need, memory.device_bytes()
 
 
@@ -79,7 +97,9 @@ def check_fits(compiled: Any, what: str) -> None:
     """GroupTooBig if `compiled` needs more than FITS of the device's memory (`needs`)."""
     found = needs(compiled)
     if found is not None and found[0] > FITS * found[1]:
-        raise GroupTooBig(f"{what} needs {found[0] / 2**30:.1f} GiB of the device's {found[1] / 2**30:.1f} GiB")
+        raise GroupTooBig(
+            f"{what} needs {found[0] / 2**30:.1f} GiB of the device's {found[1] / 2**30:.1f} GiB"
+        )
 
 
 # The settings that size a run's training programs: what a run that cannot fit is told to lower
@@ -93,6 +113,8 @@ def check_run_fits(compiled: Any, cfg: Any) -> None:
     an out-of-memory error once it runs (the lower bounds of hintsjax.system.memory count less)."""
     found = needs(compiled)
     if found is not None and found[0] > FITS * found[1]:
-        raise UsageError(f"seeds={cfg.seeds} x ppo.batch_size={cfg.ppo.batch_size} cannot fit: training's compiled "
-                         f"program needs {memory.sized(found[0])} (XLA's memory analysis), a device has "
-                         f"{memory.sized(found[1])}; lower {TRAINING_SIZES}")
+        raise UsageError(
+            f"seeds={cfg.seeds} x ppo.batch_size={cfg.ppo.batch_size} cannot fit: training's compiled "
+            f"program needs {memory.sized(found[0])} (XLA's memory analysis), a device has "
+            f"{memory.sized(found[1])}; lower {TRAINING_SIZES}"
+        )

@@ -44,7 +44,9 @@ NONFINITE_JSON = "nonfinite.json"
 @jax.jit
 def finite_seeds(params: Any) -> jax.Array:
     """[S] bool: whether every parameter of each seed (of every member, for a group) is finite."""
-    return jnp.stack([jnp.isfinite(x).reshape(x.shape[0], -1).all(axis=1) for x in jax.tree.leaves(params)]).all(axis=0)
+    return jnp.stack(
+        [jnp.isfinite(x).reshape(x.shape[0], -1).all(axis=1) for x in jax.tree.leaves(params)]
+    ).all(axis=0)
 
 
 def first_nonfinite(metrics: dict[str, np.ndarray], after: int) -> dict[str, Any] | None:
@@ -55,9 +57,16 @@ def first_nonfinite(metrics: dict[str, np.ndarray], after: int) -> dict[str, Any
             if name in metrics:
                 bad = ~np.isfinite(metrics[name][:, u])
                 if bad.any():
-                    found = {"update": after + u + 1, "quantity": name,
-                             "seeds": np.flatnonzero(bad.reshape(len(bad), -1).any(axis=1)).tolist()}
-                    return found if bad.ndim == 1 else {**found, "members": np.flatnonzero(bad.any(axis=0)).tolist()}
+                    found = {
+                        "update": after + u + 1,
+                        "quantity": name,
+                        "seeds": np.flatnonzero(bad.reshape(len(bad), -1).any(axis=1)).tolist(),
+                    }
+                    return (
+                        found
+                        if bad.ndim == 1
+                        else {**found, "members": np.flatnonzero(bad.any(axis=0)).tolist()}
+                    )
     return None
 
 
@@ -65,9 +74,14 @@ def stop_nonfinite(run_dir: Path, label: str, found: dict[str, Any]) -> None:
     """Record `found` in the run folder and raise NonFiniteError."""
     if devices.is_main():
         (run_dir / NONFINITE_JSON).write_text(json.dumps(found) + "\n")
-    where = f"seed(s) {found['seeds']}" + (f", member(s) {found['members']}" if "members" in found else "")
-    raise NonFiniteError(f"{label}: {found['quantity']} is not finite after update {found['update']} ({where}); "
-                         f"training stopped without saving it", found)
+    where = f"seed(s) {found['seeds']}" + (
+        f", member(s) {found['members']}" if "members" in found else ""
+    )
+    raise NonFiniteError(
+        f"{label}: {found['quantity']} is not finite after update {found['update']} ({where}); "
+        f"training stopped without saving it",
+        found,
+    )
 
 
 def check_physics(cfg: RunConfig, label: str) -> None:
@@ -75,5 +89,7 @@ def check_physics(cfg: RunConfig, label: str) -> None:
     worlds that did were made NaN, so nothing was trained on dropped contacts)."""
     lost = physics.overflow_seen()
     if lost is not None:
-        raise UsageError(f"{cfg.env} {label}: MJX-Warp ran out of {lost} at warp_capacity={cfg.warp_capacity}; "
-                         f"train again with a larger warp_capacity (or physics=jax)")
+        raise UsageError(
+            f"{cfg.env} {label}: MJX-Warp ran out of {lost} at warp_capacity={cfg.warp_capacity}; "
+            f"train again with a larger warp_capacity (or physics=jax)"
+        )

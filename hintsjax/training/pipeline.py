@@ -42,7 +42,11 @@ def evaluation_compiles_first(cfg: RunConfig) -> bool:
 def say_compiling(cfg: RunConfig, label: str) -> None:
     """The run's first line, before its programs compile (the longest silence of a first run on a
     fresh machine: a minute or more for the ant under Warp, its kernel builds included)."""
-    cached = " (later runs on this machine load most of them from the cache)" if compilation_cache.in_use() else ""
+    cached = (
+        " (later runs on this machine load most of them from the cache)"
+        if compilation_cache.in_use()
+        else ""
+    )
     print(f"{cfg.env} {label}: compiling its programs{cached}", flush=True)
 
 
@@ -68,11 +72,17 @@ def run_log(run_dir: Path, resume_update: int) -> RunLog | Unlogged:
 def params_shapes(trainer: Trainer, layout: SeedLayout) -> Any:
     """The seed-batched params as training will hold them ([padded seeds, ...], placed by
     `layout`), as jax.ShapeDtypeStructs: known before anything is compiled or computed."""
-    return jax.tree.map(lambda x: jax.ShapeDtypeStruct((layout.padded, *x.shape[1:]), x.dtype, sharding=layout.sharding),
-                        trainer.abstract_state().params)
+    return jax.tree.map(
+        lambda x: jax.ShapeDtypeStruct(
+            (layout.padded, *x.shape[1:]), x.dtype, sharding=layout.sharding
+        ),
+        trainer.abstract_state().params,
+    )
 
 
-def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = True) -> dict[str, Any]:
+def train(
+    cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = True
+) -> dict[str, Any]:
     """Train all seeds (in chunks, with checkpoints: see `advance`), evaluate, plot; returns eval results."""
     laps = Laps()  # eval.json's wall_split_seconds: where this call's wall-clock went
     say_compiling(cfg, cfg.label)
@@ -84,16 +94,26 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
     # Under physics=warp it compiles first, alone (`evaluation_compiles_first`), while a child
     # process builds MuJoCo Warp's kernels (envs/warp_kernels.py), waited for before the
     # first state.
-    with ThreadPoolExecutor(max_workers=1) as pool, \
-            warp_kernels.start(cfg.env, cfg.physics, cfg.warp_capacity, jax.default_backend()) as kernels:
-        evaluator = pool.submit(lambda: compile_evaluator(cfg, params_shapes(trainer, layout), variants[0],
-                                                          cfg.eval_episodes, layout=layout))
+    with (
+        ThreadPoolExecutor(max_workers=1) as pool,
+        warp_kernels.start(
+            cfg.env, cfg.physics, cfg.warp_capacity, jax.default_backend()
+        ) as kernels,
+    ):
+        evaluator = pool.submit(
+            lambda: compile_evaluator(
+                cfg, params_shapes(trainer, layout), variants[0], cfg.eval_episodes, layout=layout
+            )
+        )
         with sized_by(EVALUATION_SIZES):
             if evaluation_compiles_first(cfg):
                 evaluator.result()
         with sized_by(TRAINING_SIZES):
-            training = start(trainer, cfg, run_dir, resume, cfg.label, before_first_state=kernels.wait)
-            laps.mark("before_training")  # compiles, the first state (and MuJoCo Warp's kernel builds), a restore
+            training = start(
+                trainer, cfg, run_dir, resume, cfg.label, before_first_state=kernels.wait
+            )
+            # compiles, the first state (and MuJoCo Warp's kernel builds), a restore
+            laps.mark("before_training")
             log = run_log(run_dir, training.done)
             try:
                 training = advance(training, cfg, run_dir, log.write, progress, cfg.label)
@@ -103,15 +123,29 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
         with sized_by(EVALUATION_SIZES):
             compiled = evaluator.result()
     with sized_by(EVALUATION_SIZES):
-        evaluations, eval_compile = evaluate_variants(cfg, training.state.params, variants, cfg.eval_episodes,
-                                                      cfg.stochastic_eval, compiled, training.compiled.layout)
+        evaluations, eval_compile = evaluate_variants(
+            cfg,
+            training.state.params,
+            variants,
+            cfg.eval_episodes,
+            cfg.stochastic_eval,
+            compiled,
+            training.compiled.layout,
+        )
     laps.mark("evaluation")  # waiting on its compile, if still going, and the episodes
     check_physics(cfg, cfg.label)
-    return finish(cfg, run_dir, training, evaluations, eval_compile, {"wall_split_seconds": laps.seconds})
+    return finish(
+        cfg, run_dir, training, evaluations, eval_compile, {"wall_split_seconds": laps.seconds}
+    )
 
 
-def train_group(group_cfgs: list[RunConfig], group_dir: Path, cell_dirs: list[Path], resume: bool = False,
-                progress: bool = True) -> list[dict[str, Any]]:
+def train_group(
+    group_cfgs: list[RunConfig],
+    group_dir: Path,
+    cell_dirs: list[Path],
+    resume: bool = False,
+    progress: bool = True,
+) -> list[dict[str, Any]]:
     """Train configurations that share a network's shapes together (hintsjax.algorithms.group), all seeds of
     all of them in one compiled program; checkpoints of the group go to group_dir. Each member
     then gets what its own run would have written in its folder (cell_dirs, each holding its
@@ -122,7 +156,9 @@ def train_group(group_cfgs: list[RunConfig], group_dir: Path, cell_dirs: list[Pa
     cfg = group.cfgs[0]
     label = f"group of {len(group.cfgs)} ({', '.join(c.label for c in group.cfgs)})"
     say_compiling(cfg, label)
-    training = start(make_group_trainer(group), cfg, group_dir, resume, label, check_memory=len(group.cfgs) > 1)
+    training = start(
+        make_group_trainer(group), cfg, group_dir, resume, label, check_memory=len(group.cfgs) > 1
+    )
     laps.mark("before_training")
     logs = [run_log(d, training.done) for d in cell_dirs]
 
@@ -137,12 +173,28 @@ def train_group(group_cfgs: list[RunConfig], group_dir: Path, cell_dirs: list[Pa
             log.close()
     for k, cell_dir in enumerate(cell_dirs):
         if checkpoint.latest_update(cell_dir) != training.done:
-            checkpoint.save(cell_dir, cell_state(group, training.compiled.layout.crop(training.state), k), training.done)
+            checkpoint.save(
+                cell_dir,
+                cell_state(group, training.compiled.layout.crop(training.state), k),
+                training.done,
+            )
     laps.mark("training")  # with each member's final state saved in its folder
     evaluations, eval_compile = evaluate_group(group, training.state, training.compiled.layout)
     laps.mark("evaluation")
-    rate = (training.done - training.first) * cfg.ppo.batch_size * cfg.seeds * len(group.cfgs) / max(training.seconds, 1e-9)
-    extra = {"group": [c.label for c in group.cfgs], "group_dir": str(group_dir), "group_env_steps_per_s": rate,
-             "wall_split_seconds": laps.seconds}
-    return [finish(member, cell_dir, training, member_evaluations, eval_compile, extra)
-            for member, cell_dir, member_evaluations in zip(group.cfgs, cell_dirs, evaluations)]
+    rate = (
+        (training.done - training.first)
+        * cfg.ppo.batch_size
+        * cfg.seeds
+        * len(group.cfgs)
+        / max(training.seconds, 1e-9)
+    )
+    extra = {
+        "group": [c.label for c in group.cfgs],
+        "group_dir": str(group_dir),
+        "group_env_steps_per_s": rate,
+        "wall_split_seconds": laps.seconds,
+    }
+    return [
+        finish(member, cell_dir, training, member_evaluations, eval_compile, extra)
+        for member, cell_dir, member_evaluations in zip(group.cfgs, cell_dirs, evaluations)
+    ]

@@ -21,11 +21,20 @@ def places(values: dict[str, Any]) -> tuple[str | None, str, str | None]:
     """(resume, out_dir, name) popped from `values` as strings, whatever YAML made of them
     (`name=2024` is a folder name, not a number); UsageError for a name that is not one folder's
     name inside out_dir (a path separator, `..`, or nothing)."""
-    resume, out_dir, name = (values.pop(k, default) for k, default in (("resume", None), ("out_dir", "runs"), ("name", None)))
-    resume, out_dir, name = (None if v is None else str(v).lower() if isinstance(v, bool) else str(v)
-                             for v in (resume, out_dir, name))
-    if name is not None and (not name.strip() or name in (".", "..") or any(sep in name for sep in ("/", "\\"))):
-        raise UsageError(f"name must be one folder's name inside out_dir (no '/', '\\' or '..'), got {name!r}")
+    resume, out_dir, name = (
+        values.pop(k, default)
+        for k, default in (("resume", None), ("out_dir", "runs"), ("name", None))
+    )
+    resume, out_dir, name = (
+        None if v is None else str(v).lower() if isinstance(v, bool) else str(v)
+        for v in (resume, out_dir, name)
+    )
+    if name is not None and (
+        not name.strip() or name in (".", "..") or any(sep in name for sep in ("/", "\\"))
+    ):
+        raise UsageError(
+            f"name must be one folder's name inside out_dir (no '/', '\\' or '..'), got {name!r}"
+        )
     return resume, out_dir or "runs", name
 
 
@@ -43,7 +52,9 @@ def refuse_overrides_on_resume(values: dict[str, Any]) -> None:
         elif value != default:
             given.append(f"{key}={value}")
     if given:
-        raise UsageError(f"resume continues a run as its config.yaml says; drop {' '.join(given)} (or start a new run)")
+        raise UsageError(
+            f"resume continues a run as its config.yaml says; drop {' '.join(given)} (or start a new run)"
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -55,7 +66,8 @@ class Request:
     run_dir: Path | None
     out_dir: str
     name: str | None
-    longer: bool = False  # a resumed run given a larger ppo.total_env_steps (its config.yaml is rewritten)
+    # a resumed run given a larger ppo.total_env_steps (its config.yaml is rewritten)
+    longer: bool = False
 
 
 def request(values: dict[str, Any]) -> Request:
@@ -67,10 +79,12 @@ def request(values: dict[str, Any]) -> Request:
     steps = None
     if resume is not None:
         values["ppo"] = dict(values.get("ppo") or {})
-        steps = values["ppo"].pop("total_env_steps", None)  # the one setting a resumed run may change
+        # the one setting a resumed run may change
+        steps = values["ppo"].pop("total_env_steps", None)
         refuse_overrides_on_resume(values)
         run_dir = Path(resume)
-        cfg = load_run_config(run_dir, complete=True)  # a missing or bad checkpoint is reported by train's restore
+        # a missing or bad checkpoint is reported by train's restore
+        cfg = load_run_config(run_dir, complete=True)
         if steps is not None:
             cfg = train_longer(cfg, steps)
     else:
@@ -89,8 +103,10 @@ def rounded_budget(cfg: RunConfig) -> str | None:
     ppo = cfg.ppo
     if ppo.total_env_steps % ppo.batch_size == 0:
         return None
-    return (f"note: ppo.total_env_steps={ppo.total_env_steps} is not a multiple of ppo.batch_size={ppo.batch_size}: "
-            f"trains {ppo.num_updates} updates, {ppo.num_updates * ppo.batch_size} env steps a seed")
+    return (
+        f"note: ppo.total_env_steps={ppo.total_env_steps} is not a multiple of ppo.batch_size={ppo.batch_size}: "
+        f"trains {ppo.num_updates} updates, {ppo.num_updates * ppo.batch_size} env steps a seed"
+    )
 
 
 def train_longer(cfg: RunConfig, steps: Any) -> RunConfig:
@@ -100,6 +116,8 @@ def train_longer(cfg: RunConfig, steps: Any) -> RunConfig:
     saved = to_dict(cfg)
     longer = run_config({**saved, "ppo": {**saved["ppo"], "total_env_steps": steps}}, resolved=True)
     if longer.ppo.num_updates < cfg.ppo.num_updates:
-        raise UsageError(f"a resumed run can train longer, not shorter: ppo.total_env_steps must be at least "
-                         f"{cfg.ppo.total_env_steps} (its budget), got {steps}")
+        raise UsageError(
+            f"a resumed run can train longer, not shorter: ppo.total_env_steps must be at least "
+            f"{cfg.ppo.total_env_steps} (its budget), got {steps}"
+        )
     return longer

@@ -25,7 +25,8 @@ def fresh_folder(base: Path) -> Path:
     folder, i = Path(base), 1
     while True:
         try:
-            folder.mkdir(parents=True)  # atomic: of two processes making it, one gets FileExistsError
+            # atomic: of two processes making it, one gets FileExistsError
+            folder.mkdir(parents=True)
             return folder
         except FileExistsError:
             folder, i = Path(base).with_name(f"{Path(base).name}-{i}"), i + 1
@@ -35,11 +36,13 @@ class RunLog:
     """Appends per-update, per-seed metric rows to metrics.csv and means to TensorBoard."""
 
     def __init__(self, run_dir: Path, resume_update: int = 0):
-        from tensorboardX import SummaryWriter  # here: it loads protobuf (0.4 s), which only a run that logs needs
+        # here: it loads protobuf (0.4 s), which only a run that logs needs
+        from tensorboardX import SummaryWriter
 
         self.path = Path(run_dir) / METRICS_CSV
         self.columns: list[str] | None = None
-        if self.path.exists():  # a resumed run, or one started again in its folder (a requeued job's, at 0)
+        # a resumed run, or one started again in its folder (a requeued job's, at 0)
+        if self.path.exists():
             self._truncate(resume_update)
         self.tb = SummaryWriter(str(Path(run_dir) / "tb"))
 
@@ -62,8 +65,10 @@ class RunLog:
             rows = self._rows()
             kept = [r for r in rows if int(r["update"]) <= update]
         except (KeyError, TypeError, ValueError, UnicodeDecodeError, csv.Error) as e:
-            raise UsageError(f"{self.path} is not a metrics file of this run ({type(e).__name__}); "
-                             "move it away to resume (the run's checkpoints are intact)") from None
+            raise UsageError(
+                f"{self.path} is not a metrics file of this run ({type(e).__name__}); "
+                "move it away to resume (the run's checkpoints are intact)"
+            ) from None
         if not rows:
             return
         self.columns = list(rows[0])
@@ -91,7 +96,13 @@ class RunLog:
                 writer.writeheader()
             for i in range(n):
                 for s in range(seeds):
-                    writer.writerow({"update": first_update + i + 1, "seed": s, **{k: float(metrics[k][s, i]) for k in names}})
+                    writer.writerow(
+                        {
+                            "update": first_update + i + 1,
+                            "seed": s,
+                            **{k: float(metrics[k][s, i]) for k in names},
+                        }
+                    )
         for i in range(n):
             step = int(np.asarray(metrics["env_steps"])[0, i])
             for k in names:
@@ -121,7 +132,11 @@ def read_log(path: Path, names: Iterable[str] | None = None) -> Log:
         reader = csv.DictReader(f)
         fields = reader.fieldnames or ()
         rows = list(reader)
-    names = [c for c in fields if c not in ("update", "seed", "env_steps")] if names is None else [c for c in names if c in fields]
+    names = (
+        [c for c in fields if c not in ("update", "seed", "env_steps")]
+        if names is None
+        else [c for c in names if c in fields]
+    )
     updates = sorted({int(r["update"]) for r in rows})
     seeds = sorted({int(r["seed"]) for r in rows})
     index = {u: i for i, u in enumerate(updates)}
@@ -167,7 +182,8 @@ def storms_of(log: Log) -> list[dict] | None:
     if "approx_kl" not in log.columns:
         return None
     storms = []
-    for above in log.columns["approx_kl"] > KL_ABOVE:  # each seed's updates as logged; inf blew up too, NaN did not
+    # each seed's updates as logged; inf blew up too, NaN did not
+    for above in log.columns["approx_kl"] > KL_ABOVE:
         run, longest, first = 0, 0, None
         for update, hot in enumerate(above, start=1):
             run = run + 1 if hot else 0
@@ -183,15 +199,23 @@ def storms_text(seeds: list[int], storms: list[dict] | None) -> str:
     ones) that had one (`storms`: `kl_storms` of the run); '' for none. What a collapsed seed's
     training did: its PPO updates blew up, which is PPO's doing, not the physics'
     (experiments/results/locomotion_ppo_stability.md)."""
-    hit = [(s, storms[s]["first"]) for s in seeds if storms and s < len(storms) and storms[s]["first"] is not None]
+    hit = [
+        (s, storms[s]["first"])
+        for s in seeds
+        if storms and s < len(storms) and storms[s]["first"] is not None
+    ]
     if not hit:
         return ""
     which = ", ".join(f"seed {s} from update {u}" for s, u in hit)
-    return (f"KL storm ({which} on: approx. KL above {KL_ABOVE:g} for {STORM_UPDATES} or more updates in a row): "
-            "PPO's steps blew up")
+    return (
+        f"KL storm ({which} on: approx. KL above {KL_ABOVE:g} for {STORM_UPDATES} or more updates in a row): "
+        "PPO's steps blew up"
+    )
 
 
-def bin_means(steps: np.ndarray, values: np.ndarray, points: int = CURVE_POINTS) -> tuple[np.ndarray, np.ndarray]:
+def bin_means(
+    steps: np.ndarray, values: np.ndarray, points: int = CURVE_POINTS
+) -> tuple[np.ndarray, np.ndarray]:
     """A curve averaged over at most `points` runs of consecutive updates: (the env steps of each
     bin's last update [B], each seed's mean over the bin [S, B]). NaNs are left out of the means;
     a bin of NaNs stays NaN. With `points` or fewer updates the curve comes back as it was."""
@@ -202,8 +226,9 @@ def bin_means(steps: np.ndarray, values: np.ndarray, points: int = CURVE_POINTS)
     return steps[edges[1:] - 1], np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
 
 
-def mean_confidence_band(values: np.ndarray, level: float = 0.95, resamples: int = 1000,
-                         seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def mean_confidence_band(
+    values: np.ndarray, level: float = 0.95, resamples: int = 1000, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(mean, low, high) over seeds (axis 0) per column, with a percentile-bootstrap confidence
     band for the mean (seeds resampled with replacement). NaN seeds are ignored per column."""
     rng = np.random.default_rng(seed)
@@ -216,11 +241,14 @@ def mean_confidence_band(values: np.ndarray, level: float = 0.95, resamples: int
         return np.nanmean(values, axis=0), low, high
 
 
-def plot_curves(curves: dict[str, tuple[np.ndarray, np.ndarray]], out: Path, title: str = "") -> None:
+def plot_curves(
+    curves: dict[str, tuple[np.ndarray, np.ndarray]], out: Path, title: str = ""
+) -> None:
     """One line per label (mean over seeds) with a 95% bootstrap confidence band for the mean;
     x is environment steps. Long curves are first averaged into CURVE_POINTS bins (`bin_means`):
     per-update returns of runs with few, long episodes are too noisy to read."""
-    import matplotlib  # here: matplotlib takes about a second to import, and only a finished run draws
+    # here: matplotlib takes about a second to import, and only a finished run draws
+    import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -235,7 +263,8 @@ def plot_curves(curves: dict[str, tuple[np.ndarray, np.ndarray]], out: Path, tit
     ax.set_ylabel("training episode return (mean, 95% CI)")
     ax.set_title(title)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))  # beside the axes, off the curves
+    # beside the axes, off the curves
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
     fig.tight_layout()
     fig.savefig(out)
     plt.close(fig)

@@ -26,8 +26,16 @@ class Compiled:
         self.transition, self.state_at = jax.jit(env.transition), jax.jit(env.state_at)
 
 
-def parity(compiled: Compiled, gym_id: str, steps: int, gym_options: dict | None = None, adapt=None,
-           same_termination: bool = True, policy=None, episode_steps: int = 20) -> dict[str, float]:
+def parity(
+    compiled: Compiled,
+    gym_id: str,
+    steps: int,
+    gym_options: dict | None = None,
+    adapt=None,
+    same_termination: bool = True,
+    policy=None,
+    episode_steps: int = 20,
+) -> dict[str, float]:
     """Worst |d obs|, |d reward|, |d qpos|, |d qvel| along gym's trajectories (a fresh gym
     episode every `episode_steps` steps and after each termination), asserting equal termination
     (or, with `same_termination` False, counting the steps where it differs); counts of terminal
@@ -41,7 +49,9 @@ def parity(compiled: Compiled, gym_id: str, steps: int, gym_options: dict | None
         adapt(gym_env.model)
     rng = np.random.default_rng(0)
     low, high = gym_env.action_space.low, gym_env.action_space.high
-    worst = dict(obs=0.0, reward=0.0, qpos=0.0, qvel=0.0, terminal=0, contact=0, termination_differs=0)
+    worst = dict(
+        obs=0.0, reward=0.0, qpos=0.0, qvel=0.0, terminal=0, contact=0, termination_differs=0
+    )
     fresh = True
     for i in range(steps):
         if fresh or i % episode_steps == 0:
@@ -51,7 +61,9 @@ def parity(compiled: Compiled, gym_id: str, steps: int, gym_options: dict | None
         if policy is None:
             action = rng.uniform(low, high).astype(np.float32)
         else:
-            action = np.clip(np.asarray(policy(jnp.asarray(gym_env._get_obs(), jnp.float32))), low, high).astype(np.float32)
+            action = np.clip(
+                np.asarray(policy(jnp.asarray(gym_env._get_obs(), jnp.float32))), low, high
+            ).astype(np.float32)
         out = step(KEY, state_at(qpos, qvel), jnp.asarray(action), params)
         obs, reward, terminated, _, _ = gym_env.step(action)
         assert bool(out.terminated) == terminated or not same_termination, f"step {i}"

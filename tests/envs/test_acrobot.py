@@ -51,7 +51,9 @@ def test_one_step_parity_with_gymnasium(acrobot_step):
         clipped += int(abs(gym_env.state[2]) == 4 * np.pi or abs(gym_env.state[3]) == 9 * np.pi)
         terminal += int(terminated)
         worst = max(worst, float(np.abs(np.asarray(ts.obs["state"]) - obs).max()))
-        np.testing.assert_allclose(np.asarray(ts.obs["state"]), obs, rtol=0, atol=2e-4, err_msg=f"step {i}")
+        np.testing.assert_allclose(
+            np.asarray(ts.obs["state"]), obs, rtol=0, atol=2e-4, err_msg=f"step {i}"
+        )
         np.testing.assert_allclose(angle_diff(ts.state.qpos, gym_env.state[:2]), 0, atol=2e-4)
         assert float(ts.reward) == reward and bool(ts.terminated) == terminated, f"step {i}"
     assert clipped >= 5 and 20 < terminal < 580  # both clips and both outcomes were exercised
@@ -74,7 +76,9 @@ def test_trajectory_parity_with_gymnasium(acrobot_step):
             a = int(rng.integers(3))
             ts = acrobot_step(KEY, state, jnp.array([a - 1.0]), params)
             obs, reward, terminated, _, _ = gym_env.step(a)
-            np.testing.assert_allclose(np.asarray(ts.obs["state"]), obs, rtol=0, atol=1e-4, err_msg=f"step {i}")
+            np.testing.assert_allclose(
+                np.asarray(ts.obs["state"]), obs, rtol=0, atol=1e-4, err_msg=f"step {i}"
+            )
             assert float(ts.reward) == reward
             worst = max(worst, float(np.abs(np.asarray(ts.obs["state"]) - obs).max()))
             if terminated:
@@ -88,15 +92,26 @@ def test_negative_torque_is_reachable(acrobot_step):
     torque is clipped to [-1, 1] (the authors' action mapping could not produce negative torque)."""
     params = envs.make_params("acrobot")
     rest = S(0.0, 0.0)
-    speeds = {u: float(acrobot_step(KEY, rest, jnp.array([u]), params).state.qvel[1]) for u in (-5.0, -1.0, 0.0, 1.0)}
+    speeds = {
+        u: float(acrobot_step(KEY, rest, jnp.array([u]), params).state.qvel[1])
+        for u in (-5.0, -1.0, 0.0, 1.0)
+    }
     assert speeds[0.0] == 0.0
     assert speeds[-1.0] < -0.1 and speeds[1.0] > 0.1
     np.testing.assert_allclose(speeds[-1.0], -speeds[1.0], rtol=1e-5)
     assert speeds[-5.0] == speeds[-1.0]
 
 
-@pytest.mark.parametrize("qpos,above", [((np.pi, 0.0), True), ((0.0, 0.0), False), ((1.2, 1.0), False),
-                                        ((2.0, 0.5), True), ((np.pi / 2, -np.pi / 2), False)])
+@pytest.mark.parametrize(
+    "qpos,above",
+    [
+        ((np.pi, 0.0), True),
+        ((0.0, 0.0), False),
+        ((1.2, 1.0), False),
+        ((2.0, 0.5), True),
+        ((np.pi / 2, -np.pi / 2), False),
+    ],
+)
 def test_terminates_when_tip_rises_above_one(acrobot_step, qpos, above):
     """Taking a zero-torque step from a state at rest; gym's rule is -cos t1 - cos(t1 + t2) > 1."""
     params = envs.make_params("acrobot")
@@ -107,7 +122,8 @@ def test_terminates_when_tip_rises_above_one(acrobot_step, qpos, above):
 
 def test_initial_state_distribution(acrobot_env):
     states = jax.vmap(acrobot_env.initial_state, in_axes=(0, None))(
-        jax.random.split(KEY, 2000), envs.make_params("acrobot"))
+        jax.random.split(KEY, 2000), envs.make_params("acrobot")
+    )
     values = np.concatenate([np.asarray(states.qpos), np.asarray(states.qvel)], axis=1)
     assert np.abs(values).max() <= 0.1 and np.abs(values).max() > 0.099
     assert np.abs(values.mean(0)).max() < 0.01 and np.all(np.asarray(states.t) == 0)
@@ -129,7 +145,9 @@ def link_pixels(image):
     return -HALF_EXTENT + (cols + 0.5) * pixel, HALF_EXTENT - (rows + 0.5) * pixel
 
 
-@pytest.mark.parametrize("qpos", [(0.0, 0.0), (np.pi, 0.0), (np.pi / 2, 0.0), (-1.0, 2.0), (2.5, -1.5)])
+@pytest.mark.parametrize(
+    "qpos", [(0.0, 0.0), (np.pi, 0.0), (np.pi / 2, 0.0), (-1.0, 2.0), (2.5, -1.5)]
+)
 def test_link_pixels_follow_the_state(acrobot_env, qpos):
     """The links' pixels lie along pivot -> elbow -> tip, and cover both links."""
     image = jax.jit(acrobot_env.render)(S(*qpos), envs.make_params("acrobot"))
@@ -145,7 +163,8 @@ def test_link_pixels_follow_the_state(acrobot_env, qpos):
 
     nearest = np.minimum(dist(np.zeros(2), elbow), dist(elbow, tip))
     assert nearest.max() < 0.2  # within the link's half-width plus a pixel
-    for end in (0.75 * elbow, tip, 0.5 * elbow, 0.5 * (elbow + tip)):  # the elbow itself is a joint disc
+    # the elbow itself is a joint disc
+    for end in (0.75 * elbow, tip, 0.5 * elbow, 0.5 * (elbow + tip)):
         assert np.linalg.norm(points - end, axis=-1).min() < 0.1
 
 
@@ -157,10 +176,16 @@ def test_vmap_render_equals_loop(acrobot_env):
     images = jax.jit(jax.vmap(acrobot_env.render, in_axes=(0, None)))(batch, params)
     render = jax.jit(acrobot_env.render)
     for i in range(n):
-        np.testing.assert_array_equal(np.asarray(images[i]), np.asarray(render(jax.tree.map(lambda x: x[i], batch), params)))
+        np.testing.assert_array_equal(
+            np.asarray(images[i]), np.asarray(render(jax.tree.map(lambda x: x[i], batch), params))
+        )
     assert len({np.asarray(im).tobytes() for im in images}) == n
 
 
 def test_sizes(acrobot_env):
     assert isinstance(acrobot_env, Acrobot)
-    assert acrobot_env.state_size == 6 and acrobot_env.action_size == 1 and acrobot_env.max_steps == 500
+    assert (
+        acrobot_env.state_size == 6
+        and acrobot_env.action_size == 1
+        and acrobot_env.max_steps == 500
+    )

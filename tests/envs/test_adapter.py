@@ -16,7 +16,10 @@ import numpy as np
 import pytest
 from mujoco import mjx
 
-pytest.importorskip("mujoco_playground", reason="the Playground adapter needs the playground extra: pip install -e '.[playground]'")
+pytest.importorskip(
+    "mujoco_playground",
+    reason="the Playground adapter needs the playground extra: pip install -e '.[playground]'",
+)
 
 from hintsjax import envs  # noqa: E402
 from hintsjax.envs import adapter, render3d  # noqa: E402
@@ -53,7 +56,8 @@ def test_reset_and_step_match_the_playground_env_own(cartpole):
         np.testing.assert_array_equal(ts.state.data.qpos, ref.data.qpos)
         np.testing.assert_array_equal(ts.state.data.qvel, ref.data.qvel)
         np.testing.assert_array_equal(ts.obs["state"], ref.obs)
-        assert ts.reward == ref.reward and ts.obs["hint"][1] == ref.reward  # the `reward` hint: the last step's
+        # the `reward` hint: the last step's
+        assert ts.reward == ref.reward and ts.obs["hint"][1] == ref.reward
         assert not ts.terminated and not ts.truncated and int(ts.state.t) == i + 1
     chex.assert_shape(ts.obs["hint"], (1 + 1 + 3,))
     assert ts.reward > 0  # the dense swing-up reward is positive everywhere
@@ -62,7 +66,10 @@ def test_reset_and_step_match_the_playground_env_own(cartpole):
 def test_an_action_outside_the_range_is_clipped_as_the_actuator_would(cartpole):
     env, params, reset, step = cartpole
     ts = reset(jax.random.key(0), params)
-    far, edge = step(jax.random.key(0), ts.state, jnp.asarray([7.0]), params), step(jax.random.key(0), ts.state, jnp.ones(1), params)
+    far, edge = (
+        step(jax.random.key(0), ts.state, jnp.asarray([7.0]), params),
+        step(jax.random.key(0), ts.state, jnp.ones(1), params),
+    )
     np.testing.assert_array_equal(far.state.data.qvel, edge.state.data.qvel)
 
 
@@ -72,28 +79,45 @@ def test_the_time_limit_truncates_and_a_broken_state_terminates(cartpole):
     ts = reset(jax.random.key(0), params)
     before = step(jax.random.key(0), ts.state.replace(t=jnp.int32(998)), jnp.zeros(1), params)
     last = step(jax.random.key(0), before.state, jnp.zeros(1), params)
-    assert (bool(before.truncated), bool(last.truncated), bool(last.terminated)) == (False, True, False)
+    assert (bool(before.truncated), bool(last.truncated), bool(last.terminated)) == (
+        False,
+        True,
+        False,
+    )
     # Playground's cartpole ends an episode only on NaN physics: a termination, not a truncation
-    broken = ts.state.replace(task=ts.state.task.replace(data=ts.state.data.replace(qpos=jnp.full(2, jnp.nan, jnp.float32))))
+    broken = ts.state.replace(
+        task=ts.state.task.replace(
+            data=ts.state.data.replace(qpos=jnp.full(2, jnp.nan, jnp.float32))
+        )
+    )
     ended = step(jax.random.key(0), broken, jnp.zeros(1), params)
     assert (bool(ended.terminated), bool(ended.truncated)) == (True, False)
-    assert dataclasses.replace(env.task, episode_length=1000, action_repeat=4).episode_length // 4 == 250
+    assert (
+        dataclasses.replace(env.task, episode_length=1000, action_repeat=4).episode_length // 4
+        == 250
+    )
 
 
 def test_body_velocity_is_mujocos_object_velocity(cartpole):
     """The generic `body_velocity:<body>` hint equals MuJoCo C's mj_objectVelocity of the body
     (its centre of mass; linear part, world frame) at the same qpos and qvel."""
     env, params, reset, _ = cartpole
-    ts = reset(jax.random.key(5), params)  # Playground's reset ends in MuJoCo's forward pass, at a small random qvel
+    # Playground's reset ends in MuJoCo's forward pass, at a small random qvel
+    ts = reset(jax.random.key(5), params)
     hint = ts.obs["hint"][2:]
     model = env.mj_model
     data = mujoco.MjData(model)
     data.qpos[:], data.qvel[:] = np.asarray(ts.state.data.qpos), np.asarray(ts.state.data.qvel)
     mujoco.mj_forward(model, data)
     expected = np.zeros(6)
-    mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, model.body("pole_1").id, expected, 0)
+    mujoco.mj_objectVelocity(
+        model, data, mujoco.mjtObj.mjOBJ_BODY, model.body("pole_1").id, expected, 0
+    )
     np.testing.assert_allclose(hint, expected[3:], rtol=1e-4, atol=1e-7)
-    assert np.abs(expected[3:]).max() > 1e-3 and np.abs(expected[3:] - data.cvel[model.body("pole_1").id, 3:]).max() > 1e-4
+    assert (
+        np.abs(expected[3:]).max() > 1e-3
+        and np.abs(expected[3:] - data.cvel[model.body("pole_1").id, 3:]).max() > 1e-4
+    )
 
 
 def test_the_picture_is_the_models_camera_seeing_the_floor_at_its_hand_worked_depth(cartpole):
@@ -133,7 +157,9 @@ def test_the_picture_is_the_models_camera_seeing_the_floor_at_its_hand_worked_de
     assert other.any() and np.all(np.asarray(hits.distance)[other] <= plane[other] * (1 + 1e-5))
     picture = jax.jit(env.render)(state, params)
     chex.assert_shape(picture, (64, 64, 3))
-    np.testing.assert_array_equal(picture, render3d.render(scene, state.data.geom_xpos, state.data.geom_xmat, camera, 64))
+    np.testing.assert_array_equal(
+        picture, render3d.render(scene, state.data.geom_xpos, state.data.geom_xmat, camera, 64)
+    )
 
 
 def test_a_mesh_geom_is_refused_in_one_line_naming_it_and_the_model():
@@ -166,18 +192,29 @@ def test_an_adapted_env_takes_its_defaults_from_the_table_or_the_fallback():
     from hintsjax.settings.layers import run_config
 
     cfg = run_config({"env": CARTPOLE})
-    assert cfg.hint == "pole_angle" and cfg.ppo.total_env_steps == playground.PIXEL_PPO["total_env_steps"]
+    assert (
+        cfg.hint == "pole_angle"
+        and cfg.ppo.total_env_steps == playground.PIXEL_PPO["total_env_steps"]
+    )
     assert cfg.ppo.num_envs == 128 and cfg.ppo.epochs == 4
     other = run_config({"env": "playground:PendulumSwingup", "agent": "ppo_state"})
-    assert other.hint == playground.FALLBACK.hint == "reward" and envs.variant_names("playground:PendulumSwingup")[0] == "tracking"
+    assert (
+        other.hint == playground.FALLBACK.hint == "reward"
+        and envs.variant_names("playground:PendulumSwingup")[0] == "tracking"
+    )
 
 
 def test_a_brax_env_is_adapted_with_brax_s_own_sizes_and_names():
     env = envs.make("brax:hopper", "reward", ("state", "hint"))
     own = env.task.env
-    assert env.state_size == 11 and env.action_size == own.action_size == 3  # Brax hopper: qpos[1:] and qvel, three motors
-    assert isinstance(adapter.reset_shapes(env.task).pipeline_state, mjx.Data)  # Brax's MJX backend, whose data the picture reads
-    with pytest.raises(envs.ChoiceError, match="unknown Brax env 'hoppr'; valid choices: ant, fast, halfcheetah, hopper"):
+    # Brax hopper: qpos[1:] and qvel, three motors
+    assert env.state_size == 11 and env.action_size == own.action_size == 3
+    # Brax's MJX backend, whose data the picture reads
+    assert isinstance(adapter.reset_shapes(env.task).pipeline_state, mjx.Data)
+    with pytest.raises(
+        envs.ChoiceError,
+        match="unknown Brax env 'hoppr'; valid choices: ant, fast, halfcheetah, hopper",
+    ):
         envs.make("brax:hoppr")
 
 

@@ -15,9 +15,31 @@ import pytest
 from gymnasium.utils import seeding
 
 from hintsjax.envs.car_racing import (
-    FRONT, MAX_SPEED, MAX_TILES, PLAYFIELD, REAR, START_ALPHA, TRACK_DETAIL_STEP, TRACK_RAD, TRACK_TURN_RATE,
-    TRACK_WIDTH, VARIANTS, Car, CarRacing, CarRacingState, Track, _quads, drive, first_corner_angle,
-    generate_track, nearest_point, progress, target_speed, trace, track_from_gymnasium, wheel_contact,
+    FRONT,
+    MAX_SPEED,
+    MAX_TILES,
+    PLAYFIELD,
+    REAR,
+    START_ALPHA,
+    TRACK_DETAIL_STEP,
+    TRACK_RAD,
+    TRACK_TURN_RATE,
+    TRACK_WIDTH,
+    VARIANTS,
+    Car,
+    CarRacing,
+    CarRacingState,
+    Track,
+    _quads,
+    drive,
+    first_corner_angle,
+    generate_track,
+    nearest_point,
+    progress,
+    target_speed,
+    trace,
+    track_from_gymnasium,
+    wheel_contact,
 )
 from hintsjax.envs.hints import make_hint
 
@@ -81,12 +103,18 @@ def stadium(straight: float, radius: float) -> Track:
             xy[k], heading[k] = (radius, -straight / 2 + d), math.pi / 2
         elif d < straight + arc:  # top bend
             a = (d - straight) / radius
-            xy[k], heading[k] = (radius * math.cos(a), straight / 2 + radius * math.sin(a)), math.pi / 2 + a
+            xy[k], heading[k] = (
+                (radius * math.cos(a), straight / 2 + radius * math.sin(a)),
+                math.pi / 2 + a,
+            )
         elif d < 2 * straight + arc:  # left straight, south
             xy[k], heading[k] = (-radius, straight / 2 - (d - straight - arc)), -math.pi / 2
         else:  # bottom bend
             a = math.pi + (d - 2 * straight - arc) / radius
-            xy[k], heading[k] = (radius * math.cos(a), -straight / 2 + radius * math.sin(a)), a + math.pi / 2
+            xy[k], heading[k] = (
+                (radius * math.cos(a), -straight / 2 + radius * math.sin(a)),
+                a + math.pi / 2,
+            )
     pad = MAX_TILES - n
     return Track(
         jnp.asarray(np.pad(xy, ((0, pad), (0, 0))), jnp.float32),
@@ -103,7 +131,9 @@ def at_start(track: Track) -> CarRacingState:
 
 
 def on_stadium(car: Car, straight=140.0, radius=40.0) -> CarRacingState:
-    return CarRacingState(stadium(straight, radius), car, jnp.zeros(MAX_TILES, bool), jnp.zeros((), jnp.int32))
+    return CarRacingState(
+        stadium(straight, radius), car, jnp.zeros(MAX_TILES, bool), jnp.zeros((), jnp.int32)
+    )
 
 
 def north(x, y, **kw) -> Car:
@@ -135,20 +165,36 @@ def test_trace_equals_gymnasium_for_the_same_checkpoints():
     same_count, compared = 0, 0
     for seed in range(24):
         ours_rng, _ = seeding.np_random(seed)
-        draws = np.array([(ours_rng.uniform(0, 2 * np.pi / 12), ours_rng.uniform(TRACK_RAD / 3, TRACK_RAD))
-                          for _ in range(12)])
+        draws = np.array(
+            [
+                (ours_rng.uniform(0, 2 * np.pi / 12), ours_rng.uniform(TRACK_RAD / 3, TRACK_RAD))
+                for _ in range(12)
+            ]
+        )
         expected = gym_track(genv, seed)
         if expected is None:
             continue
         alpha = 2 * np.pi * np.arange(12) / 12 + draws[:, 0]
         rad = draws[:, 1].copy()
-        alpha[0], rad[0], alpha[-1], rad[-1] = 0.0, 1.5 * TRACK_RAD, 2 * np.pi * 11 / 12, 1.5 * TRACK_RAD
-        a, beta, x, y = (np.asarray(v) for v in trace5(jnp.asarray(alpha, jnp.float32), jnp.asarray(rad, jnp.float32)))
+        alpha[0], rad[0], alpha[-1], rad[-1] = (
+            0.0,
+            1.5 * TRACK_RAD,
+            2 * np.pi * 11 / 12,
+            1.5 * TRACK_RAD,
+        )
+        a, beta, x, y = (
+            np.asarray(v)
+            for v in trace5(jnp.asarray(alpha, jnp.float32), jnp.asarray(rad, jnp.float32))
+        )
         passes = np.nonzero((a[1:] > START_ALPHA) & (a[:-1] <= START_ALPHA))[0] + 1
         i1, i2 = passes[3], passes[4]
         assert i2 - 1 - i1 == len(expected), f"seed {seed}"
-        np.testing.assert_allclose(np.stack([x, y], -1)[i1:i2 - 1], expected[:, 2:], atol=0.01, err_msg=f"seed {seed}")
-        np.testing.assert_allclose(beta[i1:i2 - 1], expected[:, 1], atol=1e-3, err_msg=f"seed {seed}")
+        np.testing.assert_allclose(
+            np.stack([x, y], -1)[i1 : i2 - 1], expected[:, 2:], atol=0.01, err_msg=f"seed {seed}"
+        )
+        np.testing.assert_allclose(
+            beta[i1 : i2 - 1], expected[:, 1], atol=1e-3, err_msg=f"seed {seed}"
+        )
         lap2 = passes[1] - 1 - passes[0]
         assert abs(lap2 - len(expected)) <= 3, f"seed {seed}"
         same_count += lap2 == len(expected)
@@ -168,11 +214,14 @@ def test_gymnasium_tracks_load_into_our_track():
         n = len(genv.track)
         assert int(track.n_tiles) == n and not np.asarray(track.xy[n:]).any()
         np.testing.assert_allclose(np.asarray(track.xy[:n]), np.array(genv.track)[:, 2:], atol=1e-4)
-        theirs = np.array([[tuple(v) for v in tile.fixtures[0].shape.vertices] for tile in genv.road])
+        theirs = np.array(
+            [[tuple(v) for v in tile.fixtures[0].shape.vertices] for tile in genv.road]
+        )
         ours = np.asarray(quads(track))[:n]  # Box2D keeps a fixture's vertices in its own order
         assert np.linalg.norm(ours[:, :, None] - theirs[:, None], axis=-1).min(-1).max() < 1e-3
         kerbs = len(genv.road_poly) - n  # a tile's quad, then its kerb's if it has one
-        assert 0.1 * n < kerbs and abs(int(np.asarray(track.kerb).sum()) - kerbs) <= 2  # 2: the joint, as above
+        # 2: the joint, as above
+        assert 0.1 * n < kerbs and abs(int(np.asarray(track.kerb).sum()) - kerbs) <= 2
 
 
 def test_tile_counts_match_gymnasium(tracks):
@@ -185,13 +234,17 @@ def test_tile_counts_match_gymnasium(tracks):
         theirs.append(len(genv.track))
     theirs = np.array(theirs)
     ours = np.asarray(tracks["standard"][0].n_tiles)
-    standard_error = math.hypot(theirs.std() / math.sqrt(len(theirs)), ours.std() / math.sqrt(len(ours)))
+    standard_error = math.hypot(
+        theirs.std() / math.sqrt(len(theirs)), ours.std() / math.sqrt(len(ours))
+    )
     assert abs(ours.mean() - theirs.mean()) < 3 * standard_error
     assert 0.85 < ours.std() / theirs.std() < 1.15
     assert 180 <= ours.min() and ours.max() <= 420 and 180 <= theirs.min() and theirs.max() <= 420
     grid = np.arange(150, 451)
-    ks = np.abs(np.searchsorted(np.sort(ours), grid, "right") / len(ours)
-                - np.searchsorted(np.sort(theirs), grid, "right") / len(theirs)).max()
+    ks = np.abs(
+        np.searchsorted(np.sort(ours), grid, "right") / len(ours)
+        - np.searchsorted(np.sort(theirs), grid, "right") / len(theirs)
+    ).max()
     assert ks < 0.1  # the 0.1% critical value for these sample sizes is 0.15
 
 
@@ -209,8 +262,11 @@ def test_tracks_are_closed(tracks, variant):
         xy, beta = np.asarray(batch.xy[i, : n[i]]), np.asarray(batch.beta[i, : n[i]])
         if i % 10 == 0:
             np.testing.assert_allclose(np.linalg.norm(np.diff(xy, axis=0), axis=1), STEP, atol=1e-3)
-            assert np.abs((np.diff(beta) + np.pi) % (2 * np.pi) - np.pi).max() <= TRACK_TURN_RATE + 1e-4
-            assert not np.asarray(batch.xy[i, n[i]:]).any()  # padding
+            assert (
+                np.abs((np.diff(beta) + np.pi) % (2 * np.pi) - np.pi).max()
+                <= TRACK_TURN_RATE + 1e-4
+            )
+            assert not np.asarray(batch.xy[i, n[i] :]).any()  # padding
         gap = (xy[0] - xy[-1]) * np.array([np.cos(beta[0]), np.sin(beta[0])])
         assert np.linalg.norm(xy[0] - xy[-1]) <= 5 * STEP, f"track {i}"
         glued.append((abs(gap.sum()) if variant == "hairpin" else np.linalg.norm(gap)) <= STEP)
@@ -226,8 +282,12 @@ def test_kerbs_as_gymnasium_flags_them(tracks):
         beta, kerb = np.asarray(batch.beta[t, :n]), np.asarray(batch.kerb[t, :n])
         border = [False] * n
         for i in range(n):
-            turns = [(beta[i - k] - beta[i - k - 1] + np.pi) % (2 * np.pi) - np.pi for k in range(4)]
-            border[i] = all(abs(d) > TRACK_TURN_RATE * 0.2 for d in turns) and abs(sum(np.sign(turns))) == 4
+            turns = [
+                (beta[i - k] - beta[i - k - 1] + np.pi) % (2 * np.pi) - np.pi for k in range(4)
+            ]
+            border[i] = (
+                all(abs(d) > TRACK_TURN_RATE * 0.2 for d in turns) and abs(sum(np.sign(turns))) == 4
+            )
         for i in range(n):
             for k in range(4):
                 border[i - k] |= border[i]
@@ -244,7 +304,10 @@ def test_hairpin_tracks_open_with_a_sharp_corner(tracks):
     assert (hairpin <= 45).mean() >= 0.97
     assert (standard <= 45).mean() <= 0.35
     assert np.median(standard) > 80 and np.median(hairpin) < 20
-    tight, wide = float(first_corner_angle(stadium(100.0, 12.0))), float(first_corner_angle(stadium(100.0, 60.0)))
+    tight, wide = (
+        float(first_corner_angle(stadium(100.0, 12.0))),
+        float(first_corner_angle(stadium(100.0, 60.0))),
+    )
     assert tight < 10 and 105 < wide < 120
 
 
@@ -266,7 +329,9 @@ def test_same_key_same_track_and_vmap_equals_loop(env, reset, step, tracks):
     stepped = jax.jit(jax.vmap(env.step, in_axes=(0, 0, 0, None)))(keys, states, actions, STANDARD)
     for i in range(3):
         single = step(keys[i], jax.tree.map(lambda x: x[i], states), actions[i], STANDARD)
-        for a, b in zip(jax.tree.leaves(single), jax.tree.leaves(jax.tree.map(lambda x: x[i], stepped))):
+        for a, b in zip(
+            jax.tree.leaves(single), jax.tree.leaves(jax.tree.map(lambda x: x[i], stepped))
+        ):
             np.testing.assert_allclose(np.asarray(a), np.asarray(b), atol=1e-4)
 
 
@@ -335,7 +400,9 @@ def test_a_tile_is_paid_once(env, step, tracks):
     track = one(tracks["standard"][0], 0)
     n = int(track.n_tiles)
     centre = 0.5 * (track.xy[5] + track.xy[4])
-    state = CarRacingState(track, Car.at(centre, track.beta[5]), jnp.zeros(MAX_TILES, bool), jnp.zeros((), jnp.int32))
+    state = CarRacingState(
+        track, Car.at(centre, track.beta[5]), jnp.zeros(MAX_TILES, bool), jnp.zeros((), jnp.int32)
+    )
     rewards = []
     for _ in range(5):
         ts = step(KEY, state, jnp.zeros(3), STANDARD)
@@ -368,16 +435,25 @@ def test_a_tile_is_visited_when_a_wheel_touches_it(step, on_track_hint):
     assert visited(edge - 0.5, y[20])[0] == [20, 21]
     assert visited(edge - 1.6, y[20]) == ([], pytest.approx(-0.1))
     contact = jax.jit(wheel_contact)
-    assert np.asarray(contact(state.track, north(edge - 1.6, y[20])).on_road).tolist() == [False] * 4
+    assert (
+        np.asarray(contact(state.track, north(edge - 1.6, y[20])).on_road).tolist() == [False] * 4
+    )
     assert np.asarray(contact(state.track, north(40.0, y[20])).on_road).tolist() == [True] * 4
-    assert np.asarray(contact(state.track, north(edge, y[20])).on_road).tolist() == [False, True, False, True]
+    assert np.asarray(contact(state.track, north(edge, y[20])).on_road).tolist() == [
+        False,
+        True,
+        False,
+        True,
+    ]
 
 
 def test_leaving_the_playfield_costs_100_and_ends(step):
     car = Car.at([PLAYFIELD - 0.5, 0.0], -math.pi / 2, speed=60.0)  # facing +x
     ts = step(KEY, on_stadium(car), jnp.zeros(3), STANDARD)
     assert float(ts.reward) == -100.0 and bool(ts.terminated)
-    inside = step(KEY, on_stadium(car.replace(xy=jnp.array([PLAYFIELD - 5.0, 0.0]))), jnp.zeros(3), STANDARD)
+    inside = step(
+        KEY, on_stadium(car.replace(xy=jnp.array([PLAYFIELD - 5.0, 0.0]))), jnp.zeros(3), STANDARD
+    )
     assert not bool(inside.terminated) and float(inside.reward) == pytest.approx(-0.1)
 
 
@@ -389,11 +465,24 @@ def test_the_lap_ends_when_tile_0_is_first_touched_past_95_percent(step):
     n = int(state.track.n_tiles)
     tile0 = north(*np.asarray(0.5 * (state.track.xy[0] + state.track.xy[n - 1])))
     for share, ends in [(0.94, False), (0.96, True)]:
-        visited = ((jnp.arange(MAX_TILES) >= 1) & (jnp.arange(MAX_TILES) < int(share * n))).at[n - 1].set(True)
-        assert bool(step(KEY, state.replace(visited=visited, car=tile0), jnp.zeros(3), STANDARD).terminated) == ends
-        again = state.replace(visited=visited.at[0].set(True), car=tile0)  # tile 0 touched before: no lap
+        visited = (
+            ((jnp.arange(MAX_TILES) >= 1) & (jnp.arange(MAX_TILES) < int(share * n)))
+            .at[n - 1]
+            .set(True)
+        )
+        assert (
+            bool(
+                step(
+                    KEY, state.replace(visited=visited, car=tile0), jnp.zeros(3), STANDARD
+                ).terminated
+            )
+            == ends
+        )
+        # tile 0 touched before: no lap
+        again = state.replace(visited=visited.at[0].set(True), car=tile0)
         assert not bool(step(KEY, again, jnp.zeros(3), STANDARD).terminated)
-        elsewhere = state.replace(visited=visited, car=north(40.0, -70.0 + 10.5 * STEP))  # on tile 11
+        # on tile 11
+        elsewhere = state.replace(visited=visited, car=north(40.0, -70.0 + 10.5 * STEP))
         assert not bool(step(KEY, elsewhere, jnp.zeros(3), STANDARD).terminated)
     everything = state.replace(visited=(jnp.arange(MAX_TILES) < n).at[1].set(False))
     assert bool(step(KEY, everything, jnp.zeros(3), STANDARD).terminated)  # all tiles visited
@@ -436,7 +525,8 @@ def test_straight_line_acceleration_and_top_speed(run_car):
     speed, wheels = np.asarray(speed), np.asarray(wheels)
     assert 40 < speed[49] < 50 and 80 < speed[99] < 90 and 95 < speed[149] <= MAX_SPEED + 1e-3
     assert speed[-1] == pytest.approx(MAX_SPEED)  # capped
-    assert (wheels[10, 2:] > speed[10] + 10).all() and (wheels[10, :2] <= speed[10]).all()  # rear spin
+    # rear spin
+    assert (wheels[10, 2:] > speed[10] + 10).all() and (wheels[10, :2] <= speed[10]).all()
     _, (on_grass, *_) = run_car(rest, jnp.array([0.0, 1.0, 0.0]), grass)
     assert float(on_grass[24]) < 0.8 * speed[24]
     _, (braking, *_) = run_car(after(cars, FRAMES), jnp.array([0.0, 0.0, 1.0]), road)
@@ -456,7 +546,11 @@ def test_full_gas_in_a_tight_corner_spins(run_car):
     yaw, kinematic = np.asarray(yaw)[10:28], np.asarray(kinematic)[10:28]
     assert (yaw < 0).all() and (np.abs(yaw) <= 1.02 * np.abs(kinematic)).all()
     _, (_, yaw, kinematic, lateral, _) = run_car(cruising, jnp.array([1.0, 1.0, 0.0]), jnp.ones(4))
-    yaw, kinematic, lateral = np.asarray(yaw)[27], np.asarray(kinematic)[27], np.asarray(lateral)[27]
+    yaw, kinematic, lateral = (
+        np.asarray(yaw)[27],
+        np.asarray(kinematic)[27],
+        np.asarray(lateral)[27],
+    )
     assert abs(yaw) > 1.6 * abs(kinematic) and abs(lateral) > 15
 
 
@@ -484,7 +578,13 @@ def box2d_car(actions: np.ndarray, on_road: bool) -> np.ndarray:
         car.step(1.0 / 50)
         world.Step(1.0 / 50, 6 * 30, 2 * 30)
         v = np.array(car.hull.linearVelocity)
-        out.append([v @ car.hull.GetWorldVector((0, 1)), car.hull.angularVelocity, -v @ car.hull.GetWorldVector((1, 0))])
+        out.append(
+            [
+                v @ car.hull.GetWorldVector((0, 1)),
+                car.hull.angularVelocity,
+                -v @ car.hull.GetWorldVector((1, 0)),
+            ]
+        )
     return np.array(out)
 
 
@@ -495,17 +595,32 @@ def test_the_car_steps_beside_box2ds_car():
     0.08 apart), or with full gas, when the rear steps out (at most 1.0 apart over 20 frames; 28
     frames in, yaw -8.4 Box2D, -8.1 ours); on the grass, half gas then a quarter lock, where both
     spin (yaw -6.1 / -6.2 after 100 frames; at most 0.83 apart). Tolerances: those gaps, rounded up."""
-    follow = jax.jit(lambda actions, grip: jax.lax.scan(
-        lambda car, a: (lambda c: (c, jnp.stack([c.vel[0], c.yaw_rate, c.vel[1]])))(drive(car, a, grip)),
-        Car.at([0.0, 0.0], 0.0), actions)[1])
+    follow = jax.jit(
+        lambda actions, grip: jax.lax.scan(
+            lambda car, a: (lambda c: (c, jnp.stack([c.vel[0], c.yaw_rate, c.vel[1]])))(
+                drive(car, a, grip)
+            ),
+            Car.at([0.0, 0.0], 0.0),
+            actions,
+        )[1]
+    )
     straight = np.tile([0.0, 1.0, 0.0], (100, 1))
     cruise = np.tile([0.0, 0.5, 0.0], (40, 1))
-    coast, gas = np.vstack([cruise, np.tile([1.0, 0.0, 0.0], (60, 1))]), np.vstack([cruise, np.tile([1.0, 1.0, 0.0], (60, 1))])
+    coast, gas = (
+        np.vstack([cruise, np.tile([1.0, 0.0, 0.0], (60, 1))]),
+        np.vstack([cruise, np.tile([1.0, 1.0, 0.0], (60, 1))]),
+    )
     grass = np.vstack([cruise, np.tile([0.25, 0.5, 0.0], (60, 1))])
     road, off = jnp.ones(4), jnp.full(4, STANDARD.grass_grip)
-    runs = {name: (box2d_car(a, grip is road), np.asarray(follow(jnp.asarray(a, jnp.float32), grip)))
-            for name, a, grip in [("straight", straight, road), ("coast", coast, road), ("gas", gas, road),
-                                  ("grass", grass, off)]}
+    runs = {
+        name: (box2d_car(a, grip is road), np.asarray(follow(jnp.asarray(a, jnp.float32), grip)))
+        for name, a, grip in [
+            ("straight", straight, road),
+            ("coast", coast, road),
+            ("gas", gas, road),
+            ("grass", grass, off),
+        ]
+    }
     theirs, ours = runs["straight"]
     np.testing.assert_allclose(ours[[49, 99], 0], theirs[[49, 99], 0], rtol=1e-3)
     theirs, ours = runs["coast"]
@@ -530,11 +645,15 @@ def test_two_wheels_on_the_grass_turn_the_car_towards_them(env):
         def frame(state, _):
             state = env.transition(KEY, state, action, STANDARD).state
             return state, state.car.angle
+
         return jax.lax.scan(frame, on_stadium(car), None, length=50)[1]
 
     run = jax.jit(rollout)
     gas, brake = jnp.array([0.0, 1.0, 0.0]), jnp.array([0.0, 0.0, 0.5])
-    left, right = np.asarray(run(north(40.0 - TRACK_WIDTH, -60.0), gas)), np.asarray(run(north(40.0 + TRACK_WIDTH, -60.0), gas))
+    left, right = (
+        np.asarray(run(north(40.0 - TRACK_WIDTH, -60.0), gas)),
+        np.asarray(run(north(40.0 + TRACK_WIDTH, -60.0), gas)),
+    )
     centred = np.asarray(run(north(40.0, -60.0), gas))
     assert left[-1] > 1.0 and (np.diff(left[:40]) > 0).all()
     np.testing.assert_allclose(right, -left, atol=1e-3)
@@ -554,14 +673,20 @@ def test_the_car_is_finite_at_rest(run_car):
 
 def test_hints_at_hand_set_states(env):
     """On a stadium (straights 140 u, bends of radius 40 u, counter-clockwise)."""
-    hints = jax.jit(lambda s: {name: make_hint("car_racing", name)(s, STANDARD)
-                               for name in ("speed", "curvature", "on_track", "target_speed", "composite")})
+    hints = jax.jit(
+        lambda s: {
+            name: make_hint("car_racing", name)(s, STANDARD)
+            for name in ("speed", "curvature", "on_track", "target_speed", "composite")
+        }
+    )
     straight = hints(on_stadium(north(40.0, -65.0, speed=3.0, lateral=4.0)))
     assert float(straight["speed"][0]) == pytest.approx(5.0)
     assert float(straight["on_track"][0]) == 1.0
     assert abs(float(straight["curvature"][0])) < 1e-3
     assert float(straight["target_speed"][0]) == pytest.approx(100.0)
-    np.testing.assert_array_equal(straight["composite"], [straight["on_track"][0], straight["curvature"][0]])
+    np.testing.assert_array_equal(
+        straight["composite"], [straight["on_track"][0], straight["curvature"][0]]
+    )
     # in the top bend, heading west: curvature 1/40 (left), target speed sqrt(100 * 40)
     bend = hints(on_stadium(Car.at([0.0, 70.0 + 40.0], math.pi / 2, speed=20.0)))
     assert float(bend["curvature"][0]) == pytest.approx(1 / 40, rel=0.05)
@@ -576,7 +701,8 @@ def test_hints_at_hand_set_states(env):
 
 
 def test_state_observation(env):
-    state = on_stadium(north(40.0 - 2.0, -65.0, speed=10.0))  # facing north, 2 u left of the centre line
+    # facing north, 2 u left of the centre line
+    state = on_stadium(north(40.0 - 2.0, -65.0, speed=10.0))
     obs = np.asarray(jax.jit(env.state_obs)(state, STANDARD))
     assert obs.shape == (28,) and env.state_size == 28 and np.isfinite(obs).all()
     assert obs[0] == pytest.approx(0.1) and obs[7] == pytest.approx(2.0 / TRACK_WIDTH, abs=1e-4)
@@ -596,7 +722,12 @@ def test_picture(render):
     assert (image[rows, cols] == HULL_RED).all(-1).sum() >= 4
     is_road = lambda p: p[0] == p[1] == p[2] and 100 <= p[0] <= 108  # noqa: E731
     is_grass = lambda p: p[0] == p[2] == 102 and p[1] in (204, 230)  # noqa: E731
-    assert is_road(image[10, 48]) and is_road(image[90, 40]) and is_grass(image[10, 5]) and is_grass(image[50, 90])
+    assert (
+        is_road(image[10, 48])
+        and is_road(image[90, 40])
+        and is_grass(image[10, 5])
+        and is_grass(image[50, 90])
+    )
     across = np.asarray(render(on_stadium(Car.at([40.0, -50.0], -math.pi / 2)), STANDARD))
     assert is_road(across[72, 5]) and is_road(across[72, 90]) and is_grass(across[10, 48])
     visited = np.asarray(render(state.replace(visited=jnp.ones(MAX_TILES, bool)), STANDARD))

@@ -15,10 +15,24 @@ from hintsjax.envs.acrobot import AcrobotState
 PI = np.pi
 
 SPEC_DIMS = {
-    "acrobot": {"angular_velocity_1": 1, "angular_velocity_2": 1, "joint": 1, "goal_distance": 1, "composite": 2,
-                "partial_state": 4, "state": 6},
-    "idp": {"angular_velocity_1": 1, "angular_velocity_2": 1, "joint": 1, "goal_distance": 1, "composite": 2,
-            "partial_state": 7, "state": 9},
+    "acrobot": {
+        "angular_velocity_1": 1,
+        "angular_velocity_2": 1,
+        "joint": 1,
+        "goal_distance": 1,
+        "composite": 2,
+        "partial_state": 4,
+        "state": 6,
+    },
+    "idp": {
+        "angular_velocity_1": 1,
+        "angular_velocity_2": 1,
+        "joint": 1,
+        "goal_distance": 1,
+        "composite": 2,
+        "partial_state": 7,
+        "state": 9,
+    },
 }
 CASES = [(env, name) for env in SPEC_DIMS for name in envs.hint_names(env)]
 
@@ -57,7 +71,9 @@ def test_shape_unit_and_observation(env, name, states):
     value = hint(state, params)
     assert value.shape == (hint.dim,) and value.dtype == jnp.float32
     batch = jax.tree.map(lambda *x: jnp.stack(x), *states[env].values())
-    np.testing.assert_allclose(np.asarray(jax.vmap(hint, in_axes=(0, None))(batch, params))[2], np.asarray(value))
+    np.testing.assert_allclose(
+        np.asarray(jax.vmap(hint, in_axes=(0, None))(batch, params))[2], np.asarray(value)
+    )
     observed = envs.make(env, hint=name, observe=("hint",)).observation(state, params)["hint"]
     np.testing.assert_array_equal(np.asarray(observed), np.asarray(value))
 

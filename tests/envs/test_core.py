@@ -37,7 +37,9 @@ def assert_obs_equal(a, b, atol=1e-6):
         if k == "pixels":
             np.testing.assert_array_equal(np.asarray(a[k]), np.asarray(b[k]), err_msg=k)
         else:
-            np.testing.assert_allclose(np.asarray(a[k]), np.asarray(b[k]), rtol=0, atol=atol, err_msg=k)
+            np.testing.assert_allclose(
+                np.asarray(a[k]), np.asarray(b[k]), rtol=0, atol=atol, err_msg=k
+            )
 
 
 # -- time limit --------------------------------------------------------------------------------
@@ -137,13 +139,17 @@ def test_autoreset_fresh_start_depends_on_reset_key(auto, swingto_params):
     goals = [float(o.state.env_state.goal) for o in outs]
     for o in outs:
         assert bool(o.truncated) and int(o.state.env_state.t) == 0
-        np.testing.assert_allclose(float(o.info["episode_return"]), -5.0 + float(o.reward), rtol=1e-6)
+        np.testing.assert_allclose(
+            float(o.info["episode_return"]), -5.0 + float(o.reward), rtol=1e-6
+        )
         assert int(o.info["episode_length"]) == 200
         # The ended episode is the same whatever the reset key.
         assert_obs_equal(o.final_obs, outs[0].final_obs, atol=0)
         # ... and it is observed with its own goal (0.7), not the fresh one.
         cos_theta = float(o.final_obs["state"][0])
-        np.testing.assert_allclose(float(o.final_obs["hint"][1]), np.cos(0.7) - cos_theta, atol=1e-6)
+        np.testing.assert_allclose(
+            float(o.final_obs["hint"][1]), np.cos(0.7) - cos_theta, atol=1e-6
+        )
     assert len(set(thetas)) == 8 and len(set(dthetas)) == 8 and len(set(goals)) == 8
     assert all(abs(g) <= np.pi / 2 for g in goals) and 0.7 not in goals
     assert all(abs(th) <= np.pi for th in thetas) and all(abs(d) <= 1.0 for d in dthetas)
@@ -163,16 +169,23 @@ def test_autoreset_starts_from_a_given_fresh_start(auto, swingto_params):
     assert_obs_equal(ended.obs, fresh.obs, atol=0)
     for a, b in zip(jax.tree.leaves(ended.state.env_state), jax.tree.leaves(fresh.state)):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
-    assert_obs_equal(ended.final_obs, step(key, ending_state(goal=0.7), action, swingto_params).final_obs, atol=0)
+    assert_obs_equal(
+        ended.final_obs, step(key, ending_state(goal=0.7), action, swingto_params).final_obs, atol=0
+    )
     running = EpisodeState(S(0.3, 0.5, goal=0.7, t=50), jnp.float32(-5.0), jnp.int32(50))
-    given, drawn = step(key, running, action, swingto_params, fresh), step(key, running, action, swingto_params)
+    given, drawn = (
+        step(key, running, action, swingto_params, fresh),
+        step(key, running, action, swingto_params),
+    )
     assert_obs_equal(given.obs, drawn.obs, atol=0)
     assert int(given.state.env_state.t) == 51
 
 
 def test_autoreset_swingup_fresh_goal_is_upright(auto, params):
     _, _, astep = auto
-    outs = [astep(jax.random.key(s), ending_state(goal=0.0), jnp.array([0.0]), params) for s in range(3)]
+    outs = [
+        astep(jax.random.key(s), ending_state(goal=0.0), jnp.array([0.0]), params) for s in range(3)
+    ]
     assert all(float(o.state.env_state.goal) == 0.0 for o in outs)
     assert len({float(o.state.env_state.theta) for o in outs}) == 3
 

@@ -15,7 +15,14 @@ from hintsjax.envs.pendulum import PendulumState, wrap_angle
 S = PendulumState.at
 
 
-SPEC_DIMS = {"goal_distance": 1, "angular_velocity": 1, "torque": 1, "composite": 2, "partial_state": 2, "state": 3}
+SPEC_DIMS = {
+    "goal_distance": 1,
+    "angular_velocity": 1,
+    "torque": 1,
+    "composite": 2,
+    "partial_state": 2,
+    "state": 3,
+}
 HINT_NAMES = envs.hint_names("pendulum")
 
 
@@ -25,7 +32,12 @@ def hint_value(name, state, params):
 
 def random_states(n, seed=0):
     rng = np.random.default_rng(seed)
-    return S(rng.uniform(-7, 7, n), rng.uniform(-8, 8, n), rng.uniform(-1.5, 1.5, n), rng.integers(0, 200, n))
+    return S(
+        rng.uniform(-7, 7, n),
+        rng.uniform(-8, 8, n),
+        rng.uniform(-1.5, 1.5, n),
+        rng.integers(0, 200, n),
+    )
 
 
 def test_spec_hints_are_registered():
@@ -48,7 +60,9 @@ def test_hint_shape_equals_declared_dim(name, params):
     assert batched.shape == (5, hint.dim)
     # The env's observation carries it.
     env = envs.make("pendulum", hint=name, observe=("hint",))
-    np.testing.assert_array_equal(np.asarray(env.observation(S(0.4, -1.0, 0.2), params)["hint"]), np.asarray(value))
+    np.testing.assert_array_equal(
+        np.asarray(env.observation(S(0.4, -1.0, 0.2), params)["hint"]), np.asarray(value)
+    )
 
 
 # (state, name, expected) at hand-computed states; the goal is 0 unless given.
@@ -112,14 +126,24 @@ def test_composites_are_concatenations(params):
     states = random_states(20, seed=1)
     one = lambda name: jax.vmap(envs.make_hint("pendulum", name), in_axes=(0, None))(states, params)  # noqa: E731
     composite = np.asarray(one("composite"))
-    expected = np.concatenate([np.asarray(one("angular_velocity")), np.asarray(one("goal_distance"))], axis=1)
+    expected = np.concatenate(
+        [np.asarray(one("angular_velocity")), np.asarray(one("goal_distance"))], axis=1
+    )
     np.testing.assert_allclose(composite, expected, rtol=0, atol=0)
     np.testing.assert_array_equal(np.asarray(one("angular_velocity+goal_distance")), composite)
     np.testing.assert_array_equal(np.asarray(one("angular_velocity + goal_distance")), composite)
-    theta, dtheta, goal = (np.asarray(x, np.float64) for x in (states.theta, states.dtheta, states.goal))
-    np.testing.assert_allclose(composite, np.stack([dtheta, np.cos(goal) - np.cos(theta)], 1), atol=1e-5)
-    np.testing.assert_allclose(np.asarray(one("state")), np.stack([np.cos(theta), np.sin(theta), dtheta], 1), atol=1e-5)
-    np.testing.assert_allclose(np.asarray(one("partial_state")), np.stack([np.cos(theta), np.sin(theta)], 1), atol=1e-5)
+    theta, dtheta, goal = (
+        np.asarray(x, np.float64) for x in (states.theta, states.dtheta, states.goal)
+    )
+    np.testing.assert_allclose(
+        composite, np.stack([dtheta, np.cos(goal) - np.cos(theta)], 1), atol=1e-5
+    )
+    np.testing.assert_allclose(
+        np.asarray(one("state")), np.stack([np.cos(theta), np.sin(theta), dtheta], 1), atol=1e-5
+    )
+    np.testing.assert_allclose(
+        np.asarray(one("partial_state")), np.stack([np.cos(theta), np.sin(theta)], 1), atol=1e-5
+    )
     mixed = envs.make_hint("pendulum", "composite+torque")
     assert mixed.dim == 3
     np.testing.assert_array_equal(
@@ -132,7 +156,9 @@ def test_state_hint_equals_state_observation(env, params):
     states = random_states(10, seed=2)
     for i in range(10):
         s = jax.tree.map(lambda x: x[i], states)
-        np.testing.assert_array_equal(hint_value("state", s, params), np.asarray(env.state_obs(s, params)))
+        np.testing.assert_array_equal(
+            hint_value("state", s, params), np.asarray(env.state_obs(s, params))
+        )
 
 
 def test_unknown_hint_raises_choice_error_listing_valid_names():
@@ -148,7 +174,9 @@ def test_unknown_hint_raises_choice_error_listing_valid_names():
 
 def test_user_hint_registers_and_combines(monkeypatch, params):
     """SPEC 3: a user hint is one function plus `register_hint`, then usable in a '+' spec."""
-    monkeypatch.setattr(hints_module, "_HINTS", {k: dict(v) for k, v in hints_module._HINTS.items()})
+    monkeypatch.setattr(
+        hints_module, "_HINTS", {k: dict(v) for k, v in hints_module._HINTS.items()}
+    )
 
     @envs.register_hint("pendulum", "tip_height_test", dim=1, unit="m")
     def tip_height(state, p):
@@ -163,7 +191,14 @@ def test_user_hint_registers_and_combines(monkeypatch, params):
 
 # -- the torque hint swings the pendulum up ----------------------------------------------------
 
-SWING_STARTS = [(np.pi, 0.1), (np.pi, -0.1), (-np.pi, 0.05), (np.pi + 0.01, 0.0), (np.pi - 0.05, -0.2), (np.pi, 0.3)]
+SWING_STARTS = [
+    (np.pi, 0.1),
+    (np.pi, -0.1),
+    (-np.pi, 0.05),
+    (np.pi + 0.01, 0.0),
+    (np.pi - 0.05, -0.2),
+    (np.pi, 0.3),
+]
 
 
 @pytest.fixture(scope="module")
@@ -191,7 +226,9 @@ def test_torque_hint_swings_up_and_holds(torque_hint, vstep, params):
         actions.append(np.asarray(action)[:, 0])
         truncated.append(np.asarray(ts.truncated))
     final = state
-    theta, dtheta, actions, truncated = (np.stack(x, axis=1) for x in (theta, dtheta, actions, truncated))
+    theta, dtheta, actions, truncated = (
+        np.stack(x, axis=1) for x in (theta, dtheta, actions, truncated)
+    )
     wrapped = np.abs(np.asarray(wrap_angle(theta)))
     assert np.abs(np.asarray(actions)).max() <= 2.0 + 1e-6
     assert np.abs(np.asarray(actions)).max() == pytest.approx(2.0)  # it has to pump at full torque

@@ -50,14 +50,18 @@ def test_parity_with_gymnasium(idp_step, idp_state_at):
         obs, reward, terminated, _, _ = gym_env.step(np.array([action]))
         worst_obs = max(worst_obs, float(np.abs(np.asarray(ts.obs["state"]) - obs).max()))
         worst_reward = max(worst_reward, abs(float(ts.reward) - reward))
-        np.testing.assert_allclose(np.asarray(ts.obs["state"]), obs, rtol=0, atol=5e-5, err_msg=f"step {i}")
+        np.testing.assert_allclose(
+            np.asarray(ts.obs["state"]), obs, rtol=0, atol=5e-5, err_msg=f"step {i}"
+        )
         np.testing.assert_allclose(float(ts.reward), reward, rtol=0, atol=5e-5, err_msg=f"step {i}")
         assert bool(ts.terminated) == terminated, f"step {i}"
         terminal_last = terminated
         terminal += terminated
         alive += not terminated
         limit += obs[-1] != 0.0
-    print(f"max |d obs| {worst_obs:.2g}, |d reward| {worst_reward:.2g}; {terminal} terminal, {limit} at the limit")
+    print(
+        f"max |d obs| {worst_obs:.2g}, |d reward| {worst_reward:.2g}; {terminal} terminal, {limit} at the limit"
+    )
     assert terminal > 10 and alive > 50 and limit > 5  # every branch was exercised
     assert worst_obs > 0  # float32 against float64
 
@@ -66,15 +70,20 @@ def test_reset_matches_gymnasium_distribution(idp_env):
     """qpos uniform in [-0.1, 0.1], qvel N(0, 0.1^2): compared with Gymnasium's own resets."""
     params = envs.make_params("idp")
     n = 2000
-    states = jax.jit(jax.vmap(idp_env.initial_state, in_axes=(0, None)))(jax.random.split(KEY, n), params)
+    states = jax.jit(jax.vmap(idp_env.initial_state, in_axes=(0, None)))(
+        jax.random.split(KEY, n), params
+    )
     qpos, qvel = np.asarray(states.qpos), np.asarray(states.qvel)
     gym_env = gym.make("InvertedDoublePendulum-v5").unwrapped
     gym_obs = np.stack([gym_env.reset(seed=i)[0] for i in range(n)])
     assert np.abs(qpos).max() <= 0.1 and np.abs(qpos).max() > 0.099
     np.testing.assert_allclose(qvel.std(0), 0.1, rtol=0.08)
     np.testing.assert_allclose(gym_obs[:, 5:8].std(0), 0.1, rtol=0.08)  # gym's qvel, the same law
-    np.testing.assert_allclose(np.asarray(jax.vmap(idp_env.state_obs, in_axes=(0, None))(states, params)).mean(0),
-                               gym_obs.mean(0), atol=0.01)
+    np.testing.assert_allclose(
+        np.asarray(jax.vmap(idp_env.state_obs, in_axes=(0, None))(states, params)).mean(0),
+        gym_obs.mean(0),
+        atol=0.01,
+    )
     assert np.all(np.asarray(states.t) == 0)
 
 
@@ -87,8 +96,13 @@ def test_terminates_when_the_tip_drops_to_one(idp_step, idp_state_at):
     fallen = idp_step(KEY, idp_state_at([0.0, 1.2, 0.5], [0.0, 0.0, 0.0]), jnp.zeros(1), params)
     x, y = np.asarray(fallen.state.tip)
     assert y <= 1.0 and bool(fallen.terminated)
-    np.testing.assert_allclose(float(fallen.reward), -(0.01 * x**2 + (y - 2) ** 2) - 1e-3 * float(fallen.state.qvel[1]) ** 2
-                               - 5e-3 * float(fallen.state.qvel[2]) ** 2, rtol=1e-5)
+    np.testing.assert_allclose(
+        float(fallen.reward),
+        -(0.01 * x**2 + (y - 2) ** 2)
+        - 1e-3 * float(fallen.state.qvel[1]) ** 2
+        - 5e-3 * float(fallen.state.qvel[2]) ** 2,
+        rtol=1e-5,
+    )
 
 
 def test_episode_truncates_at_1000(idp_step, idp_state_at):
@@ -101,7 +115,11 @@ def test_tip_is_mujocos_site(idp_state_at):
     """The picture's geometry (pole_ends) agrees with MuJoCo's tip site."""
     for qpos in ([0.0, 0.0, 0.0], [0.5, 0.3, -0.8], [-0.9, 2.0, 1.0]):
         state = idp_state_at(qpos, [0.0, 0.0, 0.0])
-        np.testing.assert_allclose(np.asarray(pole_ends(jnp.asarray(qpos, jnp.float32))[2]), np.asarray(state.tip), atol=1e-5)
+        np.testing.assert_allclose(
+            np.asarray(pole_ends(jnp.asarray(qpos, jnp.float32))[2]),
+            np.asarray(state.tip),
+            atol=1e-5,
+        )
 
 
 # -- the picture -------------------------------------------------------------------------------
@@ -112,10 +130,14 @@ def pixels_of(image, colour, tol=40):
     img = np.asarray(image).astype(int)
     rows, cols = np.nonzero(np.all(np.abs(img - np.asarray(colour)) < tol, axis=-1))
     pixel = 2 * HALF_EXTENT / SIZE
-    return CENTRE[0] - HALF_EXTENT + (cols + 0.5) * pixel, CENTRE[1] + HALF_EXTENT - (rows + 0.5) * pixel
+    return CENTRE[0] - HALF_EXTENT + (cols + 0.5) * pixel, CENTRE[1] + HALF_EXTENT - (
+        rows + 0.5
+    ) * pixel
 
 
-@pytest.mark.parametrize("qpos", [[0.0, 0.0, 0.0], [0.6, 0.4, -0.6], [-0.8, -0.7, 0.2], [0.2, np.pi, 0.0]])
+@pytest.mark.parametrize(
+    "qpos", [[0.0, 0.0, 0.0], [0.6, 0.4, -0.6], [-0.8, -0.7, 0.2], [0.2, np.pi, 0.0]]
+)
 def test_cart_and_poles_follow_the_state(idp_env, idp_state_at, qpos):
     image = jax.jit(idp_env.render)(idp_state_at(qpos, [0.0, 0.0, 0.0]), envs.make_params("idp"))
     assert image.shape == (SIZE, SIZE, 3) and image.dtype == jnp.uint8

@@ -30,15 +30,24 @@ from hintsjax.envs.humanoid import Humanoid
 from hintsjax.envs.locomotion import LocomotionState
 from gym_parity import KEY, Compiled, parity  # tests/envs/gym_parity.py
 
-ELLIPTIC = dict(solver=mujoco.mjtSolver.mjSOL_NEWTON, iterations=100, ls_iterations=50, cone=mujoco.mjtCone.mjCONE_ELLIPTIC)
+ELLIPTIC = dict(
+    solver=mujoco.mjtSolver.mjSOL_NEWTON,
+    iterations=100,
+    ls_iterations=50,
+    cone=mujoco.mjtCone.mjCONE_ELLIPTIC,
+)
 
 
-AntElliptic = Ant.with_options(**ELLIPTIC)  # elliptic friction cones, MuJoCo's default solver budget
+# elliptic friction cones, MuJoCo's default solver budget
+AntElliptic = Ant.with_options(**ELLIPTIC)
 
 
 def test_with_options_changes_a_copy_of_the_model_options():
     euler = mujoco.mjtIntegrator.mjINT_EULER
-    fast, shipped = Ant.with_options(integrator=euler, iterations=1).make_mj_model(), Ant.make_mj_model()
+    fast, shipped = (
+        Ant.with_options(integrator=euler, iterations=1).make_mj_model(),
+        Ant.make_mj_model(),
+    )
     assert fast.opt.integrator == euler and fast.opt.iterations == 1
     assert fast.opt.ls_iterations == 16  # the rest of the shipped options stay
     assert shipped.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4 and shipped.opt.iterations == 8
@@ -80,8 +89,13 @@ def test_four_newton_iterations_were_too_few_for_the_cheetahs_running_states(che
     """Why the cap is 8 (it was 4 until 2026-11-26): with 4, from the same states, a step misses
     HalfCheetah-v5 by up to 1.2 in a velocity and 0.033 in reward (MuJoCo C capped at 4 alike)."""
     four = HalfCheetah.with_options(iterations=4, ls_iterations=8)
-    worst = parity(Compiled(four(envs.make_hint("halfcheetah", "none"), ("state",))), "HalfCheetah-v5", 1000,
-                   policy=cheetah_expert, episode_steps=500)
+    worst = parity(
+        Compiled(four(envs.make_hint("halfcheetah", "none"), ("state",))),
+        "HalfCheetah-v5",
+        1000,
+        policy=cheetah_expert,
+        episode_steps=500,
+    )
     assert worst["qvel"] > 0.2
 
 
@@ -90,7 +104,12 @@ def test_ant_parity_elliptic():
     """Both sides with elliptic cones and MuJoCo's 100 Newton iterations. Measured (60 steps):
     |d obs| 0.018 (a contact force, in N, of forces up to ~300 N before v5's clip), |d reward|
     5e-5; ten times that is allowed."""
-    worst = parity(Compiled(AntElliptic(envs.make_hint("ant", "none"), ("state",))), "Ant-v5", 60, gym_options=ELLIPTIC)
+    worst = parity(
+        Compiled(AntElliptic(envs.make_hint("ant", "none"), ("state",))),
+        "Ant-v5",
+        60,
+        gym_options=ELLIPTIC,
+    )
     assert worst["contact"] > 20 and worst["terminal"] >= 1
     assert worst["obs"] < 0.2 and worst["reward"] < 5e-4
 
@@ -125,10 +144,16 @@ def test_ant_fast_is_the_ant_with_cheaper_physics():
     from hintsjax.settings.layers import run_config
 
     fast, ant = envs.make("ant_fast", "speed"), envs.make("ant", "speed")
-    assert fast.mj_model.opt.integrator == mujoco.mjtIntegrator.mjINT_EULER and fast.mj_model.opt.iterations == 2
+    assert (
+        fast.mj_model.opt.integrator == mujoco.mjtIntegrator.mjINT_EULER
+        and fast.mj_model.opt.iterations == 2
+    )
     assert capacities(fast.mj_model)[0] == 9 and capacities(ant.mj_model)[0] == 25
     assert envs.hint_names("ant_fast") == envs.hint_names("ant")
-    assert run_config({"env": "ant_fast"}).ppo.starts_per_rollout and not run_config({"env": "ant"}).ppo.starts_per_rollout
+    assert (
+        run_config({"env": "ant_fast"}).ppo.starts_per_rollout
+        and not run_config({"env": "ant"}).ppo.starts_per_rollout
+    )
 
 
 @pytest.fixture(scope="module")
@@ -165,7 +190,12 @@ def test_one_newton_iteration_is_too_few_for_the_fast_ant():
     1 iteration ran 1.45 M env steps/s on an H200 (physics alone, AutoReset, 25 contacts),
     against 0.94 M with 2 (experiments/results/bench_h100_locomotion.txt)."""
     one = AntFast.with_options(iterations=1)
-    worst = parity(Compiled(one(envs.make_hint("ant_fast", "none"), ("state",))), "Ant-v5", 60, same_termination=False)
+    worst = parity(
+        Compiled(one(envs.make_hint("ant_fast", "none"), ("state",))),
+        "Ant-v5",
+        60,
+        same_termination=False,
+    )
     assert worst["qvel"] > 30.0 or worst["termination_differs"] > 0
 
 
@@ -179,7 +209,9 @@ def test_humanoid_parity(humanoid):
     """Both sides with our integrator (Euler); Gymnasium keeps its PGS (50 iterations), ours is
     Newton capped at 4. Measured (40 steps, 10 with contacts; ~25 s on 2 cores): |d obs| 6.7e-3,
     |d reward| 1.0e-5, |d qvel| 7.4e-5 (with RK4 on both sides: 3.7e-3, 6.6e-6)."""
-    worst = parity(humanoid, "Humanoid-v5", 40, gym_options=dict(integrator=mujoco.mjtIntegrator.mjINT_EULER))
+    worst = parity(
+        humanoid, "Humanoid-v5", 40, gym_options=dict(integrator=mujoco.mjtIntegrator.mjINT_EULER)
+    )
     assert worst["contact"] > 5
     assert worst["obs"] < 0.07 and worst["reward"] < 1e-4
 
@@ -194,22 +226,36 @@ def test_humanoid_parity_as_shipped(humanoid):
     assert worst["qpos"] < 0.1 and worst["qvel"] < 6.0 and worst["reward"] < 3.0
 
 
-@pytest.mark.parametrize("name, gym_id", [("halfcheetah", "HalfCheetah-v5"), ("ant", "Ant-v5"), ("humanoid", "Humanoid-v5")])
+@pytest.mark.parametrize(
+    "name, gym_id",
+    [("halfcheetah", "HalfCheetah-v5"), ("ant", "Ant-v5"), ("humanoid", "Humanoid-v5")],
+)
 def test_start_distribution_matches_gymnasium(name, gym_id):
     """qpos = qpos0 + U(-s, s); qvel = s N(0, 1) (Humanoid: U(-s, s)), with v5's s: the same
     means (within 5 standard errors) and spreads (10%) as Gymnasium's, 1000 draws each."""
     env = envs.make(name, observe=("state",))
     params = env.default_params()
-    qpos, qvel = map(np.asarray, jax.jit(jax.vmap(env.draw_start, in_axes=(0, None)))(jax.random.split(KEY, 1000), params))
+    qpos, qvel = map(
+        np.asarray,
+        jax.jit(jax.vmap(env.draw_start, in_axes=(0, None)))(jax.random.split(KEY, 1000), params),
+    )
     gym_env = gym.make(gym_id).unwrapped
-    gym_qpos, gym_qvel = map(np.stack, zip(*[(gym_env.reset(seed=i) and gym_env.data.qpos.copy(), gym_env.data.qvel.copy())
-                                              for i in range(1000)]))
+    gym_qpos, gym_qvel = map(
+        np.stack,
+        zip(
+            *[
+                (gym_env.reset(seed=i) and gym_env.data.qpos.copy(), gym_env.data.qvel.copy())
+                for i in range(1000)
+            ]
+        ),
+    )
     s = params.reset_noise_scale
     deviation = np.abs(qpos - env.mj_model.qpos0).max()
     assert s * 0.99 < deviation <= s * (1 + 1e-5)
     for ours, theirs in ((qpos, gym_qpos), (qvel, gym_qvel)):
         spread = theirs.std(0)
-        assert np.all(np.abs(ours.mean(0) - theirs.mean(0)) < 5 * np.sqrt(2 / 1000) * spread)  # 5 standard errors
+        # 5 standard errors
+        assert np.all(np.abs(ours.mean(0) - theirs.mean(0)) < 5 * np.sqrt(2 / 1000) * spread)
         np.testing.assert_allclose(ours.std(0), spread, rtol=0.1)
 
 
@@ -222,9 +268,17 @@ def hand_set(name: str, **fields) -> LocomotionState:
     model = env_cls.make_mj_model()
     zero = lambda *shape: jnp.zeros(shape, jnp.float32)  # noqa: E731
     state = LocomotionState(
-        qpos=jnp.asarray(model.qpos0, jnp.float32), qvel=zero(model.nv), obs=zero(3),
-        geom_xpos=zero(model.ngeom, 3), geom_xmat=zero(model.ngeom, 3, 3), com=zero(3),
-        position=zero(2), velocity=zero(2), reward=zero(), max_velocity=zero(), t=jnp.zeros((), jnp.int32),
+        qpos=jnp.asarray(model.qpos0, jnp.float32),
+        qvel=zero(model.nv),
+        obs=zero(3),
+        geom_xpos=zero(model.ngeom, 3),
+        geom_xmat=zero(model.ngeom, 3, 3),
+        com=zero(3),
+        position=zero(2),
+        velocity=zero(2),
+        reward=zero(),
+        max_velocity=zero(),
+        t=jnp.zeros((), jnp.int32),
     )
     return state.replace(**{k: jnp.asarray(v, jnp.float32) for k, v in fields.items()})
 
@@ -260,15 +314,22 @@ def test_raw_action_ctrl_cost_charges_the_action_as_gymnasium_does(cheetah):
 
     gym_env = gym.make("HalfCheetah-v5").unwrapped
     gym_env.reset(seed=3)
-    qpos, qvel = (np.asarray(x, np.float32).astype(np.float64) for x in (gym_env.data.qpos, gym_env.data.qvel))
+    qpos, qvel = (
+        np.asarray(x, np.float32).astype(np.float64) for x in (gym_env.data.qpos, gym_env.data.qvel)
+    )
     gym_env.set_state(qpos, qvel)
     action = np.random.default_rng(3).uniform(-2, 2, 6).astype(np.float32)
     _, gym_reward, _, _, _ = gym_env.step(action)
     state = cheetah.state_at(qpos, qvel)
-    raw = cheetah.transition(KEY, state, jnp.asarray(action), cheetah.params.replace(raw_action_ctrl_cost=True))
+    raw = cheetah.transition(
+        KEY, state, jnp.asarray(action), cheetah.params.replace(raw_action_ctrl_cost=True)
+    )
     clipped = cheetah.transition(KEY, state, jnp.asarray(action), cheetah.params)
     assert float(raw.reward) == pytest.approx(gym_reward, abs=2e-5)
-    clipped_away = 0.1 * (np.sum(action.astype(np.float64) ** 2) - np.sum(np.clip(action, -1, 1).astype(np.float64) ** 2))
+    clipped_away = 0.1 * (
+        np.sum(action.astype(np.float64) ** 2)
+        - np.sum(np.clip(action, -1, 1).astype(np.float64) ** 2)
+    )
     assert clipped_away > 0.2
     assert float(clipped.reward) - float(raw.reward) == pytest.approx(clipped_away, abs=1e-4)
     np.testing.assert_array_equal(raw.state.qvel, clipped.state.qvel)
@@ -289,7 +350,8 @@ def test_halfcheetah_max_velocity_follows_the_episode(cheetah):
     np.testing.assert_array_equal(np.asarray(hints(state, cheetah.params)), [0.0, 0.0, 0.0])
     running, velocities = 0.0, []
     for i in range(12):
-        action = np.full(6, 1.0 if i % 6 < 3 else -1.0, np.float32)  # float32, as parity's: no recompile
+        # float32, as parity's: no recompile
+        action = np.full(6, 1.0 if i % 6 < 3 else -1.0, np.float32)
         out = cheetah.transition(KEY, state, jnp.asarray(action), cheetah.params)
         state = out.state
         velocity, max_velocity, reward = np.asarray(hints(state, cheetah.params))

@@ -54,9 +54,15 @@ def test_one_step_parity_with_gymnasium(step, params):
         obs, reward, terminated, truncated, _ = gym_env.step(np.array([action], np.float32))
         clipped_speeds += abs(gym_env.state[1]) == 8.0
 
-        np.testing.assert_allclose(float(ts.state.theta), gym_env.state[0], rtol=0, atol=1e-5, err_msg=f"step {i}")
-        np.testing.assert_allclose(float(ts.state.dtheta), gym_env.state[1], rtol=0, atol=1e-5, err_msg=f"step {i}")
-        np.testing.assert_allclose(np.asarray(ts.obs["state"]), obs, rtol=0, atol=1e-5, err_msg=f"step {i}")
+        np.testing.assert_allclose(
+            float(ts.state.theta), gym_env.state[0], rtol=0, atol=1e-5, err_msg=f"step {i}"
+        )
+        np.testing.assert_allclose(
+            float(ts.state.dtheta), gym_env.state[1], rtol=0, atol=1e-5, err_msg=f"step {i}"
+        )
+        np.testing.assert_allclose(
+            np.asarray(ts.obs["state"]), obs, rtol=0, atol=1e-5, err_msg=f"step {i}"
+        )
         np.testing.assert_allclose(float(ts.reward), reward, rtol=0, atol=5e-5, err_msg=f"step {i}")
         assert not bool(ts.terminated) and not terminated and not truncated
         assert int(ts.state.t) == 1
@@ -72,8 +78,14 @@ def test_one_step_parity_with_gymnasium(step, params):
 # Tolerances: 2e-3 on state and obs, 1e-2 on reward (over 10x margin). Checked by mutation:
 # the rod's inertia off by 20%, explicit instead of semi-implicit Euler, or either clip
 # removed, each fails these tolerances.
-TRAJ_STARTS = [(np.pi, 0.5), (0.07427746, 7.207419), (-0.08694537, -7.144916), (1.83253, 1.6821854),
-               (-2.9, -7.9), (2.5, 3.0)]
+TRAJ_STARTS = [
+    (np.pi, 0.5),
+    (0.07427746, 7.207419),
+    (-0.08694537, -7.144916),
+    (1.83253, 1.6821854),
+    (-2.9, -7.9),
+    (2.5, 3.0),
+]
 TRAJ_ATOL_STATE, TRAJ_ATOL_REWARD = 2e-3, 1e-2
 
 
@@ -90,9 +102,15 @@ def test_trajectory_parity_with_gymnasium(step, params, theta0, dtheta0):
         state = ts.state
         obs, reward, *_ = gym_env.step(np.array([action], np.float32))
         ours = [float(state.theta), float(state.dtheta)]
-        np.testing.assert_allclose(ours, gym_env.state, rtol=0, atol=TRAJ_ATOL_STATE, err_msg=f"step {i}")
-        np.testing.assert_allclose(np.asarray(ts.obs["state"]), obs, rtol=0, atol=TRAJ_ATOL_STATE, err_msg=f"step {i}")
-        np.testing.assert_allclose(float(ts.reward), reward, rtol=0, atol=TRAJ_ATOL_REWARD, err_msg=f"step {i}")
+        np.testing.assert_allclose(
+            ours, gym_env.state, rtol=0, atol=TRAJ_ATOL_STATE, err_msg=f"step {i}"
+        )
+        np.testing.assert_allclose(
+            np.asarray(ts.obs["state"]), obs, rtol=0, atol=TRAJ_ATOL_STATE, err_msg=f"step {i}"
+        )
+        np.testing.assert_allclose(
+            float(ts.reward), reward, rtol=0, atol=TRAJ_ATOL_REWARD, err_msg=f"step {i}"
+        )
     assert int(state.t) == 100
 
 
@@ -100,7 +118,9 @@ def test_wrap_angle_matches_gymnasium():
     from gymnasium.envs.classic_control.pendulum import angle_normalize
 
     x = np.linspace(-20.0, 20.0, 2001, dtype=np.float32)
-    np.testing.assert_allclose(np.asarray(wrap_angle(jnp.asarray(x))), angle_normalize(x), atol=1e-5)
+    np.testing.assert_allclose(
+        np.asarray(wrap_angle(jnp.asarray(x))), angle_normalize(x), atol=1e-5
+    )
     out = np.asarray(wrap_angle(jnp.asarray(x)))
     assert out.min() >= -np.pi - 1e-6 and out.max() < np.pi + 1e-6
 
@@ -151,7 +171,9 @@ def test_render_shape_and_dtype(render, params):
     assert centre.max() < 120
 
 
-@pytest.mark.parametrize("theta", [0.0, np.pi / 2, np.pi, -np.pi / 2, 1.0, -2.5, 2 * np.pi + 0.3, -7.0])
+@pytest.mark.parametrize(
+    "theta", [0.0, np.pi / 2, np.pi, -np.pi / 2, 1.0, -2.5, 2 * np.pi + 0.3, -7.0]
+)
 def test_rod_pixels_follow_angle(render, params, theta):
     """The rod's centroid lies half-way to the tip at (x, z) = (sin theta, cos theta)."""
     cx, cy = rod_centroid(render(S(theta, 0.0), params))
@@ -204,7 +226,12 @@ def test_vmap_render_equals_loop(env, render, params):
 def test_vmap_step_equals_loop(step, vstep, params):
     rng = np.random.default_rng(4)
     n = 6  # the batch size test_hints' swing-up uses, so vstep compiles once per session
-    batch = S(rng.uniform(-7, 7, n), rng.uniform(-8, 8, n), rng.uniform(-1.5, 1.5, n), rng.integers(0, 199, n))
+    batch = S(
+        rng.uniform(-7, 7, n),
+        rng.uniform(-8, 8, n),
+        rng.uniform(-1.5, 1.5, n),
+        rng.integers(0, 199, n),
+    )
     actions = jnp.asarray(rng.uniform(-3, 3, (n, 1)), jnp.float32)
     keys = jax.random.split(jax.random.key(5), n)
     batched = vstep(keys, batch, actions, params)

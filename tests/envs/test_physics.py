@@ -24,7 +24,9 @@ from hintsjax.envs.ant import Ant
 from hintsjax.system.errors import UsageError
 from hintsjax.settings.layers import run_config
 
-warp_lang = pytest.mark.skipif(not physics.warp_installed(), reason="warp-lang not installed (pip install -e '.[gpu]')")
+warp_lang = pytest.mark.skipif(
+    not physics.warp_installed(), reason="warp-lang not installed (pip install -e '.[gpu]')"
+)
 
 # The default tier's programs compile at LLVM's cheapest level (tests/conftest.py); Warp's CPU kernels
 # here too (warp.config.optimization_level 0, not Warp's -O2): with Warp's kernel cache cold, the file
@@ -49,7 +51,8 @@ def test_auto_picks_warp_only_on_an_nvidia_gpu_with_warp_lang(monkeypatch):
     monkeypatch.setattr(physics, "warp_installed", lambda: True)
     assert physics.resolve("auto", "gpu") == "warp"
     assert physics.resolve("auto", "cpu") == "jax"  # CPU runs and the tests stay bit-reproducible
-    assert physics.resolve("auto", "gpu", warp_by_default=False) == "jax"  # the pendulum and the acrobot
+    # the pendulum and the acrobot
+    assert physics.resolve("auto", "gpu", warp_by_default=False) == "jax"
     assert physics.resolve("jax", "gpu") == "jax" and physics.resolve("warp", "cpu") == "warp"
     monkeypatch.setattr(physics, "warp_installed", lambda: False)
     assert physics.resolve("auto", "gpu") == "jax"
@@ -66,22 +69,39 @@ def test_auto_gives_warp_to_the_locomotion_envs_on_an_nvidia_gpu(monkeypatch):
     warp = {name for name in envs.env_names() if envs.resolve_physics(name) == "warp"}
     assert warp == {"halfcheetah", "ant", "ant_fast", "humanoid"}
     assert {envs.resolve_physics(name, "warp") for name in envs.mjx_env_names()} == {"warp"}
-    assert set(envs.mjx_env_names()) == {"pendulum", "acrobot", "idp", "halfcheetah", "ant", "ant_fast", "humanoid"}
-    monkeypatch.setattr(jax, "device_count", lambda: 2)  # several GPUs (or processes): JAX spreads the seeds
+    assert set(envs.mjx_env_names()) == {
+        "pendulum",
+        "acrobot",
+        "idp",
+        "halfcheetah",
+        "ant",
+        "ant_fast",
+        "humanoid",
+    }
+    # several GPUs (or processes): JAX spreads the seeds
+    monkeypatch.setattr(jax, "device_count", lambda: 2)
     assert {envs.resolve_physics(name) for name in envs.env_names()} == {"jax"}
     assert envs.resolve_physics("ant", "warp") == "warp"
     monkeypatch.setattr(jax, "device_count", lambda: 1)
     monkeypatch.setattr(jax, "default_backend", lambda: "cpu")
-    assert {envs.resolve_physics(name) for name in envs.env_names()} == {"jax"}  # CPU runs stay reproducible
+    # CPU runs stay reproducible
+    assert {envs.resolve_physics(name) for name in envs.env_names()} == {"jax"}
 
 
-def test_physics_warp_without_warp_lang_is_one_line_naming_the_gpu_extra(monkeypatch, tmp_path, capsys):
+def test_physics_warp_without_warp_lang_is_one_line_naming_the_gpu_extra(
+    monkeypatch, tmp_path, capsys
+):
     from hintsjax import run
 
     monkeypatch.setattr(physics, "warp_installed", lambda: False)
-    assert run.main_from_values({"env": "ant", "physics": "warp", "out_dir": str(tmp_path / "runs")}) == 2
+    assert (
+        run.main_from_values({"env": "ant", "physics": "warp", "out_dir": str(tmp_path / "runs")})
+        == 2
+    )
     lines = capsys.readouterr().err.strip().splitlines()
-    assert len(lines) == 1 and "physics=warp needs warp-lang: pip install -e '.[gpu]'" in lines[0], lines
+    assert (
+        len(lines) == 1 and "physics=warp needs warp-lang: pip install -e '.[gpu]'" in lines[0]
+    ), lines
     assert not (tmp_path / "runs").exists()
     with pytest.raises(physics.PhysicsUnavailable, match="gpu"):
         envs.make("ant", physics="warp")
@@ -91,7 +111,9 @@ def test_the_config_keeps_the_physics_a_run_is_stepped_with():
     """auto is resolved when the config is built (jax on a CPU; on an NVIDIA GPU, warp for the
     locomotion envs), so config.yaml and eval.json say what stepped the run, and a
     resumed run keeps it; a config saved before the setting existed was stepped by JAX."""
-    assert run_config({"env": "ant"}).physics == physics.resolve("auto", jax.default_backend(), Ant.warp_by_default)
+    assert run_config({"env": "ant"}).physics == physics.resolve(
+        "auto", jax.default_backend(), Ant.warp_by_default
+    )
     if jax.default_backend() == "cpu":
         assert run_config({"env": "ant"}).physics == "jax"
     assert run_config({"env": "pendulum"}).physics == "jax"
@@ -115,13 +137,17 @@ def test_collapse_vmaps_runs_the_body_once_on_every_vmapped_axis_flattened():
     batched = jax.jit(jax.vmap(jax.vmap(f), in_axes=(0, None)))  # y unbatched over the outer axis
     out = batched(x, y)
     assert seen[-1] == (2, 3, 4)  # both axes folded into the arguments (earlier calls: shapes only)
-    products = [line for line in batched.lower(x, y).as_text().splitlines() if "stablehlo.multiply" in line]
-    assert len(products) == 1 and "tensor<2x3x4xf32>" in products[0]  # the program runs the body once
+    products = [
+        line for line in batched.lower(x, y).as_text().splitlines() if "stablehlo.multiply" in line
+    ]
+    # the program runs the body once
+    assert len(products) == 1 and "tensor<2x3x4xf32>" in products[0]
     for i in range(2):
         for j in range(3):
             np.testing.assert_array_equal(out["sum"][i, j], x[i, j].sum(keepdims=True) + 1)
     np.testing.assert_array_equal(out["twice"], 2 * x)
-    np.testing.assert_array_equal(f(x[0, 0], y[0])["twice"], 2 * x[0, 0])  # unbatched: the body as it is
+    # unbatched: the body as it is
+    np.testing.assert_array_equal(f(x[0, 0], y[0])["twice"], 2 * x[0, 0])
 
 
 def test_capacities_are_the_contacts_and_rows_the_collision_pairs_can_make():
@@ -141,7 +167,9 @@ def warp_ant() -> Compiled:
     return Compiled(envs.make("ant", "none", ("state",), physics="warp"))
 
 
-@pytest.mark.slow  # Warp's CPU kernels for another model: 33 s on 2 cores; the ant and the idp keep Warp in the default tier
+# Warp's CPU kernels for another model: 33 s on 2 cores; the ant and the idp keep Warp in the
+# default tier
+@pytest.mark.slow
 @warp_lang
 def test_warp_halfcheetah_parity(warp_cheetah):
     """MJX-Warp against HalfCheetah-v5, with the bounds of the JAX path's parity test
@@ -152,7 +180,8 @@ def test_warp_halfcheetah_parity(warp_cheetah):
     assert worst["obs"] < 2e-3 and worst["reward"] < 2e-5
 
 
-@pytest.mark.slow  # 43 s of the suite; Warp in the fast tier: test_warp_equals_jax_and_its_nested_vmap_equals_a_loop
+# 43 s of the suite; Warp in the fast tier: test_warp_equals_jax_and_its_nested_vmap_equals_a_loop
+@pytest.mark.slow
 @warp_lang
 def test_warp_ant_parity_as_shipped(warp_ant):
     """MJX-Warp against Ant-v5 as Gymnasium ships it (pyramidal cones; Newton capped at 8
@@ -171,24 +200,41 @@ def test_warp_equals_jax_and_its_nested_vmap_equals_a_loop():
     5): MJX-Warp and MJX's JAX solver agree to float32 rounding over a step of random states and
     actions; and Warp's nested vmap (seeds x envs, folded into one batch of worlds) gives each
     world what stepping it alone gives."""
-    warp_idp, jax_idp = (Compiled(envs.make("idp", "none", ("state",), physics=p)) for p in ("warp", "jax"))
+    warp_idp, jax_idp = (
+        Compiled(envs.make("idp", "none", ("state",), physics=p)) for p in ("warp", "jax")
+    )
     params = jax_idp.params
     qpos = np.asarray(jax.random.uniform(KEY, (2, 3, 3), minval=-0.5, maxval=0.5), np.float32)
     qvel = np.asarray(jax.random.normal(jax.random.key(1), (2, 3, 3)), np.float32)
-    action = np.asarray(jax.random.uniform(jax.random.key(2), (2, 3, 1), minval=-1, maxval=1), np.float32)
-    stepped = lambda c: jax.jit(jax.vmap(jax.vmap(lambda q, v, a: c.env.transition(KEY, c.env.state_at(q, v), a, params))))  # noqa: E731
+    action = np.asarray(
+        jax.random.uniform(jax.random.key(2), (2, 3, 1), minval=-1, maxval=1), np.float32
+    )
+
+    def stepped(c):
+        return jax.jit(
+            jax.vmap(
+                jax.vmap(lambda q, v, a: c.env.transition(KEY, c.env.state_at(q, v), a, params))
+            )
+        )
+
     warp, jax_out = stepped(warp_idp)(qpos, qvel, action), stepped(jax_idp)(qpos, qvel, action)
     for field in ("qpos", "qvel", "tip"):
-        np.testing.assert_allclose(getattr(warp.state, field), getattr(jax_out.state, field), atol=1e-4)
+        np.testing.assert_allclose(
+            getattr(warp.state, field), getattr(jax_out.state, field), atol=1e-4
+        )
     np.testing.assert_allclose(warp.reward, jax_out.reward, atol=1e-4)
     for i, j in ((0, 0), (1, 2)):
-        alone = warp_idp.transition(KEY, warp_idp.state_at(qpos[i, j], qvel[i, j]), action[i, j], params)
+        alone = warp_idp.transition(
+            KEY, warp_idp.state_at(qpos[i, j], qvel[i, j]), action[i, j], params
+        )
         np.testing.assert_allclose(warp.state.qvel[i, j], alone.state.qvel, atol=1e-5)
 
 
 # one idp step through MJX-Warp in a fresh process, where Warp initialises and loads its kernels
 # (the default tier's, at -O0: those the test above compiled)
-_ONE_WARP_STEP = ("import warp; warp.config.optimization_level = 0\n" if KERNELS_AT_O0 else "") + """
+_ONE_WARP_STEP = (
+    ("import warp; warp.config.optimization_level = 0\n" if KERNELS_AT_O0 else "")
+    + """
 import jax, jax.numpy as jnp
 from hintsjax.envs import physics
 from hintsjax.envs.idp import InvertedDoublePendulum
@@ -197,6 +243,7 @@ warp = physics.WarpPhysics(model)
 out = jax.jit(lambda q: warp.run(q, jnp.zeros(model.nv), jnp.zeros(model.nu), 1, False))(jnp.asarray(model.qpos0))
 print("stepped", bool(jnp.isfinite(out.qpos).all()))
 """
+)
 
 
 @warp_lang
@@ -209,14 +256,21 @@ def test_warp_prints_no_banner_or_module_lines_unless_debugging():
 
     def banner_lines(debug: str) -> list[str]:
         env = {**os.environ, "HINTSJAX_DEBUG": debug}  # the suite's conftest sets it to 1
-        done = subprocess.run([sys.executable, "-c", _ONE_WARP_STEP], env=env, capture_output=True, text=True,
-                              timeout=600)
+        done = subprocess.run(
+            [sys.executable, "-c", _ONE_WARP_STEP],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
         assert done.returncode == 0 and "stepped True" in done.stdout, done.stderr[-2000:]
         return [line for line in (done.stdout + done.stderr).splitlines() if banner.match(line)]
 
     assert banner_lines("0") == []
     kept = banner_lines("1")
-    assert any(line.startswith("Module ") for line in kept) and any(line.startswith("Warp ") for line in kept), kept
+    assert any(line.startswith("Module ") for line in kept) and any(
+        line.startswith("Warp ") for line in kept
+    ), kept
 
 
 @warp_lang
@@ -233,7 +287,11 @@ def test_a_warp_overflow_poisons_the_world_and_is_reported():
     assert np.isnan(np.asarray(out.qpos)).all() and int(out.overflow) & physics.LOST_MASK
     assert "(naconmax)" in physics.overflow_seen()
     physics.clear_overflow()
-    fine = jax.jit(lambda q: physics.WarpPhysics(Ant.make_mj_model()).run(q, jnp.zeros(14), jnp.zeros(8), 1, True))(qpos)
+    fine = jax.jit(
+        lambda q: physics.WarpPhysics(Ant.make_mj_model()).run(
+            q, jnp.zeros(14), jnp.zeros(8), 1, True
+        )
+    )(qpos)
     assert np.isfinite(np.asarray(fine.qpos)).all() and physics.overflow_seen() is None
 
 
@@ -246,6 +304,8 @@ def test_warp_humanoid_parity():
     import mujoco
 
     humanoid = Compiled(envs.make("humanoid", "none", ("state",), physics="warp"))
-    worst = parity(humanoid, "Humanoid-v5", 40, gym_options=dict(integrator=mujoco.mjtIntegrator.mjINT_EULER))
+    worst = parity(
+        humanoid, "Humanoid-v5", 40, gym_options=dict(integrator=mujoco.mjtIntegrator.mjINT_EULER)
+    )
     assert worst["contact"] > 5
     assert worst["obs"] < 0.07 and worst["reward"] < 1e-4

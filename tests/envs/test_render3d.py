@@ -76,7 +76,14 @@ def world(cast):
     mujoco.mj_forward(m, d)
     dx = mjx.put_data(m, d)
     scene = make_scene(m)
-    return m, d, mjx.put_model(m), dx, scene, cast(scene, dx.geom_xpos, dx.geom_xmat, look_at(**CAMERA), size=32)
+    return (
+        m,
+        d,
+        mjx.put_model(m),
+        dx,
+        scene,
+        cast(scene, dx.geom_xpos, dx.geom_xmat, look_at(**CAMERA), size=32),
+    )
 
 
 def pixel_rays(camera: render3d.Camera, size: int) -> np.ndarray:
@@ -99,9 +106,9 @@ def test_depth_matches_mjx_ray(world):
     Tolerances: 5e-4 m; at most 2 silhouette pixels that one hits and the other misses."""
     m, _, mx, dx, _, hits = world
     camera = look_at(**CAMERA)
-    dist, geom = jax.jit(jax.vmap(lambda v: mjx.ray(mx, dx, camera.pos, v, geomgroup=(1, 0, 1, 0, 0, 0))))(
-        jnp.asarray(pixel_rays(camera, 32), jnp.float32)
-    )
+    dist, geom = jax.jit(
+        jax.vmap(lambda v: mjx.ray(mx, dx, camera.pos, v, geomgroup=(1, 0, 1, 0, 0, 0)))
+    )(jnp.asarray(pixel_rays(camera, 32), jnp.float32))
     ours, ours_geom = np.asarray(hits.distance).ravel(), np.asarray(hits.geom).ravel()
     theirs, theirs_geom = np.asarray(dist), np.asarray(geom)
     compared = ours_geom != mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "can")
@@ -125,12 +132,21 @@ def test_depth_matches_mujoco_c_ray(world):
     theirs, theirs_geom, geomid = np.zeros(32 * 32), np.zeros(32 * 32, int), np.zeros(1, np.int32)
     for i, ray in enumerate(pixel_rays(camera, 32)):
         groups = np.array([1, 1, 1, 0, 0, 0], np.uint8)
-        theirs[i] = mujoco.mj_ray(m, d, np.asarray(camera.pos, np.float64), ray, groups, 1, -1, geomid)
+        theirs[i] = mujoco.mj_ray(
+            m, d, np.asarray(camera.pos, np.float64), ray, groups, 1, -1, geomid
+        )
         theirs_geom[i] = geomid[0]
     ours = ours.ravel()
     assert np.sum(np.isfinite(ours) != (theirs >= 0)) <= 2
     both = np.isfinite(ours) & (theirs >= 0)
-    assert {m.geom(g).name for g in theirs_geom[both]} == {"floor", "ball", "pill", "egg", "can", "crate"}
+    assert {m.geom(g).name for g in theirs_geom[both]} == {
+        "floor",
+        "ball",
+        "pill",
+        "egg",
+        "can",
+        "crate",
+    }
     print(f"max |d depth| vs mj_ray: {np.abs(ours[both] - theirs[both]).max():.2g} m")
     np.testing.assert_allclose(ours[both], theirs[both], rtol=0, atol=5e-5)
     assert np.sum(ours_geom[both] != theirs_geom[both]) <= 2
@@ -153,11 +169,21 @@ def test_normals_are_unit_face_the_camera_and_are_tangent_to_the_surface(world):
     for axis in (0, 1):
         step = np.diff(point, axis=axis)
         mean = np.delete(normal, -1, axis) + np.delete(normal, 0, axis)
-        same = np.delete(hit, 0, axis) & (np.diff(geom, axis=axis) == 0) & (np.linalg.norm(mean, axis=-1) > 1.5)
+        same = (
+            np.delete(hit, 0, axis)
+            & (np.diff(geom, axis=axis) == 0)
+            & (np.linalg.norm(mean, axis=-1) > 1.5)
+        )
         step, mean = step[same], mean[same]
-        cos.append(np.abs(np.sum(step * mean, -1)) / np.linalg.norm(step, axis=-1) / np.linalg.norm(mean, axis=-1))
+        cos.append(
+            np.abs(np.sum(step * mean, -1))
+            / np.linalg.norm(step, axis=-1)
+            / np.linalg.norm(mean, axis=-1)
+        )
     cos = np.concatenate(cos)
-    print(f"|cos| over {cos.size} pairs: 90th percentile {np.percentile(cos, 90):.2g}, max {cos.max():.2g}")
+    print(
+        f"|cos| over {cos.size} pairs: 90th percentile {np.percentile(cos, 90):.2g}, max {cos.max():.2g}"
+    )
     assert cos.size > 1000 and np.percentile(cos, 90) < 1e-3 and cos.max() < 0.2
 
 
@@ -182,19 +208,26 @@ def test_spheres_land_where_pinhole_maths_puts_them(render, cast):
     d = mujoco.MjData(m)
     mujoco.mj_forward(m, d)
     scene = make_scene(m)
-    xpos, xmat = jnp.asarray(d.geom_xpos, jnp.float32), jnp.asarray(d.geom_xmat.reshape(-1, 3, 3), jnp.float32)
+    xpos, xmat = (
+        jnp.asarray(d.geom_xpos, jnp.float32),
+        jnp.asarray(d.geom_xmat.reshape(-1, 3, 3), jnp.float32),
+    )
     camera = look_at((0, 0, 0), (1, 0, 0))
     image = np.asarray(render(scene, xpos, xmat, camera, size=64))
     hits = cast(scene, xpos, xmat, camera, size=64)
     red = np.asarray(hits.geom) == 0
     assert abs(red.sum() - math.pi * 15.77**2) < 0.02 * math.pi * 15.77**2
     facing = pixel_rays(camera, 64)[32 * 64 + 32, 0]  # the normal there is -x, the light behind
-    assert red[31:33, 31:33].all() and image[32, 32, 0] == round(255 * (scene.ambient + scene.headlight * facing))
+    assert red[31:33, 31:33].all() and image[32, 32, 0] == round(
+        255 * (scene.ambient + scene.headlight * facing)
+    )
     assert image[32, 32, 1:].max() == 0
     tan = math.tan(math.radians(22.5))
     assert (0.3 / tan + 1) / 2 * 64 - 0.5 == pytest.approx(54.68, abs=0.01)
     assert (1 - 0.2 / tan) / 2 * 64 - 0.5 == pytest.approx(16.05, abs=0.01)
-    assert int(hits.geom[16, 55]) == 1 and image[16, 55, 1] > 100 and image[16, 55, [0, 2]].max() == 0
+    assert (
+        int(hits.geom[16, 55]) == 1 and image[16, 55, 1] > 100 and image[16, 55, [0, 2]].max() == 0
+    )
     ray = pixel_rays(camera, 64)[16 * 64 + 55]
     b = ray @ np.array([5, -1.5, 1])
     expected = b - math.sqrt(b * b - (5**2 + 1.5**2 + 1**2 - 0.3**2))
@@ -220,7 +253,9 @@ def test_vmap_equals_a_loop_of_single_renders(world, render):
         xmat.append(state.geom_xmat.reshape(-1, 3, 3).copy())
     xpos, xmat = jnp.asarray(np.stack(xpos), jnp.float32), jnp.asarray(np.stack(xmat), jnp.float32)
     cameras = jax.vmap(lambda p: tracking_camera(p, 5.0, -30.0, 60.0))(xpos[:, 1])
-    batch = jax.jit(jax.vmap(lambda x, r, c: render3d.render(scene, x, r, c, 32)))(xpos, xmat, cameras)
+    batch = jax.jit(jax.vmap(lambda x, r, c: render3d.render(scene, x, r, c, 32)))(
+        xpos, xmat, cameras
+    )
     for i in range(3):
         one = render(scene, xpos[i], xmat[i], jax.tree.map(lambda a: a[i], cameras), size=32)
         np.testing.assert_array_equal(np.asarray(batch[i]), np.asarray(one))
@@ -291,9 +326,12 @@ def test_mesh_geoms_are_refused_unless_hidden():
       <worldbody><geom type="plane" size="1 1 1"/><geom name="rock" type="mesh" mesh="tet" group="{}"/></worldbody>
     </mujoco>
     """
-    with pytest.raises(ValueError, match="'rock' is a mesh.*plane, sphere, capsule, ellipsoid, cylinder, box"):
+    with pytest.raises(
+        ValueError, match="'rock' is a mesh.*plane, sphere, capsule, ellipsoid, cylinder, box"
+    ):
         make_scene(mujoco.MjModel.from_xml_string(mjcf.format(0)))
-    assert len(make_scene(mujoco.MjModel.from_xml_string(mjcf.format(3))).geom) == 1  # group 3: not drawn
+    # group 3: not drawn
+    assert len(make_scene(mujoco.MjModel.from_xml_string(mjcf.format(3))).geom) == 1
 
 
 def test_cameras_follow_mujoco_conventions():
@@ -302,12 +340,22 @@ def test_cameras_follow_mujoco_conventions():
     m = mujoco.MjModel.from_xml_string(SPHERES)
     d = mujoco.MjData(m)
     scene, option, perturb = mujoco.MjvScene(m, 10), mujoco.MjvOption(), mujoco.MjvPerturb()
-    for lookat, distance, elevation, azimuth in (((1, 2, 3), 4.0, -20.0, 30.0), ((0, 0, 0.5), 2.5, -45.0, 200.0)):
+    for lookat, distance, elevation, azimuth in (
+        ((1, 2, 3), 4.0, -20.0, 30.0),
+        ((0, 0, 0.5), 2.5, -45.0, 200.0),
+    ):
         free = mujoco.MjvCamera()
-        free.lookat[:], free.distance, free.elevation, free.azimuth = lookat, distance, elevation, azimuth
+        free.lookat[:], free.distance, free.elevation, free.azimuth = (
+            lookat,
+            distance,
+            elevation,
+            azimuth,
+        )
         mujoco.mjv_updateScene(m, d, option, perturb, free, mujoco.mjtCatBit.mjCAT_ALL, scene)
         ours = tracking_camera(jnp.asarray(lookat, jnp.float32), distance, elevation, azimuth)
-        np.testing.assert_allclose(ours.pos, (scene.camera[0].pos + scene.camera[1].pos) / 2, atol=1e-5)
+        np.testing.assert_allclose(
+            ours.pos, (scene.camera[0].pos + scene.camera[1].pos) / 2, atol=1e-5
+        )
         np.testing.assert_allclose(-ours.xmat[:, 2], scene.camera[0].forward, atol=1e-6)
         np.testing.assert_allclose(ours.xmat[:, 1], scene.camera[0].up, atol=1e-6)
     camera = look_at((1.0, -2.0, 3.0), (0.5, 0.5, 0.0))
@@ -319,7 +367,11 @@ def test_cameras_follow_mujoco_conventions():
 
 
 # Gymnasium v5 models and the tracking views recommended for them: (distance, elevation, azimuth).
-GYM_VIEWS = {"ant.xml": (3.5, -35.0, 90.0), "humanoid.xml": (3.0, -15.0, 90.0), "half_cheetah.xml": (3.0, -15.0, 90.0)}
+GYM_VIEWS = {
+    "ant.xml": (3.5, -35.0, 90.0),
+    "humanoid.xml": (3.0, -15.0, 90.0),
+    "half_cheetah.xml": (3.0, -15.0, 90.0),
+}
 
 
 @pytest.mark.parametrize("asset", sorted(GYM_VIEWS))
@@ -331,12 +383,17 @@ def test_gymnasium_models_look_right(asset, render):
     m = mujoco.MjModel.from_xml_path(os.path.join(GYM_ASSETS, asset))
     d = mujoco.MjData(m)
     mujoco.mj_forward(m, d)
-    xpos, xmat = jnp.asarray(d.geom_xpos, jnp.float32), jnp.asarray(d.geom_xmat.reshape(-1, 3, 3), jnp.float32)
+    xpos, xmat = (
+        jnp.asarray(d.geom_xpos, jnp.float32),
+        jnp.asarray(d.geom_xmat.reshape(-1, 3, 3), jnp.float32),
+    )
     camera = tracking_camera(d.xpos[1], *GYM_VIEWS[asset])
     image = np.asarray(render(make_scene(m), xpos, xmat, camera, size=64)).astype(int)
     red, green = image[..., 0], image[..., 1]
     assert (red[31:33, 31:33] > green[31:33, 31:33] + 10).all()
-    assert (green[-1] > red[-1]).all() and ((green[0] > red[0]) | (image[0] == BACKGROUND).all(-1)).all()
+    assert (green[-1] > red[-1]).all() and (
+        (green[0] > red[0]) | (image[0] == BACKGROUND).all(-1)
+    ).all()
     floor = green[green > red + 5]
     assert floor.max() - floor.min() > 60 and len(np.unique(floor)) > 10
     assert image.std() > 20

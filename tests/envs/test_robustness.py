@@ -44,7 +44,9 @@ def drive(name: str, num_envs: int, chunks: int, chunk_steps: int) -> dict:
     hint = "state" if "state" in envs.hint_names(name) else envs.NO_HINT
     env = envs.AutoReset(envs.make(name, hint, ("state", "hint")))
     params = envs.make_params(name)
-    ts = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(jax.random.key(0), num_envs), params)
+    ts = jax.vmap(env.reset, in_axes=(0, None))(
+        jax.random.split(jax.random.key(0), num_envs), params
+    )
 
     @jax.jit
     def chunk(state, key):
@@ -52,12 +54,16 @@ def drive(name: str, num_envs: int, chunks: int, chunk_steps: int) -> dict:
             state, finite, ended = carry
             k_act, k_env = jax.random.split(key)
             action = jax.random.choice(k_act, EXTREMES, (num_envs, env.action_size))
-            ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(jax.random.split(k_env, num_envs), state, action, params)
+            ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
+                jax.random.split(k_env, num_envs), state, action, params
+            )
             values = [ts.reward, *jax.tree.leaves(ts.obs)]
             finite = finite & jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in values]))
             return (ts.state, finite, ended + jnp.sum(ts.terminated | ts.truncated)), None
 
-        (state, finite, ended), _ = jax.lax.scan(step, (state, True, 0), jax.random.split(key, chunk_steps))
+        (state, finite, ended), _ = jax.lax.scan(
+            step, (state, True, 0), jax.random.split(key, chunk_steps)
+        )
         pictures = jax.vmap(env.render, in_axes=(0, None))(state.env_state, params)
         return state, finite, ended, pictures
 
@@ -66,9 +72,15 @@ def drive(name: str, num_envs: int, chunks: int, chunk_steps: int) -> dict:
         state, ok, n, pictures = chunk(state, key)
         finite, ended = finite and bool(ok), ended + int(n)
         pictures = np.asarray(pictures)
-        assert pictures.dtype == np.uint8 and pictures.shape[0] == num_envs and pictures.std() > 0  # drawn, not blank
+        # drawn, not blank
+        assert pictures.dtype == np.uint8 and pictures.shape[0] == num_envs and pictures.std() > 0
         drawn += 1
-    return {"finite": finite, "ended": ended, "steps": chunks * chunk_steps * num_envs, "pictures": drawn}
+    return {
+        "finite": finite,
+        "ended": ended,
+        "steps": chunks * chunk_steps * num_envs,
+        "pictures": drawn,
+    }
 
 
 @pytest.mark.slow

@@ -15,7 +15,9 @@ import pytest
 
 from hintsjax.envs import physics, warp_kernels
 
-warp_lang = pytest.mark.skipif(not physics.warp_installed(), reason="warp-lang not installed (pip install -e '.[gpu]')")
+warp_lang = pytest.mark.skipif(
+    not physics.warp_installed(), reason="warp-lang not installed (pip install -e '.[gpu]')"
+)
 
 
 def test_a_build_starts_only_for_a_warp_run_of_an_mjx_env(monkeypatch):
@@ -27,7 +29,8 @@ def test_a_build_starts_only_for_a_warp_run_of_an_mjx_env(monkeypatch):
 
     monkeypatch.setattr(warp_kernels.subprocess, "Popen", Recorded)
     assert warp_kernels.start("idp", physics.JAX, 2.0, "gpu").process is None
-    assert warp_kernels.start("car_racing", physics.WARP, 2.0, "gpu").process is None  # no MJCF model
+    # no MJCF model
+    assert warp_kernels.start("car_racing", physics.WARP, 2.0, "gpu").process is None
     assert started == []
     warp_kernels.start("ant", physics.WARP, 1.5, "gpu")
     warp_kernels.start("idp", physics.WARP, 2.0, "cpu")
@@ -39,7 +42,8 @@ def test_a_build_starts_only_for_a_warp_run_of_an_mjx_env(monkeypatch):
     def refused(args, **kwargs):
         raise OSError(11, "Resource temporarily unavailable")
 
-    monkeypatch.setattr(warp_kernels.subprocess, "Popen", refused)  # no child: the run goes on without one
+    # no child: the run goes on without one
+    monkeypatch.setattr(warp_kernels.subprocess, "Popen", refused)
     assert warp_kernels.start("ant", physics.WARP, 2.0, "gpu").process is None
 
 
@@ -66,7 +70,8 @@ print("stepped", bool(jnp.isfinite(out.obs["state"]).all()))
 """
 
 
-@pytest.mark.slow  # Warp's CPU kernels for the idp built twice into empty caches: about 2 minutes on 2 cores
+# Warp's CPU kernels for the idp built twice into empty caches: about 2 minutes on 2 cores
+@pytest.mark.slow
 @warp_lang
 def test_the_child_builds_what_an_envs_first_call_loads(tmp_path):
     """In an empty kernel cache, the child's build leaves an env's first reset and step nothing to
@@ -75,16 +80,34 @@ def test_the_child_builds_what_an_envs_first_call_loads(tmp_path):
     built = re.compile(r"Module (\S+) .*load on device 'cpu'.*\(compiled\)")
 
     def first_call_builds(cache: str) -> list[str]:
-        env = {**os.environ, "WARP_CACHE_PATH": cache, "HINTSJAX_DEBUG": "1", "JAX_PLATFORMS": "cpu"}
-        done = subprocess.run([sys.executable, "-c", _FIRST_ENV_CALL], env=env, capture_output=True, text=True,
-                              timeout=900)
+        env = {
+            **os.environ,
+            "WARP_CACHE_PATH": cache,
+            "HINTSJAX_DEBUG": "1",
+            "JAX_PLATFORMS": "cpu",
+        }
+        done = subprocess.run(
+            [sys.executable, "-c", _FIRST_ENV_CALL],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=900,
+        )
         assert done.returncode == 0 and "stepped True" in done.stdout, done.stderr[-2000:]
         return sorted(m.group(1) for m in built.finditer(done.stdout + done.stderr))
 
     ahead = str(tmp_path / "ahead")
     env = {**os.environ, "WARP_CACHE_PATH": ahead, "HINTSJAX_DEBUG": "1"}
-    done = subprocess.run([sys.executable, "-m", "hintsjax.envs.warp_kernels", "idp", "2.0", "cpu"], env=env,
-                          capture_output=True, text=True, timeout=900)
-    assert done.returncode == 0 and "kernels built or loaded on cpu" in done.stdout, done.stderr[-2000:]
+    done = subprocess.run(
+        [sys.executable, "-m", "hintsjax.envs.warp_kernels", "idp", "2.0", "cpu"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert done.returncode == 0 and "kernels built or loaded on cpu" in done.stdout, done.stderr[
+        -2000:
+    ]
     assert first_call_builds(ahead) == ["mujoco.mjx.warp.ffi"]
-    assert len(first_call_builds(str(tmp_path / "cold"))) > 10  # the check can fail: a cold first call builds them
+    # the check can fail: a cold first call builds them
+    assert len(first_call_builds(str(tmp_path / "cold"))) > 10
