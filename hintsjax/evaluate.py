@@ -19,7 +19,9 @@ from pathlib import Path
 
 from hintsjax.system import checkpoint, memory, paths
 from hintsjax.system.devices import SeedLayout
-from hintsjax.system.errors import ArgumentParser, UsageError, command, sized_by, whole
+from hintsjax.cli.arguments import int32_arg, ArgumentParser
+from hintsjax.system.errors import UsageError, command
+from hintsjax.system.refusals import sized_by
 from hintsjax.settings.config import env_params
 from hintsjax.settings.hint_sources import PROGRAMMATIC
 from hintsjax.settings.layers import load_run_config
@@ -45,7 +47,7 @@ def main(argv: list[str] | None = None) -> int:
         "(default: the training one)",
     )
     parser.add_argument(
-        "--episodes", type=whole, default=None, help="episodes per seed (default: the run's)"
+        "--episodes", type=int32_arg, default=None, help="episodes per seed (default: the run's)"
     )
     mode = parser.add_mutually_exclusive_group()
     mode.add_argument(

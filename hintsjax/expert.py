@@ -14,7 +14,8 @@ import sys
 from pathlib import Path
 
 
-from hintsjax.system.errors import ArgumentParser, command
+from hintsjax.cli.arguments import ArgumentParser
+from hintsjax.system.errors import command
 from hintsjax.cli import choices
 from hintsjax.algorithms.experts import EXPERT_JSON, export
 

@@ -13,7 +13,8 @@ import sys
 
 
 from hintsjax.system import paths
-from hintsjax.system.errors import command, writing_to
+from hintsjax.system.errors import command
+from hintsjax.system.refusals import writing_to
 from hintsjax.cli.arguments import parse_key_values
 from hintsjax.hints.generators import GeneratorConfig, train_folder
 

@@ -21,7 +21,9 @@ from pathlib import Path
 import jax
 
 from hintsjax.system import checkpoint, compilation_cache, paths
-from hintsjax.system.errors import ArgumentParser, command, whole, writing_to
+from hintsjax.cli.arguments import int32_arg, ArgumentParser
+from hintsjax.system.errors import command
+from hintsjax.system.refusals import writing_to
 from hintsjax.cli import choices
 from hintsjax.settings.config import RunConfig
 from hintsjax.settings.layers import run_config, save_run_config
@@ -94,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     batch = SETTINGS["ppo"]["batch_size"]
     parser.add_argument(
-        "--updates", type=whole, default=32, help=f"updates of {batch} env steps (default: 32)"
+        "--updates", type=int32_arg, default=32, help=f"updates of {batch} env steps (default: 32)"
     )
     parser.add_argument(
         "--out-dir",
@@ -104,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument(
         "--epochs",
-        type=whole,
+        type=int32_arg,
         default=SETTINGS["ppo"]["epochs"],
         help=f"PPO's epochs over each update's batch (default: {SETTINGS['ppo']['epochs']})",
     )

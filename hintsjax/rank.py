@@ -22,7 +22,8 @@ import numpy as np
 import yaml
 
 from hintsjax.system import paths
-from hintsjax.system.errors import command, writing_to
+from hintsjax.system.errors import command
+from hintsjax.system.refusals import writing_to
 from hintsjax.cli.arguments import parse_key_values
 from hintsjax.training.runlog import fresh_folder
 from hintsjax.hints.ranking import RankConfig, SCORES, rank_hints, ranking

@@ -24,15 +24,13 @@ from hintsjax.system import checkpoint, compilation_cache, devices, paths, reque
 from hintsjax.system.errors import (
     INTERRUPTED,
     TERMINATED,
-    Terminated,
     UsageError,
     command,
-    fail,
-    machines,
     report_bug,
-    report_machine,
-    sigterm_as_interrupt,
+    report_usage,
 )
+from hintsjax.system.refusals import machine_refused, report_machine
+from hintsjax.system.signals import sigterm_as_interrupt, Terminated
 from hintsjax.settings import schema
 from hintsjax.settings.config import RunConfig
 from hintsjax.settings.layers import CONFIG_YAML, load_run_config, save_run_config
@@ -74,7 +72,7 @@ def _run(values: dict[str, Any]) -> int:
     try:
         asked = request(values)
     except UsageError as e:
-        return fail(e)
+        return report_usage(e)
     except Exception as e:  # noqa: BLE001  the boundary: a bug, not bad input
         return report_bug(e)
     cfg, run_dir = asked.cfg, asked.run_dir
@@ -109,7 +107,9 @@ def _run(values: dict[str, Any]) -> int:
                 save_run_config(run_dir, cfg)  # the budget it now trains to
     except Exception as e:  # noqa: BLE001  the boundary: a full disk or read-only folder, else a bug
         return (
-            report_machine(e, run_dir or asked.out_dir) if machines(e) else report_bug(e, run_dir)
+            report_machine(e, run_dir or asked.out_dir)
+            if machine_refused(e)
+            else report_bug(e, run_dir)
         )
     try:
         train(cfg, run_dir, resume=resume)
@@ -121,7 +121,7 @@ def _run(values: dict[str, Any]) -> int:
             and {p.name for p in run_dir.iterdir()} <= {CONFIG_YAML, requeue.JOB_JSON}
         ):
             paths.unmake(run_dir, existed)
-        return fail(e)
+        return report_usage(e)
     # the newest complete checkpoint stays; resume from it
     except checkpoint.CheckpointWriteError as e:
         print(f"error: {e}", file=sys.stderr)
@@ -151,7 +151,7 @@ def _run(values: dict[str, Any]) -> int:
         )
         return 1
     except Exception as e:  # noqa: BLE001  the boundary: the machine's refusals; else a bug, its traceback kept in the run folder
-        return report_machine(e, run_dir) if machines(e) else report_bug(e, run_dir)
+        return report_machine(e, run_dir) if machine_refused(e) else report_bug(e, run_dir)
     return 0
 
 

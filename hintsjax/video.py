@@ -17,7 +17,9 @@ import jax
 
 from hintsjax import envs
 from hintsjax.system import checkpoint, memory, paths
-from hintsjax.system.errors import ArgumentParser, UsageError, command, sized_by, whole
+from hintsjax.cli.arguments import int32_arg, ArgumentParser
+from hintsjax.system.errors import UsageError, command
+from hintsjax.system.refusals import sized_by
 from hintsjax.settings.config import env_params
 from hintsjax.settings.layers import load_run_config
 from hintsjax.cli import choices
@@ -43,17 +45,20 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("run", type=Path, help="a run folder written by python -m hintsjax.run")
     parser.add_argument(
-        "--seed", type=whole, default=0, help="which of the run's seeds acts (default: 0)"
+        "--seed", type=int32_arg, default=0, help="which of the run's seeds acts (default: 0)"
     )
     parser.add_argument("--variant", default=None, help="env variant (default: the training one)")
     parser.add_argument(
         "--steps",
-        type=whole,
+        type=int32_arg,
         default=None,
         help=f"at most this many steps (default: the episode, at most {MAX_STEPS})",
     )
     parser.add_argument(
-        "--scale", type=whole, default=4, help="picture upscaling, nearest neighbour (default: 4)"
+        "--scale",
+        type=int32_arg,
+        default=4,
+        help="picture upscaling, nearest neighbour (default: 4)",
     )
     parser.add_argument(
         "--out",
@@ -61,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="GIF path (default: RUN/video-<variant>-seed<seed>.gif)",
     )
-    parser.add_argument("--fps", type=whole, default=25, help="frames per second (default: 25)")
+    parser.add_argument("--fps", type=int32_arg, default=25, help="frames per second (default: 25)")
     args = parser.parse_args(argv)
     cfg = load_run_config(args.run)
     variant = args.variant or cfg.variant or envs.variant_names(cfg.env)[0]

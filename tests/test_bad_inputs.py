@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 from hintsjax import evaluate, expert, generator, quickstart, rank, run, video
-from hintsjax.system import errors, paths
+from hintsjax.system import errors, paths, refusals
 from hintsjax.training import pipeline
 
 TABLE = yaml.safe_load((Path(__file__).parent / "data" / "bad_inputs.yaml").read_text())
@@ -168,17 +168,17 @@ def test_a_file_written_whole_keeps_what_was_there_when_the_disk_fills(tmp_path)
         part.write_text("half")
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    with pytest.raises(errors.WriteFailed) as failed:
+    with pytest.raises(refusals.WriteFailed) as failed:
         paths.write_whole(out, half_then_full)
     assert failed.value.strerror == f"could not write {out}: No space left on device"
     assert out.read_text() == "old\n" and [p.name for p in tmp_path.iterdir()] == ["eval.json"]
     paths.write_whole(out, lambda part: part.write_text("new\n"))
     assert out.read_text() == "new\n" and [p.name for p in tmp_path.iterdir()] == ["eval.json"]
-    refused = errors.machine_write(PermissionError(errno.EACCES, "Permission denied", "/x/y"))
+    refused = refusals.machine_write(PermissionError(errno.EACCES, "Permission denied", "/x/y"))
     # outside writing_to: maybe a read
     assert refused.strerror == "could not read or write /x/y: Permission denied"
     with pytest.raises(PermissionError):  # not the machine's refusal of a write: passes as it was
-        with errors.writing_to(out):
+        with refusals.writing_to(out):
             raise PermissionError(errno.ENOTDIR, "not this")
 
 
@@ -198,7 +198,7 @@ def test_a_run_whose_folder_is_read_only_or_whose_device_runs_out_of_memory_says
         raise OSError(errno.EROFS, "Read-only file system")
 
     monkeypatch.setattr(run, "save_run_config", read_only)
-    assert run.main_from_values(values) == errors.MACHINE
+    assert run.main_from_values(values) == refusals.MACHINE
     assert capsys.readouterr().err.strip().splitlines() == [
         f"error: could not write {tmp_path / 'r'}: Read-only file system"
     ]
@@ -210,7 +210,7 @@ def test_a_run_whose_folder_is_read_only_or_whose_device_runs_out_of_memory_says
     monkeypatch.delenv(errors.DEBUG)
     monkeypatch.setattr(pipeline, "compile_evaluator", lambda *args, **kwargs: None)
     monkeypatch.setattr(pipeline, "start", too_big)
-    assert run.main_from_values({**values, "name": "oom"}) == errors.MACHINE
+    assert run.main_from_values({**values, "name": "oom"}) == refusals.MACHINE
     lines = capsys.readouterr().err.strip().splitlines()
     assert lines == [
         f"error: the device ran out of memory (Out of memory allocating {2**45} bytes.); lower "
@@ -220,11 +220,11 @@ def test_a_run_whose_folder_is_read_only_or_whose_device_runs_out_of_memory_says
 
     @errors.command
     def evaluating() -> int:  # as hintsjax.evaluate sizes its evaluation
-        with errors.sized_by("--episodes"):
+        with refusals.sized_by("--episodes"):
             too_big()
         return 0
 
-    assert evaluating() == errors.MACHINE
+    assert evaluating() == refusals.MACHINE
     assert capsys.readouterr().err.strip().splitlines() == [
         f"error: the device ran out of memory (Out of memory allocating {2**45} bytes.); lower --episodes and run again"
     ]

@@ -19,7 +19,7 @@ import pytest
 import yaml
 
 import command_runs
-from hintsjax.system import checkpoint, errors
+from hintsjax.system import checkpoint, errors, signals
 from hintsjax.system.errors import UsageError
 from hintsjax.settings import layers
 from hintsjax.cli import overrides
@@ -375,22 +375,22 @@ def test_a_sigterm_python_dropped_is_raised_again_where_training_checks():
         if phase == "start":
             signal.raise_signal(signal.SIGTERM)
 
-    with errors.sigterm_as_interrupt():
+    with signals.sigterm_as_interrupt():
         gc.callbacks.append(terminate_inside)
         try:
             gc.collect()  # the SIGTERM's Terminated is raised in the callback, and dropped
         finally:
             gc.callbacks.remove(terminate_inside)
-        with pytest.raises(errors.Terminated):
-            errors.raise_stop_asked()
-        with pytest.raises(errors.Terminated):
-            errors.raise_stop_asked()  # until the block that asked for it ends
-    errors.raise_stop_asked()
-    with errors.sigterm_as_interrupt():
-        with errors.stops_deferred():
+        with pytest.raises(signals.Terminated):
+            signals.raise_stop_asked()
+        with pytest.raises(signals.Terminated):
+            signals.raise_stop_asked()  # until the block that asked for it ends
+    signals.raise_stop_asked()
+    with signals.sigterm_as_interrupt():
+        with signals.stops_deferred():
             signal.raise_signal(signal.SIGTERM)  # kept, not raised
-            with pytest.raises(errors.Terminated):
-                errors.raise_stop_asked()
+            with pytest.raises(signals.Terminated):
+                signals.raise_stop_asked()
 
 
 def test_a_sweep_is_expanded_in_hydras_order_with_every_value_checked_first():

@@ -15,7 +15,7 @@ import yaml
 from PIL import Image
 
 from hintsjax import envs
-from hintsjax.system import checkpoint, errors
+from hintsjax.system import checkpoint, refusals
 from hintsjax.settings.config import RunConfig
 from hintsjax.settings.layers import run_config, save_run_config
 from hintsjax.algorithms.ppo import make_network
@@ -199,7 +199,7 @@ def test_a_gif_the_machine_refuses_to_write_is_one_line_naming_it_not_a_bug(case
     assert command == "video"
     before = sorted(p.name for p in tiny_run.path.iterdir())
     argv = [a.format(run=tiny_run.path) for a in args] + ["--seed", "1", "--steps", str(STEPS)]
-    assert main(argv) == errors.MACHINE == 1
+    assert main(argv) == refusals.MACHINE == 1
     err = capsys.readouterr().err
     assert err.strip().splitlines() == ["error: " + UNWRITABLE[case].format(run=tiny_run.path)], err
     assert "Traceback" not in err and sorted(p.name for p in tiny_run.path.iterdir()) == before

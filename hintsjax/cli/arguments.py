@@ -1,13 +1,16 @@
 """`key=value` command-line arguments into a settings dataclass (the tools beside the run command:
 hintsjax.generator, hintsjax.rank), checked against its fields' types in one line each; `--help`
-lists the settings with their defaults and the registries' choices (hintsjax.cli.choices)."""
+lists the settings with their defaults and the registries' choices (hintsjax.cli.choices). The
+argparse commands share its one-line parser errors (`ArgumentParser`) and int32 type (`int32_arg`)."""
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 from typing import Any, TypeVar
 
-from hintsjax.system.errors import UsageError, beyond_int32
+from hintsjax.system.checks import beyond_int32
+from hintsjax.system.errors import UsageError
 from hintsjax.cli import choices
 
 T = TypeVar("T")
@@ -60,3 +63,21 @@ def parse_key_values(cls: type[T], argv: list[str], prog: str = "", about: str =
             if isinstance(values[key], int) and beyond_int32(values[key]):
                 raise UsageError(f"{key} {beyond_int32(values[key])}, got {raw}")
     return cls(**values)
+
+
+def int32_arg(text: str) -> int:
+    """An argparse `type`: an integer that JAX's int32 holds."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid int value: {text!r}") from None
+    if beyond_int32(value):
+        raise argparse.ArgumentTypeError(f"{beyond_int32(value)}, got {text}")
+    return value
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse's parser whose errors are one line (`error: ...; see <prog> --help`), exit 2."""
+
+    def error(self, message: str):  # noqa: D102
+        self.exit(2, f"error: {message}; see {self.prog} --help\n")

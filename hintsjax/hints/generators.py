@@ -30,7 +30,8 @@ from flax import struct
 
 from hintsjax import envs
 from hintsjax.envs.errors import ChoiceError, choose
-from hintsjax.system.errors import UsageError, require_positive, require_range
+from hintsjax.system.checks import require_positive, require_range
+from hintsjax.system.errors import UsageError
 from hintsjax.settings.hint_sources import (
     GENERATOR_JSON,
     Generator,

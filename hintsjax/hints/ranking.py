@@ -27,7 +27,8 @@ from flax import struct
 
 from hintsjax import envs
 from hintsjax.envs.errors import ChoiceError, choose
-from hintsjax.system.errors import UsageError, require_positive, require_range
+from hintsjax.system.checks import require_positive, require_range
+from hintsjax.system.errors import UsageError
 from hintsjax.models.conditioning import SCHEMES
 from hintsjax.models.networks import Encoder, MLP, scale_pixels
 from hintsjax.settings.layers import run_config

@@ -7,7 +7,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from hintsjax.system.errors import UsageError, require_positive, require_range
+from hintsjax.system.checks import require_positive, require_range
+from hintsjax.system.errors import UsageError
 from hintsjax.settings.fields import check_choices, setting
 
 

@@ -16,7 +16,8 @@ import jax.numpy as jnp
 
 from hintsjax import envs
 from hintsjax.envs.errors import ChoiceError, choose
-from hintsjax.system.errors import INT_MAX, UsageError, require_positive
+from hintsjax.system.checks import INT_MAX, require_positive
+from hintsjax.system.errors import UsageError
 from hintsjax.models.agents import AGENTS, AgentSpec, EXPERT_AGENT
 from hintsjax.models.conditioning import SCHEMES
 from hintsjax.models.networks import MIN_IMAGE_SIZE

@@ -14,7 +14,8 @@ import yaml
 from hintsjax import envs
 from hintsjax.envs.errors import ChoiceError, choose
 from hintsjax.system import paths
-from hintsjax.system.errors import UsageError, require_int32
+from hintsjax.system.checks import require_int32
+from hintsjax.system.errors import UsageError
 from hintsjax.settings.config import RunConfig, SECTIONS
 from hintsjax.settings.env_defaults import ENV_DEFAULTS, stack_layers
 from hintsjax.settings import schema

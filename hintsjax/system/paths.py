@@ -1,7 +1,7 @@
 """Paths a command will write, checked before any work: a folder that is a file, a file that is
 a folder, or a place that cannot be written is one line naming it (UsageError), not a traceback
 after training. A write the machine refuses all the same (a full disk) is one line naming the
-path (hintsjax.system.errors.WriteFailed), and `write_whole` leaves what was there intact."""
+path (hintsjax.system.refusals.WriteFailed), and `write_whole` leaves what was there intact."""
 
 from __future__ import annotations
 
@@ -10,7 +10,8 @@ import shutil
 from pathlib import Path
 from typing import Callable
 
-from hintsjax.system.errors import UsageError, writing_to
+from hintsjax.system.errors import UsageError
+from hintsjax.system.refusals import writing_to
 
 
 def _nearest_existing(path: Path) -> Path:

@@ -21,7 +21,8 @@ from pathlib import Path
 from typing import Any, Callable
 
 from hintsjax.system import paths
-from hintsjax.system.errors import TERMINATED, Terminated, signal_as_interrupt
+from hintsjax.system.errors import TERMINATED
+from hintsjax.system.signals import signal_as_interrupt, Terminated
 
 # {"job_id", "executor", "cluster"}: the submitit job that made the run folder
 JOB_JSON = "job.json"
@@ -126,7 +127,7 @@ def hand_over(stop: Preempted, folder: Path | None, saved: str) -> int:
 
 def preemption_as_interrupt() -> contextlib.AbstractContextManager:
     """Within this block, inside a submitit job, submitit's preemption signal raises Preempted in
-    the main thread (errors.signal_as_interrupt); its handler is put back after. Elsewhere nothing
+    the main thread (signals.signal_as_interrupt); its handler is put back after. Elsewhere nothing
     changes."""
     submitit = _submitit()
     if submitit is None:

@@ -20,7 +20,8 @@ from hintsjax import envs
 from hintsjax.envs import physics
 from hintsjax.system import checkpoint, devices
 from hintsjax.system.devices import SeedLayout
-from hintsjax.system.errors import Terminated, UsageError, raise_stop_asked, stops_deferred
+from hintsjax.system.errors import UsageError
+from hintsjax.system.signals import raise_stop_asked, stops_deferred, Terminated
 from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms.trainer import Trainer
 from hintsjax.training.compilation import Compiled, check_fits, check_run_fits, compile_training

@@ -14,7 +14,7 @@ import numpy as np
 from hintsjax.envs import physics, warp_kernels
 from hintsjax.system import checkpoint, compilation_cache, devices
 from hintsjax.system.devices import SeedLayout
-from hintsjax.system.errors import sized_by
+from hintsjax.system.refusals import sized_by
 from hintsjax.system.wall import Laps
 from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms.group import cell_state, make_group, make_group_trainer
@@ -50,7 +50,7 @@ def say_compiling(cfg: RunConfig, label: str) -> None:
     print(f"{cfg.env} {label}: compiling its programs{cached}", flush=True)
 
 
-# The settings that size evaluation, named where an allocation fails (hintsjax.system.errors.sized_by);
+# The settings that size evaluation, named where an allocation fails (hintsjax.system.refusals.sized_by);
 # training's are compilation.TRAINING_SIZES.
 EVALUATION_SIZES = "eval_episodes (or seeds)"
 

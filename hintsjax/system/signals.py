@@ -1,0 +1,80 @@
+"""Signals as interrupts: within `signal_as_interrupt` a signal (SIGTERM: `sigterm_as_interrupt`;
+submitit's preemption: hintsjax/system/requeue.py) raises in the main thread as Ctrl-C does, so
+whatever handles Ctrl-C handles it too; within `stops_deferred` (training's loop) the stop is kept
+and raised at the loop's safe points (`raise_stop_asked`)."""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import threading
+from typing import Any, Callable
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (a cluster's time limit or preemption, `kill`), raised in the main thread as Ctrl-C
+    raises KeyboardInterrupt, so whatever handles Ctrl-C (a run saves its newest logged state)
+    handles it too; reported as its own line, exit 143."""
+
+
+_stops: list[KeyboardInterrupt] = []  # the stop a signal asked for (within `signal_as_interrupt`)
+_blocks: list[int] = []  # the signals of the `signal_as_interrupt` blocks open now, outermost first
+_deferring: list[bool] = []  # `stops_deferred` blocks open now
+
+
+@contextlib.contextmanager
+def signal_as_interrupt(number: int, make: Callable[[int, Any], KeyboardInterrupt]):
+    """Within this block the signal `number` raises `make(number, frame)` in the main thread, as
+    Ctrl-C raises KeyboardInterrupt (once: another signal while a stop is under way is ignored,
+    and SIGKILL still kills); the signal's handler is put back after. Outside the main thread
+    (where Python cannot handle signals) nothing changes.
+
+    Within `stops_deferred` (training's loop) the stop is only kept, and the loop raises it at its
+    safe points (`raise_stop_asked`), so that it never lands in the middle of a metrics row or a
+    checkpoint's hand-over. Python also drops an exception raised while a garbage collector's
+    callback runs (JAX has one: it prints "Exception ignored in ..." and goes on); the kept stop is
+    raised at the next safe point then too."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        if not _stops:
+            _stops.append(make(signum, frame))
+            if not _deferring:
+                raise _stops[0]
+
+    previous = signal.signal(number, handler)
+    _blocks.append(number)
+    try:
+        yield
+    finally:
+        signal.signal(number, signal.SIG_DFL if previous is None else previous)
+        _blocks.pop()
+        # the outermost block: a stop taken in an inner one still holds off the outer's signal till
+        # here
+        if not _blocks:
+            _stops.clear()
+
+
+@contextlib.contextmanager
+def stops_deferred():
+    """Within this block a signal's stop (`signal_as_interrupt`) is kept, not raised: the code in
+    it raises the stop at its own safe points (`raise_stop_asked`)."""
+    _deferring.append(True)
+    try:
+        yield
+    finally:
+        _deferring.pop()
+
+
+def raise_stop_asked() -> None:
+    """Raise the stop a signal asked for, if any (`signal_as_interrupt`): kept within
+    `stops_deferred`, or dropped by Python where it was raised."""
+    if _stops:
+        raise _stops[0]
+
+
+def sigterm_as_interrupt():
+    """Within this block SIGTERM raises Terminated in the main thread (`signal_as_interrupt`)."""
+    return signal_as_interrupt(signal.SIGTERM, lambda number, frame: Terminated())
