@@ -1,14 +1,15 @@
 """Can physics=warp train with deterministic GPU ops off? The user's command, minus its refusal.
 
-    python experiments/warp_det_off.py [--env ant] [--updates 100] [--eval-compile beside|first] [--out F]
+    python experiments/warp_det_off.py [--env ant] [--updates 100] [--eval-compile beside|first]
+                                       [--out F]
 
 Run under `XLA_FLAGS=--xla_gpu_deterministic_ops=false` (hintsjax then adds its persisted
 autotune folder beside $HINTSJAX_COMPILATION_CACHE: give each trial an empty one). It trains the
 env's HINTS-FC cell (its default hint) with physics=warp for `--updates` updates through
-`run.main_from_values`, the command's own path, with `loop.check_warp_run`'s refusal of this flag
-set lifted, and the evaluation program compiled beside training (as before this script) or first
-(`pipeline.evaluation_compiles_first`, what the command does now). It prints one JSON row: the exit
-status, the training rate and compile seconds from eval.json, and the tail of what went wrong.
+`run.main_from_values`, the command's own path, with `compilation.check_warp_run`'s refusal of this
+flag set lifted, and the evaluation program compiled beside training (as before this script) or
+first (`pipeline.evaluation_compiles_first`, what the command does now). It prints one JSON row: the
+exit status, the training rate and compile seconds from eval.json, and the tail of what went wrong.
 """
 
 from __future__ import annotations
@@ -35,10 +36,10 @@ def main() -> None:
 
     import hintsjax
     from hintsjax.settings.layers import run_config
-    from hintsjax.training import loop, pipeline
+    from hintsjax.training import compilation, pipeline
     from hintsjax import run
 
-    loop.check_warp_run = lambda: None  # the refusal under test
+    compilation.check_warp_run = lambda: None  # the refusal under test
     pipeline.evaluation_compiles_first = lambda cfg: args.eval_compile == "first"
     steps = args.updates * run_config({"env": args.env, "physics": "warp"}).ppo.batch_size
     with tempfile.TemporaryDirectory() as out:

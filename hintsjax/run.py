@@ -1,8 +1,8 @@
 """Train from the command line (Hydra), evaluate, and write one run folder.
 
     python -m hintsjax.run env=pendulum agent=hints hint=composite scheme=fc seeds=5
-    python -m hintsjax.run -m scheme=lc,ac,fc,mc          # a sweep, one folder per run
-    python -m hintsjax.run resume=runs/<folder>           # go on (ppo.total_env_steps=N: train longer)
+    python -m hintsjax.run -m scheme=lc,ac,fc,mc       # a sweep, one folder per run
+    python -m hintsjax.run resume=runs/<folder>        # go on (ppo.total_env_steps=N: train longer)
 
 A run folder holds config.yaml (resolved), metrics.csv, TensorBoard events (tb/), orbax
 checkpoints of the full train state (checkpoints/), eval.json and learning_curve.png.
@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -38,7 +39,7 @@ from hintsjax.cli import choices, overrides
 from hintsjax.training.guards import NONFINITE_JSON, NonFiniteError
 from hintsjax.training.outputs import EVAL_JSON, new_run_dir
 from hintsjax.training.pipeline import train
-from hintsjax.training.request import request, rounded_budget
+from hintsjax.training.request import Request, checked_request, rounded_budget
 
 
 def main_from_values(values: dict[str, Any]) -> int:
@@ -69,90 +70,115 @@ def requeued_run(out_dir: str, cfg: RunConfig) -> Path | None:
 
 
 def _run(values: dict[str, Any]) -> int:
+    """A run command's values to its exit status: the request checked, its folder opened, the
+    training, and the one line each way of stopping early prints (`stopped_early`)."""
     try:
-        asked = request(values)
+        asked = checked_request(values)
     except UsageError as e:
         return report_usage(e)
     except Exception as e:  # noqa: BLE001  the boundary: a bug, not bad input
         return report_bug(e)
-    cfg, run_dir = asked.cfg, asked.run_dir
     named = any(
         (values.get("ppo") or {}).get(k) is not None for k in ("total_env_steps", "batch_size")
     )
     # an env's own budget is not the user's to round
-    if named and (note := rounded_budget(cfg)) and devices.is_main():
+    if named and (note := rounded_budget(asked.cfg)) and devices.is_main():
         print(note, file=sys.stderr)
     compilation_cache.enable(compilation_cache.folder(values.get("compilation_cache")))
-    # what stays if the run goes again before its first update
-    existed = paths.existing_part(asked.out_dir)
-    # a folder made by this call (not a resumed or requeued run's); a checkpoint to go on from
-    made = resume = False
+    folder = RunFolder(asked, existed=paths.existing_part(asked.out_dir))
     try:
-        if run_dir is None:
-            if devices.is_main():
-                run_dir = requeued_run(asked.out_dir, cfg)
-                if run_dir is None:
-                    run_dir, made = new_run_dir(asked.out_dir, asked.name, cfg), True
-                    save_run_config(run_dir, cfg)
-                    requeue.record(run_dir)
-            # the folder process 0 made (or found), on every process
-            run_dir = Path(devices.agree(str(run_dir)))
-            # a requeued run's newest checkpoint, if it had one (process 0 looks: the look tidies the folder)
-            resume = devices.agree_that(
-                devices.is_main() and checkpoint.latest_update(run_dir) is not None
-            )
-        else:
-            resume = True
-            if asked.longer and devices.is_main():
-                save_run_config(run_dir, cfg)  # the budget it now trains to
+        folder.open()
     except Exception as e:  # noqa: BLE001  the boundary: a full disk or read-only folder, else a bug
-        return (
-            report_machine(e, run_dir or asked.out_dir)
-            if machine_refused(e)
-            else report_bug(e, run_dir)
-        )
+        where = folder.path or asked.out_dir
+        return report_machine(e, where) if machine_refused(e) else report_bug(e, folder.path)
     try:
-        train(cfg, run_dir, resume=resume)
-    # found before the first update (a program that cannot fit): a new folder goes again
-    except UsageError as e:
-        if (
-            made
-            and run_dir.is_dir()
-            and {p.name for p in run_dir.iterdir()} <= {CONFIG_YAML, requeue.JOB_JSON}
-        ):
-            paths.unmake(run_dir, existed)
-        return report_usage(e)
-    # the newest complete checkpoint stays; resume from it
-    except checkpoint.CheckpointWriteError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 1
-    # Ctrl-C (SIGTERM): advance saved a checkpoint if one was due, and its writes are done
-    except KeyboardInterrupt as e:
-        good = checkpoint.latest_update(run_dir)
-        saved = f"checkpoint at update {good}" if good else "no checkpoint yet"
-        # submitit's signal: its own handler requeues the job and exits
-        if isinstance(e, requeue.Preempted):
-            return requeue.hand_over(e, run_dir, saved)
-        stopped = "terminated (SIGTERM)" if isinstance(e, Terminated) else "interrupted"
-        print(
-            f"{stopped}; {saved}; go on with: python -m hintsjax.run resume={run_dir}",
-            file=sys.stderr,
+        train(asked.cfg, folder.path, resume=folder.resume)
+    except (Exception, KeyboardInterrupt) as e:  # noqa: BLE001  each kind has its line
+        return stopped_early(e, folder)
+    return 0
+
+
+@dataclass
+class RunFolder:
+    """Where a run trains (`path`): a new folder, the one a requeued job made, or the resumed run's;
+    whether this call made it (a run refused before its first update takes it away again) and
+    whether it holds a checkpoint to go on from."""
+
+    asked: Request
+    existed: Path  # the part of out_dir that stood before this call (paths.existing_part)
+    path: Path | None = None
+    made: bool = False
+    resume: bool = False
+
+    def open(self) -> None:
+        """Make (or find) the folder and write its config; the folder is set as soon as it
+        exists."""
+        asked = self.asked
+        if asked.run_dir is not None:
+            self.path, self.resume = asked.run_dir, True
+            if asked.longer and devices.is_main():
+                save_run_config(self.path, asked.cfg)  # the budget it now trains to
+            return
+        if devices.is_main():
+            self.path = requeued_run(asked.out_dir, asked.cfg)
+            if self.path is None:
+                self.path, self.made = new_run_dir(asked.out_dir, asked.name, asked.cfg), True
+                save_run_config(self.path, asked.cfg)
+                requeue.record(self.path)
+        # the folder process 0 made (or found), on every process
+        self.path = Path(devices.agree(str(self.path)))
+        # a requeued run's newest checkpoint, if it had one (process 0 looks: the look tidies it)
+        self.resume = devices.agree_that(
+            devices.is_main() and checkpoint.latest_update(self.path) is not None
         )
-        return TERMINATED if isinstance(e, Terminated) else INTERRUPTED
-    except NonFiniteError as e:  # its checkpoints were all written before it went non-finite
+
+    def take_back(self) -> None:
+        """Remove the folder this call made if it holds only its config (and job.json)."""
+        path = self.path
+        if self.made and path.is_dir() and {p.name for p in path.iterdir()} <= UNTRAINED:
+            paths.unmake(path, self.existed)
+
+
+UNTRAINED = {CONFIG_YAML, requeue.JOB_JSON}  # what a run folder holds before its first update
+
+
+def stopped_early(error: BaseException, folder: RunFolder) -> int:
+    """The one line a run that did not reach its end prints, and its exit status."""
+    run_dir = folder.path
+    # found before the first update (a program that cannot fit): a new folder goes again
+    if isinstance(error, UsageError):
+        folder.take_back()
+        return report_usage(error)
+    if isinstance(error, checkpoint.CheckpointWriteError):  # the newest complete one stays
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+    if isinstance(error, KeyboardInterrupt):
+        return interrupted(error, run_dir)
+    if isinstance(error, NonFiniteError):  # its checkpoints were all written before it went so
         good = checkpoint.latest_update(run_dir)  # read once the background writes are done
         if devices.is_main():
-            (run_dir / NONFINITE_JSON).write_text(
-                json.dumps({**e.found, "last_good_checkpoint": good}) + "\n"
-            )
-        print(
-            f"error: {e}; last good checkpoint: {f'update {good}' if good else 'none'} ({run_dir})",
-            file=sys.stderr,
-        )
+            found = {**error.found, "last_good_checkpoint": good}
+            (run_dir / NONFINITE_JSON).write_text(json.dumps(found) + "\n")
+        last = f"update {good}" if good else "none"
+        print(f"error: {error}; last good checkpoint: {last} ({run_dir})", file=sys.stderr)
         return 1
-    except Exception as e:  # noqa: BLE001  the boundary: the machine's refusals; else a bug, its traceback kept in the run folder
-        return report_machine(e, run_dir) if machine_refused(e) else report_bug(e, run_dir)
-    return 0
+    # the boundary: the machine's refusals; else a bug, its traceback kept in the run folder
+    return report_machine(error, run_dir) if machine_refused(error) else report_bug(error, run_dir)
+
+
+def interrupted(stop: KeyboardInterrupt, run_dir: Path) -> int:
+    """Ctrl-C or SIGTERM (the loop saved a checkpoint if one was due, and its writes are done):
+    one line naming the newest checkpoint and the command that goes on; submitit's preemption
+    hands over to submitit, which requeues the job."""
+    good = checkpoint.latest_update(run_dir)
+    saved = f"checkpoint at update {good}" if good else "no checkpoint yet"
+    if isinstance(stop, requeue.Preempted):
+        return requeue.hand_over(stop, run_dir, saved)
+    stopped = "terminated (SIGTERM)" if isinstance(stop, Terminated) else "interrupted"
+    print(
+        f"{stopped}; {saved}; go on with: python -m hintsjax.run resume={run_dir}", file=sys.stderr
+    )
+    return TERMINATED if isinstance(stop, Terminated) else INTERRUPTED
 
 
 # the schema, read off the fields
@@ -169,14 +195,15 @@ def _hydra_main(cfg: DictConfig) -> None:
 @command
 def checked_main() -> int:
     """The command line checked (every job of a sweep, before the first trains), then Hydra's run.
-    --help: the registries' choices, the settings with their help, then Hydra's page of the config."""
+    --help: the registries' choices, the settings with their help, then Hydra's page of the
+    config."""
     if {"-h", "--help"} & set(sys.argv[1:]):
         print(f"{__doc__.strip()}\n\n{choices.text()}\n\n{schema.help_text()}\n")
     overrides.check_overrides(sys.argv[1:])
     if overrides.asks_only_for_warp(sys.argv[1:]):
         # nothing under MuJoCo Warp repeats bit for bit; they only cost speed
         xla_flags.drop_determinism()
-    overrides.check_sweep(sys.argv[1:], request)
+    overrides.check_sweep(sys.argv[1:], checked_request)
     _hydra_main()  # exits itself with a run's non-zero status
     return 0
 

@@ -29,7 +29,7 @@ from hintsjax.training import loop, pipeline
 
 def stopped_at_the_first_report(stop, what: str) -> None:
     """Run the command's values (argv[2]), calling `stop` once the first chunk's metrics are logged
-    (loop.advance's report calls check_physics then); exit with the run's status (never 0)."""
+    (the chunk loop's log calls check_physics then); exit with the run's status (never 0)."""
     real_check, checks = loop.check_physics, []
 
     def check_then_stop(*args):

@@ -26,7 +26,8 @@ COMMANDS = {
     "rank": rank.main,
     "generator": generator.main,
 }
-# the commands of key=value arguments write into out_dir: a case must leave it unmade (a case's own out_dir comes after, and wins)
+# the commands of key=value arguments write into out_dir: a case must leave it unmade (a case's own
+# out_dir comes after, and wins)
 EXTRA = {"rank": ["out_dir={tmp}/out"], "generator": ["out_dir={tmp}/out"]}
 TINY = {
     "env": "pendulum",
@@ -209,7 +210,7 @@ def test_a_run_whose_folder_is_read_only_or_whose_device_runs_out_of_memory_says
     monkeypatch.undo()
     monkeypatch.delenv(errors.DEBUG)
     monkeypatch.setattr(pipeline, "compile_evaluator", lambda *args, **kwargs: None)
-    monkeypatch.setattr(pipeline, "start", too_big)
+    monkeypatch.setattr(pipeline, "start_training", too_big)
     assert run.main_from_values({**values, "name": "oom"}) == refusals.MACHINE
     lines = capsys.readouterr().err.strip().splitlines()
     assert lines == [
@@ -226,7 +227,8 @@ def test_a_run_whose_folder_is_read_only_or_whose_device_runs_out_of_memory_says
 
     assert evaluating() == refusals.MACHINE
     assert capsys.readouterr().err.strip().splitlines() == [
-        f"error: the device ran out of memory (Out of memory allocating {2**45} bytes.); lower --episodes and run again"
+        f"error: the device ran out of memory (Out of memory allocating {2**45} bytes.); lower "
+        "--episodes and run again"
     ]
 
 
@@ -253,8 +255,8 @@ def test_a_run_whose_compiled_program_cannot_fit_is_refused_before_training_and_
             "error: seeds=2 x ppo.batch_size=64 cannot fit: training's compiled program needs "
         )
         and lines[0].endswith(
-            "(XLA's memory analysis), a device has 293.0 KiB; lower ppo.batch_size (with ppo.num_envs and "
-            "ppo.minibatch_size), seeds or image_size"
+            "(XLA's memory analysis), a device has 293.0 KiB; lower ppo.batch_size (with "
+            "ppo.num_envs and ppo.minibatch_size), seeds or image_size"
         )
     ), lines
     assert "Traceback" not in err and list(tmp_path.iterdir()) == []

@@ -28,8 +28,9 @@ from hintsjax.training import loop, pipeline, request
 from hintsjax import run
 from hintsjax.evaluate import main as evaluate_main
 
-# The traced-program cache on for this file's runs and the commands they start (tests/conftest.py): nothing here
-# replaces a function inside a traced program (only checkpoint.save, loop.check_physics and run.train, outside them).
+# The traced-program cache on for this file's runs and the commands they start (tests/conftest.py):
+# nothing here replaces a function inside a traced program (only checkpoint.save, loop.check_physics
+# and run.train, outside them).
 pytestmark = pytest.mark.usefixtures("traced_programs_kept")
 
 TINY = [
@@ -65,7 +66,8 @@ def cli(*args: str, cwd: Path, module: str = "hintsjax.run") -> subprocess.Compl
 
 
 def with_xla_flag(flag: str) -> str:
-    """The suite's XLA_FLAGS (tests/conftest.py: LLVM's cheapest level) with `flag` added, for a subprocess."""
+    """The suite's XLA_FLAGS (tests/conftest.py: LLVM's cheapest level) with `flag` added, for a
+    subprocess."""
     return f"{os.environ.get('XLA_FLAGS', '')} {flag}".strip()
 
 
@@ -110,9 +112,13 @@ BAD_SETTINGS = BAD["run_settings"]
 def test_names_and_folders_are_strings_whatever_yaml_makes_of_them():
     """`name=2024`, `name=true`, `out_dir=123`, `resume=42` as Hydra parses them (int, bool) are
     folder names; one variant alone is a list of one."""
-    assert request.places({"name": 2024, "out_dir": 123, "resume": 42}) == ("42", "123", "2024")
-    assert request.places({"name": True}) == (None, "runs", "true")
-    assert request.places({}) == (None, "runs", None)
+    assert request.folder_settings({"name": 2024, "out_dir": 123, "resume": 42}) == (
+        "42",
+        "123",
+        "2024",
+    )
+    assert request.folder_settings({"name": True}) == (None, "runs", "true")
+    assert request.folder_settings({}) == (None, "runs", None)
     from hintsjax.settings.layers import run_config
 
     assert run_config({"env": "pendulum", "eval_variants": "swingto"}).eval_variants == ("swingto",)
@@ -220,7 +226,8 @@ def finished_run(tmp_path_factory) -> Path:
 
 
 def state_arrays(run_dir: Path) -> list[np.ndarray]:
-    """Every array of a run's newest checkpoint (params, optimiser state, env state, key, update)."""
+    """Every array of a run's newest checkpoint (params, optimiser state, env state, key,
+    update)."""
     state, _ = checkpoint.restore_latest(
         run_dir, make_trainer(layers.load_run_config(run_dir)).abstract_state()
     )
@@ -278,7 +285,8 @@ def test_a_run_killed_with_sigkill_resumes_to_the_uninterrupted_end_bit_for_bit(
     killed = killed_run(when, tiny_values(out_dir=str(tmp_path), name="killed"), tmp_path)
     assert killed.returncode == -9, killed.stderr[-2000:]
     folder = tmp_path / "killed"
-    # after: the first checkpoint (update 2); during: 2, or 4 where the writer finished before the kill
+    # after: the first checkpoint (update 2); during: 2, or 4 where the writer finished before
+    # the kill
     assert checkpoint.latest_update(folder) in ((2,) if when == "after" else (2, 4))
     assert_resumes_to_the_uninterrupted_end(folder, finished_run, tmp_path)
 
@@ -329,7 +337,8 @@ def test_sigterm_saves_the_newest_logged_state_the_uninterrupted_runs_bit_for_bi
     The saved state is the uninterrupted run's at update 2, every array equal bit for bit, and the
     logged returns its first two updates' (from there a resumed run ends as the uninterrupted one:
     the SIGKILL and Ctrl-C tests). In-process (a real signal, the run's own handler); through a
-    process of its own, resumed by the command line to the uninterrupted end: the slow tier's test below."""
+    process of its own, resumed by the command line to the uninterrupted end: the slow tier's test
+    below."""
     real_check, checks = loop.check_physics, []
 
     def check_then_terminate(*args):  # advance's report calls it once a chunk's metrics are logged
@@ -350,7 +359,8 @@ def test_sigterm_saves_the_newest_logged_state_the_uninterrupted_runs_bit_for_bi
     assert signal.getsignal(signal.SIGTERM) == before
     err = capsys.readouterr().err
     assert "Traceback" not in err and err.strip().splitlines()[-1] == (
-        f"terminated (SIGTERM); checkpoint at update 2; go on with: python -m hintsjax.run resume={folder}"
+        "terminated (SIGTERM); checkpoint at update 2; go on with: python -m hintsjax.run "
+        f"resume={folder}"
     )
     assert checkpoint.latest_update(folder) == 2 and not (folder / "eval.json").exists()
     at_two = tmp_path / "uninterrupted_at_2"
@@ -450,8 +460,8 @@ def test_a_bug_is_one_line_saying_so_with_its_traceback_kept(monkeypatch, tmp_pa
     assert run.main_from_values(tiny_values(out_dir=str(tmp_path), name="r")) == 1
     lines = capsys.readouterr().err.strip().splitlines()
     assert lines == [
-        f"error: a bug in hintsjax (RuntimeError: boom); its traceback is in {tmp_path / 'r' / 'traceback.txt'}; "
-        "please report it with that traceback"
+        "error: a bug in hintsjax (RuntimeError: boom); its traceback is in "
+        f"{tmp_path / 'r' / 'traceback.txt'}; please report it with that traceback"
     ]
     kept = (tmp_path / "r" / "traceback.txt").read_text()
     assert kept.startswith("Traceback") and "in boom" in kept and "second line" in kept
@@ -491,7 +501,8 @@ def test_a_checkpoint_that_cannot_be_written_is_the_one_named(tmp_path):
             "compilation_cache=false",
         ]
     )
-    # ulimit -f: the KiB a file may hold; config.yaml and metrics.csv fit, the checkpoint's arrays do not
+    # ulimit -f: the KiB a file may hold; config.yaml and metrics.csv fit, the checkpoint's arrays
+    # do not
     out = subprocess.run(
         ["bash", "-c", f"ulimit -f 100 && exec {command}"],
         cwd=tmp_path,
@@ -727,7 +738,8 @@ def test_a_checkpoint_saved_on_another_device_restores_here(finished_run, tmp_pa
         "from hintsjax.settings import layers\n"
         "from hintsjax.algorithms.registry import make_trainer\n"
         f"src, dest = {str(finished_run)!r}, {str(copy)!r}\n"
-        "state, update = checkpoint.restore_latest(src, make_trainer(layers.load_run_config(src)).abstract_state())\n"
+        "state, update = checkpoint.restore_latest(src, "
+        "make_trainer(layers.load_run_config(src)).abstract_state())\n"
         "checkpoint.save(dest, jax.device_put(state, jax.devices()[1]), update)\n"
     )
     env = {
@@ -905,7 +917,8 @@ def test_a_resumed_run_trains_longer_to_the_longer_runs_end_bit_for_bit(
     before = sorted((p.relative_to(short), p.stat().st_mtime_ns) for p in short.rglob("*"))
     assert run.main_from_values({"resume": str(short), "ppo": {"total_env_steps": 64}}) == 2
     assert capsys.readouterr().err.strip().splitlines() == [
-        "error: a resumed run can train longer, not shorter: ppo.total_env_steps must be at least 128 (its budget), got 64"
+        "error: a resumed run can train longer, not shorter: ppo.total_env_steps must be at least "
+        "128 (its budget), got 64"
     ]
     assert sorted((p.relative_to(short), p.stat().st_mtime_ns) for p in short.rglob("*")) == before
     longer = cli(f"resume={short}", "ppo.total_env_steps=256", cwd=tmp_path)
@@ -969,7 +982,8 @@ def test_seeds_sharded_over_two_devices_give_the_single_device_result(finished_r
     assert out.returncode == 0, out.stderr
     # the pendulum's MJX physics: auto on a CPU
     assert "on 2 cpu device(s) (1 a device), jax physics, compiled in" in out.stdout
-    # the first line comes before anything compiles (and the cache is on, as the command line turns it on)
+    # the first line comes before anything compiles (and the cache is on, as the command line turns
+    # it on)
     assert out.stdout.splitlines()[0].endswith(
         ": compiling its programs (later runs on this machine load most of them from the cache)"
     )
@@ -983,7 +997,10 @@ def test_a_launcher_whose_plugin_is_missing_is_one_line(monkeypatch):
     monkeypatch.setitem(overrides.LAUNCHERS, "submitit_slurm", "hydra_plugins.no_such_launcher")
     with pytest.raises(
         UsageError,
-        match=r"hydra/launcher=submitit_slurm needs hydra-submitit-launcher: pip install -e '\.\[cluster\]'",
+        match=(
+            r"hydra/launcher=submitit_slurm needs hydra-submitit-launcher: "
+            r"pip install -e '\.\[cluster\]'"
+        ),
     ):
         overrides.check_overrides(["-m", "hydra/launcher=submitit_slurm", "scheme=lc,fc"])
 
@@ -1069,8 +1086,8 @@ def test_a_preempted_submitit_job_is_requeued_and_goes_on_in_its_folder_bit_for_
     said = "\n".join(p.read_text() for p in (sweep / ".submitit").rglob("*_log.err"))
     job_id = json.loads((folder / "job.json").read_text())["job_id"]
     assert re.search(
-        rf"preempted \(SIGUSR2\); checkpoint at update \d+; submitit is asked to requeue job {job_id}, "
-        rf"which goes on in {re.escape(str(folder))}",
+        r"preempted \(SIGUSR2\); checkpoint at update \d+; submitit is asked to requeue job "
+        rf"{job_id}, which goes on in {re.escape(str(folder))}",
         said,
     ), said[-3000:]
     assert f"requeued job {job_id}: goes on in" in said
@@ -1083,7 +1100,8 @@ def test_a_preemption_that_submitit_will_not_requeue_says_so_and_names_the_comma
     """submitit refuses to requeue a job that timed out more often than max_num_timeout allows
     (its handler raises UncompletedJobError): after the line that asked, one line says so and names
     the command that goes on; exit 143. Outside a submitit job a run writes no job.json."""
-    # submitit's import configures logging (dictConfig), which closes the handlers that pytest's capture set up
+    # submitit's import configures logging (dictConfig), which closes the handlers that pytest's
+    # capture set up
     monkeypatch.setenv("SUBMITIT_LOG_LEVEL", "NOCONFIG")
     from submitit.core.utils import UncompletedJobError
 
@@ -1105,7 +1123,8 @@ def test_a_preemption_that_submitit_will_not_requeue_says_so_and_names_the_comma
         == errors.TERMINATED
     )
     assert capsys.readouterr().err.splitlines() == [
-        f"preempted (SIGUSR2); checkpoint at update 2; submitit is asked to requeue job 4242, which goes on in {folder}",
+        "preempted (SIGUSR2); checkpoint at update 2; submitit is asked to requeue job 4242, "
+        f"which goes on in {folder}",
         f"submitit did not requeue job 4242 (Job not requeued because: timed-out too many times.); "
         f"go on with: python -m hintsjax.run resume={folder}",
     ]
@@ -1133,7 +1152,8 @@ def test_the_checkout_runs_without_the_editable_installs_finder():
     """After a normal `pip install .`, a command run from the checkout's root imports the
     checkout's hintsjax/, which has no envs/ (pyproject maps hintsjax.envs to the top-level envs/).
     Simulated here by starting Python without site processing (no editable finder), with
-    site-packages as a plain path (PYTHONPATH, after the checkout's root): hintsjax.envs must still import."""
+    site-packages as a plain path (PYTHONPATH, after the checkout's root): hintsjax.envs must still
+    import."""
     import site
 
     root = Path(__file__).resolve().parents[1]
@@ -1185,7 +1205,8 @@ def test_a_built_wheel_runs_from_the_checkout_root_and_from_elsewhere(where, tmp
 
 def test_a_built_wheels_experts_restore_and_hold_only_what_a_restore_reads(tmp_path_factory):
     """The wheel's package data holds every packaged expert, which restores from the installed copy,
-    and none of orbax's notes of the machine that wrote it (hintsjax/algorithms/experts.py MACHINE_FILES)."""
+    and none of orbax's notes of the machine that wrote it (hintsjax/algorithms/experts.py
+    MACHINE_FILES)."""
     target = wheel_install(tmp_path_factory)
     installed = target / "hintsjax" / "experts"
     assert sorted(p.name for p in installed.iterdir() if (p / "expert.json").is_file()) == sorted(
@@ -1199,7 +1220,8 @@ def test_a_built_wheels_experts_restore_and_hold_only_what_a_restore_reads(tmp_p
     )
     assert "[console_scripts]\nhintsjax = hintsjax.console:main" in entry_points
     script = (
-        "import hintsjax.algorithms.experts as x, jax; assert x.__file__.startswith(%r), x.__file__\n"
+        "import hintsjax.algorithms.experts as x, jax; assert x.__file__.startswith(%r), "
+        "x.__file__\n"
         "for env in x.packaged(): assert jax.numpy.isfinite(x.load(env).log_std).all(), env\n"
         "print(len(x.packaged()))" % str(target)
     )
@@ -1218,7 +1240,8 @@ _WHEEL: dict[str, Path] = {}
 
 
 def wheel_install(tmp_path_factory) -> Path:
-    """The project built as a wheel and installed (no dependencies) into a temporary folder, once."""
+    """The project built as a wheel and installed (no dependencies) into a temporary folder,
+    once."""
     if "target" not in _WHEEL:
         root = Path(__file__).resolve().parents[1]
         wheels, target = tmp_path_factory.mktemp("wheels"), tmp_path_factory.mktemp("site")

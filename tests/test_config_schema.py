@@ -1,14 +1,15 @@
 """One settings schema: the command line's keys (Hydra's config, hintsjax.settings.schema) are the
-dataclasses' fields (RunConfig and its sections), each with no default of its own or the dataclass's, so
-every setting can be given on the command line and the command line resolves what `run_config` does;
-and what else is read off the fields (Hyper, a group's shapes, the keys old configs may lack,
-docs/settings.md, the README's key table) follows them.
+dataclasses' fields (RunConfig and its sections), each with no default of its own or the
+dataclass's, so every setting can be given on the command line and the command line resolves what
+`run_config` does; and what else is read off the fields (Hyper, a group's shapes, the keys old
+configs may lack, docs/settings.md, the README's key table) follows them.
 
-Which default wins, later winning: the dataclass's (hintsjax/settings/config.py, hintsjax/settings/algorithm_settings.py),
-the env's (`TRAINING` beside it, envs/<env>.py, read into hintsjax.settings.env_defaults.ENV_DEFAULTS), the
-env's for the agent (its `learners` and `references`), then the command line. config.yaml's null
-gives no value, so the layers below decide: ppo.num_envs is 16 (PPOConfig) unless the env sets
-its own (256 for ant's learners, 1024 for its references)."""
+Which default wins, later winning: the dataclass's (hintsjax/settings/config.py,
+hintsjax/settings/algorithm_settings.py), the env's (`TRAINING` beside it, envs/<env>.py, read into
+hintsjax.settings.env_defaults.ENV_DEFAULTS), the env's for the agent (its `learners` and
+`references`), then the command line. config.yaml's null gives no value, so the layers below decide:
+ppo.num_envs is 16 (PPOConfig) unless the env sets its own (256 for ant's learners, 1024 for its
+references)."""
 
 from __future__ import annotations
 
@@ -117,12 +118,12 @@ def test_no_env_sets_a_key_that_config_yaml_gives_a_value(env):
 
 @pytest.mark.parametrize("env", SHIPPED_ENVS)
 def test_the_command_line_resolves_every_agent_as_run_config_does(env):
-    """What `request.request` makes of Hydra's values for a new run (its own keys taken out first; the
-    packaged expert it then looks for is not there for every env, e.g. ant_fast)."""
+    """What `request.checked_request` makes of Hydra's values for a new run (its own keys taken out
+    first; the packaged expert it then looks for is not there for every env, e.g. ant_fast)."""
     for agent in AGENTS:
         values = {**overrides.defaults(), "env": env, "agent": agent}
         values.pop("compilation_cache")
-        request.places(values)
+        request.folder_settings(values)
         assert run_config(values) == run_config({"env": env, "agent": agent}), agent
 
 
@@ -138,15 +139,16 @@ def test_every_setting_can_be_given_on_the_command_line():
             else str(value).replace(" ", "")
         )
         overrides.check_overrides([f"{key}={text}"])
-    asked = request.request(
+    asked = request.checked_request(
         {**overrides.defaults(), "ppo": {**overrides.defaults()["ppo"], "starts_per_rollout": True}}
     )
     assert asked.cfg.ppo.starts_per_rollout and not run_config({}).ppo.starts_per_rollout
     with pytest.raises(UsageError, match="starts_per_rollout must be bool, got 2"):
-        request.request({**overrides.defaults(), "ppo": {"starts_per_rollout": 2}})
+        request.checked_request({**overrides.defaults(), "ppo": {"starts_per_rollout": 2}})
 
 
-# --- Each setting declared once (hintsjax/settings/fields.py): what is read off the fields follows them.
+# --- Each setting declared once (hintsjax/settings/fields.py): what is read off the fields follows
+# them.
 
 
 def _other_value(cls, name: str):
@@ -211,8 +213,8 @@ def test_an_optional_traced_setting_shares_a_group_when_set_in_both():
 
 
 def test_a_saved_config_may_lack_exactly_the_settings_declared_so():
-    """A config saved before a `saved_may_lack` setting existed is complete and resumes at its default;
-    one without any other setting is refused (layers.missing_keys)."""
+    """A config saved before a `saved_may_lack` setting existed is complete and resumes at its
+    default; one without any other setting is refused (layers.missing_keys)."""
     saved = to_dict(run_config({}))
     declared = schema.saved_may_lack()
     assert {"ppo.reset_every_update", "hints_from", "image_size"} <= declared
@@ -231,9 +233,9 @@ def test_a_saved_config_may_lack_exactly_the_settings_declared_so():
 
 
 def test_every_committed_run_folder_of_every_earlier_layout_still_loads():
-    """The run folders kept in experiments/results/runs were saved by hintsjax of many dates (some lack
-    physics, warp_capacity, ppo.action_head, hint_source); each still loads (but those whose hints came
-    from a generator folder, which is not kept)."""
+    """The run folders kept in experiments/results/runs were saved by hintsjax of many dates (some
+    lack physics, warp_capacity, ppo.action_head, hint_source); each still loads (but those whose
+    hints came from a generator folder, which is not kept)."""
     saved = {
         p.parent: yaml.safe_load(p.read_text()) or {}
         for p in (ROOT / "experiments" / "results" / "runs").rglob("config.yaml")
@@ -268,7 +270,8 @@ def test_every_setting_has_a_help_line_and_a_type_it_can_be_given_as():
 
 
 def test_settings_md_is_written_from_the_fields():
-    """docs/settings.md is what `python -m hintsjax.settings.schema` writes (regenerate it after a change)."""
+    """docs/settings.md is what `python -m hintsjax.settings.schema` writes (regenerate it after a
+    change)."""
     assert schema.SETTINGS_MD.read_text() == schema.markdown()
     page = schema.markdown()
     assert all(f"| `{key}` |" in page for key in schema.keys())
@@ -278,8 +281,8 @@ README_TABLE = re.compile(r"^\| key \| choices \|\n\|---\|---\|\n((?:\|.*\|\n)+)
 
 
 def readme_table_drift(readme: str) -> list[str]:
-    """What keeps the README's key table from the fields: a name there that is no setting, a top-level
-    setting it does not name, or a `section.key` anywhere in the README that is none."""
+    """What keeps the README's key table from the fields: a name there that is no setting, a
+    top-level setting it does not name, or a `section.key` anywhere in the README that is none."""
     rows = README_TABLE.search(readme).group(1).splitlines()
     named = {n for row in rows for n in re.findall(r"`([\w.*]+)`", row.split("|")[1])}
     top = [k for k in schema.keys() if "." not in k]

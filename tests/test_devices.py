@@ -25,7 +25,7 @@ from hintsjax.system import checkpoint
 from hintsjax.system.devices import SeedLayout
 from hintsjax.settings.layers import load_run_config
 from hintsjax.algorithms.registry import make_trainer
-from hintsjax.training import loop, pipeline
+from hintsjax.training import compilation, pipeline
 from hintsjax import run
 
 HERE = Path(__file__).parent
@@ -102,7 +102,8 @@ def test_a_checkpoint_written_on_four_devices_resumes_on_one(runs, tmp_path):
 
 
 def _processes(folder: Path, count: int, devices_each: int, *args: str, tries: int = 2) -> None:
-    """tests/process_run.py in `count` processes joined into one run, each with `devices_each` CPU devices.
+    """tests/process_run.py in `count` processes joined into one run, each with `devices_each` CPU
+    devices.
 
     A run that hangs (each process dumps its stacks and exits after process_run.HUNG_SECONDS) is
     started once more, on a fresh coordinator port and from an empty folder (a resume from the
@@ -179,20 +180,21 @@ def test_one_run_over_two_processes_equals_one_process_and_resumes(tmp_path):
 
 def test_physics_warp_stays_on_one_device_and_in_one_process(monkeypatch):
     """jit's partitioner cannot split MJX-Warp's custom call (every device would step every
-    world), so a Warp run keeps to this process's first device, and several processes are refused."""
+    world), so a Warp run keeps to this process's first device, and several processes are
+    refused."""
     import jax
 
     from hintsjax.system.errors import UsageError
     from hintsjax.settings.layers import run_config
 
     cfg = run_config({"env": "ant", "physics": "warp"})
-    assert loop.seed_layout(cfg).devices == tuple(jax.local_devices()[:1])
-    assert loop.seed_layout(run_config({"env": "ant", "physics": "jax"})).devices == tuple(
+    assert compilation.seed_layout(cfg).devices == tuple(jax.local_devices()[:1])
+    assert compilation.seed_layout(run_config({"env": "ant", "physics": "jax"})).devices == tuple(
         jax.devices()
     )
     monkeypatch.setattr(jax, "process_count", lambda: 2)
     with pytest.raises(UsageError, match="physics=warp runs in one process"):
-        loop.seed_layout(cfg)
+        compilation.seed_layout(cfg)
 
 
 def test_under_warp_the_evaluation_compiles_before_training_not_beside_it(monkeypatch, tmp_path):
@@ -207,7 +209,7 @@ def test_under_warp_the_evaluation_compiles_before_training_not_beside_it(monkey
 
     assert pipeline.evaluation_compiles_first(run_config({"env": "ant", "physics": "warp"}))
     assert not pipeline.evaluation_compiles_first(run_config({"env": "ant", "physics": "jax"}))
-    compile_evaluator, advance = pipeline.compile_evaluator, pipeline.advance
+    compile_evaluator, advance = pipeline.compile_evaluator, pipeline.train_in_chunks
     for first in (True, False):
         events, training = [], threading.Event()
 
@@ -224,7 +226,7 @@ def test_under_warp_the_evaluation_compiles_before_training_not_beside_it(monkey
             return advance(*args, **kwargs)
 
         monkeypatch.setattr(pipeline, "compile_evaluator", compiled)
-        monkeypatch.setattr(pipeline, "advance", advanced)
+        monkeypatch.setattr(pipeline, "train_in_chunks", advanced)
         monkeypatch.setattr(pipeline, "evaluation_compiles_first", lambda cfg: first)
         values = {
             "env": "linear",
@@ -265,10 +267,12 @@ def test_a_runs_first_state_waits_for_warp_kernels_built_beside_its_compiles(mon
         events.append(("start", env, physics_choice, capacity, backend))
         return Build(None)
 
-    advance = pipeline.advance
+    advance = pipeline.train_in_chunks
     monkeypatch.setattr(pipeline.warp_kernels, "start", started)
     monkeypatch.setattr(
-        pipeline, "advance", lambda *a, **k: (events.append("training"), advance(*a, **k))[1]
+        pipeline,
+        "train_in_chunks",
+        lambda *a, **k: (events.append("training"), advance(*a, **k))[1],
     )
     values = {
         "env": "linear",

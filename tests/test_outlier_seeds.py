@@ -15,7 +15,7 @@ import pytest
 from hintsjax.evaluation.evaluator import EvalResult, variant_summary
 from hintsjax.evaluation.outliers import K, far_below, spread
 from hintsjax.settings.layers import run_config
-from hintsjax.training.outputs import EVAL_JSON, finish
+from hintsjax.training.outputs import EVAL_JSON, write_results
 
 ROOT = Path(__file__).resolve().parents[1]
 # five ant seeds of one physics=warp command (issue 59)
@@ -54,9 +54,9 @@ def test_one_two_and_equal_seeds_name_none_but_a_collapse_among_three_does():
 
 
 def test_no_seed_of_table3_at_20_seeds_is_named():
-    """The committed Table 3 rows (locomotion and the car's learners at 20 seeds, the humanoid at 10,
-    the car's references at 5) name no seed; the largest shortfall, halfcheetah hints-fc-max_velocity's -502 against a
-    median of 213, is 1.46 spreads, under half of K."""
+    """The committed Table 3 rows (locomotion and the car's learners at 20 seeds, the humanoid at
+    10, the car's references at 5) name no seed; the largest shortfall, halfcheetah
+    hints-fc-max_velocity's -502 against a median of 213, is 1.46 spreads, under half of K."""
     worst = 0.0
     rows = sorted((ROOT / "experiments/results/runs/table3_20").glob("*/*/eval.json"))
     assert len(rows) == 22
@@ -82,13 +82,14 @@ def test_a_runs_end_names_the_seed_in_eval_json_and_one_line(tmp_path, capsys):
     training = SimpleNamespace(
         compiled=compiled, seconds=2.0, before=0.0, done=1, first=0, arrivals=()
     )
-    finish(cfg, tmp_path, training, [collapsed, fine], 0.1)
+    write_results(cfg, tmp_path, training, [collapsed, fine], 0.1)
     saved = json.loads((tmp_path / EVAL_JSON).read_text())["evaluations"]
     assert [e["outlier_seeds"] for e in saved] == [[3], []]
     named = [line for line in capsys.readouterr().out.splitlines() if "far below" in line]
     assert named == [
         f"pendulum/swingup {cfg.label}: seed 3 ended far below the others (-3006 against a median "
-        f"of 997, more than 3 x 997 short): one episode: python -m hintsjax.video {tmp_path} --seed 3"
+        f"of 997, more than 3 x 997 short): one episode: python -m hintsjax.video {tmp_path} "
+        "--seed 3"
     ]
 
 
@@ -114,7 +115,7 @@ def test_a_runs_end_says_which_collapsed_seed_had_a_kl_storm(tmp_path, capsys):
             for seed in range(5):
                 hot = (seed == 3 and 5 <= update < 17) or (seed == 0 and 2 <= update < 14)
                 writer.writerow([update, seed, 64 * update, 0.0, 0.9 if hot else 0.01])
-    finish(cfg, tmp_path, training, [collapsed], 0.1)
+    write_results(cfg, tmp_path, training, [collapsed], 0.1)
     storms = json.loads((tmp_path / EVAL_JSON).read_text())["kl_storms"]
     assert storms == [
         {"first": 2, "longest": 12},
@@ -124,10 +125,10 @@ def test_a_runs_end_says_which_collapsed_seed_had_a_kl_storm(tmp_path, capsys):
     ]
     lines = capsys.readouterr().out.splitlines()
     assert lines[-1] == (
-        f"pendulum/swingup {cfg.label}: KL storm (seed 3 from update 5 on: approx. KL above 0.5 for "
-        "10 or more updates in a row): PPO's steps blew up"
+        f"pendulum/swingup {cfg.label}: KL storm (seed 3 from update 5 on: approx. KL above 0.5 "
+        "for 10 or more updates in a row): PPO's steps blew up"
     )
     (tmp_path / "metrics.csv").unlink()
-    finish(cfg, tmp_path, training, [collapsed], 0.1)
+    write_results(cfg, tmp_path, training, [collapsed], 0.1)
     assert json.loads((tmp_path / EVAL_JSON).read_text())["kl_storms"] is None
     assert "KL storm" not in capsys.readouterr().out

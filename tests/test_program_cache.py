@@ -1,5 +1,5 @@
-"""The traced-program cache (hintsjax/system/program_cache.py): a program loaded from it computes what
-the program traced afresh computes, bit for bit; a second process loads the run's programs
+"""The traced-program cache (hintsjax/system/program_cache.py): a program loaded from it computes
+what the program traced afresh computes, bit for bit; a second process loads the run's programs
 instead of tracing them; a changed source, an undescribable program, a registered hint without
 a source file and a corrupt entry are never served from it."""
 
@@ -60,7 +60,7 @@ def _chunk(trainer):
 
 def _run(lowered_init, lowered_chunk, keys):
     """init, then one chunk of 2 of its 3 updates, from the two lowered programs; the state is
-    placed as the chunk expects, as a resumed run's restored state is (loop.start)."""
+    placed as the chunk expects, as a resumed run's restored state is (loop.start_training)."""
     state = lowered_init.compile()(keys)
     chunk = lowered_chunk.compile()
     return chunk(jax.device_put(state, chunk.input_shardings[0][0]), np.int32(2))

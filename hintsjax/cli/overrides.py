@@ -40,7 +40,8 @@ HYDRA_VALUE_FLAGS = {
 }
 MULTIRUN_FLAGS = {"-m", "--multirun"}
 
-# Hydra's launchers that run a sweep's jobs elsewhere: the package that provides them (the cluster extra).
+# Hydra's launchers that run a sweep's jobs elsewhere: the package that provides them (the cluster
+# extra).
 LAUNCHERS = {
     "submitit_slurm": "hydra_plugins.hydra_submitit_launcher",
     "submitit_local": "hydra_plugins.hydra_submitit_launcher",
@@ -70,12 +71,14 @@ HYDRA_SECTIONS = {
 
 
 def defaults() -> dict[str, Any]:
-    """What Hydra hands over for every key the command line left alone (schema.command_line_defaults)."""
+    """What Hydra hands over for every key the command line left alone
+    (schema.command_line_defaults)."""
     return schema.command_line_defaults()
 
 
 def hydra_config() -> dict[str, Any]:
-    """The run command's config as Hydra's ConfigStore holds it: the settings and Hydra's sections."""
+    """The run command's config as Hydra's ConfigStore holds it: the settings and Hydra's
+    sections."""
     return {**defaults(), **copy.deepcopy(HYDRA_SECTIONS)}
 
 
@@ -139,8 +142,9 @@ def check_overrides(argv: list[str]) -> None:
             close = difflib.get_close_matches(key, keys, n=1)
             hint = f"did you mean {close[0]!r}? " if close else ""
             raise UsageError(
-                f"unknown config key {key!r}; {hint}valid: {', '.join(k for k in keys if '.' not in k)}, "
-                "ppo.<key>, dagger.<key>, gail.<key> (docs/settings.md)"
+                f"unknown config key {key!r}; {hint}valid: "
+                f"{', '.join(k for k in keys if '.' not in k)}, ppo.<key>, dagger.<key>, "
+                "gail.<key> (docs/settings.md)"
             )
     parsed = parse(overrides)
     if not MULTIRUN_FLAGS & set(argv):
@@ -242,7 +246,7 @@ def asks_only_for_warp(argv: list[str]) -> bool:
                 "physics"
             )
         except (OSError, UnicodeDecodeError, yaml.YAMLError, AttributeError):
-            return None  # request() says what is wrong with the folder
+            return None  # checked_request() says what is wrong with the folder
 
     jobs = jobs_values(argv)
     return bool(jobs) and all(physics(values) == "warp" for values in jobs)

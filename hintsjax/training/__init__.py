@@ -1,8 +1,8 @@
 """A run from its command line to its folder: compile, train in chunks, guard, evaluate, record.
 
 - `request`: what a run command asks for, checked before anything is made or compiled;
-- `compilation`: a trainer's programs compiled for the seeds' layout, and whether they fit;
-- `loop`: start (fresh or from a checkpoint) and advance in chunks, with checkpoints;
+- `compilation`: the seeds' layout, a trainer's programs compiled for it, and whether they fit;
+- `loop`: the training loop (start fresh or from a checkpoint, then chunk by chunk);
 - `guards`: the non-finite check on every chunk, MJX-Warp's buffer check;
 - `outputs`: the run folder, eval.json and the learning curve;
 - `pipeline`: `train` (one run) and `train_group` (configurations trained as one program);

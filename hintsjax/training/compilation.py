@@ -1,10 +1,12 @@
-"""A run's training programs compiled ahead of time for its seed-batched state, and whether they fit.
+"""A run's training programs compiled ahead of time for its seed-batched state, and whether they
+fit.
 
-`compile_training` lowers a trainer's `init` and its chunk of updates for the seeds' layout over
-the devices (each device runs its share of the seeds), through the traced-program cache
-(hintsjax/system/program_cache.py), then compiles both; `check_fits` refuses a group's program that
-needs more memory than the device has (GroupTooBig, which the sweeps answer by splitting a group),
-`check_run_fits` a run's (one line naming the settings to lower), both by XLA's memory analysis.
+`seed_layout` places a run's seeds over the devices; `compile_training` lowers a trainer's `init`
+and its chunk of updates for that layout (each device runs its share of the seeds), through the
+traced-program cache (hintsjax/system/program_cache.py), then compiles both; `check_fits` refuses
+a group's program that needs more memory than the device has (GroupTooBig, which the sweeps answer
+by splitting a group), `check_run_fits` a run's (one line naming the settings to lower), both by
+XLA's memory analysis.
 """
 
 from __future__ import annotations
@@ -17,10 +19,31 @@ from typing import Any, Callable
 import jax
 import numpy as np
 
+from hintsjax.envs import physics
 from hintsjax.system import memory, program_cache
 from hintsjax.system.errors import UsageError
 from hintsjax.system.devices import SeedLayout
+from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms.trainer import Trainer
+
+
+def check_warp_run() -> None:
+    """UsageError where a physics=warp run cannot go: over several processes (`seed_layout`)."""
+    if jax.process_count() > 1:
+        raise UsageError(
+            "physics=warp runs in one process (on one GPU); drop JAX_NUM_PROCESSES or use "
+            "physics=jax"
+        )
+
+
+def seed_layout(cfg: RunConfig) -> SeedLayout:
+    """cfg's seeds over every device (of every process) JAX sees; a run with physics=warp on this
+    process's first device only (jit's partitioner cannot split MJX-Warp's custom call: every
+    device would step every world)."""
+    if cfg.physics != physics.WARP:
+        return SeedLayout.of(cfg.seeds)
+    check_warp_run()
+    return SeedLayout.of(cfg.seeds, jax.local_devices()[:1])
 
 
 @dataclass(frozen=True)
@@ -51,7 +74,8 @@ def compile_training(
     chunk_fn = layout.spread(
         jax.vmap(partial(trainer.run_chunk, length=chunk), in_axes=(0, None)), batched=1, shared=1
     )
-    # traced, or loaded as traced by an earlier process (hintsjax/system/program_cache.py: one device's programs only)
+    # traced, or loaded as traced by an earlier process (hintsjax/system/program_cache.py: one
+    # device's programs only)
     identity = trainer.identity if layout.count == 1 else None
     init = program_cache.lower(init_fn, keys, name="init", context=identity)
     run_chunk = program_cache.lower(
@@ -114,7 +138,7 @@ def check_run_fits(compiled: Any, cfg: Any) -> None:
     found = needs(compiled)
     if found is not None and found[0] > FITS * found[1]:
         raise UsageError(
-            f"seeds={cfg.seeds} x ppo.batch_size={cfg.ppo.batch_size} cannot fit: training's compiled "
-            f"program needs {memory.sized(found[0])} (XLA's memory analysis), a device has "
-            f"{memory.sized(found[1])}; lower {TRAINING_SIZES}"
+            f"seeds={cfg.seeds} x ppo.batch_size={cfg.ppo.batch_size} cannot fit: training's "
+            f"compiled program needs {memory.sized(found[0])} (XLA's memory analysis), a device "
+            f"has {memory.sized(found[1])}; lower {TRAINING_SIZES}"
         )

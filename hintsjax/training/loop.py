@@ -1,6 +1,8 @@
 """The training loop: a run's programs compiled and its state started (fresh or from its newest
-checkpoint), then advanced in chunks to its last update, with progress, checkpoints and the
-guards between chunks. The device never waits on the host (see `advance`).
+checkpoint), then trained in chunks to its last update: `ChunkLoop` dispatches a chunk, logs the
+one before it while the device works, saves when a checkpoint is due, and stops when asked. The
+non-finite guard (guards.py), the asynchronous checkpoints (hintsjax/system/checkpoint.py) and
+the deferred signals (hintsjax/system/signals.py) are the parts it calls by name.
 """
 
 from __future__ import annotations
@@ -19,18 +21,25 @@ from tqdm import tqdm
 from hintsjax import envs
 from hintsjax.envs import physics
 from hintsjax.system import checkpoint, devices
-from hintsjax.system.devices import SeedLayout
-from hintsjax.system.errors import UsageError
-from hintsjax.system.signals import raise_stop_asked, stops_deferred, Terminated
+from hintsjax.system.signals import Terminated, raise_stop_asked, stops_deferred
 from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms.trainer import Trainer
-from hintsjax.training.compilation import Compiled, check_fits, check_run_fits, compile_training
+from hintsjax.training.compilation import (
+    Compiled,
+    check_fits,
+    check_run_fits,
+    compile_training,
+    seed_layout,
+)
 from hintsjax.training.guards import check_physics, finite_seeds, first_nonfinite, stop_nonfinite
 
 
 # Training seconds (compiles excluded) up to the newest checkpoint, summed over resumed calls; and
 # this call's compile seconds, of which tracing (Python).
 SECONDS_JSON = "seconds.json"
+
+# What gets each chunk's metrics: write(metrics [S, n, ...], updates before them)
+MetricsWriter = Callable[[dict[str, np.ndarray], int], None]
 
 
 def seconds_trained(run_dir: Path) -> float:
@@ -41,7 +50,8 @@ def seconds_trained(run_dir: Path) -> float:
 
 @dataclass
 class Training:
-    """A training run's progress: its compiled programs, state and timing (what `start` and `advance` share)."""
+    """A training run's progress: its compiled programs, state and timing (what
+    `start_training` makes and `train_in_chunks` carries on)."""
 
     compiled: Compiled
     state: Any
@@ -64,25 +74,7 @@ def chunks_rate(training: Training, env_steps_per_update: int) -> float | None:
     return (updates - training.first) * env_steps_per_update / max(seconds, 1e-9)
 
 
-def check_warp_run() -> None:
-    """UsageError where a physics=warp run cannot go: over several processes (`seed_layout`)."""
-    if jax.process_count() > 1:
-        raise UsageError(
-            "physics=warp runs in one process (on one GPU); drop JAX_NUM_PROCESSES or use physics=jax"
-        )
-
-
-def seed_layout(cfg: RunConfig) -> SeedLayout:
-    """cfg's seeds over every device (of every process) JAX sees; a run with physics=warp on this
-    process's first device only (jit's partitioner cannot split MJX-Warp's custom call: every
-    device would step every world)."""
-    if cfg.physics != physics.WARP:
-        return SeedLayout.of(cfg.seeds)
-    check_warp_run()
-    return SeedLayout.of(cfg.seeds, jax.local_devices()[:1])
-
-
-def start(
+def start_training(
     trainer: Trainer,
     cfg: RunConfig,
     run_dir: Path,
@@ -92,7 +84,8 @@ def start(
     before_first_state: Callable[[], None] = lambda: None,
 ) -> Training:
     """Compile `trainer`'s programs for cfg's seeds, then (after `before_first_state()`: MuJoCo
-    Warp's kernel builds begun beside the compiles) a fresh state or the newest checkpoint of run_dir."""
+    Warp's kernel builds begun beside the compiles) a fresh state or the newest checkpoint of
+    run_dir."""
     layout = seed_layout(cfg)
     keys = layout.pad(cfg.seed_keys())
     physics.clear_overflow()
@@ -112,23 +105,29 @@ def start(
         state, done = compiled.init(keys), 0
     # the first state's work (MuJoCo Warp's kernel builds too) counted before training
     jax.block_until_ready(state)
-    spread = f" ({layout.per_device} a device{f', {layout.padded - cfg.seeds} of them padding' if layout.padded > cfg.seeds else ''})"
-    # what auto chose, too
-    stepped_by = f", {cfg.physics} physics" if cfg.env in envs.mjx_env_names() else ""
     print(
-        f"{cfg.env} {label}: {cfg.seeds} seeds x {total} updates of {cfg.ppo.batch_size} env steps "
-        f"on {layout.count} {jax.default_backend()} device(s){spread if layout.count > 1 else ''}{stepped_by}, "
-        f"compiled in {compiled.seconds:.1f} s -> {run_dir}",
-        flush=True,
+        f"{cfg.env} {label}: {_started_text(cfg, layout, total, compiled)} -> {run_dir}", flush=True
     )
     return Training(compiled, state, done, done, seconds_trained(run_dir) if resume else 0.0)
 
 
-def advance(
+def _started_text(cfg: RunConfig, layout: Any, total: int, compiled: Compiled) -> str:
+    padding = layout.padded - cfg.seeds
+    spread = f" ({layout.per_device} a device{f', {padding} of them padding' if padding else ''})"
+    # the physics auto chose, too
+    stepped_by = f", {cfg.physics} physics" if cfg.env in envs.mjx_env_names() else ""
+    return (
+        f"{cfg.seeds} seeds x {total} updates of {cfg.ppo.batch_size} env steps on {layout.count} "
+        f"{jax.default_backend()} device(s){spread if layout.count > 1 else ''}{stepped_by}, "
+        f"compiled in {compiled.seconds:.1f} s"
+    )
+
+
+def train_in_chunks(
     training: Training,
     cfg: RunConfig,
     run_dir: Path,
-    write: Callable[[dict[str, np.ndarray], int], None],
+    write: MetricsWriter,
     progress: bool,
     label: str,
 ) -> Training:
@@ -141,129 +140,158 @@ def advance(
     is skipped (the newest complete checkpoint is then at most one write old); the last update
     is always saved. Compile seconds are reported apart from training seconds.
     """
-    compiled, state, done, total = (
-        training.compiled,
-        training.state,
-        training.done,
-        cfg.ppo.num_updates,
-    )
-    layout = compiled.layout
-    bar = tqdm(
-        total=total,
-        initial=done,
-        unit="upd",
-        disable=not (progress and devices.is_main()),
-        desc=f"{cfg.env} {label}",
-    )
-    t0 = saved = time.perf_counter()
-    last_saved = written = done  # the newest update saved (or being saved), and logged
+    return ChunkLoop(training, cfg, run_dir, write, label).run(progress)
 
-    def save(state: Any, update: int, finite: jax.Array) -> None:
-        """Checkpoint `state` unless `finite` (its finite_seeds) says some seed's params are not."""
-        nonlocal saved, last_saved
-        finite = layout.fetch(finite)
-        if not finite.all():
-            stop_nonfinite(
-                run_dir,
-                label,
-                {"update": update, "quantity": "params", "seeds": np.flatnonzero(~finite).tolist()},
-            )
-        last_saved = update  # before the write starts: an interrupt never asks for it twice
-        # the run's own seeds: it resumes on any device count
-        checkpoint.save(run_dir, layout.crop(state), update)
-        saved = time.perf_counter()
-        if devices.is_main():
-            (run_dir / SECONDS_JSON).write_text(
-                json.dumps(
-                    {
-                        "update": update,
-                        "seconds": training.before + saved - t0,
-                        "compile_seconds": compiled.seconds,
-                        "trace_seconds": compiled.trace_seconds,
-                    }
-                )
-            )
 
-    arrivals = []
+class ChunkLoop:
+    """One call's chunks of a run: the newest state dispatched, the chunk whose metrics are still
+    to be logged, and what has been logged and saved."""
 
-    def report(metrics: dict[str, jax.Array], after: int, n: int) -> None:
-        nonlocal written
-        # waits for that chunk only
-        metrics = {k: v[:, :n] for k, v in layout.fetch(metrics).items()}
-        arrivals.append((time.perf_counter() - t0, after + n))
-        write(metrics, after)
-        written = after + n
-        check_physics(cfg, label)  # before the NaN guard: a world that overflowed is NaN
+    def __init__(
+        self, training: Training, cfg: RunConfig, run_dir: Path, write: MetricsWriter, label: str
+    ):
+        self.training, self.cfg, self.run_dir, self.write, self.label = (
+            training,
+            cfg,
+            run_dir,
+            write,
+            label,
+        )
+        self.compiled, self.layout = training.compiled, training.compiled.layout
+        self.total = cfg.ppo.num_updates
+        self.state, self.done = (
+            training.state,
+            training.done,
+        )  # the newest state dispatched, its updates
+        # finite_seeds of `state` once a chunk has made it (the state a call starts from is never
+        # saved)
+        self.finite: jax.Array | None = None
+        self.pending: tuple[dict[str, jax.Array], int, int] | None = (
+            None  # (metrics, after, n): not yet logged
+        )
+        self.logged = self.saved = training.done  # the newest update logged; saved (or being saved)
+        self.started = self.saved_at = time.perf_counter()
+        self.arrivals: list[tuple[float, int]] = []
+        self.bar: Any = None
+
+    def run(self, progress: bool) -> Training:
+        """Every chunk to the last update, then that update saved (see `train_in_chunks`)."""
+        show = progress and devices.is_main()
+        desc = f"{self.cfg.env} {self.label}"
+        self.bar = tqdm(
+            total=self.total, initial=self.done, unit="upd", disable=not show, desc=desc
+        )
+        try:
+            with checkpoint.writing(
+                self.run_dir
+            ):  # leaving it, even by Ctrl-C, waits for the writes under way
+                try:
+                    # SIGTERM (or a preemption) waits for a safe point in `step`, its state logged
+                    with stops_deferred():
+                        while self.done < self.total:
+                            self.step()
+                        if (
+                            self.pending is not None
+                        ):  # something was trained (a run resumed at its end only evaluates)
+                            self.log(*self.pending)
+                            self.save(self.total)
+                    # one asked during the last chunk: the end is saved; the run stops before
+                    # evaluating
+                    raise_stop_asked()
+                except KeyboardInterrupt as stop:
+                    self.save_before_stopping(stop)
+                    raise
+        finally:
+            self.bar.close()
+        return dataclasses.replace(
+            self.training,
+            state=self.state,
+            done=self.done,
+            seconds=time.perf_counter() - self.started,
+            arrivals=tuple(self.arrivals),
+        )
+
+    def step(self) -> None:
+        """Dispatch the next chunk, log the one before it while the device runs this one, stop if a
+        signal asked, save the state this chunk started from if a checkpoint is due."""
+        n = min(self.compiled.chunk, self.total - self.done)
+        following, metrics = self.compiled.run_chunk(
+            self.state, np.int32(n)
+        )  # returns at once; the device works on
+        # queued behind the chunk, so reading it once the chunk has run never stalls the device
+        following_finite = finite_seeds(following.params)
+        if self.pending is not None:
+            self.log(*self.pending)
+        # here `state` (at `done`) has its metrics logged, and no write is half-made
+        raise_stop_asked()
+        if self.checkpoint_due():
+            self.save(self.done)  # computed, and copied off as the chunk runs
+        self.state, self.finite = following, following_finite
+        self.pending, self.done = (metrics, self.done, n), self.done + n
+
+    def checkpoint_due(self) -> bool:
+        """Whether to save `state` now: checkpoint_seconds since the last save, none being written,
+        and something trained this call (process 0 decides for all)."""
+        due = time.perf_counter() - self.saved_at >= self.cfg.checkpoint_seconds
+        return devices.agree_that(
+            self.done > self.training.first and due and not checkpoint.saving(self.run_dir)
+        )
+
+    def log(self, metrics: dict[str, jax.Array], after: int, n: int) -> None:
+        """A chunk's metrics written and shown, then the guards: MJX-Warp's buffers, non-finite
+        losses."""
+        metrics = {
+            k: v[:, :n] for k, v in self.layout.fetch(metrics).items()
+        }  # waits for that chunk only
+        self.arrivals.append((time.perf_counter() - self.started, after + n))
+        self.write(metrics, after)
+        self.logged = after + n
+        check_physics(self.cfg, self.label)  # before the NaN guard: a world that overflowed is NaN
         found = first_nonfinite(metrics, after)
         if found is not None:
-            stop_nonfinite(run_dir, label, found)
-        # the chunk's updates (NaN where no episode ended in one)
-        returns = metrics["episode_return"]
-        bar.set_postfix(
+            stop_nonfinite(self.run_dir, self.label, found)
+        returns = metrics[
+            "episode_return"
+        ]  # the chunk's updates (NaN where no episode ended in one)
+        self.bar.set_postfix(
             steps=int(np.max(metrics["env_steps"][:, -1])),
             ret=f"{np.nanmean(returns):.1f}" if not np.all(np.isnan(returns)) else "-",
         )
-        bar.update(n)
+        self.bar.update(n)
 
-    pending = None  # (metrics, updates before, length) of the chunk dispatched last
-    # finite_seeds of `state` once a chunk has made it (the state a call starts from is never saved)
-    finite = None
-    try:
-        # leaving it, even by Ctrl-C, waits for the writes under way
-        with checkpoint.writing(run_dir):
-            try:
-                # SIGTERM (or a preemption) waits for the safe point below, its state logged
-                with stops_deferred():
-                    while done < total:
-                        n = min(compiled.chunk, total - done)
-                        # returns at once; the device works on
-                        following, metrics = compiled.run_chunk(state, np.int32(n))
-                        # queued behind the chunk, so reading it once the chunk has run never stalls the device
-                        following_finite = finite_seeds(following.params)
-                        if pending is not None:
-                            report(*pending)
-                        # here `state` (at `done`) has its metrics logged, and no write is half-made
-                        raise_stop_asked()
-                        if devices.agree_that(
-                            done > training.first
-                            and time.perf_counter() - saved >= cfg.checkpoint_seconds
-                            # process 0 decides for all
-                            and not checkpoint.saving(run_dir)
-                        ):
-                            # the state this chunk started from: computed, copied off as the chunk
-                            # runs
-                            save(state, done, finite)
-                        state, finite, pending, done = (
-                            following,
-                            following_finite,
-                            (metrics, done, n),
-                            done + n,
-                        )
-                    # something was trained (a run resumed at its end only evaluates)
-                    if pending is not None:
-                        report(*pending)
-                        save(state, total, finite)
-                # one asked during the last chunk: the end is saved; the run stops before evaluating
-                raise_stop_asked()
-            except KeyboardInterrupt as e:
-                # Ctrl-C: `state` (at `done`, its metrics logged) is saved when a checkpoint is due;
-                # SIGTERM (the job is going away: a time limit, preemption) saves it whenever it is
-                # newer than the last save, after that write (one process only: several would
-                # have to agree); then the interrupt goes on up
-                due = isinstance(e, Terminated) or (
-                    time.perf_counter() - saved >= cfg.checkpoint_seconds
-                    and not checkpoint.saving(run_dir)
-                )
-                if (
-                    jax.process_count() == 1
-                    and finite is not None
-                    and written == done > last_saved
-                    and due
-                ):
-                    save(state, done, finite)
-                raise
-    finally:
-        bar.close()
-    return dataclasses.replace(
-        training, state=state, done=done, seconds=time.perf_counter() - t0, arrivals=tuple(arrivals)
-    )
+    def save(self, update: int) -> None:
+        """Checkpoint `state` (at `update`) unless `finite` says some seed's params are not."""
+        finite = self.layout.fetch(self.finite)
+        if not finite.all():
+            seeds = np.flatnonzero(~finite).tolist()
+            stop_nonfinite(
+                self.run_dir, self.label, {"update": update, "quantity": "params", "seeds": seeds}
+            )
+        self.saved = update  # before the write starts: an interrupt never asks for it twice
+        # the run's own seeds: it resumes on any device count
+        checkpoint.save(self.run_dir, self.layout.crop(self.state), update)
+        self.saved_at = time.perf_counter()
+        if devices.is_main():
+            seconds = {
+                "update": update,
+                "seconds": self.training.before + self.saved_at - self.started,
+                "compile_seconds": self.compiled.seconds,
+                "trace_seconds": self.compiled.trace_seconds,
+            }
+            (self.run_dir / SECONDS_JSON).write_text(json.dumps(seconds))
+
+    def save_before_stopping(self, stop: KeyboardInterrupt) -> None:
+        """Ctrl-C: `state` (at `done`, its metrics logged) is saved when a checkpoint is due;
+        SIGTERM (the job is going away: a time limit, preemption) saves it whenever it is newer
+        than the last save, after that write (one process only: several would have to agree)."""
+        due = isinstance(stop, Terminated) or (
+            time.perf_counter() - self.saved_at >= self.cfg.checkpoint_seconds
+            and not checkpoint.saving(self.run_dir)
+        )
+        if (
+            jax.process_count() == 1
+            and self.finite is not None
+            and self.logged == self.done > self.saved
+            and due
+        ):
+            self.save(self.done)

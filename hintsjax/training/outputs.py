@@ -36,7 +36,7 @@ def new_run_dir(out_dir: str, name: str | None, cfg: RunConfig) -> Path:
     )
 
 
-def finish(
+def write_results(
     cfg: RunConfig,
     run_dir: Path,
     training: Training,
@@ -83,7 +83,8 @@ def finish(
         )
     for ev in results["evaluations"]:
         print(
-            f"{cfg.env}/{ev['variant']} {cfg.label}: {ev['mean']:.2f} +- {ev['std']:.2f}{metrics_text(ev)} "
+            f"{cfg.env}/{ev['variant']} {cfg.label}: {ev['mean']:.2f} +- {ev['std']:.2f}"
+            f"{metrics_text(ev)} "
             f"({ev['seeds']} seeds x {ev['episodes_per_seed']} episodes)  -> {run_dir}"
         )
         if outliers := far_below_text(ev, run_dir):

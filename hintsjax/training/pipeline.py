@@ -4,6 +4,7 @@ then getting the folder its own run would have written."""
 
 from __future__ import annotations
 
+import contextlib
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -21,10 +22,10 @@ from hintsjax.algorithms.group import cell_state, make_group, make_group_trainer
 from hintsjax.algorithms.registry import make_trainer
 from hintsjax.algorithms.trainer import Trainer
 from hintsjax.evaluation.evaluator import compile_evaluator, evaluate_group, evaluate_variants
-from hintsjax.training.compilation import TRAINING_SIZES
+from hintsjax.training.compilation import TRAINING_SIZES, seed_layout
 from hintsjax.training.guards import check_physics
-from hintsjax.training.loop import advance, seed_layout, start
-from hintsjax.training.outputs import finish
+from hintsjax.training.loop import Training, start_training, train_in_chunks
+from hintsjax.training.outputs import write_results
 from hintsjax.training.runlog import RunLog
 
 
@@ -50,13 +51,14 @@ def say_compiling(cfg: RunConfig, label: str) -> None:
     print(f"{cfg.env} {label}: compiling its programs{cached}", flush=True)
 
 
-# The settings that size evaluation, named where an allocation fails (hintsjax.system.refusals.sized_by);
-# training's are compilation.TRAINING_SIZES.
+# The settings that size evaluation, named where an allocation fails
+# (hintsjax.system.refusals.sized_by); training's are compilation.TRAINING_SIZES.
 EVALUATION_SIZES = "eval_episodes (or seeds)"
 
 
 class Unlogged:
-    """What a process other than the main one logs: nothing (process 0 writes metrics.csv and tb/)."""
+    """What a process other than the main one logs: nothing (process 0 writes metrics.csv and
+    tb/)."""
 
     def write(self, metrics: dict[str, np.ndarray], after: int) -> None:
         pass
@@ -80,63 +82,70 @@ def params_shapes(trainer: Trainer, layout: SeedLayout) -> Any:
     )
 
 
+@contextlib.contextmanager
+def evaluation_compiling(cfg: RunConfig, trainer: Trainer, layout: SeedLayout):
+    """The evaluation program compiling on the host in a thread from the start: it needs only the
+    params' shapes, so it compiles beside the training program's compile (mostly one core's work)
+    and then while the device trains, adding nothing to the wall-clock of a run that trains
+    longer; under physics=warp first, alone (`evaluation_compiles_first`). Yields the function
+    that waits for it."""
+    with ThreadPoolExecutor(max_workers=1) as pool:
+
+        def compile_it() -> Any:
+            shapes = params_shapes(trainer, layout)
+            return compile_evaluator(cfg, shapes, cfg.variant, cfg.eval_episodes, layout=layout)
+
+        future = pool.submit(compile_it)
+
+        def compiled() -> Any:
+            with sized_by(EVALUATION_SIZES):
+                return future.result()
+
+        if evaluation_compiles_first(cfg):
+            compiled()
+        yield compiled
+
+
+def train_logged(training: Training, cfg: RunConfig, run_dir: Path, progress: bool) -> Training:
+    """`train_in_chunks` writing each chunk's metrics to the run folder (metrics.csv, tb/)."""
+    with contextlib.closing(run_log(run_dir, training.done)) as log:
+        return train_in_chunks(training, cfg, run_dir, log.write, progress, cfg.label)
+
+
 def train(
     cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = True
 ) -> dict[str, Any]:
-    """Train all seeds (in chunks, with checkpoints: see `advance`), evaluate, plot; returns eval results."""
+    """Train all seeds (in chunks, with checkpoints: loop.py), evaluate, plot; returns eval results.
+    A child process builds MuJoCo Warp's kernels (envs/warp_kernels.py) beside the compiles,
+    waited for before the first state; the evaluation compiles in a thread
+    (`evaluation_compiling`)."""
     laps = Laps()  # eval.json's wall_split_seconds: where this call's wall-clock went
     say_compiling(cfg, cfg.label)
     trainer, layout = make_trainer(cfg), seed_layout(cfg)
-    variants = (cfg.variant, *cfg.eval_variants)
-    # The evaluation program needs only the params' shapes, so it compiles on the host in a
-    # thread from the start: beside the training program's compile (mostly one core's work) and
-    # then while the device trains, adding nothing to the wall-clock of a run that trains longer.
-    # Under physics=warp it compiles first, alone (`evaluation_compiles_first`), while a child
-    # process builds MuJoCo Warp's kernels (envs/warp_kernels.py), waited for before the
-    # first state.
+    backend = jax.default_backend()
     with (
-        ThreadPoolExecutor(max_workers=1) as pool,
-        warp_kernels.start(
-            cfg.env, cfg.physics, cfg.warp_capacity, jax.default_backend()
-        ) as kernels,
+        warp_kernels.start(cfg.env, cfg.physics, cfg.warp_capacity, backend) as kernel_builds,
+        evaluation_compiling(cfg, trainer, layout) as evaluation_program,
     ):
-        evaluator = pool.submit(
-            lambda: compile_evaluator(
-                cfg, params_shapes(trainer, layout), variants[0], cfg.eval_episodes, layout=layout
-            )
-        )
-        with sized_by(EVALUATION_SIZES):
-            if evaluation_compiles_first(cfg):
-                evaluator.result()
         with sized_by(TRAINING_SIZES):
-            training = start(
-                trainer, cfg, run_dir, resume, cfg.label, before_first_state=kernels.wait
+            training = start_training(
+                trainer, cfg, run_dir, resume, cfg.label, before_first_state=kernel_builds.wait
             )
             # compiles, the first state (and MuJoCo Warp's kernel builds), a restore
             laps.mark("before_training")
-            log = run_log(run_dir, training.done)
-            try:
-                training = advance(training, cfg, run_dir, log.write, progress, cfg.label)
-            finally:
-                log.close()
+            training = train_logged(training, cfg, run_dir, progress)
             laps.mark("training")  # the chunks, logs and checkpoints, the last one written
-        with sized_by(EVALUATION_SIZES):
-            compiled = evaluator.result()
+        compiled = evaluation_program()
     with sized_by(EVALUATION_SIZES):
+        variants = (cfg.variant, *cfg.eval_variants)
+        params, placed = training.state.params, training.compiled.layout
         evaluations, eval_compile = evaluate_variants(
-            cfg,
-            training.state.params,
-            variants,
-            cfg.eval_episodes,
-            cfg.stochastic_eval,
-            compiled,
-            training.compiled.layout,
+            cfg, params, variants, cfg.eval_episodes, cfg.stochastic_eval, compiled, placed
         )
     laps.mark("evaluation")  # waiting on its compile, if still going, and the episodes
     check_physics(cfg, cfg.label)
-    return finish(
-        cfg, run_dir, training, evaluations, eval_compile, {"wall_split_seconds": laps.seconds}
-    )
+    extra = {"wall_split_seconds": laps.seconds}
+    return write_results(cfg, run_dir, training, evaluations, eval_compile, extra)
 
 
 def train_group(
@@ -146,17 +155,18 @@ def train_group(
     resume: bool = False,
     progress: bool = True,
 ) -> list[dict[str, Any]]:
-    """Train configurations that share a network's shapes together (hintsjax.algorithms.group), all seeds of
-    all of them in one compiled program; checkpoints of the group go to group_dir. Each member
-    then gets what its own run would have written in its folder (cell_dirs, each holding its
-    config.yaml): metrics.csv, its final state as a checkpoint, eval.json, learning_curve.png.
+    """Train configurations that share a network's shapes together (hintsjax.algorithms.group),
+    all seeds of all of them in one compiled program; checkpoints of the group go to group_dir.
+    Each member then gets what its own run would have written in its folder (cell_dirs, each
+    holding its config.yaml): metrics.csv, its final state as a checkpoint, eval.json,
+    learning_curve.png.
     GroupTooBig if the group's program would not fit on the device (before anything is written)."""
     laps = Laps()
     group = make_group(group_cfgs)
     cfg = group.cfgs[0]
     label = f"group of {len(group.cfgs)} ({', '.join(c.label for c in group.cfgs)})"
     say_compiling(cfg, label)
-    training = start(
+    training = start_training(
         make_group_trainer(group), cfg, group_dir, resume, label, check_memory=len(group.cfgs) > 1
     )
     laps.mark("before_training")
@@ -167,7 +177,7 @@ def train_group(
             log.write({name: v[..., k] for name, v in metrics.items()}, after)
 
     try:
-        training = advance(training, cfg, group_dir, write, progress, label)
+        training = train_in_chunks(training, cfg, group_dir, write, progress, label)
     finally:
         for log in logs:
             log.close()
@@ -195,6 +205,6 @@ def train_group(
         "wall_split_seconds": laps.seconds,
     }
     return [
-        finish(member, cell_dir, training, member_evaluations, eval_compile, extra)
+        write_results(member, cell_dir, training, member_evaluations, eval_compile, extra)
         for member, cell_dir, member_evaluations in zip(group.cfgs, cell_dirs, evaluations)
     ]

@@ -14,10 +14,10 @@ from hintsjax.settings.config import RunConfig
 from hintsjax.settings.layers import load_run_config, run_config, to_dict
 from hintsjax.cli import overrides
 from hintsjax.algorithms import experts
-from hintsjax.training.loop import seed_layout
+from hintsjax.training.compilation import seed_layout
 
 
-def places(values: dict[str, Any]) -> tuple[str | None, str, str | None]:
+def folder_settings(values: dict[str, Any]) -> tuple[str | None, str, str | None]:
     """(resume, out_dir, name) popped from `values` as strings, whatever YAML made of them
     (`name=2024` is a folder name, not a number); UsageError for a name that is not one folder's
     name inside out_dir (a path separator, `..`, or nothing)."""
@@ -53,7 +53,8 @@ def refuse_overrides_on_resume(values: dict[str, Any]) -> None:
             given.append(f"{key}={value}")
     if given:
         raise UsageError(
-            f"resume continues a run as its config.yaml says; drop {' '.join(given)} (or start a new run)"
+            f"resume continues a run as its config.yaml says; drop {' '.join(given)} "
+            "(or start a new run)"
         )
 
 
@@ -70,12 +71,12 @@ class Request:
     longer: bool = False
 
 
-def request(values: dict[str, Any]) -> Request:
+def checked_request(values: dict[str, Any]) -> Request:
     """The run that plain config values (what Hydra resolved) ask for; UsageError for anything
     that cannot run, found before any folder is made or anything compiled."""
     values = dict(values)
     values.pop("compilation_cache", None)
-    resume, out_dir, name = places(values)
+    resume, out_dir, name = folder_settings(values)
     steps = None
     if resume is not None:
         values["ppo"] = dict(values.get("ppo") or {})
@@ -92,7 +93,8 @@ def request(values: dict[str, Any]) -> Request:
         paths.check_folder(out_dir, "out_dir")
     if cfg.agent_spec.imitates:
         experts.describe(cfg.env, cfg.expert)  # a missing or foreign expert
-    # seed_layout refuses a Warp run it cannot place; then sizes that cannot fit, before the seeds' keys are drawn
+    # seed_layout refuses a Warp run it cannot place; then sizes that cannot fit, before the seeds'
+    # keys are drawn
     memory.check_run(cfg, seed_layout(cfg).per_device)
     return Request(cfg, run_dir, out_dir, name, longer=steps is not None)
 
@@ -104,7 +106,8 @@ def rounded_budget(cfg: RunConfig) -> str | None:
     if ppo.total_env_steps % ppo.batch_size == 0:
         return None
     return (
-        f"note: ppo.total_env_steps={ppo.total_env_steps} is not a multiple of ppo.batch_size={ppo.batch_size}: "
+        f"note: ppo.total_env_steps={ppo.total_env_steps} is not a multiple of "
+        f"ppo.batch_size={ppo.batch_size}: "
         f"trains {ppo.num_updates} updates, {ppo.num_updates * ppo.batch_size} env steps a seed"
     )
 

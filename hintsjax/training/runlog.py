@@ -208,7 +208,8 @@ def storms_text(seeds: list[int], storms: list[dict] | None) -> str:
         return ""
     which = ", ".join(f"seed {s} from update {u}" for s, u in hit)
     return (
-        f"KL storm ({which} on: approx. KL above {KL_ABOVE:g} for {STORM_UPDATES} or more updates in a row): "
+        f"KL storm ({which} on: approx. KL above {KL_ABOVE:g} for {STORM_UPDATES} or more updates "
+        "in a row): "
         "PPO's steps blew up"
     )
 
