@@ -50,8 +50,8 @@ from hintsjax.envs.physics import AUTO, DEFAULT_CAPACITY, JAX, WARP, PhysicsUnav
 @dataclass(frozen=True)
 class EnvEntry:
     """A registered env: its class, its named params variants (the first is the default), its
-    training defaults (`TRAINING` beside the env; hintsjax/settings/env_defaults.py reads them) and what
-    its constructor takes besides the hint and the observation (an adapted env's task)."""
+    training defaults (`TRAINING` beside the env; hintsjax/settings/env_defaults.py reads them) and
+    what its constructor takes besides the hint and the observation (an adapted env's task)."""
 
     cls: type[Env]
     variants: dict[str, Any]
@@ -195,7 +195,8 @@ def resolve_physics(name: str, physics: str = AUTO) -> str:
 def auto_likely_warp(name: str) -> bool:
     """Whether physics=auto will step env `name` with MJX-Warp on this machine, read without
     starting JAX (`gpu_likely`): what a command decides its XLA flags by. An adapted env
-    (`source:name`) or an unknown name: False, without looking it up (its check says what is wrong)."""
+    (`source:name`) or an unknown name: False, without looking it up (its check says what is
+    wrong)."""
     if ":" in name or name not in env_names():
         return False
     cls = REGISTRY[name].cls

@@ -183,8 +183,8 @@ def full_state(state: AcrobotState, params: AcrobotParams) -> jax.Array:
 
 
 # Training defaults, RunConfig layers over the dataclasses' (hintsjax/settings/env_defaults.py): the
-# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but the
-# converged references; `agents`, an agent's own layer (the references' budgets and settings).
+# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but
+# the converged references; `agents`, an agent's own layer (the references' budgets and settings).
 # 700 episodes of at most 500 steps (the paper's 700 episodes, counted at their length).
 EXPERT_PPO = dict(total_env_steps=1_000_000)
 TRAINING = dict(

@@ -60,7 +60,8 @@ class Task:
 
 @struct.dataclass
 class AdaptedParams:
-    """The variant's camera: `tracking` or a named camera of the model (static: a program per camera)."""
+    """The variant's camera: `tracking` or a named camera of the model (static: a program per
+    camera)."""
 
     camera: str = struct.field(pytree_node=False, default=TRACK)
 
@@ -256,7 +257,8 @@ def body_velocity(data: Any, body: int, root: int) -> jax.Array:
 def register_generic_hints(task: Task) -> None:
     """The hints of any adapted env, no code needed: `reward` (the last step's), `state` (the
     task's observation), `sensor:<name>` (a named sensor's reading, in the sensor's unit) and
-    `body_velocity:<name>` (a body's centre of mass's velocity, m/s, world frame) for each of the model's."""
+    `body_velocity:<name>` (a body's centre of mass's velocity, m/s, world frame) for each of the
+    model's."""
     model = task.mj_model
     register_hint(task.name, "reward", dim=1, unit="reward")(last_reward)
 

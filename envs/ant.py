@@ -98,7 +98,7 @@ def full_state(state: LocomotionState, params) -> jax.Array:
     return state.obs
 
 
-# -- ant_fast: another, cheaper task on the ant's body (not Ant-v5's dynamics) ----------------------
+# -- ant_fast: another, cheaper task on the ant's body (not Ant-v5's dynamics) ---------------------
 
 FAST_NAME = "ant_fast"
 # The capsules from the torso to the knees: they reach the floor only once the ant lies on them.
@@ -149,8 +149,8 @@ share_hints(FAST_NAME, NAME)
 
 
 # Training defaults, RunConfig layers over the dataclasses' (hintsjax/settings/env_defaults.py): the
-# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but the
-# converged references; `agents`, an agent's own layer (the references' budgets and settings).
+# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but
+# the converged references; `agents`, an agent's own layer (the references' budgets and settings).
 # Ant steps 256 envs per seed (rollouts of 4 steps per 1024-transition batch): each of its
 # steps is 5 RK4 substeps with 25 floor contacts, latency-bound at these sizes on a GPU, so
 # half the rollout length nearly halves a 5 M-step run (a speed choice, SPEC section 5).

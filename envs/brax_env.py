@@ -49,5 +49,6 @@ def load(name: str) -> Task:
 
 
 def training(name: str) -> dict[str, Any]:
-    """Every Brax env's training defaults: the generic `reward` hint, the DeepMind Control tasks' PPO."""
+    """Every Brax env's training defaults: the generic `reward` hint, the DeepMind Control tasks'
+    PPO."""
     return dict(hint=TRAINING["hint"], ppo=dict(TRAINING["ppo"]))

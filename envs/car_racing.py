@@ -47,13 +47,14 @@ TYRE_STIFFNESS = 205000 * 0.02**2  # force per u/s of slip
 BRAKE_RATE = 15 * WHEEL_R * FPS  # u/s^2 of rim speed at full brake
 # u/s: Box2D's cap on a body's translation, b2_maxTranslation = 2 u per 1/50 s step
 MAX_SPEED = 100.0
-# Gymnasium's wheels (WHEELPOS, WHEEL_W, WHEEL_R times SIZE) in the car's frame [right, forward] (u):
-# front-left, front-right, rear-left, rear-right; each a box WHEEL_HALF [across, along] either side.
+# Gymnasium's wheels (WHEELPOS, WHEEL_W, WHEEL_R times SIZE) in the car's frame [right, forward]
+# (u): front-left, front-right, rear-left, rear-right; each a box WHEEL_HALF [across, along] either
+# side.
 WHEELS = np.array([(-55, 80), (55, 80), (-55, -82), (55, -82)], np.float32) * 0.02
 WHEEL_HALF = np.array([14, 27], np.float32) * 0.02
 WHEEL_FORWARD, WHEEL_LEFT = WHEELS[:, 1], -WHEELS[:, 0]  # FRONT, FRONT, -REAR, -REAR; +-1.1
-# Box2D's centre of mass of the hull (density 1) and the wheels (0.1) lies MASS_BEHIND behind the hull's
-# origin (the car's xy); the car turns about it and its velocity is the centre of mass's.
+# Box2D's centre of mass of the hull (density 1) and the wheels (0.1) lies MASS_BEHIND behind the
+# hull's origin (the car's xy); the car turns about it and its velocity is the centre of mass's.
 MASS_BEHIND = 0.0805
 # The front wheels' joint limit is 0.4 rad, which Box2D holds with a slop: pushed by the steering
 # motor, Gymnasium's wheels settle at 0.4202 rad (measured); a target within it is met exactly.
@@ -182,7 +183,8 @@ def checkpoints(key: jax.Array, params: CarRacingParams) -> tuple[jax.Array, jax
 
 def trace(alpha_c: jax.Array, rad_c: jax.Array, steps: int = TRACE_STEPS) -> tuple[jax.Array, ...]:
     """Gymnasium's trace from its start (1.5 TRACK_RAD, 0) heading north: float32[steps] each of the
-    angle before the step (less 2 pi past the last checkpoint), across-track angle, x, y after it."""
+    angle before the step (less 2 pi past the last checkpoint), across-track angle, x, y after
+    it."""
     cx, cy, idx = rad_c * jnp.cos(alpha_c), rad_c * jnp.sin(alpha_c), jnp.arange(CHECKPOINTS)
 
     def step(carry, _):
@@ -239,8 +241,8 @@ def _lap(key: jax.Array, params: CarRacingParams) -> tuple[Track, jax.Array]:
 
 
 def _kerbs(beta: jax.Array, n: jax.Array) -> jax.Array:
-    """bool[MAX_TILES] kerb flags of a track with across-track angles beta[MAX_TILES] (n valid): where
-    BORDER_MIN_COUNT successive heading steps turn one way by more than 0.2 the rate, and the
+    """bool[MAX_TILES] kerb flags of a track with across-track angles beta[MAX_TILES] (n valid):
+    where BORDER_MIN_COUNT successive heading steps turn one way by more than 0.2 the rate, and the
     BORDER_MIN_COUNT - 1 tiles before."""
     # the headings repeat with period n, padded by c on either side so that shifts are slices
     c, i = BORDER_MIN_COUNT, jnp.arange(MAX_TILES)
@@ -253,7 +255,8 @@ def _kerbs(beta: jax.Array, n: jax.Array) -> jax.Array:
 
 def track_from_gymnasium(points: np.ndarray) -> Track:
     """A Track holding Gymnasium's track `env.unwrapped.track` (float[n, 4] of alpha, beta, x, y per
-    centre point; its tile i spans point i-1 to i, as ours), padded to MAX_TILES; kerbs by `_kerbs`."""
+    centre point; its tile i spans point i-1 to i, as ours), padded to MAX_TILES; kerbs by
+    `_kerbs`."""
     points = np.asarray(points, np.float64)
     n = len(points)
     if not CONTACT_TILES <= n <= MAX_TILES:  # fewer would repeat tiles in wheel_contact's window
@@ -294,7 +297,8 @@ def _normal(beta: jax.Array) -> jax.Array:
 
 
 def _quads(track: Track, tiles: jax.Array) -> jax.Array:
-    """float32[k, 4, 2] corners of tiles, clockwise: left and right of its end, right and left of its start."""
+    """float32[k, 4, 2] corners of tiles, clockwise: left and right of its end, right and left of
+    its start."""
     prev = (tiles - 1) % track.n_tiles
     end, start = track.xy[tiles], track.xy[prev]
     n1, n0 = _normal(track.beta[tiles]) * TRACK_WIDTH, _normal(track.beta[prev]) * TRACK_WIDTH
@@ -332,7 +336,8 @@ CONTACT_TILES = 6
 @struct.dataclass
 class WheelContact:
     """Which tiles the wheels touch: `tiles` int32[CONTACT_TILES] searched around the car, `touched`
-    bool[CONTACT_TILES] whether a wheel touches each, `on_road` bool[4] whether each wheel touches any."""
+    bool[CONTACT_TILES] whether a wheel touches each, `on_road` bool[4] whether each wheel touches
+    any."""
 
     tiles: jax.Array
     touched: jax.Array
@@ -340,7 +345,8 @@ class WheelContact:
 
 
 def wheel_corners(car: Car) -> jax.Array:
-    """float32[4, 4, 2] world corners of the four WHEELS' boxes, the front pair turned by the steering."""
+    """float32[4, 4, 2] world corners of the four WHEELS' boxes, the front pair turned by the
+    steering."""
     half_across, half_along = WHEEL_HALF
     corner_along = np.array([1.0, 1.0, -1.0, -1.0], np.float32) * half_along
     corner_left = np.array([1.0, -1.0, -1.0, 1.0], np.float32) * half_across
@@ -353,8 +359,9 @@ def wheel_corners(car: Car) -> jax.Array:
 
 
 def wheel_contact(track: Track, car: Car) -> WheelContact:
-    """The tiles the wheels touch. Box2D touches a tile when a wheel's box overlaps its quad; here when
-    a corner of the box lies inside the quad (a tile's corner poking into a wheel is missed)."""
+    """The tiles the wheels touch. Box2D touches a tile when a wheel's box overlaps its quad; here
+    when a corner of the box lies inside the quad (a tile's corner poking into a wheel is
+    missed)."""
     tiles = (nearest_point(track, car.xy) + jnp.arange(-2, CONTACT_TILES - 2)) % track.n_tiles
     normal, offset = _edge_lines(_quads(track, tiles))  # [K, 4, 2], [K, 4]
     p = wheel_corners(car).reshape(16, 1, 1, 2)
@@ -364,7 +371,8 @@ def wheel_contact(track: Track, car: Car) -> WheelContact:
 
 
 def _track_frame(track: Track, car: Car):
-    """Nearest point index, the car's signed offset left of the centre line (u), heading error (rad)."""
+    """Nearest point index, the car's signed offset left of the centre line (u), heading error
+    (rad)."""
     j = nearest_point(track, car.xy)
     lateral = -jnp.sum((car.xy - track.xy[j]) * _normal(track.beta[j]))
     return j, lateral, wrap(car.angle - track.beta[j])
@@ -385,10 +393,11 @@ ACTION_RANGE = (np.array([-1.0, 0.0, 0.0], np.float32), np.array([1.0, 1.0, 1.0]
 
 
 def drive(car: Car, action: jax.Array, grip: jax.Array) -> Car:
-    """One 1/50 s frame under action [steer, gas, brake] (clipped) with grip float32[4] per wheel (1 on
-    the road), in the WHEELS' order. As Gymnasium's `Car.step` then Box2D's `world.Step`: each wheel's
-    force from the velocities and wheel angle at the frame's start, held for the frame; velocities
-    then positions updated (semi-implicit Euler); the wheels turn towards the steering target."""
+    """One 1/50 s frame under action [steer, gas, brake] (clipped) with grip float32[4] per wheel (1
+    on the road), in the WHEELS' order. As Gymnasium's `Car.step` then Box2D's `world.Step`: each
+    wheel's force from the velocities and wheel angle at the frame's start, held for the frame;
+    velocities then positions updated (semi-implicit Euler); the wheels turn towards the steering
+    target."""
     steer_action, gas, brake = jnp.clip(action, *ACTION_RANGE)
     gas = car.gas + jnp.minimum(gas - car.gas, 0.1)
     target, limit, dt = (
@@ -398,7 +407,8 @@ def drive(car: Car, action: jax.Array, grip: jax.Array) -> Car:
     )
     u, v, r = car.vel[0], car.vel[1], car.yaw_rate
     c, s = jnp.cos(STEERED * car.steer), jnp.sin(STEERED * car.steer)
-    # each wheel's ground velocity [forward, left] in the car's frame, then along and across the wheel
+    # each wheel's ground velocity [forward, left] in the car's frame, then along and across the
+    # wheel
     arm = WHEEL_FORWARD + MASS_BEHIND  # ahead of the mass centre
     ground_u, ground_v = u - r * WHEEL_LEFT, v + r * arm
     along, across = ground_u * c + ground_v * s, -ground_u * s + ground_v * c
@@ -466,7 +476,8 @@ HULL_POLYS = [
 
 
 def _hull_cover() -> np.ndarray:
-    """float32[S, S] coverage of Gymnasium's hull polygons, 4x4 supersampled (the car never moves)."""
+    """float32[S, S] coverage of Gymnasium's hull polygons, 4x4 supersampled (the car never
+    moves)."""
     sub = (np.arange(4) + 0.5) / 4 - 0.5
     du, dv = np.meshgrid(sub * 1000 / SIZE / ZOOM, -sub * 800 / SIZE / ZOOM)
     p = VIEW[:, :, None, None, :] + np.stack([du, dv], -1)
@@ -609,7 +620,8 @@ class CarRacing(Env):
 
     def transition(self, key, state: CarRacingState, action, params: CarRacingParams) -> Step:
         track = state.track
-        # a wheel grips as on the road while it touches a tile (Box2D: the contacts of the last step)
+        # a wheel grips as on the road while it touches a tile (Box2D: the contacts of the last
+        # step)
         grip = jnp.where(wheel_contact(track, state.car).on_road, 1.0, params.grass_grip)
         car = drive(state.car, jnp.asarray(action, f32), grip)
         contact = wheel_contact(track, car)
@@ -701,7 +713,7 @@ def on_track(state: CarRacingState, params: CarRacingParams) -> jax.Array:
 
 @register_hint(NAME, "target_speed", dim=1, unit="u/s")
 def target_speed(state: CarRacingState, params: CarRacingParams) -> jax.Array:
-    """sqrt(A_LAT / |kappa|) for the sharpest curvature over the next 2 LOOKAHEAD tiles, at most V_MAX."""
+    """sqrt(A_LAT / |kappa|) for the sharpest curvature over the next 2 LOOKAHEAD tiles, at most V_MAX."""  # noqa: E501
     j = nearest_point(state.track, state.car.xy)
     ahead = jnp.arange(2 * LOOKAHEAD + 1)
     kappa = jnp.abs(
@@ -720,8 +732,8 @@ register_composite(NAME, "composite", ("on_track", "curvature"))
 
 
 # Training defaults, RunConfig layers over the dataclasses' (hintsjax/settings/env_defaults.py): the
-# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but the
-# converged references; `agents`, an agent's own layer (the references' budgets and settings).
+# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but
+# the converged references; `agents`, an agent's own layer (the references' budgets and settings).
 # 1000 episodes of 1000 steps (SPEC section 5); trained on the standard track, deployed on
 # hairpins. The paper conditions the car with scheme mc (scheme=mc).
 # The car's references run on its state (state_observation: speeds, steering, the track's

@@ -83,8 +83,8 @@ def full_state(state: LocomotionState, params) -> jax.Array:
 
 
 # Training defaults, RunConfig layers over the dataclasses' (hintsjax/settings/env_defaults.py): the
-# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but the
-# converged references; `agents`, an agent's own layer (the references' budgets and settings).
+# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but
+# the converged references; `agents`, an agent's own layer (the references' budgets and settings).
 # Locomotion (SPEC section 5): 1k, 5k and 10k episodes, counted at their full 1000 steps
 # (early episodes end in a few dozen steps when the robot falls, as on idp).
 # HalfCheetah's pixel agents at Table 5's encoder rate 1e-3 and 8 epochs drifted from their

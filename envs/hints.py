@@ -207,8 +207,8 @@ def check_hint_shapes(hint: Hint, state: Any, params: Any) -> None:
             out = jax.eval_shape(part.fn, state, params)
         except Exception as e:  # noqa: BLE001  the user's function fails to trace: one line naming it
             raise HintFileError(
-                f"hint '{part.name}' of {hint.env} fails on the env's state "
-                f"({type(e).__name__}: {str(e).strip().splitlines()[0][:160] if str(e).strip() else ''})"
+                f"hint '{part.name}' of {hint.env} fails on the env's state ({type(e).__name__}: "
+                f"{str(e).strip().splitlines()[0][:160] if str(e).strip() else ''})"
             ) from None
         shape = getattr(out, "shape", None)
         if shape is None or len(shape) > 1 or (shape[0] if shape else 1) != part.dim:

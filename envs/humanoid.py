@@ -106,8 +106,8 @@ def full_state(state: LocomotionState, params) -> jax.Array:
 
 
 # Training defaults, RunConfig layers over the dataclasses' (hintsjax/settings/env_defaults.py): the
-# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but the
-# converged references; `agents`, an agent's own layer (the references' budgets and settings).
+# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but
+# the converged references; `agents`, an agent's own layer (the references' budgets and settings).
 # Humanoid's learners take the ant's KL early stop and its 256 envs per seed (rollouts of 4
 # steps: each update waits on 4 latency-bound MJX steps instead of 8). Its references follow
 # the ant's: the expert is PPO on the state for 20 M steps (2x the learners'), 1024 envs per

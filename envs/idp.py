@@ -51,7 +51,7 @@ MJCF = f"""
     <motor ctrllimited="true" ctrlrange="-1 1" gear="500" joint="slider" name="slide"/>
   </actuator>
 </mujoco>
-"""
+"""  # noqa: E501
 
 
 @struct.dataclass
@@ -170,7 +170,8 @@ class InvertedDoublePendulum(MjxEnv):
 
 
 def observation(state: IDPState) -> jax.Array:
-    """float32[9] = [x, sin phi1, sin phi2, cos phi1, cos phi2, clip(qvel, 10), clip(slider force, 10)]."""
+    """float32[9] = [x, sin phi1, sin phi2, cos phi1, cos phi2, clip(qvel, 10), clip(slider force,
+    10)]."""
     q = state.qpos
     return jnp.concatenate(
         [
@@ -209,8 +210,8 @@ def full_state(state: IDPState, params: IDPParams) -> jax.Array:
 
 
 # Training defaults, RunConfig layers over the dataclasses' (hintsjax/settings/env_defaults.py): the
-# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but the
-# converged references; `agents`, an agent's own layer (the references' budgets and settings).
+# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but
+# the converged references; `agents`, an agent's own layer (the references' budgets and settings).
 # Early IDP episodes last ~10 steps, so an episode count would be a tiny budget: we count
 # 200 full-length episodes (200 K steps), the pendulum's budget. 128 envs per seed (rollouts
 # of 8 steps per 1024-transition batch): MJX's RK4 with the rail's constraint solver is

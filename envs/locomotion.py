@@ -107,7 +107,8 @@ class LocomotionEnv(MjxEnv):
         self, data: Readout, velocity: jax.Array, ctrl: jax.Array, params
     ) -> tuple[jax.Array, jax.Array]:
         """(reward, terminated) of a step that ended in `data` with `velocity` (float32[2]), its
-        control cost charged on `ctrl` (the clipped action, or the raw one: `raw_action_ctrl_cost`)."""
+        control cost charged on `ctrl` (the clipped action, or the raw one:
+        `raw_action_ctrl_cost`)."""
         raise NotImplementedError
 
     def observe_data(self, data: Readout) -> jax.Array:

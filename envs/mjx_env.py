@@ -68,7 +68,8 @@ class MjxEnv(Env):
     @classmethod
     def with_options(cls, **options: Any) -> type[MjxEnv]:
         """This env's class with more `mj_model.opt` fields overridden (e.g. fewer solver
-        iterations): what a benchmark compares. The registered envs keep their documented options."""
+        iterations): what a benchmark compares. The registered envs keep their documented
+        options."""
         return type(cls.__name__, (cls,), {"options": {**cls.options, **options}})
 
     @classmethod

@@ -214,8 +214,8 @@ register_composite(NAME, "composite", ("angular_velocity", "goal_distance"))
 
 
 # Training defaults, RunConfig layers over the dataclasses' (hintsjax/settings/env_defaults.py): the
-# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but the
-# converged references; `agents`, an agent's own layer (the references' budgets and settings).
+# hint, deploy variants and PPO settings of every agent; `learners`, the layer of every agent but
+# the converged references; `agents`, an agent's own layer (the references' budgets and settings).
 # The expert's (and GAIL's) PPO is tuned for the state pendulum. With 16 envs x 64 steps a
 # batch holds one phase of the 16 synchronised 200-step episodes (all swinging up, then all
 # balancing), and the greedy policy swung between good and failing from one evaluation to

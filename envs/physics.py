@@ -61,7 +61,8 @@ DEBUG = "HINTSJAX_DEBUG"
 
 
 def debugging() -> bool:
-    """Whether HINTSJAX_DEBUG is set (to anything but 0): then Warp's and MJX's own lines are kept."""
+    """Whether HINTSJAX_DEBUG is set (to anything but 0): then Warp's and MJX's own lines are
+    kept."""
     return os.environ.get(DEBUG, "0") not in ("", "0")
 
 
@@ -107,7 +108,8 @@ DEFAULT_CAPACITY = 2.0
 
 
 class PhysicsUnavailable(ValueError):
-    """physics=warp where MJX-Warp cannot run (no warp-lang, or no NVIDIA GPU and no Warp CPU path)."""
+    """physics=warp where MJX-Warp cannot run (no warp-lang, or no NVIDIA GPU and no Warp CPU
+    path)."""
 
 
 def warp_installed() -> bool:
@@ -154,8 +156,8 @@ def resolve(choice: str, platform: str, warp_by_default: bool = True, devices: i
 
     auto: Warp on one NVIDIA GPU with warp-lang installed (for an env that prefers it), else JAX,
     so CPU runs, the tests and CPU sweeps stay bit-reproducible, and a run on several GPUs or
-    processes spreads its seeds over them (physics=warp runs on one). warp: on a GPU or a CPU (Warp's
-    CPU path, for tests: slow), with warp-lang installed; PhysicsUnavailable otherwise."""
+    processes spreads its seeds over them (physics=warp runs on one). warp: on a GPU or a CPU
+    (Warp's CPU path, for tests: slow), with warp-lang installed; PhysicsUnavailable otherwise."""
     choose("physics", choice, dict.fromkeys(CHOICES))
     if choice == AUTO:
         return (
@@ -171,7 +173,8 @@ def resolve(choice: str, platform: str, warp_by_default: bool = True, devices: i
             )
         if platform not in ("gpu", "cpu"):
             raise PhysicsUnavailable(
-                f"physics=warp runs on NVIDIA GPUs (and slowly on CPUs), not on {platform}; use physics=jax"
+                f"physics=warp runs on NVIDIA GPUs (and slowly on CPUs), not on {platform}; use "
+                "physics=jax"
             )
     return choice
 
@@ -358,7 +361,8 @@ class WarpPhysics:
         self._runs: dict[tuple[int, bool], Callable[..., Readout]] = {}
 
     def template(self, worlds: int) -> mjx.Data:
-        """A fresh data of one world, its shared buffers sized for `worlds` worlds (numpy arrays)."""
+        """A fresh data of one world, its shared buffers sized for `worlds` worlds (numpy
+        arrays)."""
         if worlds not in self._templates:
             with quiet(), jax.ensure_compile_time_eval():  # host arrays, also mid-trace
                 data = mjx.make_data(

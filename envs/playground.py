@@ -29,7 +29,8 @@ SOURCE = "playground"
 @dataclass(frozen=True)
 class TaskDefaults:
     """A task's defaults: the camera of its default variant, its default hint and the PPO
-    settings of its agents (RunConfig's `ppo` section; hintsjax/settings/env_defaults.py reads them)."""
+    settings of its agents (RunConfig's `ppo` section; hintsjax/settings/env_defaults.py reads
+    them)."""
 
     camera: str = TRACK
     hint: str = "reward"
@@ -90,7 +91,8 @@ def load(task: str) -> Task:
         env = registry.load(task, config_overrides={"impl": "jax"})
     except Exception as e:  # noqa: BLE001  Playground's own failure (a model it must download, ...), in one line
         raise EnvUnavailable(
-            f"playground:{task} does not load: {type(e).__name__}: {str(e).splitlines()[0][:200] if str(e) else ''}"
+            f"playground:{task} does not load: {type(e).__name__}: "
+            f"{str(e).splitlines()[0][:200] if str(e) else ''}"
         ) from None
     return Task(
         f"{SOURCE}:{task}",

@@ -112,8 +112,9 @@ def make_scene(
         kind = int(mj_model.geom_type[g])
         if kind not in SUPPORTED:
             raise ValueError(
-                f"geom {g} '{mj_model.geom(g).name}' is a {_UNSUPPORTED.get(kind, kind)}; render3d draws only "
-                f"{', '.join(SUPPORTED.values())} (hide it with its group or rgba alpha 0)"
+                f"geom {g} '{mj_model.geom(g).name}' is a {_UNSUPPORTED.get(kind, kind)}; "
+                f"render3d draws only {', '.join(SUPPORTED.values())} (hide it with its group or "
+                "rgba alpha 0)"
             )
         drawn.append((kind, g, floats(mj_model.geom_size[g]), rgba[:3]))
     kinds, ids, sizes, rgbs = zip(*sorted(drawn)) if drawn else ((), (), (), ())

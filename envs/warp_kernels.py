@@ -3,12 +3,12 @@
 On a machine whose Warp kernel cache is empty (WARP_CACHE_PATH, or Warp's default folder), the
 first physics call of a `physics=warp` run builds about 33 kernel modules (code generation, then
 NVRTC or clang): about as long as the run's XLA compiles for the ant (docs/throughput.md), and one
-after the other with them. `start` builds them in a child process from the run's first moment instead, with
-MuJoCo Warp's own API on one world of the env's model (the same options, contact and constraint
-capacities, and overflow warnings off, as `physics.WarpPhysics`), so that they land in the kernel
-cache while the run's programs compile; `KernelBuild.wait` is called before the run's first state.
-The modules' names and hashes match the ones the run's first call loads (the study behind this:
-docs/throughput.md), except the module of MJX's own FFI callables, built while tracing.
+after the other with them. `start` builds them in a child process from the run's first moment
+instead, with MuJoCo Warp's own API on one world of the env's model (the same options, contact and
+constraint capacities, and overflow warnings off, as `physics.WarpPhysics`), so that they land in
+the kernel cache while the run's programs compile; `KernelBuild.wait` is called before the run's
+first state. The modules' names and hashes match the ones the run's first call loads (the study
+behind this: docs/throughput.md), except the module of MJX's own FFI callables, built while tracing.
 
 More of what it owns and why: docs/design.md, "Module notes", envs/warp_kernels.py.
 """

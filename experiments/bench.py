@@ -1,7 +1,8 @@
 """Throughput of each env (with its picture), of training end to end, and the ceiling.
 
-    python experiments/bench.py [--envs pendulum,acrobot,idp] [--sizes 4096,65536] [--steps 100] [--no-train]
-                                [--reset-cost] [--default-train-only] [--quick] [--out results.json]
+    python experiments/bench.py [--envs pendulum,acrobot,idp] [--sizes 4096,65536] [--steps 100]
+                                [--no-train] [--reset-cost] [--default-train-only] [--quick]
+                                [--out results.json]
                                 [--model-option integrator=EULER ...]
 
 Measures, in one process on whatever device JAX sees:
@@ -12,8 +13,8 @@ Measures, in one process on whatever device JAX sees:
   ceiling  the encoder + heads' own update rate: samples/s of one forward+backward+Adam step
            of the hints/fc network at batch 8192 (nothing else in the graph)
   train    end-to-end training (rollout, GAE, epochs of minibatch updates), seed-vmapped, timed
-           through pipeline.train, the function the command line runs (compile apart), beside the same
-           updates as one bare jitted scan: env steps/s, and gradient samples/s = env steps/s x
+           through pipeline.train, the function the command line runs (compile apart), beside the
+           same updates as one bare jitted scan: env steps/s, and gradient samples/s = env steps/s x
            epochs, as a fraction of the ceiling (1.0 would mean the GPU did nothing but full-batch
            updates); and the milliseconds of one update's rollout, learning and env steps alone
 Each timing is the best of a few repetitions after a compile-and-warm-up call.
@@ -340,7 +341,8 @@ def main() -> None:
             state = jax.jit(jax.vmap(make_trainer(cfg).init))(cfg.seed_keys())
             parts = update_parts(cfg, state)
             print(
-                f"update  {name:>9} 5 seeds {cfg.ppo.num_envs} envs x {cfg.ppo.rollout_length} steps, {cfg.physics}: "
+                f"update  {name:>9} 5 seeds {cfg.ppo.num_envs} envs x "
+                f"{cfg.ppo.rollout_length} steps, {cfg.physics}: "
                 + ", ".join(f"{k} {1e3 * v:.1f} ms" for k, v in parts.items()),
                 flush=True,
             )
@@ -404,9 +406,11 @@ def main() -> None:
             r["fraction_of_ceiling"] = r["grad_samples_per_s"] / ceiling
             results["train"].append(r)
             print(
-                f"train   {name:>9} {seeds:>3} seeds {r['ppo']}: {r['env_steps_per_s']:,.0f} env steps/s "
+                f"train   {name:>9} {seeds:>3} seeds {r['ppo']}: "
+                f"{r['env_steps_per_s']:,.0f} env steps/s "
                 f"through pipeline.train (bare scan {r['scan_env_steps_per_s']:,.0f}), "
-                f"{r['grad_samples_per_s']:,.0f} grad samples/s = {r['fraction_of_ceiling']:.0%} of ceiling; "
+                f"{r['grad_samples_per_s']:,.0f} grad samples/s = "
+                f"{r['fraction_of_ceiling']:.0%} of ceiling; "
                 f"compile {r['compile_s']['train']:.1f} s; one update: "
                 + ", ".join(f"{k} {1e3 * v:.1f} ms" for k, v in r["update_parts_s"].items()),
                 flush=True,

@@ -65,7 +65,8 @@ def main() -> None:
             for seeds in (1, args.seeds):
                 r = rate(conv, dtype, args.batch, seeds)
                 print(
-                    f"{conv:8s} {jnp.dtype(dtype).name:8s} seeds={seeds:<3d} batch={args.batch}: {r:,.0f} samples/s",
+                    f"{conv:8s} {jnp.dtype(dtype).name:8s} seeds={seeds:<3d} batch={args.batch}: "
+                    f"{r:,.0f} samples/s",
                     flush=True,
                 )
 

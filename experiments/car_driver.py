@@ -1,6 +1,7 @@
 """Our car against Gymnasium's CarRacing-v3 under one scripted driver, on Gymnasium's own tracks (issues 26, 50).
 
-    python experiments/car_driver.py [--tracks 10] [--speeds 30,60,90]   # -> experiments/results/car_driver.md, .json
+    python experiments/car_driver.py [--tracks 10] [--speeds 30,60,90]
+        # -> experiments/results/car_driver.md, .json
 
 The driver is pure pursuit on the track's centre line: it steers towards the centre point
 LOOKAHEAD points past the nearest one (steer = -GAIN x the angle to it, clipped to [-1, 1]; +1
@@ -12,7 +13,7 @@ until the episode ends. Per target speed: tiles visited (progress), return (and 
 json), laps completed and their time, top speed, and how often the car leaves the road (all four
 wheels off the tiles) per lap of track. Then our visit rules are replayed along Gymnasium's
 driven trajectories and their counts of visited tiles compared with Gymnasium's (`visit_rule_gap`).
-"""
+"""  # noqa: E501
 
 from __future__ import annotations
 
@@ -83,7 +84,8 @@ class GymnasiumEpisodes:
 
 
 def gymnasium_tracks(seeds: range) -> list[np.ndarray]:
-    """Gymnasium's tracks for `reset(seed=s)`, each float[n, 4] (alpha, beta, x, y per centre point)."""
+    """Gymnasium's tracks for `reset(seed=s)`, each float[n, 4] (alpha, beta, x, y per centre
+    point)."""
     import gymnasium as gym
 
     env = gym.make("CarRacing-v3", continuous=True)
@@ -166,7 +168,8 @@ def our_tracks(count: int):
 
 
 def drive_ours(tracks, target_speed: float) -> dict:
-    """The driver on our car on a batch of Tracks, each from Gymnasium's start (its first centre point)."""
+    """The driver on our car on a batch of Tracks, each from Gymnasium's start (its first centre
+    point)."""
     import jax
     import jax.numpy as jnp
 
@@ -230,9 +233,10 @@ def drive_ours(tracks, target_speed: float) -> dict:
 
 
 def visit_rule_gap(episodes: GymnasiumEpisodes) -> dict:
-    """Our visit rules replayed along Gymnasium's driven trajectories: per frame, our count of visited
-    tiles less Gymnasium's, for the wheel rule (car_racing.wheel_contact) and the centre rule (the tile
-    holding the car's centre, the rule before issue 50): mean, mean |.|, max |.| over all frames."""
+    """Our visit rules replayed along Gymnasium's driven trajectories: per frame, our count of
+    visited tiles less Gymnasium's, for the wheel rule (car_racing.wheel_contact) and the centre
+    rule (the tile holding the car's centre, the rule before issue 50): mean, mean |.|, max |.| over
+    all frames."""
     import jax
     import jax.numpy as jnp
 
@@ -332,14 +336,15 @@ def main() -> None:
     lines = [
         "# The scripted driver on Gymnasium's car and on ours, on Gymnasium's tracks",
         "",
-        f"Made by `python experiments/car_driver.py --tracks {args.tracks} --speeds {args.speeds}` on the 2-core "
-        f"CPU development machine, {time.strftime('%Y-%m-%d', time.gmtime())} (Gymnasium 1.4.0 with Box2D "
-        f"2.3.10). Both envs drive the same {args.tracks} tracks: Gymnasium's `reset(seed=s)` for s = 0.."
-        f"{args.tracks - 1}, loaded into our Track (`car_racing.track_from_gymnasium`), each car from "
-        f"Gymnasium's start. Pure pursuit on the centre line ({LOOKAHEAD} points ahead, gain {GAIN}), a target "
-        "speed held by gas 0.5 / brake 0.3, 1000 steps at most. Progress: tiles visited / all (mean ± std over "
-        "tracks); laps: episodes ended by a completed lap, and their mean time; exits: times all four wheels "
-        "left the tiles, per lap of track driven.",
+        f"Made by `python experiments/car_driver.py --tracks {args.tracks} --speeds {args.speeds}` "
+        f"on the 2-core CPU development machine, {time.strftime('%Y-%m-%d', time.gmtime())} "
+        f"(Gymnasium 1.4.0 with Box2D 2.3.10). Both envs drive the same {args.tracks} tracks: "
+        f"Gymnasium's `reset(seed=s)` for s = 0..{args.tracks - 1}, loaded into our Track "
+        "(`car_racing.track_from_gymnasium`), each car from Gymnasium's start. Pure pursuit on the "
+        f"centre line ({LOOKAHEAD} points ahead, gain {GAIN}), a target speed held by gas 0.5 / "
+        "brake 0.3, 1000 steps at most. Progress: tiles visited / all (mean ± std over tracks); "
+        "laps: episodes ended by a completed lap, and their mean time; exits: times all four "
+        "wheels left the tiles, per lap of track driven.",
         "",
         *markdown_table(
             [
@@ -361,12 +366,13 @@ def main() -> None:
         "",
         "## Visited tiles along Gymnasium's trajectories",
         "",
-        "Gymnasium's car is driven as above; after every frame its hull's pose and front-wheel angle are "
-        "replayed into our visit rules on the same track, and our count of visited tiles is compared with "
-        "Gymnasium's `tile_visited_count`. wheels: a tile is visited when a corner of a wheel's box lies in "
-        "its quad (`car_racing.wheel_contact`, the env's rule); centre: when the car's centre lies in it "
-        "(the env's rule before issue 50). Difference = ours - Gymnasium's, in tiles, over every frame of "
-        "every track; final: at the episode's last frame.",
+        "Gymnasium's car is driven as above; after every frame its hull's pose and front-wheel "
+        "angle are replayed into our visit rules on the same track, and our count of visited tiles "
+        "is compared with Gymnasium's `tile_visited_count`. wheels: a tile is visited when a "
+        "corner of a wheel's box lies in its quad (`car_racing.wheel_contact`, the env's rule); "
+        "centre: when the car's centre lies in it (the env's rule before issue 50). Difference = "
+        "ours - Gymnasium's, in tiles, over every frame of every track; final: at the episode's "
+        "last frame.",
         "",
         *markdown_table(
             [

@@ -1,6 +1,7 @@
 """How the car learns under each policy head and reward scale (issue 26, item 2).
 
-    python experiments/car_learning.py [--variants gaussian,tanh,sigmoid] [--seeds 5]   # train (GPU); resumable
+    python experiments/car_learning.py [--variants gaussian,tanh,sigmoid] [--seeds 5]
+        # train (GPU); resumable
     python experiments/car_learning.py --report     # -> experiments/results/car_learning.md
 
 Each variant is PPO-RGB on the car at its table's budget (ENV_DEFAULTS: 1000 episodes of 1000
@@ -12,7 +13,8 @@ sampled actions, the authors' protocol (`python -m hintsjax.evaluate <folder> --
 tracks). The report gives per variant and evaluation the IQM [95% CI] of the per-seed mean
 returns, the progress P, the training return (the last tenth of updates), the policy's std at the
 end (from the logged entropy), and each variant against the first (`gaussian`, the defaults) as a
-probability of improvement. `--report` archives the finished runs (experiments/results/runs/car_learning).
+probability of improvement. `--report` archives the finished runs
+(experiments/results/runs/car_learning).
 """
 
 from __future__ import annotations
@@ -39,8 +41,9 @@ from hintsjax.reproduce.report import iqm_cell, load, metric_cell, ordering, tra
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ENV, AGENT = "car_racing", "ppo_rgb"
-# Each variant's settings over the car's defaults (and STUDY's); the first is the reference the others are
-# compared with. The heads are named, not left to the defaults, which these measurements chose (the sigmoid).
+# Each variant's settings over the car's defaults (and STUDY's); the first is the reference the
+# others are compared with. The heads are named, not left to the defaults, which these measurements
+# chose (the sigmoid).
 VARIANTS: dict[str, dict] = {
     # a Gaussian whose draws the env clips (gas and brake into [0, 1])
     "gaussian": {"ppo": {"action_head": "gaussian"}},
@@ -84,8 +87,9 @@ def variant_settings(name: str, seeds: int, smoke: bool) -> dict:
 
 def train(runs: Path, names: list[str], seeds: int, smoke: bool) -> None:
     """Train and evaluate each variant not finished yet (both evaluations); resumable. Variants
-    that differ only in numbers (the reward scale: hintsjax.algorithms.group's Hyper) train as one group, in
-    one program (<runs>/car_racing/_groups/<names>); the policy heads each need their own."""
+    that differ only in numbers (the reward scale: hintsjax.algorithms.group's Hyper) train as one
+    group, in one program (<runs>/car_racing/_groups/<names>); the policy heads each need their
+    own."""
     from hintsjax.system import checkpoint
     from hintsjax.settings.layers import run_config, save_run_config
     from hintsjax.algorithms.group import plan
@@ -224,15 +228,16 @@ def report(runs: Path, out: Path) -> None:
     lines = [
         "# The car's learning side: action heads, evaluation protocol, reward scale (issue 26)",
         "",
-        f"PPO-RGB on the car at its table's budget, one row per variant (`experiments/car_learning.py`); cells: "
-        f"IQM [95% CI] of the per-seed mean returns ({first['seeds']} seeds x {first['episodes_per_seed']} "
-        "evaluation episodes). Deterministic: the policy's mean; stochastic: sampled actions (the authors' "
-        f"protocol). Runs: experiments/results/runs/{runs.name}.",
+        "PPO-RGB on the car at its table's budget, one row per variant "
+        "(`experiments/car_learning.py`); cells: IQM [95% CI] of the per-seed mean returns "
+        f"({first['seeds']} seeds x {first['episodes_per_seed']} evaluation episodes). "
+        "Deterministic: the policy's mean; stochastic: sampled actions (the authors' protocol). "
+        f"Runs: experiments/results/runs/{runs.name}.",
         "",
         *markdown_table(header, rows),
         "",
-        f"Each variant against `{reference}` (probability of improvement over seeds, 95% bootstrap interval; "
-        "decided where it excludes 0.5):",
+        f"Each variant against `{reference}` (probability of improvement over seeds, 95% bootstrap "
+        "interval; decided where it excludes 0.5):",
         "",
         *comparisons,
         "",

@@ -2,7 +2,8 @@
 
     python experiments/car_racing.py [--workers 2] [--launch-until 300]
     python experiments/car_racing.py --report     # experiments/results/car_table3.md + curves
-    python experiments/car_racing.py --learners-report experiments/results/table3_seeds20.md --runs runs/table3_20
+    python experiments/car_racing.py --learners-report experiments/results/table3_seeds20.md
+        --runs runs/table3_20
 
 PPO-RGB and HINTS-MC with each of the paper's car hint columns (curvature, on_track and their
 composite), trained on the standard tracks at the paper's budget (config.ENV_DEFAULTS: 1000
@@ -114,10 +115,10 @@ def findings(runs: Path, env: str) -> str:
     d = stats.difference_ci(composite, rgb)
     verdict = "decided" if stats.difference_decided(d) else "undecided"
     return (
-        f"Hairpin progress (O3): HINTS-MC composite {100 * np.mean(composite):.0f}% ({len(composite)} seeds), "
-        f"PPO-RGB {100 * np.mean(rgb):.0f}% ({len(rgb)} seeds); paper 78% against 46%. Composite minus vision "
-        f"only: {100 * d.point:+.1f} points [{100 * d.low:+.1f}, {100 * d.high:+.1f}] (95% bootstrap interval "
-        f"over seeds): {verdict}."
+        f"Hairpin progress (O3): HINTS-MC composite {100 * np.mean(composite):.0f}% "
+        f"({len(composite)} seeds), PPO-RGB {100 * np.mean(rgb):.0f}% ({len(rgb)} seeds); paper "
+        f"78% against 46%. Composite minus vision only: {100 * d.point:+.1f} points "
+        f"[{100 * d.low:+.1f}, {100 * d.high:+.1f}] (95% bootstrap interval over seeds): {verdict}."
     )
 
 
@@ -129,7 +130,8 @@ def protocol(runs: Path, env: str) -> str:
         if (result := load(runs, env, label)) is not None:
             e = result["evaluations"][0]
             text = (
-                f"{len(e['seed_means'])} training seeds x {e.get('episodes_per_seed', '?')} evaluation episodes "
+                f"{len(e['seed_means'])} training seeds x {e.get('episodes_per_seed', '?')} "
+                "evaluation episodes "
                 f"({'sampled actions' if e.get('stochastic') else 'the policy mean'})"
             )
             found.setdefault(text, []).append(label)
@@ -149,12 +151,18 @@ def report(runs: Path, force: bool = False) -> None:
         "# Car Racing: the paper's Table 3 (CR Standard and CR Hairpin rows), reproduced",
         "",
         f"Each cell: mean ± std over {protocol(runs, ENVS[0])};",
-        "in brackets the std of the per-seed means. Return: the episode return; P: progress, visited",
-        "tiles / all tiles of the state an episode ended in. Agents train on standard tracks and are",
-        "deployed on hairpin ones (first corner at most 45 degrees). The paper's cells are mean ± std",
-        "over n=50; its P values are section 5's (O3); it gives no expert, DAgger, GAIL or PPO-x car numbers.",
-        "Wall-clock per run (hardware at the end) includes compilation and both evaluations. '-': not run yet",
-        "(or not given by the paper). Training return: the training episodes (sampled actions, standard",
+        "in brackets the std of the per-seed means. "
+        "Return: the episode return; P: progress, visited",
+        "tiles / all tiles of the state an episode ended in. "
+        "Agents train on standard tracks and are",
+        "deployed on hairpin ones (first corner at most 45 degrees). "
+        "The paper's cells are mean ± std",
+        "over n=50; its P values are section 5's (O3); "
+        "it gives no expert, DAgger, GAIL or PPO-x car numbers.",
+        "Wall-clock per run (hardware at the end) includes compilation and both evaluations. '-': "
+        "not run yet",
+        "(or not given by the paper). Training return: "
+        "the training episodes (sampled actions, standard",
         "tracks) that ended in the last 10% of updates, mean ± std over the seeds.",
         "",
     ]
@@ -250,13 +258,18 @@ def learners_report(runs: Path, names: list[str], path: Path, force: bool = Fals
     ppo = run_config({"env": env}).ppo
     heading = f"## {env} ({ppo.total_env_steps / 1e6:g} M env steps per seed"
     lines = [
-        f"Made by `python experiments/car_racing.py --learners-report experiments/results/{path.name} "
-        f"--runs runs/{runs.name}` from the archived runs (experiments/results/runs/{runs.name}).",
-        "Agents train on standard tracks and are deployed on standard and hairpin ones. Cells per track variant:",
-        "the IQM of the per-seed mean returns with a 95 % stratified bootstrap interval, P(row > PPO-RGB) over the",
-        "seeds, and the progress P (visited tiles / all tiles at an episode's end), mean ± std over all seeds x",
+        "Made by `python experiments/car_racing.py --learners-report "
+        f"experiments/results/{path.name} --runs runs/{runs.name}` from the archived runs "
+        f"(experiments/results/runs/{runs.name}).",
+        "Agents train on standard tracks and are deployed on standard and hairpin ones. "
+        "Cells per track variant:",
+        "the IQM of the per-seed mean returns with a 95 % stratified bootstrap interval, "
+        "P(row > PPO-RGB) over the",
+        "seeds, and the progress P (visited tiles / all tiles at an episode's end), "
+        "mean ± std over all seeds x",
         "50 evaluation episodes (in brackets the std of the per-seed means).",
-        f"GPU wall-clock of the sweeps (runs/{runs.name}/sweeps.jsonl): {sweep_seconds(runs, TABLE):.0f} s.",
+        f"GPU wall-clock of the sweeps (runs/{runs.name}/sweeps.jsonl): "
+        f"{sweep_seconds(runs, TABLE):.0f} s.",
         "",
     ]
     if not trained:

@@ -101,11 +101,13 @@ def main() -> None:
     lines = [
         "# Skidpad: Gymnasium's Box2D car / ours",
         "",
-        f"Made by `python experiments/car_skidpad.py --speeds {args.speeds} --steers {args.steers}` (2-core CPU "
-        f"development machine, Gymnasium 1.4.0, Box2D 2.3.10, {time.strftime('%Y-%m-%d', time.gmtime())}). "
-        "Each cell: Gymnasium's value / ours, the mean over the last "
-        f"{MEASURE} of {TURN} frames at a fixed steering input, after {STRAIGHT} frames straight; on grass "
-        "(both cars' grip 0.6 of the road's). Steer 1 is full lock (0.42 rad at the wheels in both: Box2D holds its 0.4 rad joint limit with a slop).",
+        f"Made by `python experiments/car_skidpad.py --speeds {args.speeds} --steers "
+        f"{args.steers}` (2-core CPU development machine, Gymnasium 1.4.0, Box2D 2.3.10, "
+        f"{time.strftime('%Y-%m-%d', time.gmtime())}). Each cell: Gymnasium's value / ours, the "
+        f"mean over the last {MEASURE} of {TURN} frames at a fixed steering input, after "
+        f"{STRAIGHT} frames straight; on grass (both cars' grip 0.6 of the road's). Steer 1 is "
+        "full lock (0.42 rad at the wheels in both: Box2D holds its 0.4 rad joint limit with a "
+        "slop).",
         "",
         *markdown_table(
             [

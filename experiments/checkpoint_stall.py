@@ -7,7 +7,8 @@ For each way of saving it prints the seconds the save call took and when the run
 ended, counted from its dispatch, against one chunk alone: a save that takes about a chunk's time
 waited for it (the device then idles until the loop dispatches the next chunk); a chunk that ends
 later than one alone was slowed by the save's work beside it. (An array's `is_ready()` is not
-used: on an H200 it reported the chunk finished 0.1 s after its dispatch, while the chunk ran 0.8 s.)
+used: on an H200 it reported the chunk finished 0.1 s after its dispatch, while the chunk ran
+0.8 s.)
 """
 
 from __future__ import annotations
@@ -43,7 +44,8 @@ def main() -> None:
     jax.block_until_ready(compiled.run_chunk(state, n))
     chunk = time.perf_counter() - t
     print(
-        f"{args.env}: one chunk of {compiled.chunk} updates takes {chunk:.3f} s ({jax.devices()[0].device_kind})"
+        f"{args.env}: one chunk of {compiled.chunk} updates takes {chunk:.3f} s "
+        f"({jax.devices()[0].device_kind})"
     )
 
     def device_get(folder: Path, state, update: int) -> None:
@@ -73,7 +75,8 @@ def main() -> None:
                     took = time.perf_counter() - t
                     jax.block_until_ready(following)
                     print(
-                        f"  {name}: {took:.3f} s; the chunk ended {time.perf_counter() - t0:.3f} s after its dispatch",
+                        f"  {name}: {took:.3f} s; the chunk ended {time.perf_counter() - t0:.3f} s "
+                        "after its dispatch",
                         flush=True,
                     )
                     while checkpoint.saving(folder):

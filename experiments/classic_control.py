@@ -3,7 +3,8 @@
     python experiments/classic_control.py --table 2 [--envs acrobot,idp] [--seeds 20] [--workers 3]
     python experiments/classic_control.py --table 4 [--workers 3] [--launch-until 300]
     python experiments/classic_control.py --report       # markdown tables and learning curves
-    python experiments/classic_control.py --learners-report FILE --runs runs/classic20 --envs pendulum
+    python experiments/classic_control.py --learners-report FILE --runs runs/classic20
+        --envs pendulum
 
 Table 2: per env the converged references (expert PPO, DAgger, GAIL), PPO-RGB, PPO-x,
 PPO-x+N(0,1) and HINTS-FC with every hint the env registers. The expert's run exports its best
@@ -13,10 +14,10 @@ Table 4: HINTS with each scheme (fc, lc, ac, mc) times the table's hint columns.
 Every configuration is trained at the env's default budget (config.ENV_DEFAULTS) with --seeds
 seeds (default 20), then evaluated on 50 episodes per seed; its folder under --runs holds
 config.yaml, metrics.csv and eval.json. Runs that share a network's shapes train as one group,
-all their seeds in one compiled program (hintsjax/algorithms/group.py; e.g. HINTS-FC with every hint), and
-`--alone` trains each in its own. Finished folders are skipped and groups resume from their
-checkpoints, so an interrupted sweep resumes where it stopped. `--workers N` trains N groups at
-once in separate processes (each gets 1/N of the GPU's memory, and a group that does not fit is
+all their seeds in one compiled program (hintsjax/algorithms/group.py; e.g. HINTS-FC with every
+hint), and `--alone` trains each in its own. Finished folders are skipped and groups resume from
+their checkpoints, so an interrupted sweep resumes where it stopped. `--workers N` trains N groups
+at once in separate processes (each gets 1/N of the GPU's memory, and a group that does not fit is
 split in halves). `--report` only reads finished folders and writes
 experiments/results/classic_table{2,4}.md and classic_curves_<env>.png (the 5-seed tables);
 `--learners-report` writes the learner rows of --envs at any seed count (the 20-seed tables).
@@ -227,7 +228,8 @@ ROW_PAPER = (" (paper)", None)  # the paper's cell (PAPER_TABLE4), not a run's
 def scheme_table(
     runs: Path, env: str, *kinds: tuple[str, Callable[[dict | None], str] | None]
 ) -> list[str]:
-    """Table 4 of one env as markdown: its hint columns across, and per scheme one row of each of `kinds`."""
+    """Table 4 of one env as markdown: its hint columns across, and per scheme one row of each of
+    `kinds`."""
     cols = TABLE4_HINTS[env]
 
     def row(scheme: str, suffix: str, cell_of) -> list[str]:
@@ -249,7 +251,10 @@ def findings(runs: Path, env: str) -> str:
         return ""
     best = max(hints, key=hints.get)
     gain = (hints[best] - rgb) / abs(rgb) if rgb else float("nan")
-    text = f"O1: best HINTS-FC hint `{best}` {hints[best]:.1f} vs PPO-RGB {rgb:.1f} ({gain:+.0%} of |PPO-RGB|)."
+    text = (
+        f"O1: best HINTS-FC hint `{best}` {hints[best]:.1f} vs PPO-RGB {rgb:.1f} "
+        f"({gain:+.0%} of |PPO-RGB|)."
+    )
     if "composite" in hints:
         others = [f"{h} {hints[h]:.1f}" for h in ("partial_state", "state") if h in hints]
         text += f" O5: composite {hints['composite']:.1f} vs " + ", ".join(others) + "."
@@ -293,9 +298,9 @@ def orderings(runs: Path, env: str, best: str) -> str:
     if not lines:
         return ""
     return (
-        "\n\nOrderings as probabilities of improvement over the per-seed mean returns, with 95% bootstrap "
-        "intervals (hintsjax/reproduce/stats.py); decided where the interval excludes 0.5:\n\n"
-        + "\n".join(lines)
+        "\n\nOrderings as probabilities of improvement over the per-seed mean returns, "
+        "with 95% bootstrap intervals (hintsjax/reproduce/stats.py); "
+        "decided where the interval excludes 0.5:\n\n" + "\n".join(lines)
     )
 
 
@@ -326,17 +331,25 @@ def report(runs: Path, force: bool = False) -> None:
 
     RESULTS.mkdir(exist_ok=True)
     head = [
-        "Each cell: mean ± std of the episode return over all 5 training seeds x 50 evaluation episodes",
+        "Each cell: mean ± std of the episode return over all 5 training seeds x 50 evaluation "
+        "episodes",
         "(deterministic policy); in brackets the std of the 5 per-seed means, which is the honest",
-        "error bar for comparing agents. Budgets (env steps per seed): pendulum 200 K (1000 episodes),",
+        "error bar for comparing agents. Budgets (env steps per seed): "
+        "pendulum 200 K (1000 episodes),",
         "acrobot 350 K (700 episodes of 500 steps), idp 200 K (see TRAINING in envs/<env>.py).",
-        "The paper's cells are mean ± std over n=50; where the paper has no cell, '-'; where we have",
+        "The paper's cells are mean ± std over n=50; where the paper has no cell, '-'; "
+        "where we have",
         "not run a configuration yet, '-'. Per-run wall-clock (one H100) includes compilation and",
-        "evaluation, with 3 to 10 runs sharing the GPU (time-sliced) in the sweeps of 2026-11-22 05:30-08:25,",
-        "so it overstates a run's cost alone; the pendulum rows trained before then (all but torque and",
-        "ppo_noisy_state) ran one at a time. '(CPU)': trained on a 2-core CPU when the GPU time was spent.",
-        "The last column is the interquartile mean of the per-seed mean returns with a 95% percentile",
-        "bootstrap interval over seeds (hintsjax/reproduce/stats.py, as rliable computes it); with 5 seeds the IQM",
+        "evaluation, with 3 to 10 runs sharing the GPU (time-sliced) "
+        "in the sweeps of 2026-11-22 05:30-08:25,",
+        "so it overstates a run's cost alone; the pendulum rows trained before then (all but "
+        "torque and",
+        "ppo_noisy_state) ran one at a time. '(CPU)': trained on a 2-core CPU when the GPU time "
+        "was spent.",
+        "The last column is the interquartile mean of the per-seed mean returns with a 95% "
+        "percentile",
+        "bootstrap interval over seeds (hintsjax/reproduce/stats.py, as rliable computes it); "
+        "with 5 seeds the IQM",
         "is the mean of the middle 3 and the interval is wide.",
         "",
     ]
@@ -380,25 +393,37 @@ def report(runs: Path, force: bool = False) -> None:
             if label not in REFERENCES and (path := metrics_path(runs, env, label)) is not None
         }
     lines += [
-        f"Sweep wall-clock recorded in {runs}/sweeps.jsonl for `--table 2` on the GPU: {sweep_seconds(runs, 2):.0f} s "
-        "(it includes runs that the 10-minute limit of a GPU call interrupted and a later call retrained; "
-        "the (CPU) rows' sweeps are not in it).",
+        f"Sweep wall-clock recorded in {runs}/sweeps.jsonl for `--table 2` on the GPU: "
+        f"{sweep_seconds(runs, 2):.0f} s (it includes runs that the 10-minute limit of a GPU call "
+        "interrupted and a later call retrained; the (CPU) rows' sweeps are not in it).",
         "",
-        "The references (TRAINING['references'] in envs/<env>.py): expert_ppo is PPO on the state for",
-        "1 M env steps per seed; its best seed (by its 50-episode evaluation) is the env's packaged expert",
-        "(hintsjax/experts/<env>/expert.json). dagger (100 K env steps, rounds of 1024, beta 0.5^i) and",
-        "gail (1 M env steps, 16 expert episodes) learn from that expert. GAIL's reward is the log odds",
-        "log D - log(1 - D) on pendulum and acrobot and Ho and Ermon's -log(1 - D) on idp: with the log",
-        "odds, mostly negative at first, ending an episode early pays, and idp's episodes end by falling",
-        f"(idp gail with the log odds: {cell(load(runs.parent / 'classic_extra', 'idp', 'gail-logit'))}, in",
-        "runs/classic_extra/idp/gail-logit); with -log(1 - D) > 0 every step alive pays, which on acrobot",
+        "The references (TRAINING['references'] in envs/<env>.py): expert_ppo is PPO on the state "
+        "for",
+        "1 M env steps per seed; its best seed (by its 50-episode evaluation) "
+        "is the env's packaged expert",
+        "(hintsjax/experts/<env>/expert.json). dagger (100 K env steps, rounds of 1024, "
+        "beta 0.5^i) and",
+        "gail (1 M env steps, 16 expert episodes) learn from that expert. "
+        "GAIL's reward is the log odds",
+        "log D - log(1 - D) on pendulum and acrobot and Ho and Ermon's -log(1 - D) on idp: "
+        "with the log",
+        "odds, mostly negative at first, ending an episode early pays, "
+        "and idp's episodes end by falling",
+        "(idp gail with the log odds: "
+        f"{cell(load(runs.parent / 'classic_extra', 'idp', 'gail-logit'))}, in",
+        "runs/classic_extra/idp/gail-logit); with -log(1 - D) > 0 every step alive pays, "
+        "which on acrobot",
         "keeps an agent from its terminating goal (the paper's GAIL scored -500 there).",
         "",
-        "The pendulum's references were retrained on 2026-11-22 (one H100, two runs at a time, outside",
-        "the sweep) with the PPO tuned for the state pendulum (ENV_DEFAULTS: one 200-step episode per",
-        "rollout, gamma 0.95, entropy 0.01); dagger learnt from that expert. Without the entropy bonus:",
-        f"expert_ppo {cell(load(runs.parent / 'classic_extra', 'pendulum', 'expert_ppo-ent0'))}, gail "
-        f"{cell(load(runs.parent / 'classic_extra', 'pendulum', 'gail-ent0'))} (runs/classic_extra/pendulum).",
+        "The pendulum's references were retrained on 2026-11-22 (one H100, two runs at a time, "
+        "outside",
+        "the sweep) with the PPO tuned for the state pendulum (ENV_DEFAULTS: "
+        "one 200-step episode per",
+        "rollout, gamma 0.95, entropy 0.01); dagger learnt from that expert. "
+        "Without the entropy bonus:",
+        f"expert_ppo {cell(load(runs.parent / 'classic_extra', 'pendulum', 'expert_ppo-ent0'))}, "
+        f"gail {cell(load(runs.parent / 'classic_extra', 'pendulum', 'gail-ent0'))} "
+        "(runs/classic_extra/pendulum).",
     ]
     table2 = lines
 
@@ -406,7 +431,8 @@ def report(runs: Path, force: bool = False) -> None:
         "# Classic control: the paper's Table 4 (conditioning schemes), reproduced",
         "",
         *head,
-        "The paper's Table 4 is on another scale than its Table 2 (its acrobot floor is -2500 = 5 x -500),",
+        "The paper's Table 4 is on another scale than its Table 2 "
+        "(its acrobot floor is -2500 = 5 x -500),",
         "so compare orderings, not values. The fc row shares its runs with Table 2.",
         "",
     ]
@@ -414,8 +440,9 @@ def report(runs: Path, force: bool = False) -> None:
         lines += [f"## {env}", "", *scheme_table(runs, env, ROW_OURS, ROW_OURS_IQM, ROW_PAPER), ""]
         lines += [scheme_findings(runs, env), ""]
     lines.append(
-        f"Sweep wall-clock recorded for the Table 4 runs not already in Table 2: {sweep_seconds(runs, 4):.0f} s "
-        "over the GPU calls that trained them (one call also trained Table 2's references and counts for both)."
+        "Sweep wall-clock recorded for the Table 4 runs not already in Table 2: "
+        f"{sweep_seconds(runs, 4):.0f} s over the GPU calls that trained them (one call also "
+        "trained Table 2's references and counts for both)."
     )
     reports = ((RESULTS / "classic_table2.md", table2), (RESULTS / "classic_table4.md", lines))
     for path, table in reports if not force else ():
@@ -436,12 +463,17 @@ def learners_report(runs: Path, envs: list[str], path: Path, force: bool = False
     lines = [
         f"# Classic control at more seeds: the learner rows of Tables 2 and 4 ({runs})",
         "",
-        "Cells: mean ± std over all seeds x 50 evaluation episodes (in brackets the std of the per-seed means),",
-        "then the IQM of the per-seed means with a 95% stratified bootstrap interval (hintsjax/reproduce/stats.py).",
-        "Wall-clock: the whole group's (compiles and evaluation included); the runs of a group train in one",
-        "program (hintsjax/algorithms/group.py) and share it. Command and hardware: experiments/results/table_in_one_call.json.",
-        f"Recorded sweep wall-clock in {runs}/sweeps.jsonl: Table 2 {sweep_seconds(runs, 2):.0f} s, Table 4 "
-        f"{sweep_seconds(runs, 4):.0f} s (a sweep stopped by a time limit and resumed counts its resumed call only).",
+        "Cells: mean ± std over all seeds x 50 evaluation episodes (in brackets the std of the "
+        "per-seed means),",
+        "then the IQM of the per-seed means with a 95% stratified bootstrap interval "
+        "(hintsjax/reproduce/stats.py).",
+        "Wall-clock: the whole group's (compiles and evaluation included); "
+        "the runs of a group train in one",
+        "program (hintsjax/algorithms/group.py) and share it. "
+        "Command and hardware: experiments/results/table_in_one_call.json.",
+        f"Recorded sweep wall-clock in {runs}/sweeps.jsonl: "
+        f"Table 2 {sweep_seconds(runs, 2):.0f} s, Table 4 {sweep_seconds(runs, 4):.0f} s "
+        "(a sweep stopped by a time limit and resumed counts its resumed call only).",
         "",
     ]
     for env in envs:
@@ -534,8 +566,8 @@ def run_ids(table: int, names: list[str]) -> list[str]:
     return [f"{env}/{label}" for env in names for label in table_runs(table, env)]
 
 
-# --table 2 or 4 picks the table to train (Table 4's fc row is Table 2's runs: once finished, its sweep leaves
-# them out).
+# --table 2 or 4 picks the table to train (Table 4's fc row is Table 2's runs: once finished, its
+# sweep leaves them out).
 SCRIPT = TableScript(
     __doc__.splitlines()[0],
     "runs/classic",

@@ -5,8 +5,8 @@
 Each variant runs in its own process (XLA_FLAGS are read at start-up) with its own empty
 compilation cache; with `--warm` a second process then compiles again from the cache the first
 filled, as a second run of `python -m hintsjax.run` would. A process compiles the cell's init and
-chunk programs through `compilation.compile_training` (what the command runs, the traced-program cache
-included), splits the seconds by JAX's monitoring events (tracing, lowering to MLIR, XLA's
+chunk programs through `compilation.compile_training` (what the command runs, the traced-program
+cache included), splits the seconds by JAX's monitoring events (tracing, lowering to MLIR, XLA's
 backend compile, reading the persistent cache), then runs one chunk of `--updates` updates and
 digests the params: equal digests mean a flag left the program's numbers alone.
 """

@@ -43,7 +43,8 @@ def main() -> None:
     print(
         f"{args.agent} {args.updates} updates, XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r}: "
         f"max |param difference| between two runs in this process = {diff:.3g}, "
-        f"checksum {sum(float(np.abs(x).astype(np.float64).sum()) for x in jax.tree.leaves(runs[0])):.10e}"
+        "checksum "
+        f"{sum(float(np.abs(x).astype(np.float64).sum()) for x in jax.tree.leaves(runs[0])):.10e}"
     )
 
 

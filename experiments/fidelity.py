@@ -31,7 +31,7 @@ Three measures, each a row of the JSON (a rerun replaces the rows it measures an
 
 A setting is a set of `mj_model.opt` overrides on top of the env's registered class; a row's
 `default` says whether they are what the class registers. See SETTINGS.
-"""
+"""  # noqa: E501
 
 from __future__ import annotations
 
@@ -174,7 +174,8 @@ def gym_records(name: str, source: str, states: int, seed: int = 0) -> Records:
 
 
 def mujoco_c_step(name: str, cls, records: Records) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """MuJoCo C (float64) with the setting's model from each kept state: (qvel, reward, terminated)."""
+    """MuJoCo C (float64) with the setting's model from each kept state: (qvel, reward,
+    terminated)."""
     env = gym.make(GYM_IDS[name]).unwrapped
     cls.adapt(env.model)
     qvel, reward, terminated = [], [], []
@@ -224,7 +225,8 @@ def errors(records: Records, qvel: np.ndarray, reward: np.ndarray, terminated: n
 
 
 def one_step_rows(name: str, settings: list[str], physics: list[str], states: int) -> list[dict]:
-    """Rows per (setting, source); each setting's MJX step compiles once, for every source's states."""
+    """Rows per (setting, source); each setting's MJX step compiles once, for every source's
+    states."""
     records = {source: gym_records(name, source, states) for source in SOURCES}
     every = Records(
         *(
@@ -435,17 +437,20 @@ def report(path: Path) -> None:
     lines = [
         "# Fidelity of the locomotion tasks to Gymnasium v5, per solver setting (issue 50)",
         "",
-        "Made by `python experiments/fidelity.py` (commands below) and `--report`; rows in [fidelity.json](fidelity.json). "
-        "Gymnasium 1.4.0, MuJoCo 3.17.0, MJX 3.17.0, warp-lang 1.18.0. `default`: what the env registers today.",
+        "Made by `python experiments/fidelity.py` (commands below) and `--report`; rows in "
+        "[fidelity.json](fidelity.json). Gymnasium 1.4.0, MuJoCo 3.17.0, MJX 3.17.0, warp-lang "
+        "1.18.0. `default`: what the env registers today.",
         "",
         "## One control step along Gymnasium's own trajectories",
         "",
-        "From each kept state of Gymnasium-as-shipped (float32-rounded; 200 per source: every 5th step of episodes of "
-        "up to 500 steps driven by uniform random actions, saturated actions at the range's ends, or the packaged "
-        "expert), one step of MuJoCo C with the setting (float64: the setting's own share), MJX's JAX solver and "
-        "MJX-Warp with the setting, against Gymnasium as shipped. Cells: max / mean over the states of the largest "
-        "|d qvel| of a state, and of |d reward|. `MJX vs C`: MJX-JAX against MuJoCo C at the same setting "
-        "(MJX's own share); `Warp vs C` likewise. Two-core CPU (the development machine), 2026-11-26.",
+        "From each kept state of Gymnasium-as-shipped (float32-rounded; 200 per source: every 5th "
+        "step of episodes of up to 500 steps driven by uniform random actions, saturated actions "
+        "at the range's ends, or the packaged expert), one step of MuJoCo C with the setting "
+        "(float64: the setting's own share), MJX's JAX solver and MJX-Warp with the setting, "
+        "against Gymnasium as shipped. Cells: max / mean over the states of the largest |d qvel| "
+        "of a state, and of |d reward|. `MJX vs C`: MJX-JAX against MuJoCo C at the same setting "
+        "(MJX's own share); `Warp vs C` likewise. Two-core CPU (the development machine), "
+        "2026-11-26.",
         "",
     ]
     for env in dict.fromkeys(r["env"] for r in by("one_step")):
@@ -510,11 +515,12 @@ def report(path: Path) -> None:
         lines += [
             "## Training cost",
             "",
-            f"`{cost[0]['command'].split(' --envs')[0]} --envs <env> --settings <settings> --physics "
-            "<physics> --states 0 --cost --cost-updates 40` on one H100 (`device` says which), 2026-11-26: the env's "
-            "default cell (hints/fc with its default hint, 5 seeds), its compiled training chunks back to back. "
-            "Deterministic GPU ops as the physics' default runs them (Warp: off). Cost: the time of an env step "
-            "relative to Newton at 4 iterations and 8 line-search steps (the cap until 2026-11-26).",
+            f"`{cost[0]['command'].split(' --envs')[0]} --envs <env> --settings <settings> "
+            "--physics <physics> --states 0 --cost --cost-updates 40` on one H100 (`device` says "
+            "which), 2026-11-26: the env's default cell (hints/fc with its default hint, 5 seeds), "
+            "its compiled training chunks back to back. Deterministic GPU ops as the physics' "
+            "default runs them (Warp: off). Cost: the time of an env step relative to Newton at 4 "
+            "iterations and 8 line-search steps (the cap until 2026-11-26).",
             "",
             *markdown_table(
                 ["env", "setting", "physics", "deterministic ops", "training env steps/s", "cost"],
@@ -538,7 +544,8 @@ def report(path: Path) -> None:
                 str(r["episodes"]),
                 ci(r["ours"]),
                 ci(r["gymnasium"]),
-                f"{r['ours_minus_gymnasium']['mean']:+.0f} [{r['ours_minus_gymnasium']['ci'][0]:+.0f}, "
+                f"{r['ours_minus_gymnasium']['mean']:+.0f} "
+                f"[{r['ours_minus_gymnasium']['ci'][0]:+.0f}, "
                 f"{r['ours_minus_gymnasium']['ci'][1]:+.0f}]",
                 f"{r['raw_minus_clipped_action_cost']:+.4g}",
             ]
@@ -547,12 +554,13 @@ def report(path: Path) -> None:
         lines += [
             "## The packaged experts in closed loop",
             "",
-            "`--experts 60` (2-core CPU, 2026-11-26): each env's packaged expert (ant_fast: the ant's), mean actions "
-            "clipped to the control range, 60 full episodes from the same starts (our reset's, set into Gymnasium's "
-            "env) on ours with the setting and on Gymnasium v5 as shipped. Return: mean [95 % bootstrap CI]. "
-            "Ours - Gymnasium: 95 % CI, episodes resampled independently. Last column: what charging the control "
-            "cost on the raw action (Gymnasium's rule; `raw_action_ctrl_cost`) instead of the clipped one changes "
-            "in the mean return: the experts' mean actions lie outside the control range.",
+            "`--experts 60` (2-core CPU, 2026-11-26): each env's packaged expert (ant_fast: the "
+            "ant's), mean actions clipped to the control range, 60 full episodes from the same "
+            "starts (our reset's, set into Gymnasium's env) on ours with the setting and on "
+            "Gymnasium v5 as shipped. Return: mean [95 % bootstrap CI]. Ours - Gymnasium: 95 % CI, "
+            "episodes resampled independently. Last column: what charging the control cost on the "
+            "raw action (Gymnasium's rule; `raw_action_ctrl_cost`) instead of the clipped one "
+            "changes in the mean return: the experts' mean actions lie outside the control range.",
             "",
             *markdown_table(
                 [
@@ -572,9 +580,10 @@ def report(path: Path) -> None:
     lines += [
         "## Commands",
         "",
-        "Each row's `command` in the JSON, with its device. They wrote to scratch files whose rows were "
-        "merged into fidelity.json; `today`, in the earliest, was the name of the env's registered setting then "
-        "(Newton 4 / 8: newton_4_8, the humanoid's euler_newton_4_8), and the humanoid's `newton_8_16` was Euler's.",
+        "Each row's `command` in the JSON, with its device. They wrote to scratch files whose rows "
+        "were merged into fidelity.json; `today`, in the earliest, was the name of the env's "
+        "registered setting then (Newton 4 / 8: newton_4_8, the humanoid's euler_newton_4_8), and "
+        "the humanoid's `newton_8_16` was Euler's.",
         "",
         *sorted({f"- `{r['command']}` ({r['device']})" for r in rows}),
         "",
@@ -631,7 +640,8 @@ def main() -> None:
         unknown = sorted(set(settings) - set(SETTINGS[name]))
         if unknown:
             raise SystemExit(
-                f"unknown setting(s) {unknown} for {name}; valid choices: {', '.join(SETTINGS[name])}"
+                f"unknown setting(s) {unknown} for {name}; valid choices: "
+                f"{', '.join(SETTINGS[name])}"
             )
         new = one_step_rows(name, settings, physics, args.states) if args.states else []
         for setting in settings:

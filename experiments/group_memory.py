@@ -3,8 +3,8 @@
     python experiments/group_memory.py [--envs pendulum,idp] [--sizes 1x20,2x20,4x20] [--out FILE]
 
 For each env and each K x S (K hint configurations of Table 2, S seeds) it compiles the group's
-training chunk (`compilation.compile_training`, what the sweeps run) without running it and reads XLA's
-memory analysis: arguments + outputs + temporaries, the figure `loop.check_fits` compares with
+training chunk (`compilation.compile_training`, what the sweeps run) without running it and reads
+XLA's memory analysis: arguments + outputs + temporaries, the figure `loop.check_fits` compares with
 90 % of the device's memory. The need grows linearly in K x S (the rows show it); the last line
 per env extrapolates the number of runs that fit.
 """
@@ -95,8 +95,8 @@ def main() -> None:
                 }
             )
             print(
-                f"{env}: {per_run / 2**20:.0f} MiB per run; about {fit} runs fit in 90 % of the device's "
-                f"{limit / 2**30:.1f} GiB (e.g. {fit // 20} configurations x 20 seeds)",
+                f"{env}: {per_run / 2**20:.0f} MiB per run; about {fit} runs fit in 90 % of the "
+                f"device's {limit / 2**30:.1f} GiB (e.g. {fit // 20} configurations x 20 seeds)",
                 flush=True,
             )
     if args.out:

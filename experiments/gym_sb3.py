@@ -4,7 +4,8 @@ wrapper's env steps/s against Gymnasium's own Pendulum-v1 drawn (render_mode="rg
 resized to 64x64, at the same number of envs on the same CPU. Needs the `gym` extra.
 
     python experiments/gym_sb3.py --part rate  --num-envs 16 --steps 2000
-    python experiments/gym_sb3.py --part train --num-envs 8 --timesteps 32768 --image-size 36 --seed 0
+    python experiments/gym_sb3.py --part train --num-envs 8 --timesteps 32768 --image-size 36
+        --seed 0
     python experiments/gym_sb3.py --part all ... --out experiments/results/gym.json
 
 Results: experiments/results/gym.md (and the JSON it is read from).
@@ -54,9 +55,9 @@ def hintsjax_rate(num_envs: int, steps: int, seed: int) -> dict:
 
 
 def gymnasium_rate(num_envs: int, steps: int, seed: int) -> dict:
-    """The same for Gymnasium's Pendulum-v1 as pixels the usual way: render_mode="rgb_array" (pygame,
-    500x500), AddRenderObservation (the picture as the observation) and ResizeObservation to 64x64
-    (OpenCV), in SyncVectorEnv (the envs stepped one after another in this process)."""
+    """The same for Gymnasium's Pendulum-v1 as pixels the usual way: render_mode="rgb_array"
+    (pygame, 500x500), AddRenderObservation (the picture as the observation) and ResizeObservation
+    to 64x64 (OpenCV), in SyncVectorEnv (the envs stepped one after another in this process)."""
     from gymnasium.wrappers import AddRenderObservation, ResizeObservation
 
     def make():
@@ -124,8 +125,8 @@ def train(
     if normalize_reward:
         venv = VecNormalize(venv, norm_obs=False, norm_reward=True, gamma=0.9)
     # rl-zoo's Pendulum-v1 settings (gamma 0.9, gae 0.95, lr 1e-3, 10 epochs of minibatches of 64,
-    # gSDE sampled every 4 steps, no entropy bonus); the defaults here roll out 8 x 256 steps an update
-    # (rl-zoo: 4 x 1024)
+    # gSDE sampled every 4 steps, no entropy bonus); the defaults here roll out 8 x 256 steps an
+    # update (rl-zoo: 4 x 1024)
     hyper = dict(
         n_steps=n_steps,
         batch_size=batch_size,

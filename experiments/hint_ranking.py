@@ -1,6 +1,7 @@
 """How far a cheap hint-utility score agrees with the full tables (issue 25).
 
-    python experiments/hint_ranking.py --envs pendulum,acrobot,idp,halfcheetah --seeds 5    # scores (GPU); resumable
+    python experiments/hint_ranking.py --envs pendulum,acrobot,idp,halfcheetah --seeds 5
+        # scores (GPU); resumable
     python experiments/hint_ranking.py --report     # -> experiments/results/hint_ranking.md
 
 Scores every hint of an env's table (Table 2 for the classic envs, Table 3 for halfcheetah, the
@@ -127,7 +128,8 @@ def rho_interval(
 
 def scored(runs: Path, env: str) -> Path:
     """The runs folder holding `env`'s scores: --runs where it was scored there, else the committed
-    copy of that folder (archive.ARCHIVE/<its name>), so --report on a fresh checkout rebuilds the file."""
+    copy of that folder (archive.ARCHIVE/<its name>), so --report on a fresh checkout rebuilds the
+    file."""
     return (
         runs if (score_folder(runs, env) / "scores.json").is_file() else archive.ARCHIVE / runs.name
     )
@@ -140,15 +142,17 @@ def report(runs: Path, env_list: list[str], out: Path) -> None:
     lines = [
         "# Which hint is worth giving: cheap scores against the full tables",
         "",
-        "Written by `python experiments/hint_ranking.py --report` from `python experiments/hint_ranking.py "
-        "--envs ... --seeds 5` (hintsjax.rank on every hint of the env's table; commands and hardware below). "
-        "Full ranking: the IQM of each HINTS-FC row's per-seed evaluation returns at the full budget "
-        "(20 seeds, experiments/results/runs/classic20; halfcheetah: the 5-seed means of locomotion_table3.md, "
-        "whose interval resamples the score's seeds only). rho: Spearman's rank correlation "
-        "between a score's mean over its seeds and that ranking, with a 95% bootstrap interval; `probe f`: the "
-        "short training probe at the fraction f of the budget. Cost: the "
-        "score's env steps and seconds (compile included, one H100) against the table's hint rows (TABLE_SECONDS "
-        "in experiments/hint_ranking.py says where each table's seconds come from).",
+        "Written by `python experiments/hint_ranking.py --report` from `python "
+        "experiments/hint_ranking.py --envs ... --seeds 5` (hintsjax.rank on every hint of the "
+        "env's table; commands and hardware below). Full ranking: the IQM of each HINTS-FC row's "
+        "per-seed evaluation returns at the full budget (20 seeds, "
+        "experiments/results/runs/classic20; halfcheetah: the 5-seed means of "
+        "locomotion_table3.md, whose interval resamples the score's seeds only). rho: Spearman's "
+        "rank correlation between a score's mean over its seeds and that ranking, with a 95% "
+        "bootstrap interval; `probe f`: the short training probe at the fraction f of the budget. "
+        "Cost: the score's env steps and seconds (compile included, one H100) against the table's "
+        "hint rows (TABLE_SECONDS in experiments/hint_ranking.py says where each table's seconds "
+        "come from).",
         "",
     ]
     summary, per_env = [], []
@@ -204,8 +208,8 @@ def report(runs: Path, env_list: list[str], out: Path) -> None:
         per_env += [*markdown_table(header, cells), ""]
         if result.get("probe_measure") == "step_reward":
             per_env += [
-                "The probe's score here is the mean reward per step over the short run's updates: no "
-                f"{env} episode ended within it (hintsjax.rank's `learning_curve_area`).",
+                "The probe's score here is the mean reward per step over the short run's updates: "
+                f"no {env} episode ended within it (hintsjax.rank's `learning_curve_area`).",
                 "",
             ]
     lines += [
@@ -224,8 +228,9 @@ def report(runs: Path, env_list: list[str], out: Path) -> None:
         "",
     ]
     lines += [
-        "Where a rho lies outside its interval, tied scores (e.g. the pendulum's three hints that carry the "
-        "angular velocity) are ordered differently by the resampled seeds than by the means. Mean rho over the envs: "
+        "Where a rho lies outside its interval, tied scores (e.g. the pendulum's three hints that "
+        "carry the angular velocity) are ordered differently by the resampled seeds than by the "
+        "means. Mean rho over the envs: "
         + ", ".join(f"{n} {np.mean(v):.2f}" for n, v in rhos.items())
         + " (target: 0.7 at 10% of the cost).",
         "",
@@ -249,7 +254,8 @@ def _table_env_steps(env: str, hints: int) -> int:
 
 
 def _score_env_steps(name: str, result: dict, folder: Path, hints: int) -> int:
-    """The env steps a score used: every candidate's short runs, or the information score's rollouts."""
+    """The env steps a score used: every candidate's short runs, or the information score's
+    rollouts."""
     import yaml
 
     seeds = len(result["scores"][name])

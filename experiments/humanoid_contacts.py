@@ -74,7 +74,8 @@ def floor_only(m: mujoco.MjModel) -> None:
 
 
 def steps_per_second(change, n: int, steps: int = 5) -> tuple[float, int]:
-    """(env steps/s, MJX contact slots) of Humanoid's transition with `change` applied to its model."""
+    """(env steps/s, MJX contact slots) of Humanoid's transition with `change` applied to its
+    model."""
     env = Humanoid(envs.make_hint("humanoid", "velocity"))
     model = env.make_mj_model()
     if change:
@@ -120,7 +121,8 @@ def main() -> None:
     for name, change in rows:
         rate, slots = steps_per_second(change, args.envs)
         print(
-            f"{name:>20}: {rate:8.0f} env steps/s ({args.envs} envs, {slots} contact slots, {jax.devices()[0].platform})",
+            f"{name:>20}: {rate:8.0f} env steps/s ({args.envs} envs, {slots} contact slots, "
+            f"{jax.devices()[0].platform})",
             flush=True,
         )
 

@@ -48,25 +48,31 @@ def row(folder: Path) -> str:
     hit = [(seed, s) for seed, s in enumerate(storms) if s["first"] is not None]
     starts = ", ".join(f"{seed}: {s['first']}" for seed, s in hit) or "-"
     longest = max((s["longest"] for s in storms), default=0)
-    return f"| {folder.name} | {len(storms)} | {len(hit)} | {starts} | {longest} | {means} | {below or 'none'} |"
+    return (
+        f"| {folder.name} | {len(storms)} | {len(hit)} | {starts} | {longest} | {means} "
+        f"| {below or 'none'} |"
+    )
 
 
 def report(folders: list[Path]) -> list[str]:
     return [
         f"KL storms: {STORM_UPDATES} or more updates in a row with approx. KL above {KL_ABOVE}.",
         "",
-        "| run | seeds | seeds with a storm | seed: update its first storm began | longest storm, updates | evaluation per seed | seeds far below |",
+        "| run | seeds | seeds with a storm | seed: update its first storm began "
+        "| longest storm, updates | evaluation per seed | seeds far below |",
         "|---|---|---|---|---|---|---|",
         *(row(f) for f in folders),
     ]
 
 
 def stormed_by(folder: Path, at: int) -> list[bool]:
-    """Per seed, whether its first KL storm had begun by update `at` (its STORM_UPDATES-th update)."""
+    """Per seed, whether its first KL storm had begun by update `at` (its STORM_UPDATES-th
+    update)."""
     storms = kl_storms(folder)
     if storms is None:
         raise SystemExit(
-            f"error: {folder} has no PPO log (metrics.csv with approx_kl, or an archived summary.json)"
+            f"error: {folder} has no PPO log (metrics.csv with approx_kl, or an archived "
+            "summary.json)"
         )
     return [s["first"] is not None and s["first"] + STORM_UPDATES - 1 <= at for s in storms]
 
@@ -93,8 +99,8 @@ def evaluation_by(folder: Path, at: int) -> list[float] | None:
 
 
 def fisher_fewer(hits: int, n: int, base_hits: int, base_n: int) -> float:
-    """One-sided Fisher exact p: the chance of `hits` or fewer storms among an arm's n seeds when the
-    hits + base_hits storms fell at random among all n + base_n seeds (hypergeometric)."""
+    """One-sided Fisher exact p: the chance of `hits` or fewer storms among an arm's n seeds when
+    the hits + base_hits storms fell at random among all n + base_n seeds (hypergeometric)."""
     total, drawn = hits + base_hits, n + base_n
     return sum(
         math.comb(n, k) * math.comb(base_n, total - k)
@@ -120,11 +126,13 @@ def arms_report(arms: dict[str, list[Path]], at: int) -> list[str]:
     }
     base_name, (base_storms, base_returns, base_evals) = next(iter(pooled.items()))
     lines = [
-        f"As far as update {at}: seeds whose first KL storm ({STORM_UPDATES} or more updates in a row with approx. KL "
-        f"above {KL_ABOVE}) had begun, each seed's training return over updates {at - SPAN + 1}-{at}, and where every "
-        "run of an arm ended there, its final evaluation (each seed's mean).",
+        f"As far as update {at}: seeds whose first KL storm ({STORM_UPDATES} or more updates in a "
+        f"row with approx. KL above {KL_ABOVE}) had begun, each seed's training return over "
+        f"updates {at - SPAN + 1}-{at}, and where every run of an arm ended there, its final "
+        "evaluation (each seed's mean).",
         "",
-        f"| arm | runs | seeds | seeds with a storm by {at} | Fisher p (fewer than {base_name} by chance) "
+        f"| arm | runs | seeds | seeds with a storm by {at} "
+        f"| Fisher p (fewer than {base_name} by chance) "
         f"| training return, IQM [95% CI] | P(arm > {base_name}) | evaluation, IQM [95% CI] "
         f"| P(arm > {base_name}), evaluation |",
         "|---|---|---|---|---|---|---|---|---|",
@@ -141,8 +149,9 @@ def arms_report(arms: dict[str, list[Path]], at: int) -> list[str]:
             else ordering_text(name, base_name, poi_ci(evals, base_evals))
         )
         lines.append(
-            f"| {name} | {', '.join(f.name for f in arms[name])} | {len(storms)} | {sum(storms)} | {p} "
-            f"| {iqm_cell(returns, digits=0)} | {poi} | {'-' if evals is None else iqm_cell(evals, digits=0)} "
+            f"| {name} | {', '.join(f.name for f in arms[name])} | {len(storms)} | {sum(storms)} "
+            f"| {p} | {iqm_cell(returns, digits=0)} | {poi} "
+            f"| {'-' if evals is None else iqm_cell(evals, digits=0)} "
             f"| {eval_poi} |"
         )
     return lines

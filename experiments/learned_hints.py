@@ -1,7 +1,8 @@
 """Hints without ground truth at deploy (issue 24): agents whose hints come from a learned generator.
 
     python experiments/learned_hints.py --cases pendulum:composite,acrobot:composite --seeds 10
-    python experiments/learned_hints.py --cases halfcheetah:velocity --seeds 5 --parts generator,programmatic
+    python experiments/learned_hints.py --cases halfcheetah:velocity --seeds 5
+                                        --parts generator,programmatic
     python experiments/learned_hints.py --frames-sweep 1,2,3,4 --cases pendulum:composite
     python experiments/learned_hints.py --report          # -> experiments/results/learned_hints.md
 
@@ -14,7 +15,7 @@ cut off mid-way resumes from its checkpoint, so the command can be repeated unti
 `--frames-sweep` trains only generators, one per number of pictures, for the choice of that
 default. `--report` reads the folders (and PPO-RGB's archived 20-seed rows; an env without one,
 e.g. halfcheetah, gets a PPO-RGB run of --seeds seeds beside its case) and writes the table.
-"""
+"""  # noqa: E501
 
 from __future__ import annotations
 
@@ -27,7 +28,10 @@ from hintsjax.reproduce.archive import ARCHIVE, about_lines, read_about
 from hintsjax.reproduce.markdown import markdown_table
 
 RESULTS = Path(__file__).resolve().parent / "results"
-CASES = "pendulum:composite,pendulum:angular_velocity,acrobot:composite,idp:composite,halfcheetah:velocity"
+CASES = (
+    "pendulum:composite,pendulum:angular_velocity,acrobot:composite,idp:composite,"
+    "halfcheetah:velocity"
+)
 GENERATOR = dict(
     policy="expert", expert_fraction=0.5, num_envs=64, steps=500, held_out_envs=16, epochs=10
 )
@@ -103,9 +107,9 @@ def deploy_with(folder: Path, source: Path) -> Path:
     return out
 
 
-# A case's pieces, in order; `--parts` runs some of them (e.g. where one device call cannot hold them all:
-# a 5-seed halfcheetah run trained in 106 to 119 s alone on an H200; Table 3's cheetah runs, 7 sharing one
-# H100, took about 1150 s each).
+# A case's pieces, in order; `--parts` runs some of them (e.g. where one device call cannot hold
+# them all: a 5-seed halfcheetah run trained in 106 to 119 s alone on an H200; Table 3's cheetah
+# runs, 7 sharing one H100, took about 1150 s each).
 # Each piece needs the generator's folder, which the first makes.
 PARTS = ("generator", "programmatic", "ppo_rgb", "learned")
 
@@ -132,7 +136,7 @@ def run_case(
         train_agent(runs, f"{env}-{hint}-learned-k{frames}", {**base, "hint_source": str(source)})
 
 
-# -- the report ----------------------------------------------------------------------------------------
+# -- the report ----------------------------------------------------------------------------------
 
 
 def seed_means(path: Path) -> np.ndarray:
@@ -158,10 +162,12 @@ def report(runs: Path, cases: list[tuple[str, str]], frames: int, out: Path) -> 
         "# Hints without ground truth at deploy: agents that see a learned generator's hints",
         "",
         "Written by `python experiments/learned_hints.py --report` from the runs of "
-        "`python experiments/learned_hints.py --cases ... --seeds ...` (commands and hardware below). "
+        "`python experiments/learned_hints.py --cases ... --seeds ...` "
+        "(commands and hardware below). "
         "Returns: the mean over each seed's 50 deterministic episodes, then mean ± std over seeds, "
-        "IQM with its 95% bootstrap interval (hintsjax/reproduce/stats.py), and P(row > PPO-RGB), the probability "
-        "that a seed of the row beats a seed of PPO-RGB, with its 95% interval (decided where it excludes 0.5).",
+        "IQM with its 95% bootstrap interval (hintsjax/reproduce/stats.py), and P(row > PPO-RGB), "
+        "the probability that a seed of the row beats a seed of PPO-RGB, with its 95% interval "
+        "(decided where it excludes 0.5).",
         "",
     ]
     about = read_about(runs)
@@ -280,11 +286,12 @@ def report(runs: Path, cases: list[tuple[str, str]], frames: int, out: Path) -> 
     lines += [
         "## The generators and what they cost",
         "",
-        f"Each generator: {frames} pictures, trained on rollouts of 64 envs x 500 steps (half driven by the "
-        "packaged expert, half by N(0, 1) actions), held out: 16 more envs x 500 steps. R^2 is the held-out "
-        "mean over the generator's seeds (and its worst seed); agents use seed 0. Training rate: the agent "
-        "run's env steps per second (compiles excluded), programmatic against learned hints; the last column "
-        "is the slowdown the generator's inference causes.",
+        f"Each generator: {frames} pictures, trained on rollouts of 64 envs x 500 steps "
+        "(half driven by the packaged expert, half by N(0, 1) actions), held out: 16 more envs "
+        "x 500 steps. R^2 is the held-out mean over the generator's seeds (and its worst seed); "
+        "agents use seed 0. Training rate: the agent run's env steps per second (compiles "
+        "excluded), programmatic against learned hints; the last column is the slowdown the "
+        "generator's inference causes.",
         "",
         *markdown_table(
             [
@@ -306,8 +313,9 @@ def report(runs: Path, cases: list[tuple[str, str]], frames: int, out: Path) -> 
         lines += [
             "## How many pictures",
             "",
-            "Held-out R^2 per hint dimension, mean over 3 generator seeds (worst seed), by the number of "
-            "pictures the generator reads (`--frames-sweep 1,2,3,4 --gen-seeds 3`); everything else as above.",
+            "Held-out R^2 per hint dimension, mean over 3 generator seeds (worst seed), by the "
+            "number of pictures the generator reads (`--frames-sweep 1,2,3,4 --gen-seeds 3`); "
+            "everything else as above.",
             "",
             *markdown_table(
                 ["env", "hint", "pictures", "held-out R^2", "compile + train (s)"],

@@ -1,15 +1,16 @@
 """The paper's Table 3, locomotion rows (halfcheetah, ant, humanoid), reproduced.
 
     python experiments/locomotion.py [--envs halfcheetah,ant] [--workers 2] [--launch-until 300]
-    python experiments/locomotion.py --report     # experiments/results/locomotion_table3.md + curves
-    python experiments/locomotion.py --learners-report experiments/results/table3_seeds20.md --runs runs/table3_20
+    python experiments/locomotion.py --report    # experiments/results/locomotion_table3.md + curves
+    python experiments/locomotion.py --learners-report experiments/results/table3_seeds20.md
+                                     --runs runs/table3_20
 
 Per env: PPO-RGB, PPO-x (the state) and HINTS-FC with each of the paper's hint columns, at the
 paper's budgets (config.ENV_DEFAULTS: 1k, 5k and 10k episodes counted at 1000 steps), 5 seeds
 vmapped in one call, 50 evaluation episodes per seed. Finished folders are skipped, so an
-interrupted sweep resumes where it stopped (see hintsjax/reproduce/sweep.py). The DAgger column's expert is PPO
-on the state at the env's expert budget (config.ENV_DEFAULTS), exported to hintsjax/experts/<env>
-when it finishes; dagger and gail start only then.
+interrupted sweep resumes where it stopped (see hintsjax/reproduce/sweep.py). The DAgger column's
+expert is PPO on the state at the env's expert budget (config.ENV_DEFAULTS), exported to
+hintsjax/experts/<env> when it finishes; dagger and gail start only then.
 """
 
 from __future__ import annotations
@@ -92,28 +93,30 @@ PAPER = {
 # What a row's figures alone do not say (measured; the report prints it under the env's references).
 NOTES = {
     "ant": (
-        "The ant's curves show ppo_rgb's earlier run at Table 5's rates (994); its row is the retraining at "
-        "today's settings (2026-11-23, `--only ppo_rgb` alone on an H200)."
+        "The ant's curves show ppo_rgb's earlier run at Table 5's rates (994); its row is the "
+        "retraining at today's settings (2026-11-23, `--only ppo_rgb` alone on an H200)."
     ),
     "humanoid": (
-        "expert_ppo and dagger trained beside two other runs on one H200 (2026-11-23; that sweep's record was "
-        "lost with the machine). gail trained alone on an H200 by `python -m hintsjax.run env=humanoid "
-        "agent=gail` (2026-11-23; its wall-clock is the training alone); the footer counts the sweep of its "
-        "first run (900 s), which had no R1 penalty (gail.grad_penalty 0): there the discriminator told the "
-        "expert's pairs from the policy's perfectly from update 200 on (accuracy 1.0, reward -log(1 - D) near "
-        "0), the entropy bonus drove the policy's entropy from 24 to 159, the robot fell after about 78 steps "
-        "and gail scored 446.7 ± 125.1. With the penalty of 10 the accuracy is also 1.0 until about update "
-        "600, the reward as small (0.002 to 0.017 a step), yet the training return climbs (3397 to 6480 at "
-        "update 600), and by the end the accuracy is 0.44 to 0.74. The learners' "
-        "wall-clock is their training time summed over calls, while sharing the GPU (2026-11-23, H200s): one "
-        "sweep started all four learners, stopped the two hint runs after 8 minutes and ppo_rgb after 16 "
-        "(at update 3450, its checkpoint carried to the next machine), and let ppo_state finish alone; a "
-        "second sweep resumed ppo_rgb beside hints-fc-velocity (its record was lost with the machine: about "
-        "1800 s by its log); hints-fc-goal_height trained alone on an H200 (1108 s). ppo_rgb's log lacks "
-        "updates 3451 to 8600: each later call to the machine "
-        "copied the carried folder over the running one's, and the run, going on in memory, wrote on into "
-        "the copy; its parameters and evaluation are whole, its curve joins update 3450 to 8601 with a "
-        "straight line, and its training-return and KL cells cover the 4615 updates logged."
+        "expert_ppo and dagger trained beside two other runs on one H200 (2026-11-23; that "
+        "sweep's record was lost with the machine). gail trained alone on an H200 by `python "
+        "-m hintsjax.run env=humanoid agent=gail` (2026-11-23; its wall-clock is the training "
+        "alone); the footer counts the sweep of its first run (900 s), which had no R1 penalty "
+        "(gail.grad_penalty 0): there the discriminator told the expert's pairs from the policy's "
+        "perfectly from update 200 on (accuracy 1.0, reward -log(1 - D) near 0), the entropy "
+        "bonus drove the policy's entropy from 24 to 159, the robot fell after about 78 steps and "
+        "gail scored 446.7 ± 125.1. With the penalty of 10 the accuracy is also 1.0 until about "
+        "update 600, the reward as small (0.002 to 0.017 a step), yet the training return climbs "
+        "(3397 to 6480 at update 600), and by the end the accuracy is 0.44 to 0.74. The learners' "
+        "wall-clock is their training time summed over calls, while sharing the GPU (2026-11-23, "
+        "H200s): one sweep started all four learners, stopped the two hint runs after 8 minutes "
+        "and ppo_rgb after 16 (at update 3450, its checkpoint carried to the next machine), and "
+        "let ppo_state finish alone; a second sweep resumed ppo_rgb beside hints-fc-velocity (its "
+        "record was lost with the machine: about 1800 s by its log); hints-fc-goal_height trained "
+        "alone on an H200 (1108 s). ppo_rgb's log lacks updates 3451 to 8600: each later call "
+        "to the machine copied the carried folder over the running one's, and the run, going on "
+        "in memory, wrote on into the copy; its parameters and evaluation are whole, its curve "
+        "joins update 3450 to 8601 with a straight line, and its training-return and KL cells "
+        "cover the 4615 updates logged."
     ),
 }
 DEFAULT_RUNS = "runs/locomotion"
@@ -135,7 +138,8 @@ def table_runs(env: str) -> list[str]:
 def kept_row(
     runs: Path, env: str, label: str, kept: dict[tuple[str, str], list[str]]
 ) -> list[str] | None:
-    """The previous report's row of a run that neither runs/ nor the archive holds (not even begun)."""
+    """The previous report's row of a run that neither runs/ nor the archive holds (not even
+    begun)."""
     if load(runs, env, label) is None and metrics_path(runs, env, label) is None:
         return kept.get((env, label))
     return None
@@ -177,9 +181,9 @@ def settings_lines(
     reported: dict[tuple[str, str], str] | None = None,
 ) -> list[str]:
     """The PPO settings the rows were trained with (each run's config.yaml), grouped when they
-    differ, naming the fields where a row's are not today's defaults; rows not yet run are listed at
-    today's defaults (config.ENV_DEFAULTS); kept rows as the previous report listed them (`reported`,
-    else today's defaults)."""
+    differ, naming the fields where a row's are not today's defaults; rows not yet run are listed
+    at today's defaults (config.ENV_DEFAULTS); kept rows as the previous report listed them
+    (`reported`, else today's defaults)."""
     from hintsjax.settings.layers import run_config
 
     default, kept, reported = run_config({"env": env}).ppo, kept or {}, reported or {}
@@ -252,14 +256,19 @@ def report(runs: Path, force: bool = False) -> None:
     lines = [
         "# Locomotion: the paper's Table 3 (Ant, Cheetah, Humanoid rows), reproduced",
         "",
-        "Each cell: mean ± std of the episode return over 5 training seeds x 50 evaluation episodes",
-        "(deterministic policy); in brackets the std of the 5 per-seed means. The paper's cells are",
-        "mean ± std over n=50. Wall-clock per run (hardware at the end) includes compilation and evaluation.",
+        "Each cell: mean ± std of the episode return over 5 training seeds x 50 "
+        "evaluation episodes",
+        "(deterministic policy); in brackets the std of the 5 per-seed means. The "
+        "paper's cells are",
+        "mean ± std over n=50. Wall-clock per run (hardware at the end) includes "
+        "compilation and evaluation.",
         "The envs are Gymnasium v5's tasks on MJX (envs/ant.py, halfcheetah.py, humanoid.py), seen",
-        "as 64x64 renders from a camera that follows the robot (envs/render3d.py). '-': not run yet.",
+        "as 64x64 renders from a camera that follows the robot (envs/render3d.py). "
+        "'-': not run yet.",
         "Training return: the training episodes (sampled actions) that ended in the last 10% of",
         "updates, mean ± std over the seeds. Updates with KL > 0.5: the share of PPO updates (all",
-        "seeds) whose approx. KL from the rollout policy exceeded 0.5, a blown-up update; healthy runs",
+        "seeds) whose approx. KL from the rollout policy exceeded 0.5, a blown-up "
+        "update; healthy runs",
         "stay near 0% (experiments/results/locomotion_ppo_stability.md).",
         "",
     ]
@@ -267,7 +276,8 @@ def report(runs: Path, force: bool = False) -> None:
         # at the table's budget
         learners = [label for label in table_runs(env) if label not in REFERENCES]
         lines += [
-            f"## {env} ({run_config({'env': env}).ppo.total_env_steps / 1e6:g} M env steps per seed)",
+            f"## {env} ({run_config({'env': env}).ppo.total_env_steps / 1e6:g} M "
+            "env steps per seed)",
             "",
             *settings_lines(runs, env, learners, kept, reported),
             "",
@@ -311,9 +321,9 @@ def report(runs: Path, force: bool = False) -> None:
         )
     if any(KEPT in line for line in lines):
         lines.append(
-            f"Rows marked {KEPT} are kept from the previous report: their runs predate the results archive "
-            "(experiments/results/runs) and their run folders were lost. The sweeps before the archive took "
-            f"{UNARCHIVED_SWEEP_SECONDS} s of GPU wall-clock, beside the footer's."
+            f"Rows marked {KEPT} are kept from the previous report: their runs predate the results "
+            "archive (experiments/results/runs) and their run folders were lost. The sweeps before "
+            f"the archive took {UNARCHIVED_SWEEP_SECONDS} s of GPU wall-clock, beside the footer's."
         )
         lines.append("")
     lines.append(footer(runs, TABLE, run_ids(ENVS)))
@@ -368,11 +378,15 @@ def learners_report(runs: Path, names: list[str], path: Path, force: bool = Fals
 
     about = {k: v for k, v in read_about(ARCHIVE / runs.name).items() if k in (*ENVS, "references")}
     lines = [
-        f"Made by `python experiments/locomotion.py --learners-report experiments/results/{path.name} "
-        f"--runs runs/{runs.name}` from the archived runs (experiments/results/runs/{runs.name}).",
-        "Cells: mean ± std over all seeds x 50 evaluation episodes (in brackets the std of the per-seed means), the",
-        "IQM of the per-seed means with a 95 % stratified bootstrap interval, and P(row > PPO-RGB) over the seeds.",
-        f"GPU wall-clock of the sweeps (runs/{runs.name}/sweeps.jsonl): {sweep_seconds(runs, TABLE):.0f} s.",
+        "Made by `python experiments/locomotion.py --learners-report "
+        f"experiments/results/{path.name} --runs runs/{runs.name}` from the archived runs "
+        f"(experiments/results/runs/{runs.name}).",
+        "Cells: mean ± std over all seeds x 50 evaluation episodes (in brackets the std "
+        "of the per-seed means), the",
+        "IQM of the per-seed means with a 95 % stratified bootstrap interval, and P(row "
+        "> PPO-RGB) over the seeds.",
+        f"GPU wall-clock of the sweeps (runs/{runs.name}/sweeps.jsonl): "
+        f"{sweep_seconds(runs, TABLE):.0f} s.",
         "",
     ]
     for env in names:
@@ -385,7 +399,8 @@ def learners_report(runs: Path, names: list[str], path: Path, force: bool = Fals
             continue
         seeds = sorted({len(seed_means(r)) for r in trained.values()})
         lines += [
-            f"## {env} ({budget:g} M env steps per seed, {', '.join(map(str, seeds))} seeds per row)",
+            f"## {env} ({budget:g} M env steps per seed, {', '.join(map(str, seeds))} "
+            "seeds per row)",
             "",
             *settings_lines(runs, env, labels),
             "",

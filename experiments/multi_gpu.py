@@ -1,6 +1,7 @@
 """One run's speed on 1, 2 and 4 GPUs: the command a user types, timed at several seed counts.
 
-    python experiments/multi_gpu.py --gpus 0 0,1 0,1,2,3 --seeds 5,20 [--steps 262144] [--xla-flags ...]
+    python experiments/multi_gpu.py --gpus 0 0,1 0,1,2,3 --seeds 5,20 [--steps 262144]
+                                    [--xla-flags ...]
 
 For each set of GPUs (CUDA_VISIBLE_DEVICES) and seed count it runs
 `python -m hintsjax.run env=pendulum agent=hints hint=composite scheme=fc seeds=S

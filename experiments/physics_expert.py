@@ -39,10 +39,11 @@ HERE = Path(__file__).resolve().parent
 OUT = HERE / "results" / "physics_expert.json"
 GAP_STEPS = (1, 10, 100)
 ABOUT = (
-    "Each env's packaged expert (mean actions) for `episodes` full episodes from the same starts under "
-    "physics=jax and physics=warp: mean return [95 % bootstrap CI], falls, warp - jax [95 % CI, episodes "
-    "resampled independently]; jax_nudged_1e-6: the jax run again from starts with qvel + 1e-6 (the task's "
-    "own chaos); qpos_gap_median: median over episodes of max |qpos| gap at steps 1, 10, 100."
+    "Each env's packaged expert (mean actions) for `episodes` full episodes from the same starts "
+    "under physics=jax and physics=warp: mean return [95 % bootstrap CI], falls, warp - jax "
+    "[95 % CI, episodes resampled independently]; jax_nudged_1e-6: the jax run again from starts "
+    "with qvel + 1e-6 (the task's own chaos); qpos_gap_median: median over episodes of max "
+    "|qpos| gap at steps 1, 10, 100."
 )
 
 
@@ -146,7 +147,8 @@ def main() -> None:
         row.update(
             device=jax.devices()[0].device_kind,
             jax_version=jax.__version__,
-            command=f"python experiments/physics_expert.py --envs {name} --episodes {args.episodes}",
+            command=f"python experiments/physics_expert.py --envs {name} "
+            f"--episodes {args.episodes}",
         )
         rows[name] = row
         print(json.dumps(row), flush=True)

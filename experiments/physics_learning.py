@@ -1,6 +1,7 @@
 """Does learning on MJX-Warp match learning on MJX-JAX? Archived runs of the two physics, compared.
 
-    python experiments/physics_learning.py [--runs experiments/results/runs/physics_compare] [--out FILE.md]
+    python experiments/physics_learning.py [--runs experiments/results/runs/physics_compare]
+                                           [--out FILE.md]
 
 Reads the runs folder's about.json and its run folders: by default `<env>-jax` and `<env>-warp`
 (the same command but `physics`); about.json's `arms` may instead name, per env and physics,
@@ -68,7 +69,8 @@ class Arm:
         return [read_curves(f / "metrics.csv") for f in self.folders]
 
     def training_means(self, up_to: float) -> np.ndarray:
-        """[S] each seed's mean training return over the episodes logged in (1 - LAST) x up_to to up_to env steps."""
+        """[S] each seed's mean training return over the episodes logged in (1 - LAST) x up_to to
+        up_to env steps."""
         means = []
         for steps, values in self.curves:
             window = (steps > (1 - LAST) * up_to) & (steps <= up_to)
@@ -91,12 +93,15 @@ class Arm:
         return f"{grown} of {seeds}"
 
     def storm_seeds(self) -> str:
-        """'k of S': the seeds that had a KL storm (hintsjax.reproduce.archive.kl_storms); '-' when a
-        run has no record of them (no approx_kl logged, or archived before they were kept)."""
+        """'k of S': the seeds that had a KL storm (hintsjax.reproduce.archive.kl_storms); '-' when
+        a run has no record of them (no approx_kl logged, or archived before they were kept)."""
         storms = [kl_storms(f) for f in self.folders]
         if any(s is None for s in storms):
             return "-"
-        return f"{sum(s['first'] is not None for run in storms for s in run)} of {sum(len(run) for run in storms)}"
+        return (
+            f"{sum(s['first'] is not None for run in storms for s in run)} of "
+            f"{sum(len(run) for run in storms)}"
+        )
 
     def reached(self) -> float:
         """The env steps per seed that every run of the arm logged."""
@@ -129,7 +134,8 @@ def comparison(warp: np.ndarray, jax: np.ndarray) -> tuple[str, str, str]:
     """(P(warp > jax) cell, difference cell, verdict) of two [S] score arrays."""
     poi, diff = stats.poi_ci(warp, jax), stats.difference_ci(warp, jax)
     verdict = (
-        f"decided: warp scores {'below' if diff.high < 0 else 'above'} jax (the difference's interval excludes 0)"
+        f"decided: warp scores {'below' if diff.high < 0 else 'above'} jax (the difference's "
+        "interval excludes 0)"
         if stats.difference_decided(diff)
         else "undecided: the difference's interval holds 0"
     )
@@ -158,24 +164,27 @@ def report(runs: Path) -> list[str]:
         "",
         "## The evaluation (deterministic policy, each seed's mean over its episodes)",
         "",
-        "| env | env steps per seed | seeds, jax / warp | jax: IQM [95 % CI] | warp: IQM [95 % CI] | P(warp > jax) | "
-        "warp - jax, mean [95 % CI] | seeds far below, jax / warp | seeds with a KL storm, jax / warp |",
+        "| env | env steps per seed | seeds, jax / warp | jax: IQM [95 % CI] | "
+        "warp: IQM [95 % CI] | P(warp > jax) | warp - jax, mean [95 % CI] | "
+        "seeds far below, jax / warp | seeds with a KL storm, jax / warp |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
     training = [
         "",
-        "## The training return at equal env steps (sampled actions, each seed's mean over the episodes "
-        f"logged in the last {LAST:.0%} of the steps both physics reached)",
+        "## The training return at equal env steps (sampled actions, each seed's mean over the "
+        f"episodes logged in the last {LAST:.0%} of the steps both physics reached)",
         "",
-        "| env | env steps per seed | seeds, jax / warp | jax: IQM [95 % CI] | warp: IQM [95 % CI] | P(warp > jax) | "
-        "warp - jax, mean [95 % CI] | seeds whose policy std ended above its start, jax / warp |",
+        "| env | env steps per seed | seeds, jax / warp | jax: IQM [95 % CI] | "
+        "warp: IQM [95 % CI] | P(warp > jax) | warp - jax, mean [95 % CI] | "
+        "seeds whose policy std ended above its start, jax / warp |",
         "|---|---|---|---|---|---|---|---|",
     ]
     speed = [
         "",
         "## Each run's training rate and compile",
         "",
-        "| env | training env steps/s, jax | training env steps/s, warp | training compile s, jax | training compile s, warp |",
+        "| env | training env steps/s, jax | training env steps/s, warp | "
+        "training compile s, jax | training compile s, warp |",
         "|---|---|---|---|---|",
     ]
     verdicts = []
@@ -190,9 +199,10 @@ def report(runs: Path) -> list[str]:
         if jx is not None and wp is not None:
             poi, diff, verdict = comparison(wp, jx)
             lines.append(
-                f"| {env} | {', '.join(f'{s:,}' for s in sorted(steps)) or '-'} | {len(jx)} / {len(wp)} | "
-                f"{stats.iqm_cell(jx)} | {stats.iqm_cell(wp)} | {poi} | {diff} | "
-                f"{outliers_text(jx)} / {outliers_text(wp)} | {arms['jax'].storm_seeds()} / {arms['warp'].storm_seeds()} |"
+                f"| {env} | {', '.join(f'{s:,}' for s in sorted(steps)) or '-'} | "
+                f"{len(jx)} / {len(wp)} | {stats.iqm_cell(jx)} | {stats.iqm_cell(wp)} | "
+                f"{poi} | {diff} | {outliers_text(jx)} / {outliers_text(wp)} | "
+                f"{arms['jax'].storm_seeds()} / {arms['warp'].storm_seeds()} |"
             )
             verdicts.append(f"- {env}, evaluation: {verdict}")
         else:
@@ -204,14 +214,16 @@ def report(runs: Path) -> list[str]:
         tj, tw = arms["jax"].training_means(up_to), arms["warp"].training_means(up_to)
         poi, diff, verdict = comparison(tw, tj)
         training.append(
-            f"| {env} | {up_to:,.0f} | {len(tj)} / {len(tw)} | {stats.iqm_cell(tj)} | {stats.iqm_cell(tw)} | "
-            f"{poi} | {diff} | {arms['jax'].std_grown(up_to)} / {arms['warp'].std_grown(up_to)} |"
+            f"| {env} | {up_to:,.0f} | {len(tj)} / {len(tw)} | "
+            f"{stats.iqm_cell(tj)} | {stats.iqm_cell(tw)} | {poi} | {diff} | "
+            f"{arms['jax'].std_grown(up_to)} / {arms['warp'].std_grown(up_to)} |"
         )
         verdicts.append(f"- {env}, training return at {up_to:,.0f} env steps: {verdict}")
         speed.append(
             f"| {env} | {arms['jax'].runs_text('train_env_steps_per_s', 1e3, ' K')} | "
             f"{arms['warp'].runs_text('train_env_steps_per_s', 1e3, ' K')} | "
-            f"{arms['jax'].runs_text('compile_seconds')} | {arms['warp'].runs_text('compile_seconds')} |"
+            f"{arms['jax'].runs_text('compile_seconds')} | "
+            f"{arms['warp'].runs_text('compile_seconds')} |"
         )
     return [
         *lines,

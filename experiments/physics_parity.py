@@ -2,7 +2,8 @@
 the picture, one step at a time, from the states a learned policy visits.
 
     python experiments/physics_parity.py [--policies expert random] [--starts 2] [--steps 100]
-                                         [--fresh 64] [--out experiments/results/physics_parity.json]
+                                         [--fresh 64]
+                                         [--out experiments/results/physics_parity.json]
 
 The ant learns less under physics=warp (experiments/results/physics_learning.md), while the packaged
 expert scores the same under both (physics_expert.py) and the parity test compares qpos, qvel, tip
@@ -75,8 +76,9 @@ def visited_states(env, policy: str, starts: int, steps: int):
 
 
 def mujoco_c(mj_model: mujoco.MjModel, qpos, qvel, ctrl, substeps: int) -> dict[str, np.ndarray]:
-    """MuJoCo C's readout ([N, ...], float64) of each (qpos, qvel, ctrl) stepped `substeps` times from
-    a fresh MjData (0: the forward pass), with mj_rnePostConstraint after, as Gymnasium's step."""
+    """MuJoCo C's readout ([N, ...], float64) of each (qpos, qvel, ctrl) stepped `substeps` times
+    from a fresh MjData (0: the forward pass), with mj_rnePostConstraint after, as Gymnasium's
+    step."""
     out = {f: [] for f in FIELDS}
     data = mujoco.MjData(mj_model)
     for q, v, c in zip(
@@ -286,7 +288,8 @@ def main() -> None:
         nargs="+",
         choices=("expert", "random"),
         default=["expert", "random"],
-        help="whose states: the packaged expert's (mean actions), uniform random actions' (default: both)",
+        help="whose states: the packaged expert's (mean actions), uniform random "
+        "actions' (default: both)",
     )
     parser.add_argument(
         "--starts",
@@ -315,8 +318,8 @@ def main() -> None:
             device=jax.devices()[0].device_kind,
             jax_version=jax.__version__,
             mujoco_version=mujoco.__version__,
-            command=f"python experiments/physics_parity.py --policies {policy} --starts {args.starts} "
-            f"--steps {args.steps} --fresh {args.fresh}",
+            command=f"python experiments/physics_parity.py --policies {policy} "
+            f"--starts {args.starts} --steps {args.steps} --fresh {args.fresh}",
         )
         rows.append(row)
         print(json.dumps(row, indent=1), flush=True)

@@ -1,15 +1,17 @@
 """HINTs on MuJoCo Playground's DeepMind Control tasks from pixels, and hintsjax's PPO beside Brax's (issue 48).
 
-    python experiments/playground.py [--envs playground:CartpoleSwingup] [--workers 2]   # item 5: the sweep
-    python experiments/playground.py --versus-brax [--steps 60000000] [--side brax]       # item 6: the side by side
+    python experiments/playground.py [--envs playground:CartpoleSwingup] [--workers 2]  # item 5
+    python experiments/playground.py --versus-brax [--steps 60000000] [--side brax]     # item 6
     python experiments/playground.py --report      # experiments/results/playground.md
-    python experiments/playground.py --smoke --runs /tmp/pg --versus-brax && python experiments/playground.py --smoke --runs /tmp/pg --report
+    python experiments/playground.py --smoke --runs /tmp/pg --versus-brax &&
+        python experiments/playground.py --smoke --runs /tmp/pg --report
 
 Item 5: on CartpoleSwingup, CheetahRun, WalkerWalk and ReacherEasy (adapted by envs/adapter.py,
 seen as 64x64 renders from each task's table camera, envs/playground.py), PPO-RGB and HINTS-FC
 with one natural hint each (the table's), 5 seeds vmapped in one call, at the table's budget (1 M
 env steps), 50 evaluation episodes per seed; the report gives each row's IQM [95 % CI] over seeds
-and P(HINTS > PPO-RGB) (hintsjax.reproduce.stats). Finished folders are skipped (hintsjax/reproduce/sweep.py).
+and P(HINTS > PPO-RGB) (hintsjax.reproduce.stats). Finished folders are skipped
+(hintsjax/reproduce/sweep.py).
 
 Item 6: CartpoleSwingup from its state vector, the same seeds and the same whole number of
 updates (training steps) of the same batch on both sides: hintsjax's `ppo_state` (its seeds
@@ -22,7 +24,7 @@ trained policies, compilation included; each seed's final policy is then evaluat
 episodes, deterministic and stochastic, by the side's own evaluator. `--side hintsjax|brax` runs
 one side (say, each on a GPU of its own); the record is runs/<runs>/versus_brax.json, which each
 side fills in, with the settings it ran; --report adds it to the results.
-"""
+"""  # noqa: E501
 
 from __future__ import annotations
 
@@ -97,7 +99,8 @@ def brax_settings(smoke: bool) -> dict:
 
 
 def steps_per_update(brax: dict) -> int:
-    """Env steps of one Brax training step (one hintsjax update): batch_size x num_minibatches x unroll_length."""
+    """Env steps of one Brax training step (one hintsjax update): batch_size x num_minibatches x
+    unroll_length."""
     return brax["batch_size"] * brax["num_minibatches"] * brax["unroll_length"]
 
 
@@ -116,11 +119,12 @@ def hintsjax_values(brax: dict, seeds: int, steps: int, smoke: bool) -> dict:
     steps, and takes num_updates_per_batch epochs of num_minibatches minibatches; the discount,
     one learning rate for actor and critic, the entropy cost, the reward scale and the running
     observation normalisation, updated before learning as Brax's is, and Brax's gradient clipping:
-    none unless its settings name a max_grad_norm (`NO_CLIP`; hintsjax's own 0.5 over the actor's and
-    critic's gradients together made every seed collapse at 60 M, versus_brax_knobs.md). Left at
-    hintsjax's: the networks ((256, 256) beside Brax's policy (32,)x4 and value (256,)x5), GAE over
-    the whole rollout (Brax's over each unroll), the ratio clip (0.2 beside Brax's 0.3) and the
-    episodes running on across updates (Brax resets every env after each: ppo.reset_every_update)."""
+    none unless its settings name a max_grad_norm (`NO_CLIP`; hintsjax's own 0.5 over the actor's
+    and critic's gradients together made every seed collapse at 60 M, versus_brax_knobs.md). Left
+    at hintsjax's: the networks ((256, 256) beside Brax's policy (32,)x4 and value (256,)x5), GAE
+    over the whole rollout (Brax's over each unroll), the ratio clip (0.2 beside Brax's 0.3) and
+    the episodes running on across updates (Brax resets every env after each:
+    ppo.reset_every_update)."""
     batch = steps_per_update(brax)
     ppo = {
         "total_env_steps": steps,
@@ -160,7 +164,8 @@ def train_hintsjax(
     section), its seeds vmapped in one program, exactly `updates` updates; the seconds run from the
     call to the trained policies (compilation included, evaluation not); then each seed's final
     policy on `episodes` fresh episodes, both MODES. `curve`: each seed's training return after
-    every `every` updates (NaN where no episode ended in them); `kl_curve`: their largest update KL."""
+    every `every` updates (NaN where no episode ended in them); `kl_curve`: their largest update
+    KL."""
     import jax
     import numpy as np
 
@@ -320,7 +325,8 @@ def versus_brax(
     }
     for side in sides:
         print(
-            f"{TRAINERS[side]}: {seeds} seeds x {updates} updates of {steps_per_update(brax):,} env steps",
+            f"{TRAINERS[side]}: {seeds} seeds x {updates} updates of {steps_per_update(brax):,} "
+            "env steps",
             flush=True,
         )
         result = (
@@ -360,7 +366,8 @@ def seed_steps(result: dict) -> list[int]:
 
 def versus_record(runs: Path, keep: bool = False) -> Path:
     """The side by side's record: runs/versus_brax.json where it ran here, else its archived copy
-    (experiments/results/runs/<runs' name>/); `keep` archives the first (the report does, not a smoke run's)."""
+    (experiments/results/runs/<runs' name>/); `keep` archives the first (the report does, not a
+    smoke run's)."""
     path, archived = runs / VERSUS_JSON, ARCHIVE / runs.name / VERSUS_JSON
     if keep and path.exists():
         archived.parent.mkdir(parents=True, exist_ok=True)
@@ -399,11 +406,14 @@ def versus_lines(runs: Path) -> list[str]:
             ]
         )
     lines += [
-        f"{record['task']} from its state, {record['seeds']} seeds x {record['updates']} updates of "
-        f"{record['env_steps_per_seed'] // record['updates']:,} env steps ({record['env_steps_per_seed']:,} a seed) "
-        f"on each side{' (smoke: the numbers mean nothing)' if record['smoke'] else ''}. Final return: each seed's "
-        f"final policy on {max(r['eval_episodes'] for r in results.values()) if results else EVAL_EPISODES} fresh episodes, deterministic (mean action) and stochastic; wall-clock: "
-        "from the call to the last trained policy, compilation included (Brax's seeds one after another, "
+        f"{record['task']} from its state, {record['seeds']} seeds x {record['updates']} "
+        f"updates of {record['env_steps_per_seed'] // record['updates']:,} "
+        f"env steps ({record['env_steps_per_seed']:,} a seed) on each "
+        f"side{' (smoke: the numbers mean nothing)' if record['smoke'] else ''}. "
+        "Final return: each seed's final policy on "
+        f"{max(r['eval_episodes'] for r in results.values()) if results else EVAL_EPISODES} "
+        "fresh episodes, deterministic (mean action) and stochastic; wall-clock: from the call "
+        "to the last trained policy, compilation included (Brax's seeds one after another, "
         "hintsjax's vmapped in one program).",
         "",
     ]
@@ -443,12 +453,17 @@ def report(runs: Path, force: bool = False, out: Path | None = None) -> None:
             if out is not None
             else []
         ),
-        "Commands: `python experiments/playground.py` (item 5), `python experiments/playground.py --versus-brax`",
-        f"(item 6), then `python experiments/playground.py --report`. Hardware: {hardware or 'see each wall-clock cell'}.",
+        "Commands: `python experiments/playground.py` (item 5), "
+        "`python experiments/playground.py --versus-brax`",
+        "(item 6), then `python experiments/playground.py --report`. Hardware: "
+        f"{hardware or 'see each wall-clock cell'}.",
         "",
-        "Each cell: IQM of the 5 training seeds' mean returns (50 deterministic evaluation episodes each), with",
-        "its 95% stratified-bootstrap CI (hintsjax.reproduce.stats); P(HINTS > PPO-RGB) over the seeds' mean returns.",
-        "The tasks are Playground's, adapted by envs/adapter.py and seen as 64x64 renders (envs/render3d.py)",
+        "Each cell: IQM of the 5 training seeds' mean returns (50 deterministic evaluation "
+        "episodes each), with",
+        "its 95% stratified-bootstrap CI (hintsjax.reproduce.stats); P(HINTS > PPO-RGB) "
+        "over the seeds' mean returns.",
+        "The tasks are Playground's, adapted by envs/adapter.py and seen as 64x64 "
+        "renders (envs/render3d.py)",
         "from each task's camera (envs/playground.py DEFAULTS); '-': not run yet.",
         "",
         "## PPO-RGB and HINTS-FC (item 5)",
@@ -489,7 +504,8 @@ def extra_arguments(parser: argparse.ArgumentParser) -> None:
         "--steps",
         type=int,
         default=None,
-        help="--versus-brax: env steps per seed, in whole updates (default Playground's: 60 M, 61 updates)",
+        help="--versus-brax: env steps per seed, in whole updates (default Playground's: "
+        "60 M, 61 updates)",
     )
     parser.add_argument(
         "--side", choices=SIDES, default=None, help="--versus-brax: one side only (default both)"
@@ -497,8 +513,8 @@ def extra_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def extra_mode(parser: argparse.ArgumentParser, args: argparse.Namespace) -> bool:
-    """--versus-brax (item 6, on the device), or --smoke --report: the plumbing only, no archive, the
-    report beside the runs. False for the other calls (the sweep of item 5, its report)."""
+    """--versus-brax (item 6, on the device), or --smoke --report: the plumbing only, no archive,
+    the report beside the runs. False for the other calls (the sweep of item 5, its report)."""
     if args.versus_brax:
         chosen_envs(parser, args, ENVS)  # checks --seeds
         versus_brax(

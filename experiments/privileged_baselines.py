@@ -1,8 +1,10 @@
 """Hints against the baselines that give the same privileged signal to the learner in training only (issue 80).
 
     python experiments/privileged_baselines.py --envs pendulum,acrobot,idp --seeds 20 --workers 3
-    python experiments/privileged_baselines.py --envs halfcheetah,ant --seeds 10 --runs runs/privileged_loco
-    python experiments/privileged_baselines.py --report    # -> experiments/results/privileged_baselines.md
+    python experiments/privileged_baselines.py --envs halfcheetah,ant --seeds 10
+                                               --runs runs/privileged_loco
+    python experiments/privileged_baselines.py --report
+        # -> experiments/results/privileged_baselines.md
 
 Per env, with its privileged signal (`SIGNAL`: the composite hint on the classic envs, the state on
 the locomotion ones): PPO-RGB; the asymmetric actor-critic (`asym_ac`), privileged-information
@@ -12,7 +14,7 @@ budget (config.ENV_DEFAULTS), 50 evaluation episodes a seed. Beside them the rep
 on a learned generator's hints (read off pictures at deployment too) from learned_hints.py's
 archived runs, where there is one. Runs are trained as the other table scripts train theirs
 (hintsjax/reproduce/sweep.py): finished folders are skipped, an interrupted one resumes.
-"""
+"""  # noqa: E501
 
 from __future__ import annotations
 
@@ -126,7 +128,8 @@ def env_lines(runs: Path, env: str) -> list[str]:
         )
     ppo = trained_ppo(runs, env, labels(env)[0])
     lines = [
-        f"## {env}: the privileged signal is the {SIGNAL[env]} {'state' if SIGNAL[env] == 'state' else 'hint'}",
+        f"## {env}: the privileged signal is the {SIGNAL[env]} "
+        f"{'state' if SIGNAL[env] == 'state' else 'hint'}",
         "",
         *markdown_table(
             [
@@ -147,8 +150,9 @@ def env_lines(runs: Path, env: str) -> list[str]:
         lines += [f"PPO: {ppo_text(ppo)}.", ""]
     if learned is not None:
         lines += [
-            f"The learned generator's row is learned_hints.py's archived run {env}-{SIGNAL[env]}-learned-"
-            f"k{LEARNED_FRAMES} (experiments/results/learned_hints.md), trained apart from this sweep.",
+            "The learned generator's row is learned_hints.py's archived "
+            f"run {env}-{SIGNAL[env]}-learned-k{LEARNED_FRAMES} "
+            "(experiments/results/learned_hints.md), trained apart from this sweep.",
             "",
         ]
     return lines
@@ -160,12 +164,13 @@ def report(runs: Path, force: bool = False) -> None:
         "# Hints against the privileged-signal baselines",
         "",
         "Written by `python experiments/privileged_baselines.py --report` from the runs of "
-        "`python experiments/privileged_baselines.py --envs ... --seeds ...` (commands and hardware below). "
-        "Does a hint do more than giving the same privileged signal to the learner in training only? The "
-        "baselines see the signal (the hint HINTS-FC gets, or the state) in training and act on pictures alone; "
-        "HINTS-FC needs the hint at deployment. Returns: the mean over each seed's 50 deterministic episodes, "
-        "then mean ± std over seeds and the IQM with its 95% bootstrap interval (hintsjax/reproduce/stats.py). "
-        "P(HINTS-FC > row): the probability that a seed of HINTS-FC beats a seed of the row; P(row > PPO-RGB): "
+        "`python experiments/privileged_baselines.py --envs ... --seeds ...` "
+        "(commands and hardware below). Does a hint do more than giving the same privileged signal "
+        "to the learner in training only? The baselines see the signal (the hint HINTS-FC gets, or "
+        "the state) in training and act on pictures alone; HINTS-FC needs the hint at deployment. "
+        "Returns: the mean over each seed's 50 deterministic episodes, then mean ± std over seeds "
+        "and the IQM with its 95% bootstrap interval (hintsjax/reproduce/stats.py). P(HINTS-FC > "
+        "row): the probability that a seed of HINTS-FC beats a seed of the row; P(row > PPO-RGB): "
         "whether the row gains on pictures alone.",
         "",
         ORDERINGS_ABOUT.split(" The best hint")[0],

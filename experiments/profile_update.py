@@ -1,14 +1,15 @@
 """Where one training chunk of a cell spends its GPU time: a kernel table from JAX's profiler.
 
     python experiments/profile_update.py [--env pendulum] [--seeds 5] [--updates 10] [--top 25]
-                                         [--variants base,nodet,...] [--physics auto|jax|warp] [--out DIR]
+                                         [--variants base,nodet,...] [--physics auto|jax|warp]
+                                         [--out DIR]
                                          [--part update|learn] [--ppo num_envs=1024,...]
 
 For each variant (a fresh process, since XLA_FLAGS are read at start-up) it compiles the cell's
-chunk program (`compilation.compile_training`, what `python -m hintsjax.run` runs), times `--updates`
-updates back to back (best of 3), then records one chunk under `jax.profiler.trace` and sums the
-GPU kernels' time by name: the device's busy fraction (the union of kernel intervals over the
-chunk's wall time) says whether the chunk is bound by the GPU's work or by launching it.
+chunk program (`compilation.compile_training`, what `python -m hintsjax.run` runs), times
+`--updates` updates back to back (best of 3), then records one chunk under `jax.profiler.trace` and
+sums the GPU kernels' time by name: the device's busy fraction (the union of kernel intervals over
+the chunk's wall time) says whether the chunk is bound by the GPU's work or by launching it.
 
 `--part learn` profiles the learner alone: one seed-vmapped `learn` (GAE and the epochs of
 minibatch steps) on one rollout's transitions, `--updates` times, with the kernels of one call
@@ -61,11 +62,13 @@ VARIANTS = {
     # deterministic once autotuning is read from a cache): the first process tunes and writes the
     # folder, later ones read it; `tuned_b` starts another folder
     "tuned": (
-        "--xla_gpu_deterministic_ops=false --xla_gpu_per_fusion_autotune_cache_dir=/tmp/hintsjax_autotune_a",
+        "--xla_gpu_deterministic_ops=false "
+        "--xla_gpu_per_fusion_autotune_cache_dir=/tmp/hintsjax_autotune_a",
         {},
     ),
     "tuned_b": (
-        "--xla_gpu_deterministic_ops=false --xla_gpu_per_fusion_autotune_cache_dir=/tmp/hintsjax_autotune_b",
+        "--xla_gpu_deterministic_ops=false "
+        "--xla_gpu_per_fusion_autotune_cache_dir=/tmp/hintsjax_autotune_b",
         {},
     ),
     "tuned_scatter": (
@@ -73,8 +76,9 @@ VARIANTS = {
         "--xla_gpu_per_fusion_autotune_cache_dir=/tmp/hintsjax_autotune_a",
         {},
     ),
-    # physics=warp runs with deterministic ops off (MuJoCo Warp's atomics are not reproducible anyway):
-    # its baseline is `nodet`; this adds CUDA graphs over the update's while loops and conditionals
+    # physics=warp runs with deterministic ops off (MuJoCo Warp's atomics are not reproducible
+    # anyway): its baseline is `nodet`; this adds CUDA graphs over the update's while loops and
+    # conditionals
     "nodet_cmdbuf": (
         "--xla_gpu_deterministic_ops=false "
         "--xla_gpu_enable_command_buffer=FUSION,CUBLAS,CUBLASLT,CUSTOM_CALL,CUDNN,WHILE,CONDITIONAL",
@@ -140,7 +144,8 @@ def kernel_table(trace_dir: Path, top: int) -> dict:
 
 
 def kinds(rows: list[dict]) -> dict:
-    """The kernel table's rows' time summed by kind of kernel (a guess from XLA's and Warp's names)."""
+    """The kernel table's rows' time summed by kind of kernel (a guess from XLA's and Warp's
+    names)."""
     out: dict[str, list[float]] = defaultdict(lambda: [0.0, 0])
     for row in rows:
         name = row["name"]
@@ -346,12 +351,13 @@ def main() -> None:
         rate = (
             f"{r['update_ms']:.1f} ms/update = {r['env_steps_per_s']:,.0f} env steps/s"
             if args.part == "update"
-            else f"learn {r['learn_ms']:.1f} ms = {r['gradient_steps']} steps of {r['ms_per_gradient_step']:.2f} ms, "
-            f"{r['samples_per_s']:,.0f} samples/s"
+            else f"learn {r['learn_ms']:.1f} ms = {r['gradient_steps']} steps of "
+            f"{r['ms_per_gradient_step']:.2f} ms, {r['samples_per_s']:,.0f} samples/s"
         )
         print(
             f"\n== {name} ({r['xla_flags']}): {rate}, "
-            f"compile {r['compile_s']:.1f} s, params digest {r['digest']}; GPU busy {k.get('busy_ms', 0):.1f} of {k.get('span_ms', 0):.1f} ms "
+            f"compile {r['compile_s']:.1f} s, params digest {r['digest']}; "
+            f"GPU busy {k.get('busy_ms', 0):.1f} of {k.get('span_ms', 0):.1f} ms "
             f"({k.get('busy_fraction', 0):.0%}), {k.get('events', 0)} kernels",
             flush=True,
         )

@@ -1,7 +1,7 @@
 """Where `make run` ends, and how long it takes, on this machine's CPU: the quickstart at several seeds.
 
-    python experiments/quickstart_spread.py [--seeds 0,1,2,3] [--parallel 1] [--cores 2] [--quickstart '--epochs 4']
-                                            [--out FILE]
+    python experiments/quickstart_spread.py [--seeds 0,1,2,3] [--parallel 1] [--cores 2]
+                                            [--quickstart '--epochs 4'] [--out FILE]
 
 Runs the command `make run` types (`python -m hintsjax.quickstart`, on the CPU) once per seed
 (`--seed s`; `make run` itself is seed 0), `--parallel` at a time, each pinned to `--cores` cores
@@ -12,7 +12,7 @@ Each row: the seed, the command's wall-clock, its compile and training seconds, 
 agent's mean return over 20 episodes and the random policy's; with the CPU's name, jax's version
 and Python's. Written to `--out`; experiments/results/quickstart_spread.md reports the committed
 runs, one JSON file per CPU kind (quickstart_spread_epyc.json, quickstart_spread_xeon.json).
-"""
+"""  # noqa: E501
 
 from __future__ import annotations
 
@@ -126,7 +126,8 @@ def main() -> None:
 
         rows = list(pool.map(task, seeds))
     record = {
-        "command": "python -m hintsjax.quickstart --seed S (make run is seed 0), JAX_PLATFORMS=cpu, cold caches",
+        "command": "python -m hintsjax.quickstart --seed S (make run is seed 0), "
+        "JAX_PLATFORMS=cpu, cold caches",
         "cpu": cpu_name(),
         "isa": isa(),
         "cores_per_run": args.cores,

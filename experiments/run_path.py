@@ -1,6 +1,7 @@
 """What the command a user types delivers: `python -m hintsjax.run` timed end to end, beside the bench.
 
-    python experiments/run_path.py [--cells pendulum,ant,ant_fast,humanoid] [--updates 200] [--physics jax,warp] [--no-bench]
+    python experiments/run_path.py [--cells pendulum,ant,ant_fast,humanoid] [--updates 200]
+                                   [--physics jax,warp] [--no-bench]
                                    [--out experiments/results/run_path.json]
 
 For each cell (pendulum: hints/fc/composite; ant: hints/fc/speed; humanoid: hints/fc/velocity;
@@ -16,7 +17,7 @@ full wall is extrapolated at the measured rate: such rows say so (`updates`, `fu
 With `--physics jax,warp` each cell runs once per physics (`physics=...` on the command line),
 cold and warm, with its own empty caches: XLA's and MuJoCo Warp's kernel cache ($WARP_CACHE_PATH),
 so a cold warp row compiles Warp's CUDA kernels too.
-"""
+"""  # noqa: E501
 
 from __future__ import annotations
 
@@ -33,7 +34,8 @@ from pathlib import Path
 CELLS = {
     "pendulum": ["env=pendulum", "agent=hints", "hint=composite", "scheme=fc"],
     "ant": ["env=ant", "agent=hints", "hint=speed", "scheme=fc"],
-    # a different, cheaper task on the ant's body (Euler, 2 Newton iterations, 9 contacts: docs/environments.md)
+    # a different, cheaper task on the ant's body (Euler, 2 Newton iterations, 9 contacts:
+    # docs/environments.md)
     "ant_fast": ["env=ant_fast", "agent=hints", "hint=speed", "scheme=fc"],
     "humanoid": ["env=humanoid", "agent=hints", "hint=velocity", "scheme=fc"],
 }
@@ -42,7 +44,8 @@ PARTIAL = ("ant", "ant_fast", "humanoid")
 
 
 def timed_command(args: list[str], cache: Path, out_dir: Path) -> tuple[float, dict]:
-    """Run the command once (MuJoCo Warp's kernels cached beside XLA's); (wall seconds, its eval.json)."""
+    """Run the command once (MuJoCo Warp's kernels cached beside XLA's); (wall seconds, its
+    eval.json)."""
     name = f"r{time.time_ns()}"
     t = time.perf_counter()
     subprocess.run(
@@ -72,7 +75,8 @@ def main() -> None:
         "--ant-updates",
         type=int,
         default=200,
-        help=f"updates of the locomotion cells ({', '.join(PARTIAL)}: the ant's full budget is 4882)",
+        help=f"updates of the locomotion cells ({', '.join(PARTIAL)}: "
+        "the ant's full budget is 4882)",
     )
     parser.add_argument(
         "--physics", default="jax", help="comma-separated: auto, jax, warp (one row pair each)"

@@ -1,15 +1,16 @@
 """What a whole table costs: the pendulum's Table 2 trained by the command a user types.
 
-    python experiments/table_in_one_call.py --seeds 5,20 [--env pendulum] [--alone] [--keep runs/classic20]
-    python experiments/table_in_one_call.py --cpu-updates 3      # the training rate on this machine's CPU
+    python experiments/table_in_one_call.py --seeds 5,20 [--env pendulum] [--alone]
+                                            [--keep runs/classic20]
+    python experiments/table_in_one_call.py --cpu-updates 3  # the training rate on this CPU
 
 For each seed count it runs `experiments/classic_control.py --table 2 --envs <env> --seeds S`
 on the table's learner rows (PPO-RGB, PPO-x, PPO-x+N(0,1) and HINTS-FC with every hint; the
 references expert_ppo, dagger and gail are left out: dagger and gail need the expert's run
 first) into a fresh runs folder, and times the whole command, compiles and evaluation included.
 The rows go to experiments/results/table_in_one_call.json with the fields
-`env, rows, seeds, wall_s, env_steps_per_s, ceiling_fraction, device, devices, deterministic` and more
-(devices: the GPUs visible, all of which every worker's run spreads its seeds over):
+`env, rows, seeds, wall_s, env_steps_per_s, ceiling_fraction, device, devices, deterministic`
+and more (devices: the GPUs visible, all of which every worker's run spreads its seeds over):
 env_steps_per_s is every row's training env steps over the command's wall-clock;
 ceiling_fraction is that rate x PPO's epochs (gradient samples/s) over the network's own update
 ceiling, measured in this process (experiments/bench.py's `ceiling`). `--alone` trains each row
@@ -150,8 +151,9 @@ def cpu_rate(env: str, seeds: int, updates: int) -> dict:
         "ratio": round(rate / AUTHORS_CPU_ENV_STEPS_PER_S, 1),
         "compile_seconds": results[0]["compile_seconds"],
         "grouped": True,
-        "note": f"training only (compiles apart), {updates} updates of the {len(cfgs)}-row HINTS-FC group "
-        "extrapolated to the table; the other rows (PPO-RGB, PPO-x) train at a similar or higher rate",
+        "note": f"training only (compiles apart), {updates} updates of the {len(cfgs)}-row "
+        "HINTS-FC group extrapolated to the table; the other rows (PPO-RGB, PPO-x) train at a "
+        "similar or higher rate",
     }
 
 

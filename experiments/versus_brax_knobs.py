@@ -1,9 +1,11 @@
 """Which unmatched knob explains hintsjax's PPO trailing Brax's on CartpoleSwingup (issue 61, item 3).
 
-    python experiments/versus_brax_knobs.py --side brax                               # Brax's PPO
-    python experiments/versus_brax_knobs.py --side hintsjax --label baseline          # hintsjax, as --versus-brax maps it
-    python experiments/versus_brax_knobs.py --side hintsjax --label no-grad-clip ppo.max_grad_norm=1e9
-    python experiments/versus_brax_knobs.py --table                                    # the rows so far
+    python experiments/versus_brax_knobs.py --side brax    # Brax's PPO
+    # hintsjax, as --versus-brax maps it:
+    python experiments/versus_brax_knobs.py --side hintsjax --label baseline
+    python experiments/versus_brax_knobs.py --side hintsjax --label no-grad-clip
+                                            ppo.max_grad_norm=1e9
+    python experiments/versus_brax_knobs.py --table        # the rows so far
 
 A CPU-sized version of experiments/playground.py's --versus-brax: Playground's Brax settings for
 CartpoleSwingup (dm_control_suite_params) with fewer envs and epochs (`CPU`, the same on both
@@ -12,7 +14,7 @@ side takes `hintsjax_values`' mapping plus any `ppo.<key>=<value>` overrides (th
 Each side's final policy is evaluated both ways, deterministic (mean action) and stochastic, on
 `EVAL_EPISODES` fresh episodes per seed: hintsjax by its own evaluator, Brax by its own Evaluator.
 Each run appends one row to runs/versus_brax_knobs/rows.jsonl.
-"""
+"""  # noqa: E501
 
 from __future__ import annotations
 
@@ -91,7 +93,8 @@ def table() -> None:
     rows = [json.loads(line) for line in ROWS.read_text().splitlines()]
     mean = lambda xs: sum(xs) / len(xs)  # noqa: E731
     print(
-        "| regime | side | knob | env steps per seed | deterministic return per seed (mean) | stochastic return per seed (mean) | wall-clock (s) |"
+        "| regime | side | knob | env steps per seed | deterministic return per seed (mean) | "
+        "stochastic return per seed (mean) | wall-clock (s) |"
     )
     print("|---|---|---|---|---|---|---|")
     for r in rows:
@@ -99,7 +102,8 @@ def table() -> None:
         steps = r["env_steps_per_seed"]
         steps = steps if isinstance(steps, int) else "/".join(str(s) for s in sorted(set(steps)))
         print(
-            f"| {r.get('regime', 'many')} | {r['side']} | {r['label']} | {steps} | {', '.join(f'{x:.1f}' for x in det)} ({mean(det):.1f}) | "
+            f"| {r.get('regime', 'many')} | {r['side']} | {r['label']} | {steps} | "
+            f"{', '.join(f'{x:.1f}' for x in det)} ({mean(det):.1f}) | "
             f"{', '.join(f'{x:.1f}' for x in sto)} ({mean(sto):.1f}) | {r['seconds']:.0f} |"
         )
 

@@ -1,6 +1,7 @@
 """MJX-Warp's CUDA graph modes and the overflow report, measured on an env's rollout.
 
-    python experiments/warp_graph_modes.py --env ant --variants default:1,default:0,none:1,warp_staged:1,warp_staged_ex:1
+    python experiments/warp_graph_modes.py --env ant
+        --variants default:1,default:0,none:1,warp_staged:1,warp_staged_ex:1
 
 Each variant is `graph_mode:report`: the graph mode MJX-Warp's kernels are launched with
 (`default`: MJX's own choice on a GPU, Warp capturing a CUDA graph and replaying it for matching

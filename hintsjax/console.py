@@ -2,9 +2,10 @@
 subcommand per command module, each run exactly as `python -m hintsjax.<command>` runs it.
 
 Each command takes the arguments its kind expects, and `--help` lists them:
-  run                      Hydra's `key=value` settings (docs/settings.md) (`-m` sweeps a comma list)
-  generator, rank          `key=value` settings of their own dataclass (hintsjax.cli.arguments)
-  evaluate, video, expert, quickstart   a run folder and `--flags` (argparse), as tools on folders take
+  run                    Hydra's `key=value` settings (docs/settings.md) (`-m` sweeps a comma list)
+  generator, rank        `key=value` settings of their own dataclass (hintsjax.cli.arguments)
+  evaluate, video, expert, quickstart
+                         a run folder and `--flags` (argparse), as tools on folders take
 """
 
 from __future__ import annotations
@@ -51,7 +52,10 @@ def usage() -> str:
     width = max(map(len, COMMANDS))
     return "\n".join(
         [
-            f"usage: {PROG} <command> [arguments]   ({PROG} <command> --help: that command's arguments)",
+            (
+                f"usage: {PROG} <command> [arguments]   "
+                f"({PROG} <command> --help: that command's arguments)"
+            ),
             "",
             *(f"  {name:<{width}}  {c.about}" for name, c in COMMANDS.items()),
             "",

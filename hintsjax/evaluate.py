@@ -1,10 +1,11 @@
 """Evaluation: every training seed times N fresh episodes in one jitted call.
 
     python -m hintsjax.evaluate runs/<run folder> [--variant swingto] [--episodes 50]
-                                [--stochastic | --deterministic] [--hint-source runs/<generator folder>]
+                                [--stochastic | --deterministic]
+                                [--hint-source runs/<generator folder>]
 
-(by default sampled or not as the run's `stochastic_eval`: the car samples, the others take the mean).
-Writes eval-<variant>-<mode>-<episodes>.json into the run folder; the evaluation itself is
+(by default sampled or not as the run's `stochastic_eval`: the car samples, the others take the
+mean). Writes eval-<variant>-<mode>-<episodes>.json into the run folder; the evaluation itself is
 hintsjax/evaluation/evaluator.py.
 """
 
@@ -63,8 +64,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--hint-source",
         default=None,
-        help="the agent's hints at deploy: programmatic, or a generator folder (hintsjax.generator); "
-        "default: the run's eval_hint_source",
+        help="the agent's hints at deploy: programmatic, or a generator folder "
+        "(hintsjax.generator); default: the run's eval_hint_source",
     )
     args = parser.parse_args(argv)
     cfg = load_run_config(args.run)
@@ -91,7 +92,8 @@ def main(argv: list[str] | None = None) -> int:
         )
         paths.write_whole(out, lambda part: part.write_text(text))
         print(
-            f"{cfg.label} on {cfg.env}/{result['variant']} ({mode}, {cfg.seeds} seeds x {episodes} episodes"
+            f"{cfg.label} on {cfg.env}/{result['variant']} ({mode}, {cfg.seeds} seeds x {episodes} "
+            "episodes"
             f"{'' if not tag else ', hints from ' + source}): "
             f"{result['mean']:.2f} +- {result['std']:.2f}{metrics_text(result)}  -> {out}"
         )

@@ -1,7 +1,7 @@
 """Trained experts: the policy of an `expert_ppo` run, exported for DAgger and GAIL to learn from.
 
     python -m hintsjax.run env=pendulum agent=expert_ppo name=expert-pendulum   # train (5 seeds)
-    python -m hintsjax.expert runs/expert-pendulum                             # -> hintsjax/experts/pendulum
+    python -m hintsjax.expert runs/expert-pendulum  # -> hintsjax/experts/pendulum
 
 The export and the loading are hintsjax/algorithms/experts.py.
 """

@@ -152,12 +152,15 @@ def main(argv: list[str] | None = None) -> int:
             baseline, gif = baseline_done.result(), gif_done.result()
         (run_dir / BASELINE_JSON).write_text(json.dumps(baseline, indent=1))
     print(
-        f"\n{cfg.env}/{trained['variant']}, {cfg.eval_episodes} episodes each ({time.perf_counter() - t:.0f} s in all):\n"
+        f"\n{cfg.env}/{trained['variant']}, {cfg.eval_episodes} episodes each "
+        f"({time.perf_counter() - t:.0f} s in all):\n"
         f"  trained agent ({cfg.label}, {cfg.ppo.total_env_steps} env steps): "
         f"{trained['mean']:8.1f} +- {trained['std']:.1f}\n"
         f"  random policy (the agent before training, sampling its actions): "
         f"{baseline['mean']:8.1f} +- {baseline['std']:.1f}\n"
-        f"run folder:     {run_dir}\nlearning curve: {run_dir / runlog.CURVE_PNG}\none episode:    {gif}"
+        f"run folder:     {run_dir}\n"
+        f"learning curve: {run_dir / runlog.CURVE_PNG}\n"
+        f"one episode:    {gif}"
     )
     return 0
 

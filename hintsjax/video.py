@@ -1,6 +1,7 @@
 """A short GIF of a trained agent: one episode, with its hint drawn beside the picture.
 
-    python -m hintsjax.video runs/<run folder> [--seed 0] [--variant swingto] [--steps 300] [--scale 4] [--out v.gif] [--fps 25]
+    python -m hintsjax.video runs/<run folder> [--seed 0] [--variant swingto] [--steps 300]
+                             [--scale 4] [--out v.gif] [--fps 25]
 
 One seed's params act as the run is evaluated; the episode and its frames are
 hintsjax/evaluation/recording.py.

@@ -1,5 +1,5 @@
-"""Many `python -m <module> <args>` runs for the price of one interpreter start. Used by tests/test_cli.py and
-tests/test_console.py through `outcomes`.
+"""Many `python -m <module> <args>` runs for the price of one interpreter start. Used by
+tests/test_cli.py and tests/test_console.py through `outcomes`.
 
     python tests/command_runs.py <module> '<cases as JSON>' [<module the command runs in turn>...]
 

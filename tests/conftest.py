@@ -1,7 +1,7 @@
 """Settings for the whole test suite.
 
-The traced-program cache (hintsjax/system/program_cache.py) is off: several tests replace a function at
-run time (a poisoned trainer, a patched env metric), which no key of that cache can see, and such
+The traced-program cache (hintsjax/system/program_cache.py) is off: several tests replace a function
+at run time (a poisoned trainer, a patched env metric), which no key of that cache can see, and such
 a test must never run a program traced for another test. tests/test_program_cache.py turns it on
 in folders of its own; tests/test_cli.py and tests/test_group.py for their own runs, which replace
 no function inside a traced program (their repeated and resumed runs of one tiny config load what
@@ -19,8 +19,8 @@ Compiling is most of the suite's time on a CPU (the runs it trains are tiny), so
   XLA keys an entry by the whole program and the flags, so a test that patches a function gets
   its own entry. The folder is removed when the run ends. HINTSJAX_TEST_XLA_CACHE=off turns it off.
 - **LLVM's cheapest optimisation level** (`--xla_backend_optimization_level=0`) for the programs the
-  default tier compiles, set before JAX's backend starts (subprocesses inherit it; the slow tier keeps
-  XLA's default: `pytest_configure`). Their runs are tiny, so
+  default tier compiles, set before JAX's backend starts (subprocesses inherit it; the slow tier
+  keeps XLA's default: `pytest_configure`). Their runs are tiny, so
   compiling faster wins over running slower: the whole suite took 851 s on 2 cores with it and
   1120 s without (2026-11-27; docs/tests.md), though test_rank's long probe went from 57 s to 153 s
   (so tests/test_rank.py runs that command in a process of its own, without the flag).
@@ -55,10 +55,11 @@ if os.environ.get("HINTSJAX_TEST_XLA_CACHE", "on") != "off":
 
 
 def pytest_configure(config):
-    """LLVM -O0 and the loop emitters for the default tier, set before JAX's backend starts (it reads XLA_FLAGS once; no
-    test module is imported yet, and xdist's workers start later and inherit it). The slow tier
-    alone (`-m slow`, `make test-slow`) keeps XLA's default: its drives run for minutes, which -O0
-    made several times longer (the humanoid's 2x10^5-step drive took 1296 s on a core)."""
+    """LLVM -O0 and the loop emitters for the default tier, set before JAX's backend starts (it
+    reads XLA_FLAGS once; no test module is imported yet, and xdist's workers start later and
+    inherit it). The slow tier alone (`-m slow`, `make test-slow`) keeps XLA's default: its drives
+    run for minutes, which -O0 made several times longer (the humanoid's 2x10^5-step drive took
+    1296 s on a core)."""
     if config.option.markexpr.strip() != "slow" and xla_tier.OPTIMIZATION not in os.environ.get(
         "XLA_FLAGS", ""
     ):

@@ -4,9 +4,9 @@ At reset a cue c in {-1, +1} is drawn uniformly; the picture is a constant grey 
 state observation is [0.0], so neither reveals c. The hint `cue` is [c]. The episode is one
 step long (truncated at t = 1) with reward -(a - c)^2, a clipped to [-2, 2]. (A second hint,
 `cue_pair` = [c, -c], gives tests/test_group.py hints of several widths; a third, `distractor`, is
-noise: a number drawn uniformly in [-1, 1] at reset, independent of c, for tests/test_rank.py.) The best an agent
-blind to the hint can do is the constant action a = 0, whose expected return is -1; an agent
-that reads the hint can reach 0.
+noise: a number drawn uniformly in [-1, 1] at reset, independent of c, for tests/test_rank.py.) The
+best an agent blind to the hint can do is the constant action a = 0, whose expected return is -1; an
+agent that reads the hint can reach 0.
 
 Importing this module registers the env with its defaults in one call (`envs.REGISTRY["cue"]`)
 and its hint, so `run_config({"env": "cue", ...})` works.

@@ -2,7 +2,8 @@
 that JAX's multi-controller runtime joins into one run (hintsjax.system.devices.join_processes).
 
     JAX_NUM_PROCESSES=2 JAX_PROCESS_ID=0 JAX_COORDINATOR_ADDRESS=localhost:1234 \\
-        XLA_FLAGS=--xla_force_host_platform_device_count=2 python tests/process_run.py <out_dir> [--resume]
+        XLA_FLAGS=--xla_force_host_platform_device_count=2 \\
+        python tests/process_run.py <out_dir> [--resume]
 
 Trains the linear env's ppo_state at 3 seeds into <out_dir>/run (a checkpoint after every
 chunk of 2 updates), or with --resume continues <out_dir>/run from its newest checkpoint;

@@ -115,9 +115,10 @@ def test_sigmoid_head_bounds_the_mean_and_floors_the_std():
 
 
 def test_sigmoid_head_log_probability_is_the_hand_computed_one():
-    """The actor's last layer outputs its bias b = (0, ln 3) (every kernel zero), so the head's mean is
-    2 sigmoid(b) - 1 = (0, 0.5); log std (ln 0.5, -10) is floored to (ln 0.5, ln 0.01). Action (0.5,
-    0.52) is then 1 and 2 stds from the mean: log p = (-1/2 + ln 2) + (-2 + ln 100) - ln 2 pi."""
+    """The actor's last layer outputs its bias b = (0, ln 3) (every kernel zero), so the head's mean
+    is 2 sigmoid(b) - 1 = (0, 0.5); log std (ln 0.5, -10) is floored to (ln 0.5, ln 0.01). Action
+    (0.5, 0.52) is then 1 and 2 stds from the mean: log p = (-1/2 + ln 2) + (-2 + ln 100) -
+    ln 2 pi."""
     from hintsjax.algorithms.ppo_math import gaussian_log_prob
 
     net = ActorCritic(AGENTS["ppo_state"], "fc", 2, hidden=(8,), action_head="sigmoid")

@@ -1,5 +1,5 @@
-"""experiments/bench.py: its command-line parsing of physics options, and (slow tier) one training row
-at a toy size on CPU (its measured timings run on the GPU)."""
+"""experiments/bench.py: its command-line parsing of physics options, and (slow tier) one training
+row at a toy size on CPU (its measured timings run on the GPU)."""
 
 from __future__ import annotations
 

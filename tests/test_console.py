@@ -1,6 +1,7 @@
 """The `hintsjax` console script (hintsjax/console.py): each subcommand is its module's
 `python -m`, a missing or unknown one is one line naming the commands (exit 2), and the --help
-of run, generator, rank, evaluate and video lists every env with its hints, every agent and scheme."""
+of run, generator, rank, evaluate and video lists every env with its hints, every agent and
+scheme."""
 
 from __future__ import annotations
 
@@ -140,8 +141,8 @@ def test_each_tools_help_lists_its_settings_and_the_choices(name, console_runs):
 def test_the_choices_follow_the_registries():
     page = choices.text()
     pendulum = page[page.index("\n  pendulum\n") :].splitlines()
-    assert (
-        pendulum[2]
-        == "    hints:    composite (default), angular_velocity, goal_distance, partial_state, state, torque"
+    assert pendulum[2] == (
+        "    hints:    composite (default), angular_velocity, goal_distance, partial_state, "
+        "state, torque"
     )
     assert pendulum[3] == "    variants: swingup, swingto"

@@ -5,7 +5,8 @@ pieces; when XLA's concurrency-optimised schedule runs two of them side by side 
 machine, both pool threads wait and the program never finishes. This program (two independent
 batched Cholesky solves, the shape of MJX's constraint solves) stopped for good in 12 of 13 runs
 on 2 cores without the scheduler flag hintsjax sets, and finished 300 calls in about a second in 6
-of 6 with it (docs/throughput.md). On a machine with more cores it finishes either way, so there the test cannot fail.
+of 6 with it (docs/throughput.md). On a machine with more cores it finishes either way, so there the
+test cannot fail.
 """
 
 from __future__ import annotations
@@ -54,7 +55,8 @@ def test_two_batched_cholesky_solves_side_by_side_finish():
         )
     except subprocess.TimeoutExpired:
         pytest.fail(
-            "two batched Cholesky solves did not finish in 300 s (a few seconds when they do): deadlocked"
+            "two batched Cholesky solves did not finish in 300 s (a few seconds when they do): "
+            "deadlocked"
         )
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.strip().endswith("finished")

@@ -47,7 +47,8 @@ def test_every_envs_resolved_configuration_matches_the_snapshot():
 
 
 def write_snapshot() -> None:
-    """Regenerate the snapshot: `python tests/test_docs.py` (after a deliberate change of defaults)."""
+    """Regenerate the snapshot: `python tests/test_docs.py` (after a deliberate change of
+    defaults)."""
     from test_cli import SHIPPED_ENVS
 
     from hintsjax.models.agents import AGENTS

@@ -1,6 +1,7 @@
-"""The learned hint generator (hintsjax.generator, read by hintsjax.settings.hint_sources): it learns a hint that the picture determines,
-its training is the same vmapped as looped, the env that carries its pictures keeps the task's
-dynamics, and an agent given `hint_source` sees the generator's hint and nothing else."""
+"""The learned hint generator (hintsjax.generator, read by hintsjax.settings.hint_sources): it
+learns a hint that the picture determines, its training is the same vmapped as looped, the env that
+carries its pictures keeps the task's dynamics, and an agent given `hint_source` sees the
+generator's hint and nothing else."""
 
 from __future__ import annotations
 
@@ -79,7 +80,8 @@ def test_training_vmapped_over_seeds_equals_a_loop():
 
 
 def test_stacked_pictures_repeat_an_episodes_first():
-    # one env, 5 steps; an episode starts at step 0 and another at step 3; picture t is filled with t
+    # one env, 5 steps; an episode starts at step 0 and another at step 3; picture t is filled
+    # with t
     frames = jnp.broadcast_to(
         jnp.arange(5, dtype=jnp.uint8)[:, None, None, None, None], (5, 1, 2, 2, 3)
     )

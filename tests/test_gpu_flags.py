@@ -187,9 +187,10 @@ def test_a_child_of_a_hintsjax_process_tells_its_parents_flags_from_the_users(tm
 
 
 def test_a_sweep_worker_drops_determinism_only_when_all_its_runs_get_warp(monkeypatch):
-    """A table script's worker (python -m hintsjax.reproduce.sweep --one env/label,...): physics=warp,
-    or auto where every run's env prefers Warp on an NVIDIA GPU, drops deterministic GPU ops before
-    its check starts JAX; a run that keeps JAX's solver keeps them for the whole worker."""
+    """A table script's worker (python -m hintsjax.reproduce.sweep --one env/label,...):
+    physics=warp, or auto where every run's env prefers Warp on an NVIDIA GPU, drops deterministic
+    GPU ops before its check starts JAX; a run that keeps JAX's solver keeps them for the whole
+    worker."""
     import argparse
 
     from hintsjax.envs import physics

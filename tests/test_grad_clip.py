@@ -48,8 +48,9 @@ def actor_step(grad_clip: str, critic_gradient: float) -> np.ndarray:
 
 
 def test_per_part_clipping_leaves_the_actor_step_to_the_actor():
-    # Adam's first step is -lr * g / (|g| + eps) per element: -lr * 1e-3 / (1e-3 + 1e-5), about -0.99 lr,
-    # whatever the critic's gradient (the actor's own norm, sqrt(5) 1e-3, is under the clip).
+    # Adam's first step is -lr * g / (|g| + eps) per element: -lr * 1e-3 / (1e-3 + 1e-5), about
+    # -0.99 lr, whatever the critic's gradient (the actor's own norm, sqrt(5) 1e-3, is under the
+    # clip).
     small, large = actor_step("per_part", 1.0), actor_step("per_part", 1e4)
     np.testing.assert_allclose(small, -LR * 1e-3 / (1e-3 + 1e-5), rtol=1e-5)
     np.testing.assert_array_equal(small, large)
@@ -57,7 +58,8 @@ def test_per_part_clipping_leaves_the_actor_step_to_the_actor():
 
 def test_global_clipping_lets_the_critic_shrink_the_actor_step():
     # A critic gradient of 1e4 per element (norm 2e4) scales every gradient by 0.5 / 2e4: the
-    # actor's become 2.5e-8, under Adam's eps, and its step -lr * 2.5e-8 / (2.5e-8 + 1e-5) is 0.25% of lr.
+    # actor's become 2.5e-8, under Adam's eps, and its step -lr * 2.5e-8 / (2.5e-8 + 1e-5) is 0.25%
+    # of lr.
     np.testing.assert_allclose(actor_step("global", 0.0), -LR * 1e-3 / (1e-3 + 1e-5), rtol=1e-5)
     scaled = (
         1e-3 * 0.5 / float(jnp.linalg.norm(jnp.concatenate([jnp.full(5, 1e-3), jnp.full(4, 1e4)])))

@@ -1,4 +1,5 @@
-"""Configurations trained in one group (hintsjax.algorithms.group) give what each gives trained alone.
+"""Configurations trained in one group (hintsjax.algorithms.group) give what each gives trained
+alone.
 
 Agreement is to float32 rounding, not bit for bit: vmapped over the group, XLA computes the
 networks' matrix products and convolutions as batched ones and may sum in another order, and
@@ -24,8 +25,9 @@ from hintsjax.algorithms import group, ppo
 from hintsjax.algorithms.registry import make_trainer
 from hintsjax.training import outputs, pipeline
 
-# The traced-program cache on for this file's runs (tests/conftest.py): nothing here replaces a function, so
-# the group resumed after its SIGKILL, and the finished group resumed to evaluate, load what `whole_group` traced.
+# The traced-program cache on for this file's runs (tests/conftest.py): nothing here replaces a
+# function, so the group resumed after its SIGKILL, and the finished group resumed to evaluate, load
+# what `whole_group` traced.
 pytestmark = pytest.mark.usefixtures("traced_programs_kept")
 
 UPDATES = 3

@@ -2,7 +2,8 @@
 
 - the single env passes `gymnasium.utils.env_checker.check_env`;
 - the vector env steps as Gymnasium's own `SyncVectorEnv` (autoreset_mode=SAME_STEP) over single
-  envs seeded s, s+1, ... (its info's `final_obs` included), and Gymnasium's vector wrappers read it;
+  envs seeded s, s+1, ... (its info's `final_obs` included), and Gymnasium's vector wrappers read
+  it;
 - its trajectories equal hintsjax's own env's (`Env.reset` / `Env.step`, keys drawn as
   hintsjax/gym/core.py's docstring says), step for step through an episode's end and autoreset;
 - `reset(seed=s)` reproduces; bad names fail in one line naming the valid choices.
@@ -134,8 +135,8 @@ def test_the_single_env_passes_gymnasiums_check_env():
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         check_env(env.unwrapped)
-    # the hint is a Box without bounds (a velocity has none) and the torque's range is [-2, 2], both as
-    # in Gymnasium's Pendulum-v1 (its check warns of the same); nothing else may be warned of
+    # the hint is a Box without bounds (a velocity has none) and the torque's range is [-2, 2], both
+    # as in Gymnasium's Pendulum-v1 (its check warns of the same); nothing else may be warned of
     unexpected = [
         str(w.message)
         for w in caught
@@ -227,13 +228,13 @@ def test_gymnasiums_episode_statistics_wrapper_reads_the_autoreset(vector_rollou
     assert np.allclose(info["episode"]["r"], np.stack(vector_rollout[1][:200]).sum(0), rtol=1e-5)
 
 
-# -- the slow tier: every other env through check_env, an adapted env of each source, SB3 --------------------
+# -- the slow tier: every other env through check_env, an adapted env of each source, SB3 ----------
 
 
-# Each MJCF env's check costs minutes of compiling on 2 cores (busy: the ant 215 s, brax:hopper 192 s,
-# ant_fast 165 s), so the slow tier that CI runs checks one env of each kind (classic, MJCF, the car);
-# HINTSJAX_TEST_EVERY_GYM_ENV=1 checks every env and an adapted one of each source (all 9 passed,
-# 2026-11-27: experiments/results/gym.md)
+# Each MJCF env's check costs minutes of compiling on 2 cores (busy: the ant 215 s, brax:hopper
+# 192 s, ant_fast 165 s), so the slow tier that CI runs checks one env of each kind (classic, MJCF,
+# the car); HINTSJAX_TEST_EVERY_GYM_ENV=1 checks every env and an adapted one of each source (all 9
+# passed, 2026-11-27: experiments/results/gym.md)
 EVERY_ENV = [n for n in envs.env_names() if n != "pendulum"] + [
     "brax:hopper",
     "playground:CartpoleSwingup",
@@ -273,7 +274,8 @@ def test_every_env_passes_check_env_and_its_vector_env_steps(name):
 def test_stable_baselines3_steps_it_as_its_own_dummy_vec_env_and_trains_on_it():
     """hintsjax.gym.sb3.VecEnv against SB3's DummyVecEnv over single envs (SB3's own vectorisation):
     the same observations, rewards, dones and terminal observations through an episode's end; then
-    SB3's PPO (MultiInputPolicy) runs two short updates on it and its rollouts hold the env's hints."""
+    SB3's PPO (MultiInputPolicy) runs two short updates on it and its rollouts hold the env's
+    hints."""
     pytest.importorskip("stable_baselines3")
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import DummyVecEnv

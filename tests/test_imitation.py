@@ -39,7 +39,8 @@ GAIL = dict(
 
 
 def trained(values: dict):
-    """Train 2 seeds vmapped, and seed 1 alone: (trainer, batched state, batched metrics, seed 1's state)."""
+    """Train 2 seeds vmapped, and seed 1 alone: (trainer, batched state, batched metrics, seed 1's
+    state)."""
     cfg = layers.run_config({**values, "seeds": 2})
     trainer = make_trainer(cfg, expert=linear_env.EXPERT)
     keys = cfg.seed_keys()
@@ -287,7 +288,8 @@ def test_the_packaged_experts_are_the_listed_ones():
 
 def test_the_packaged_experts_ship_nothing_of_the_machine_that_wrote_them():
     """No packaged expert holds orbax's notes of where it was written (commit_success.txt named the
-    author's folder) or on what device; `test_packaged_experts_load_and_act` restores them without."""
+    author's folder) or on what device; `test_packaged_experts_load_and_act` restores them
+    without."""
     shipped = [p for p in experts.EXPERTS_DIR.rglob("*") if p.is_file()]
     assert len(shipped) > 10 * len(PACKAGED)
     assert [str(p) for p in shipped if p.name in experts.MACHINE_FILES] == []
@@ -363,9 +365,9 @@ def pendulum_expert_returns(total_env_steps: int, seeds: int = 3) -> list[float]
 
 @pytest.mark.slow
 def test_expert_ppo_learns_the_state_pendulum():
-    """expert_ppo's tuned settings (hintsjax.settings.env_defaults.ENV_DEFAULTS["pendulum"]) at the hint agents' pendulum
-    budget (200 K steps) swing the rod up and hold it, far from a random policy's -1200 (measured:
-    seeds -157, -179, -151). The expert itself trains 1 M steps."""
+    """expert_ppo's tuned settings (hintsjax.settings.env_defaults.ENV_DEFAULTS["pendulum"]) at the
+    hint agents' pendulum budget (200 K steps) swing the rod up and hold it, far from a random
+    policy's -1200 (measured: seeds -157, -179, -151). The expert itself trains 1 M steps."""
     returns = pendulum_expert_returns(200_000)
     assert np.mean(returns) > -250 and min(returns) > -350, returns
 

@@ -96,8 +96,8 @@ def test_hints_agent_learns_the_cue(scheme):
     final = returns[-LAST:].mean()
     assert final > -0.3, f"{scheme}: final return {final:.3f}, returns {np.round(returns, 2)}"
     assert final > returns[0] + 1.0
-    # The deterministic policy follows the cue: the sign of each cue, and far apart (a policy blind to
-    # it gives both cues one mean). Not "within 0.3 of the cue": near the optimum the normalised
+    # The deterministic policy follows the cue: the sign of each cue, and far apart (a policy blind
+    # to it gives both cues one mean). Not "within 0.3 of the cue": near the optimum the normalised
     # advantages are noise at unit scale, and the last update's steps at actor_lr 1e-2 (after the
     # last measured return) move the mean by up to 2 in 1 of 16 runs; which runs depends on XLA's
     # CPU thread count (fc seed 0 ends at -1.78 for cue -1 on 1 core, within 0.3 of -1 on 2).
@@ -315,7 +315,8 @@ def test_target_kl_must_be_positive():
 
 def test_kl_adaptive_rates_follow_rsl_rls_band():
     """kl_rate.adapted, by hand: divided by 1.5 above 1.5 x target (the KL stop's bound; NaN and inf
-    too), multiplied by 1.5 below 0.5 x target, unchanged between; never above 1 nor below MIN_SCALE."""
+    too), multiplied by 1.5 below 0.5 x target, unchanged between; never above 1 nor below
+    MIN_SCALE."""
     from hintsjax.algorithms import kl_rate
 
     def after(scale, kl):
@@ -334,11 +335,11 @@ def test_kl_adaptive_rates_follow_rsl_rls_band():
 
 
 def test_kl_adaptive_lr_shrinks_the_rates_an_update_carries_to_the_next():
-    """ppo.kl_adaptive_lr with a target no KL reaches gives the params of the fixed rates (to float32
-    rounding) at a scale of 1. With a tiny target, one update of 2 x 2 minibatches: the first
-    (the rollout policy's own KL, not read) steps at the full rate, the second's KL is too far, so
-    the rates shrink by 1.5 and the KL stop ends the update; the next update starts at that rate
-    and shrinks it again."""
+    """ppo.kl_adaptive_lr with a target no KL reaches gives the params of the fixed rates (to
+    float32 rounding) at a scale of 1. With a tiny target, one update of 2 x 2 minibatches: the
+    first (the rollout policy's own KL, not read) steps at the full rate, the second's KL is too
+    far, so the rates shrink by 1.5 and the KL stop ends the update; the next update starts at that
+    rate and shrinks it again."""
     from hintsjax.algorithms import kl_rate
 
     def make(target_kl, adaptive):

@@ -1,4 +1,5 @@
-"""Networks and conditioning schemes: the conv as patches equals nn.Conv; each scheme's shape and use of h."""
+"""Networks and conditioning schemes: the conv as patches equals nn.Conv; each scheme's shape and
+use of h."""
 
 from __future__ import annotations
 

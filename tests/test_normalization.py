@@ -104,7 +104,8 @@ def test_ppo_merges_each_rollout_after_learning_and_never_trains_the_statistics(
 def test_normalize_before_learning_learns_on_the_merged_statistics():
     # Brax's order (ppo.normalize_before_learning): learning on a rollout sees the statistics that
     # already include it, so the first update learns on normalised states, not through the identity.
-    # It learns exactly what the default order learns from a state whose statistics were merged first.
+    # It learns exactly what the default order learns from a state whose statistics were merged
+    # first.
     after = layers.run_config({**LINEAR, "agent": "ppo_state"})
     before = layers.run_config(
         {

@@ -1,6 +1,6 @@
-"""A row trained in parts of its seeds, pooled (hintsjax/reproduce/pool.py, a table script's --pool):
-the parts, each archived and pooled, give what archiving the whole row gives, every file and
-every report cell; parts that cannot be one row are one line naming why, exit 2."""
+"""A row trained in parts of its seeds, pooled (hintsjax/reproduce/pool.py, a table script's
+--pool): the parts, each archived and pooled, give what archiving the whole row gives, every file
+and every report cell; parts that cannot be one row are one line naming why, exit 2."""
 
 from __future__ import annotations
 

@@ -88,8 +88,8 @@ def test_only_pi_dropout_rolls_out_with_dropped_hints():
 
 def test_pi_dropout_reads_the_hint_in_training_and_acts_without_it_at_deployment():
     """Trained with half its hints, its training return beats every blind policy's -1; evaluated,
-    where the hint is always dropped, it acts as one blind policy (the same action for both cues) and
-    scores about -1 (E[-(a - c)^2] = -(1 + a^2) for a blind action a; 256 episodes' cues average
+    where the hint is always dropped, it acts as one blind policy (the same action for both cues)
+    and scores about -1 (E[-(a - c)^2] = -(1 + a^2) for a blind action a; 256 episodes' cues average
     near 0), where its policy with the hint in view scores far better."""
     trainer, state, metrics = learn("pi_dropout", hint_dropout=0.5)
     assert metrics["episode_return"][-LAST:].mean() > -0.95, np.round(metrics["episode_return"], 2)
@@ -111,7 +111,8 @@ def test_pi_dropout_reads_the_hint_in_training_and_acts_without_it_at_deployment
 @pytest.mark.parametrize("agent", ["asym_ac", "hint_aux"])
 def test_the_training_only_baselines_learn_the_best_blind_action(agent):
     """asym_ac and hint_aux act on the picture, which is grey for both cues: they learn toward the
-    best blind action (return -1 from -2 at the start, the std falling) and give both cues one mean."""
+    best blind action (return -1 from -2 at the start, the std falling) and give both cues one
+    mean."""
     trainer, state, metrics = learn(agent)
     returns = metrics["episode_return"]
     final = returns[-LAST:].mean()
@@ -122,8 +123,8 @@ def test_the_training_only_baselines_learn_the_best_blind_action(agent):
 
 def test_hint_aux_learns_to_predict_a_hint_that_the_picture_shows():
     """On the dot task, whose hint (the dot's position) is a function of the picture, hint_aux's
-    prediction error falls below 0.02 (the position's variance is 1/3) when the loss is weighted, and
-    stays far above it when its weight is 0 (the head then learns nothing)."""
+    prediction error falls below 0.02 (the position's variance is 1/3) when the loss is weighted,
+    and stays far above it when its weight is 0 (the head then learns nothing)."""
     settings = dict(
         num_envs=32,
         batch_size=256,
@@ -141,8 +142,9 @@ def test_hint_aux_learns_to_predict_a_hint_that_the_picture_shows():
 
 
 def test_the_baselines_train_in_groups_of_their_own():
-    """Same observations and scheme, other networks or views: HINTS, pi_dropout, asym_ac and hint_aux
-    never share a group; two pi_dropout runs of other rates do not either (hint_dropout is a shape)."""
+    """Same observations and scheme, other networks or views: HINTS, pi_dropout, asym_ac and
+    hint_aux never share a group; two pi_dropout runs of other rates do not either (hint_dropout is
+    a shape)."""
     cfgs = [
         layers.run_config(dict(env="cue", agent=a, ppo=p))
         for a, p in (
@@ -202,8 +204,9 @@ def test_each_baseline_trains_through_the_command_and_says_it_deployed_on_pixels
 
 
 # The slow tier trains one baseline on each other env (the three share everything an env gives them:
-# pictures and a hint), the locomotion ones with the state as their signal, as privileged_baselines.py
-# does; HINTSJAX_TEST_EVERY_BASELINE=1 trains all three on every shipped env (24 runs, 877 s on 2 cores).
+# pictures and a hint), the locomotion ones with the state as their signal, as
+# privileged_baselines.py does; HINTSJAX_TEST_EVERY_BASELINE=1 trains all three on every shipped env
+# (24 runs, 877 s on 2 cores).
 EVERY = os.environ.get("HINTSJAX_TEST_EVERY_BASELINE", "") not in ("", "0")
 ROTATION = {
     "acrobot": "asym_ac",
@@ -231,8 +234,9 @@ def test_a_baseline_trains_on_each_env(tmp_path, env, agent):
 
 
 # hint_aux is compared after 1 update: on the cue task's constant pictures its encoder and hint head
-# get gradients near 0, which Adam scales up to whole steps, so by update 3 the float rounding of the
-# group's padded sums reaches 9e-4 at the default tier's -O0 (none above 1e-7 at XLA's default level).
+# get gradients near 0, which Adam scales up to whole steps, so by update 3 the float rounding of
+# the group's padded sums reaches 9e-4 at the default tier's -O0 (none above 1e-7 at XLA's default
+# level).
 @pytest.mark.slow  # 25 s each on 2 cores: the default tier is near its 10 minutes
 @pytest.mark.parametrize("agent, updates", [("asym_ac", 3), ("hint_aux", 1)])
 def test_a_baseline_in_a_group_of_hint_widths_trains_as_it_does_alone(agent, updates):

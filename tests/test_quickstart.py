@@ -22,7 +22,8 @@ PROMISE = 500
 
 
 def readme_block() -> list[str]:
-    """The quickstart's last lines as the README shows them (its first fenced block after `make run (`)."""
+    """The quickstart's last lines as the README shows them (its first fenced block after
+    `make run (`)."""
     text = (ROOT / "README.md").read_text()
     return (
         text[text.index("`make run` (`python -m hintsjax.quickstart`)") :]

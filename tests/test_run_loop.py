@@ -148,9 +148,10 @@ def test_a_failed_background_write_stops_the_run_with_one_line_and_keeps_the_las
 
 
 def test_orbax_s_unawaited_writes_of_a_failed_checkpoint_are_not_reported(tmp_path):
-    """A failed background write can leave orbax's per-array writes unstarted; each printed "coroutine
-    '...write_fragment' was never awaited" when collected, even at exit (once in CI under ulimit -f).
-    Inside `writing` (and after) only those are dropped: another unawaited coroutine is reported."""
+    """A failed background write can leave orbax's per-array writes unstarted; each printed
+    "coroutine '...write_fragment' was never awaited" when collected, even at exit (once in CI under
+    ulimit -f). Inside `writing` (and after) only those are dropped: another unawaited coroutine is
+    reported."""
 
     def dropped_coroutine(name: str):
         async def coro():
@@ -315,7 +316,10 @@ def test_a_learning_rate_that_blows_up_is_caught_by_the_same_check(tmp_path, cap
 def test_process_age_counts_from_the_process_start():
     """hintsjax.system.wall.process_age in a process that waited 0.5 s before asking: at least
     that, and less than the whole subprocess took; Laps name each stage by its end."""
-    code = "import time; time.sleep(0.5); from hintsjax.system.wall import process_age; print(process_age())"
+    code = (
+        "import time; time.sleep(0.5); from hintsjax.system.wall import process_age; "
+        "print(process_age())"
+    )
     t = time.perf_counter()
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True

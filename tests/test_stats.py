@@ -1,6 +1,6 @@
-"""The result tables' statistics (hintsjax.reproduce.stats): IQM, stratified percentile bootstrap intervals,
-probability of improvement and the text the tables print, checked against hand-worked values and
-against scipy."""
+"""The result tables' statistics (hintsjax.reproduce.stats): IQM, stratified percentile bootstrap
+intervals, probability of improvement and the text the tables print, checked against hand-worked
+values and against scipy."""
 
 from __future__ import annotations
 
@@ -17,7 +17,8 @@ def scipy_iqm(a, axis=-1):
 
 
 def pairwise_poi(x, y):
-    """P(X > Y) + P(X = Y) / 2 by comparing every pair, the definition itself; batched on leading axes."""
+    """P(X > Y) + P(X = Y) / 2 by comparing every pair, the definition itself; batched on leading
+    axes."""
     x, y = np.asarray(x)[..., :, None], np.asarray(y)[..., None, :]
     return ((x > y) + 0.5 * (x == y)).mean(axis=(-2, -1))
 
@@ -298,7 +299,8 @@ def test_an_agent_against_itself_is_undecided_with_a_real_interval():
     x = np.random.default_rng(12).normal(size=10)
     ci = stats.poi_ci(x, x)
     assert ci.point == 0.5
-    # resampling both sides with one set of indices would compare each resample with itself: always 0.5
+    # resampling both sides with one set of indices would compare each resample with itself: always
+    # 0.5
     assert ci.low < 0.4 and ci.high > 0.6
     assert not stats.decided(ci)
 

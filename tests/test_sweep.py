@@ -1,7 +1,8 @@
-"""The sweeps (hintsjax/reproduce/sweep.py, their --set: hintsjax/reproduce/sweep_settings.py), the table scripts'
-command line (hintsjax/reproduce/table_script.py), the tables and reports (hintsjax/reproduce/report.py,
-hintsjax/reproduce/markdown.py) and the archive (hintsjax/reproduce/archive.py), and the table scripts of
-experiments/ (on pytest's path: pyproject's pythonpath), on hand-written run folders."""
+"""The sweeps (hintsjax/reproduce/sweep.py, their --set: hintsjax/reproduce/sweep_settings.py), the
+table scripts' command line (hintsjax/reproduce/table_script.py), the tables and reports
+(hintsjax/reproduce/report.py, hintsjax/reproduce/markdown.py) and the archive
+(hintsjax/reproduce/archive.py), and the table scripts of experiments/ (on pytest's path:
+pyproject's pythonpath), on hand-written run folders."""
 
 from __future__ import annotations
 
@@ -220,8 +221,8 @@ def test_car_references_come_first_and_the_note_describes_gail():
     note = report.references_note(Path("/nowhere"), "car_racing", car_racing.REFERENCES)
     assert "2 M steps" in note and "250 K expert-labelled steps" in note
     assert (
-        "gail learns from 16 of that expert's episodes, by PPO for 2 M steps on the discriminator's reward -log(1 - D)"
-        in note
+        "gail learns from 16 of that expert's episodes, by PPO for 2 M steps on the "
+        "discriminator's reward -log(1 - D)" in note
     )
     # Archived runs name their own expert_ppo's best seed, not the packaged expert that replaced it
     # (the car's of 2026-11-26, seed 0, was retrained on the per-wheel grip: seed 2, 866).
@@ -235,7 +236,8 @@ def test_car_references_come_first_and_the_note_describes_gail():
 
 def test_car_findings_decide_o3_by_the_interval_of_the_difference_in_hairpin_progress(tmp_path):
     """O3 (composite hints lift hairpin progress above vision only) is decided when the bootstrap
-    interval of the difference in mean progress over seeds excludes 0, undecided when it does not."""
+    interval of the difference in mean progress over seeds excludes 0, undecided when it does
+    not."""
     import car_racing
 
     def runs(rgb, composite):
@@ -288,8 +290,9 @@ def test_car_findings_decide_o3_by_the_interval_of_the_difference_in_hairpin_pro
         [evaluation(1.0, 0.0, [1.0] * 5, stochastic=True, episodes_per_seed=50)],
     )
     assert car_racing.protocol(uneven, "car_racing") == (
-        "the row's training seeds x evaluation episodes (dagger, ppo_rgb: 5 training seeds x 50 evaluation episodes "
-        "(sampled actions); hints-mc-composite: 10 training seeds x 50 evaluation episodes (sampled actions))"
+        "the row's training seeds x evaluation episodes (dagger, ppo_rgb: 5 training seeds x 50 "
+        "evaluation episodes (sampled actions); hints-mc-composite: 10 training seeds x 50 "
+        "evaluation episodes (sampled actions))"
     )
 
 
@@ -299,9 +302,9 @@ def test_locomotion_report_states_the_settings_each_row_was_trained_with(tmp_pat
 
     labels = ["ppo_rgb", "hints-fc-speed", "ppo_state"]
     assert locomotion.settings_lines(tmp_path, "ant", labels) == [  # none run yet: today's defaults
-        "PPO: 256 envs per seed, batches of 1024, 4 epochs of minibatches of 256, learning rates encoder 0.0003, "
-        "actor 0.0003, critic 0.001, KL early stop at 0.05 with the learning rates adapted to the KL (not run yet; "
-        "config.ENV_DEFAULTS)."
+        "PPO: 256 envs per seed, batches of 1024, 4 epochs of minibatches of 256, learning rates "
+        "encoder 0.0003, actor 0.0003, critic 0.001, KL early stop at 0.05 with the learning rates "
+        "adapted to the KL (not run yet; config.ENV_DEFAULTS)."
     ]
     for label, values in (
         ("ppo_rgb", {"agent": "ppo_rgb"}),
@@ -325,15 +328,16 @@ def test_locomotion_report_states_the_settings_each_row_was_trained_with(tmp_pat
     assert locomotion.settings_lines(tmp_path, "ant", labels) == [
         "PPO, as each row was trained:",
         "",
-        "- ppo_rgb: 256 envs per seed, batches of 1024, 4 epochs of minibatches of 256, learning rates "
-        "encoder 0.0003, actor 0.0003, critic 0.001, KL early stop at 0.05 with the learning rates adapted to the KL "
-        "(config.ENV_DEFAULTS).",
-        "- hints-fc-speed: 256 envs per seed, batches of 1024, 8 epochs of minibatches of 256, learning rates "
-        "encoder 0.001, actor 0.0003, critic 0.001, KL early stop at 0.1, the encoder trained by the actor alone "
-        "(not today's config.ENV_DEFAULTS: epochs, encoder_lr, target_kl, critic_trains_encoder, kl_adaptive_lr differ).",
-        "- ppo_state: 256 envs per seed, batches of 1024, 4 epochs of minibatches of 256, learning rates "
-        "encoder 0.0003, actor 0.0003, critic 0.001, KL early stop at 0.05 with the learning rates adapted to the KL "
-        "(not run yet; config.ENV_DEFAULTS).",
+        "- ppo_rgb: 256 envs per seed, batches of 1024, 4 epochs of minibatches of 256, learning "
+        "rates encoder 0.0003, actor 0.0003, critic 0.001, KL early stop at 0.05 with the learning "
+        "rates adapted to the KL (config.ENV_DEFAULTS).",
+        "- hints-fc-speed: 256 envs per seed, batches of 1024, 8 epochs of minibatches of 256, "
+        "learning rates encoder 0.001, actor 0.0003, critic 0.001, KL early stop at 0.1, the "
+        "encoder trained by the actor alone (not today's config.ENV_DEFAULTS: epochs, encoder_lr, "
+        "target_kl, critic_trains_encoder, kl_adaptive_lr differ).",
+        "- ppo_state: 256 envs per seed, batches of 1024, 4 epochs of minibatches of 256, learning "
+        "rates encoder 0.0003, actor 0.0003, critic 0.001, KL early stop at 0.05 with the learning "
+        "rates adapted to the KL (not run yet; config.ENV_DEFAULTS).",
     ]
 
 
@@ -551,12 +555,15 @@ def test_a_report_keeps_the_rows_of_runs_it_cannot_read(tmp_path, monkeypatch):
             [
                 "## ant (5 M env steps per seed)",
                 "",
-                "PPO: 64 envs per seed, as the kept row trained (kept rows †; config.ENV_DEFAULTS when last reported).",
+                "PPO: 64 envs per seed, as the kept row trained (kept rows †; config.ENV_DEFAULTS "
+                "when last reported).",
                 "",
-                "| agent | ours | paper | training return, last 10% | updates with KL > 0.5 | wall-clock (s) |",
+                "| agent | ours | paper | training return, last 10% | updates with KL > 0.5 | "
+                "wall-clock (s) |",
                 "|---|---|---|---|---|---|",
                 "| ppo_rgb | 1081.5 ± 175.9 (170.2) | 1015.49 ± 3.3 | 1049.8 ± 88.7 | 0.0% | 915 |",
-                "| ppo_state | 3764.1 ± 1089.3 (729.7) | 533.77 ± 254.7 | 2531.2 ± 611.6 | 0.0% | 1226 |",
+                "| ppo_state | 3764.1 ± 1089.3 (729.7) | 533.77 ± 254.7 | 2531.2 ± 611.6 | 0.0% | "
+                "1226 |",
                 "| hints-fc-speed | - | 1313.57 ± 57.6 | - | - | - |",
                 "",
             ]
@@ -568,8 +575,8 @@ def test_a_report_keeps_the_rows_of_runs_it_cannot_read(tmp_path, monkeypatch):
     locomotion.report(tmp_path / "runs", force=True)
     text = (tmp_path / "results" / locomotion.REPORT).read_text()
     assert (
-        f"| ppo_rgb {markdown.KEPT} | 1081.5 ± 175.9 (170.2) | 1015.49 ± 3.3 | 1049.8 ± 88.7 | 0.0% | 915 |"
-        in text
+        f"| ppo_rgb {markdown.KEPT} | 1081.5 ± 175.9 (170.2) | 1015.49 ± 3.3 | 1049.8 ± 88.7 | "
+        "0.0% | 915 |" in text
     )
     assert "| ppo_state | 5.0 ± 1.0 (0.0) |" in text and "3764.1" not in text
     assert (
@@ -577,12 +584,13 @@ def test_a_report_keeps_the_rows_of_runs_it_cannot_read(tmp_path, monkeypatch):
     )
     assert "PPO-RGB 1081.5" in text  # the kept row's mean counts in the findings
     assert (
-        f"- ppo_rgb: 64 envs per seed, as the kept row trained (kept rows {markdown.KEPT}; as last reported)."
-        in text
+        "- ppo_rgb: 64 envs per seed, as the kept row trained "
+        f"(kept rows {markdown.KEPT}; as last reported)." in text
     )
     locomotion.report(tmp_path / "runs", force=True)  # and again from the report just written
     assert (
-        f"- ppo_rgb: 64 envs per seed, as the kept row trained (kept rows {markdown.KEPT}; as last reported)."
+        "- ppo_rgb: 64 envs per seed, as the kept row trained "
+        f"(kept rows {markdown.KEPT}; as last reported)."
         in (tmp_path / "results" / locomotion.REPORT).read_text()
     )
     assert f"Rows marked {markdown.KEPT} are kept from the previous report" in text
@@ -791,11 +799,13 @@ def test_plan_jobs_groups_the_classic_table_by_shape():
     assert sorted(r for job in capped for r in job) == sorted(ids)
 
 
-# 34 s on 2 cores: in the slow tier, to keep `make test` within its minutes (plan_jobs' splits stay above)
+# 34 s on 2 cores: in the slow tier, to keep `make test` within its minutes (plan_jobs' splits stay
+# above)
 @pytest.mark.slow
 def test_a_group_trains_into_each_runs_folder_and_splits_when_too_big(tmp_path, monkeypatch):
     """A sweep's group job writes each run's eval.json (with the group and the sweep's fields)
-    and keeps its checkpoints in the group's folder; a group that does not fit is split in halves."""
+    and keeps its checkpoints in the group's folder; a group that does not fit is split in
+    halves."""
     import cue_env  # noqa: F401  (tests/cue_env.py: the "cue" env and its hints)
     from hintsjax.training import compilation, loop, pipeline
 
@@ -992,7 +1002,7 @@ sweep_settings.add_settings(parser)
 settings = sweep_settings.worker_settings(parser, parser.parse_args(sys.argv[1:]))
 from jax._src import xla_bridge
 print(xla_bridge.backends_are_initialized(), "--xla_gpu_deterministic_ops=false" in os.environ["XLA_FLAGS"].split())
-"""
+"""  # noqa: E501
 
 
 @pytest.mark.parametrize("physics, dropped", [("warp", True), ("jax", False)])
@@ -1049,7 +1059,8 @@ def test_the_playground_side_by_side_gives_hintsjax_brax_s_settings_and_the_repo
     )
     # 60 M steps in whole updates of 983,040
     assert cfg.agent == "ppo_state" and cfg.ppo.num_updates == 61
-    # Brax clips no gradient unless told to (its max_grad_norm None; Playground's DM Control settings name none)
+    # Brax clips no gradient unless told to (its max_grad_norm None; Playground's DM Control
+    # settings name none)
     assert (
         "max_grad_norm" not in playground.brax_settings(smoke=False)
         and cfg.ppo.max_grad_norm == playground.NO_CLIP
@@ -1085,9 +1096,10 @@ def test_the_playground_side_by_side_gives_hintsjax_brax_s_settings_and_the_repo
 
 def test_the_side_by_side_holds_brax_to_the_same_updates_and_reports_both_sides(tmp_path):
     """Brax's `train` runs num_evals_after_init x max(num_resets_per_eval, 1) x ceil(num_timesteps /
-    (that product x env steps per training step)) training steps (brax/training/agents/ppo/train.py):
-    `brax_schedule` makes that exactly the updates hintsjax takes, for any count (Playground's own 10
-    and 10 gave 90 for 61); and the report puts both sides' returns, steps and rates in one table."""
+    (that product x env steps per training step)) training steps
+    (brax/training/agents/ppo/train.py): `brax_schedule` makes that exactly the updates hintsjax
+    takes, for any count (Playground's own 10 and 10 gave 90 for 61); and the report puts both
+    sides' returns, steps and rates in one table."""
     import math
 
     import playground
@@ -1158,12 +1170,12 @@ def test_locomotion_learners_report_gives_each_ordering_its_verdict(tmp_path, mo
     assert text.startswith("# The plan\n\nRows and budgets.\n") and "stale table" not in text
     assert "halfcheetah (1 M env steps per seed, 6 seeds per row)" in text
     assert (
-        "- O1 (hints beat vision only): P(hints-fc-state > ppo_rgb) = 1.00 [1.00, 1.00]: decided for"
-        in text
+        "- O1 (hints beat vision only): P(hints-fc-state > ppo_rgb) = 1.00 [1.00, 1.00]: decided "
+        "for" in text
     )
     assert (
-        "- O4 (hints close the gap to PPO on the state): P(hints-fc-state > ppo_state) = 0.00 [0.00, 0.00]: decided against"
-        in text
+        "- O4 (hints close the gap to PPO on the state): P(hints-fc-state > ppo_state) = 0.00 "
+        "[0.00, 0.00]: decided against" in text
     )
     assert "P(hints-fc-reward > hints-fc-state) = 0.4" in text and text.count(": undecided") == 1
     assert "| hints-fc-max_velocity | - | - | - |" in text  # not trained
@@ -1236,12 +1248,12 @@ def test_car_learners_report_gives_o1_and_o3_their_verdicts_beside_the_locomotio
         and "halfcheetah" not in section
     )
     assert (
-        "- O1 (hints beat vision only; standard tracks): P(hints-mc-on_track > ppo_rgb) = 1.00 [1.00, 1.00]: "
-        "decided for"
+        "- O1 (hints beat vision only; standard tracks): P(hints-mc-on_track > ppo_rgb) = 1.00 "
+        "[1.00, 1.00]: decided for"
     ) in section
     assert (
-        "- O3 (composite hints carry the car round hairpins; hairpin tracks): P(hints-mc-composite > ppo_rgb) = "
-        "0.00 [0.00, 0.00]: decided against"
+        "- O3 (composite hints carry the car round hairpins; hairpin tracks): P(hints-mc-composite "
+        "> ppo_rgb) = 0.00 [0.00, 0.00]: decided against"
     ) in section
     assert "Composite minus vision only: -20.0 points" in section and ": decided." in section
     assert "| hints-mc-curvature | - | - | - | - | - | - |" in section  # not trained
@@ -1285,10 +1297,11 @@ def test_archive_flag_archives_the_finished_runs_and_nothing_else(tmp_path, monk
 def test_physics_learning_pools_the_seeds_of_several_runs_and_compares_training_at_equal_steps(
     tmp_path,
 ):
-    """experiments/physics_learning.py with about.json's `arms`: jax's two 5-seed runs pooled into 10
-    seeds against warp's one, the evaluation compared (every warp seed 100 below: decided), and
+    """experiments/physics_learning.py with about.json's `arms`: jax's two 5-seed runs pooled into
+    10 seeds against warp's one, the evaluation compared (every warp seed 100 below: decided), and
     the training return taken over the last 10 % of the env steps that both physics reached: a warp
-    run cut at 10 updates is compared with jax's updates 10 and 9 (steps 9216 to 10240), not with jax's end."""
+    run cut at 10 updates is compared with jax's updates 10 and 9 (steps 9216 to 10240), not with
+    jax's end."""
     import physics_learning
 
     runs = tmp_path / "physics"
@@ -1367,9 +1380,9 @@ def test_physics_learning_pools_the_seeds_of_several_runs_and_compares_training_
 
 
 def test_kl_storms_are_counted_per_seed_and_kept_in_the_archive(tmp_path, monkeypatch):
-    """A storm is STORM_UPDATES updates in a row with approx. KL above KL_ABOVE: seed 0 has one of 15
-    updates from update 101 (inf counts as above) and a burst of 6 later; seed 1 only bursts, so no
-    storm. archive_run keeps them in summary.json, which the archived run answers from."""
+    """A storm is STORM_UPDATES updates in a row with approx. KL above KL_ABOVE: seed 0 has one of
+    15 updates from update 101 (inf counts as above) and a burst of 6 later; seed 1 only bursts, so
+    no storm. archive_run keeps them in summary.json, which the archived run answers from."""
     from hintsjax.settings import layers
 
     monkeypatch.setattr(archive, "ARCHIVE", tmp_path / "archive")
@@ -1468,7 +1481,8 @@ def test_kl_storms_compares_arms_at_equal_updates(tmp_path, capsys, monkeypatch)
 
 def test_a_resumed_sweep_run_keeps_the_physics_it_began_with(tmp_path):
     """sweep.saved_physics: what a run folder's config.yaml trained with (jax where it predates the
-    setting), so a sweep resumed after auto changed its mind goes on as it began; no folder: the default."""
+    setting), so a sweep resumed after auto changed its mind goes on as it began; no folder: the
+    default."""
     assert sweep.saved_physics(tmp_path / "nowhere", "auto") == "auto"
     for saved, physics in (
         ("physics: jax\n", "jax"),
@@ -1481,9 +1495,9 @@ def test_a_resumed_sweep_run_keeps_the_physics_it_began_with(tmp_path):
 
 def test_the_privileged_baselines_report_sets_hints_fc_against_each_baseline(tmp_path, monkeypatch):
     """privileged_baselines.py: an env's five rows (their labels parse back to their agents) and the
-    learned generator's row; P(HINTS-FC > row) with its verdict (hand values: every HINTS-FC seed beats
-    every PPO-RGB seed, P = 1 decided; asym_ac's seeds interleave with HINTS-FC's, P = 0.5, undecided);
-    what each row needs at deployment."""
+    learned generator's row; P(HINTS-FC > row) with its verdict (hand values: every HINTS-FC seed
+    beats every PPO-RGB seed, P = 1 decided; asym_ac's seeds interleave with HINTS-FC's, P = 0.5,
+    undecided); what each row needs at deployment."""
     import privileged_baselines as pb
 
     from hintsjax.settings.layers import run_config
@@ -1543,8 +1557,9 @@ def test_the_privileged_baselines_report_sets_hints_fc_against_each_baseline(tmp
 def test_the_privileged_baselines_report_rebuilds_the_committed_file_on_a_fresh_checkout(
     tmp_path, monkeypatch
 ):
-    """`python experiments/privileged_baselines.py --report` with no runs/privileged reads the archived
-    runs (experiments/results/runs/privileged) and writes the committed file, byte for byte."""
+    """`python experiments/privileged_baselines.py --report` with no runs/privileged reads the
+    archived runs (experiments/results/runs/privileged) and writes the committed file, byte for
+    byte."""
     import privileged_baselines as pb
 
     committed = pb.OUT.read_text()

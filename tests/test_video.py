@@ -1,4 +1,5 @@
-"""The video command: its rollout matches a step-by-step loop, its GIF has one frame per step, bad input fails."""
+"""The video command: its rollout matches a step-by-step loop, its GIF has one frame per step, bad
+input fails."""
 
 from __future__ import annotations
 
@@ -232,7 +233,8 @@ def test_bad_input_fails_in_one_line_and_writes_nothing(tiny_run, tmp_path, caps
 
 @pytest.mark.slow
 def test_video_of_a_trained_run(tmp_path):
-    """End to end on a run that pipeline.train wrote (slow: ~100 s on 2 CPU cores, mostly compiling)."""
+    """End to end on a run that pipeline.train wrote (slow: ~100 s on 2 CPU cores, mostly
+    compiling)."""
     cfg = run_config(TINY_HINTS)
     save_run_config(tmp_path, cfg)
     pipeline.train(cfg, tmp_path, progress=False)

@@ -16,7 +16,8 @@ def default_tier_flags() -> str:
 
 
 def at_o0() -> bool:
-    """Whether this process's XLA programs compile at LLVM -O0 (the default tier's flags are set)."""
+    """Whether this process's XLA programs compile at LLVM -O0 (the default tier's flags are
+    set)."""
     return f"{OPTIMIZATION}=0" in os.environ.get("XLA_FLAGS", "").split()
 
 

@@ -85,7 +85,8 @@ def imitation_loss(predicted: jax.Array, label: jax.Array) -> jax.Array:
 
 
 def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
-    """DAgger's trainer; `expert` (anything with `mean(state)`) defaults to the env's packaged one."""
+    """DAgger's trainer; `expert` (anything with `mean(state)`) defaults to the env's packaged
+    one."""
     ppo, dagger = cfg.ppo, cfg.dagger
     env = envs.AutoReset(cfg.make_env())
     env_params = cfg.task_params(cfg.variant)

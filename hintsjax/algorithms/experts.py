@@ -1,7 +1,7 @@
 """Trained experts: the policy of an `expert_ppo` run, exported for DAgger and GAIL to learn from.
 
     python -m hintsjax.run env=pendulum agent=expert_ppo name=expert-pendulum   # train (5 seeds)
-    python -m hintsjax.expert runs/expert-pendulum                             # -> hintsjax/experts/pendulum
+    python -m hintsjax.expert runs/expert-pendulum  # -> hintsjax/experts/pendulum
 
 Export keeps the seed with the best evaluation (eval.json's 50-episode mean, not a training
 episode) and only what acting needs: the actor MLP's parameters, the learnt log std and, for a
@@ -37,7 +37,8 @@ EXPERT_JSON = "expert.json"
 POLICY = "policy"  # the orbax checkpoint inside an expert folder
 # What orbax writes into a checkpoint about the machine that wrote it, which a restore here does not
 # read: the folder's absolute path (commit_success.txt) and the device each array was on (_sharding;
-# `load` names its own). An exported expert drops them, so a packaged one ships only what a restore needs.
+# `load` names its own). An exported expert drops them, so a packaged one ships only what a restore
+# needs.
 MACHINE_FILES = ("commit_success.txt", "_sharding")
 
 
@@ -88,7 +89,8 @@ def export(run_dir: Path, out_dir: Path | None = None, force: bool = False) -> P
     cfg = load_run_config(run_dir)
     if cfg.agent_spec.observe != ("state",) or cfg.agent_spec.algorithm != "ppo":
         raise UsageError(
-            f"{run_dir} trained {cfg.agent}; an expert comes from a state PPO run (agent=expert_ppo)"
+            f"{run_dir} trained {cfg.agent}; an expert comes from a state PPO run "
+            "(agent=expert_ppo)"
         )
     eval_json = Path(run_dir) / "eval.json"
     if not eval_json.is_file():
@@ -99,8 +101,9 @@ def export(run_dir: Path, out_dir: Path | None = None, force: bool = False) -> P
     paths.check_folder(out, "--out")
     if (out / EXPERT_JSON).exists() and not force:
         raise UsageError(
-            f"{out} holds an expert already ({cfg.env}'s{' packaged' if out.parent == EXPERTS_DIR.absolute() else ''} "
-            f"one); give --out another folder, or --force to replace it"
+            f"{out} holds an expert already "
+            f"({cfg.env}'s{' packaged' if out.parent == EXPERTS_DIR.absolute() else ''} one); give "
+            "--out another folder, or --force to replace it"
         )
     evaluation = json.loads(eval_json.read_text())["evaluations"][0]
     best = best_seed(evaluation)
@@ -146,7 +149,8 @@ def describe(env: str, path: str | Path | None = None) -> tuple[Path, dict]:
     )
     if not (folder / EXPERT_JSON).is_file():
         raise UsageError(
-            f"no expert for {env} at {folder} (packaged: {', '.join(packaged()) or 'none'}); {retrain}"
+            f"no expert for {env} at {folder} (packaged: {', '.join(packaged()) or 'none'}); "
+            f"{retrain}"
         )
     try:
         meta = json.loads((folder / EXPERT_JSON).read_text())
@@ -165,7 +169,8 @@ def describe(env: str, path: str | Path | None = None) -> tuple[Path, dict]:
 
 
 def load(env: str, path: str | Path | None = None) -> Expert:
-    """The expert at `path` (None: the env's packaged one); UsageError if missing, foreign or corrupt."""
+    """The expert at `path` (None: the env's packaged one); UsageError if missing, foreign or
+    corrupt."""
     folder, meta = describe(env, path)
     hidden, sizes = meta["hidden"], (meta["state_size"], meta["action_size"])
     shapes = {
@@ -192,7 +197,8 @@ def load(env: str, path: str | Path | None = None) -> Expert:
     except Exception as e:  # orbax raises many types for unreadable or mismatched files
         reason = str(e).strip().splitlines()[0][:200] if str(e).strip() else type(e).__name__
         raise UsageError(
-            f"the expert checkpoint in {folder} is corrupt or does not match {EXPERT_JSON}: {reason}"
+            f"the expert checkpoint in {folder} is corrupt or does not match {EXPERT_JSON}: "
+            f"{reason}"
         ) from None
     return Expert(params["actor"], params["log_std"], hidden, params.get("state_norm"))
 

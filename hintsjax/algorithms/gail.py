@@ -34,7 +34,8 @@ from hintsjax.algorithms.trainer import Trainer
 
 @struct.dataclass
 class Demonstrations:
-    """The expert's (state, action) pairs, [D * L, ...], with `valid` false after an episode ended."""
+    """The expert's (state, action) pairs, [D * L, ...], with `valid` false after an episode
+    ended."""
 
     state: jax.Array
     action: jax.Array
@@ -142,7 +143,8 @@ def pairs(state: jax.Array, action: jax.Array) -> jax.Array:
 
 
 def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
-    """GAIL's trainer; `expert` (anything with `sample(key, state)`) defaults to the env's packaged one."""
+    """GAIL's trainer; `expert` (anything with `sample(key, state)`) defaults to the env's packaged
+    one."""
     ppo, gail = cfg.ppo, cfg.gail
     parts = make_ppo(cfg)
     expert = experts.load(cfg.env, cfg.expert) if expert is None else expert

@@ -31,8 +31,9 @@ from hintsjax.algorithms.ppo import Hyper, RunnerState
 from hintsjax.algorithms.trainer import Trainer, program_identity
 
 # The PPO settings that fix the shapes of a run's arrays or the structure of its program (those not
-# declared `traced`): the members of a group agree on these; every traced one is a Hyper leaf and may
-# differ, but whether an optional one is set at all (ppo.target_kl) is the program's structure too.
+# declared `traced`): the members of a group agree on these; every traced one is a Hyper leaf and
+# may differ, but whether an optional one is set at all (ppo.target_kl) is the program's structure
+# too.
 SHAPES = fields.names(PPOConfig, traced=False)
 OPTIONAL_TRACED = tuple(
     f.name
@@ -122,7 +123,8 @@ class Group:
         return max(len(t) for t in self.takes)
 
     def hyper(self, k: int) -> Hyper:
-        """Member k's numbers, its hint picked from the group's env and padded to the group's width."""
+        """Member k's numbers, its hint picked from the group's env and padded to the group's
+        width."""
         return Hyper.of(self.cfgs[k], self.takes[k], self.width)
 
     def own_hyper(self, k: int) -> Hyper:
@@ -131,7 +133,8 @@ class Group:
 
 
 def make_group(cfgs: Sequence[RunConfig]) -> Group:
-    """The group of validated configurations; UsageError naming what differs if they cannot share one."""
+    """The group of validated configurations; UsageError naming what differs if they cannot share
+    one."""
     cfgs = tuple(cfgs)
     check_group(cfgs)
     hint, takes = envs.hints.side_by_side(cfgs[0].env, [cfg.effective_hint for cfg in cfgs])

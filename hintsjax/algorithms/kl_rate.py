@@ -1,10 +1,11 @@
-"""PPO's learning rates scaled by the KL of its steps (`ppo.kl_adaptive_lr`): the adaptive schedule of
-rsl_rl's PPO (legged_gym, Isaac Lab), shrink-only. Before each minibatch step the update's approx. KL
-from the rollout policy is read; above TOO_FAR x target_kl (the KL stop's bound) the rates are divided by STEP, below
-TOO_CLOSE x target_kl they are multiplied by it, never above the configured rates nor below
-MIN_SCALE of them. The scale is kept in the optimiser's state, so it carries from one update to the
-next: an update's first step, which no KL stop can stop (it meets the rollout policy itself), is
-taken at the rate the last update ended with (experiments/results/locomotion_ppo_stability.md).
+"""PPO's learning rates scaled by the KL of its steps (`ppo.kl_adaptive_lr`): the adaptive schedule
+of rsl_rl's PPO (legged_gym, Isaac Lab), shrink-only. Before each minibatch step the update's
+approx. KL from the rollout policy is read; above TOO_FAR x target_kl (the KL stop's bound) the
+rates are divided by STEP, below TOO_CLOSE x target_kl they are multiplied by it, never above the
+configured rates nor below MIN_SCALE of them. The scale is kept in the optimiser's state, so it
+carries from one update to the next: an update's first step, which no KL stop can stop (it meets the
+rollout policy itself), is taken at the rate the last update ended with
+(experiments/results/locomotion_ppo_stability.md).
 """
 
 from __future__ import annotations

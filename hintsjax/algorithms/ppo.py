@@ -1,8 +1,8 @@
 """PPO as one jittable `train(key)`: rollout, GAE, clipped-surrogate loss and updates.
 
-`make_trainer(cfg)` returns PPO's `Trainer` (hintsjax.algorithms.trainer); `make_ppo(cfg)` its pieces
-(init, rollout, learn), which GAIL reuses with the discriminator's reward. The arithmetic they join
-(the Gaussian policy, GAE, the loss) is in hintsjax.algorithms.ppo_math.
+`make_trainer(cfg)` returns PPO's `Trainer` (hintsjax.algorithms.trainer); `make_ppo(cfg)` its
+pieces (init, rollout, learn), which GAIL reuses with the discriminator's reward. The arithmetic
+they join (the Gaussian policy, GAE, the loss) is in hintsjax.algorithms.ppo_math.
 
 Episodes carry `terminated` and `truncated` separately: GAE bootstraps a truncated episode from
 the value of the state it was cut off in (the env's `final_obs`) and a terminated one from 0.
@@ -50,14 +50,16 @@ TRACED = fields.names(PPOConfig, traced=True)
 class Hyper:
     """A configuration's numbers, as arrays in its runner state rather than constants in the
     trace: configurations that differ only in these (and in their hint) train in one compiled
-    program, vmapped over a group of them (hintsjax.algorithms.group), as rejax vmaps over its configs.
+    program, vmapped over a group of them (hintsjax.algorithms.group), as rejax vmaps over its
+    configs.
 
     Its leaves, read as attributes (`hyper.clip_eps`): every PPO setting declared `traced` (TRACED;
-    an optional one is NaN where unset), the agent's `state_noise` (the std of N(0, s^2) on the state it
-    sees in training rollouts), and `hint_take` (int32[W]) and `hint_keep` (bool[W]), which pick the
-    agent's hint out of the env's: an env built for a group computes every member's hint parts side by
-    side, and a member sees those at `hint_take` where `hint_keep`, 0 elsewhere (its width padded to
-    the group's). Trained alone, a configuration takes its own hint's positions in order, all kept.
+    an optional one is NaN where unset), the agent's `state_noise` (the std of N(0, s^2) on the
+    state it sees in training rollouts), and `hint_take` (int32[W]) and `hint_keep` (bool[W]), which
+    pick the agent's hint out of the env's: an env built for a group computes every member's hint
+    parts side by side, and a member sees those at `hint_take` where `hint_keep`, 0 elsewhere (its
+    width padded to the group's). Trained alone, a configuration takes its own hint's positions in
+    order, all kept.
     """
 
     __slots__ = ("_leaves",)
@@ -77,7 +79,8 @@ class Hyper:
         return f"Hyper({', '.join(f'{k}={v!r}' for k, v in self._leaves.items())})"
 
     def tree_flatten_with_keys(self):
-        """Leaves keyed by name, as a dataclass's fields are (checkpoints store them by these names)."""
+        """Leaves keyed by name, as a dataclass's fields are (checkpoints store them by these
+        names)."""
         return [(jax.tree_util.GetAttrKey(k), v) for k, v in self._leaves.items()], tuple(
             self._leaves
         )
@@ -182,8 +185,8 @@ def observe(
     obs: dict[str, jax.Array], key: jax.Array, hyper: Hyper, drop: float | None = None
 ) -> dict[str, jax.Array]:
     """The agent's view of obs ([N, ...]) in training: its hint, each env's replaced by zeros with
-    probability `drop` (an agent that drops its hint; None: kept), and the state plus N(0, s^2) (s is 0
-    but for PPO-x+N(0,1); adding 0 x noise leaves the state as it was)."""
+    probability `drop` (an agent that drops its hint; None: kept), and the state plus N(0, s^2) (s
+    is 0 but for PPO-x+N(0,1); adding 0 x noise leaves the state as it was)."""
     obs = pick_hint(obs, hyper)
     if drop is not None:
         kept = jax.random.uniform(jax.random.fold_in(key, DROP_TAG), obs["hint"].shape[:-1]) >= drop
@@ -197,13 +200,15 @@ def observe(
 
 
 def deploy_view(obs: dict[str, jax.Array], spec: AgentSpec) -> dict[str, jax.Array]:
-    """obs as the agent sees it at deployment: its privileged inputs (`spec.privileged`) are zeros."""
+    """obs as the agent sees it at deployment: its privileged inputs (`spec.privileged`) are
+    zeros."""
     return {**obs, **{k: jnp.zeros_like(obs[k]) for k in spec.privileged if k in obs}}
 
 
 def hint_error(prediction: jax.Array, hint: jax.Array, keep: jax.Array) -> jax.Array:
     """The mean squared error of a hint's prediction over its kept positions: prediction, hint
-    [M, W], keep bool[W] (a group's padding is no part of a member's hint, so its loss is as alone)."""
+    [M, W], keep bool[W] (a group's padding is no part of a member's hint, so its loss is as
+    alone)."""
     squared = jnp.where(keep, (prediction - hint) ** 2, 0.0)
     return squared.sum() / (prediction.shape[0] * jnp.maximum(keep.sum(), 1))
 
@@ -270,7 +275,8 @@ class PPO:
     init: Callable[[jax.Array], RunnerState]
     # (state, key) -> (state after T steps of N envs, [T, N] transitions, [N] value after them)
     rollout: Callable[[RunnerState, jax.Array], tuple[RunnerState, Transition, jax.Array]]
-    # (state, transitions, last value, [T, N] reward to learn from, key) -> (state one update on, metrics)
+    # (state, transitions, last value, [T, N] reward to learn from, key) -> (state one update on,
+    # metrics)
     learn: Callable[
         [RunnerState, Transition, jax.Array, jax.Array, jax.Array],
         tuple[RunnerState, dict[str, jax.Array]],
@@ -280,7 +286,8 @@ class PPO:
 def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
     """PPO's pieces for a validated RunConfig. Every number a table varies is read from the
     state's `Hyper`, so the pieces serve any configuration of the same shapes; `hint` is the
-    env's hint (default: cfg's; a group's env computes every member's, see hintsjax.algorithms.group)."""
+    env's hint (default: cfg's; a group's env computes every member's, see
+    hintsjax.algorithms.group)."""
     ppo, spec = cfg.ppo, cfg.agent_spec
     env = envs.AutoReset(cfg.make_env(hint=hint))
     env_params = cfg.task_params(cfg.variant)

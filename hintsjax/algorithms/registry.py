@@ -1,4 +1,5 @@
-"""The training algorithms by name: an agent's `algorithm` (hintsjax.models.agents) picks its trainer."""
+"""The training algorithms by name: an agent's `algorithm` (hintsjax.models.agents) picks its
+trainer."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ ALGORITHMS: dict[str, Callable[..., Trainer]] = {
 
 
 def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
-    """The trainer of a validated RunConfig; `expert` replaces the packaged one for imitation agents."""
+    """The trainer of a validated RunConfig; `expert` replaces the packaged one for imitation
+    agents."""
     build = ALGORITHMS[cfg.agent_spec.algorithm]
     return build(cfg, expert) if cfg.agent_spec.imitates else build(cfg)

@@ -1,11 +1,11 @@
 """What every training algorithm builds: a `Trainer` of pure functions over one run's state.
 
 `init(key)` builds the state, `update(state)` advances it by one update and returns that
-update's metrics; `run(state, n)` is `n` updates in one `lax.scan` and `train(key)` the whole run; `run_chunk(state, n,
-length)` is one compiled program for every chunk of a chunked run (the first `n` of `length`
-updates happen, `n` a traced number), so a shorter last chunk does not compile again.
-All are pure, so `jax.jit(jax.vmap(trainer.train))(keys)` trains many seeds at once, and chunking
-`run` between checkpoints gives the same result as one call. The state is any pytree with a
+update's metrics; `run(state, n)` is `n` updates in one `lax.scan` and `train(key)` the whole run;
+`run_chunk(state, n, length)` is one compiled program for every chunk of a chunked run (the first
+`n` of `length` updates happen, `n` a traced number), so a shorter last chunk does not compile
+again. All are pure, so `jax.jit(jax.vmap(trainer.train))(keys)` trains many seeds at once, and
+chunking `run` between checkpoints gives the same result as one call. The state is any pytree with a
 `params` field (the policy's ActorCritic parameters, which evaluation uses) and an `update`
 counter; its metrics include `episode_return` and `env_steps`, which the run log plots.
 """
@@ -43,8 +43,9 @@ class Trainer:
     def run_chunk(
         self, state: Any, count: jax.Array, length: int
     ) -> tuple[Any, dict[str, jax.Array]]:
-        """The first `count` of `length` updates (`count` may be traced); metrics are [length]-stacked,
-        those after `count` filled with NaN (0 for integer metrics) and the state left as it was."""
+        """The first `count` of `length` updates (`count` may be traced); metrics are
+        [length]-stacked, those after `count` filled with NaN (0 for integer metrics) and the state
+        left as it was."""
         # traced once: its shapes below and the branch reuse the trace
         update = jax.jit(self.update)
         shapes = jax.eval_shape(lambda s: update(s)[1], state)
@@ -68,7 +69,8 @@ class Trainer:
 
     def abstract_state(self) -> Any:
         """The shapes and types of the run's seed-batched state ([S, ...] for cfg's seeds), computed
-        without any arrays: what a checkpoint of the run restores into (hintsjax.system.checkpoint)."""
+        without any arrays: what a checkpoint of the run restores into
+        (hintsjax.system.checkpoint)."""
         return jax.eval_shape(
             jax.vmap(self.init), jax.random.split(jax.random.key(0), self.cfg.seeds)
         )

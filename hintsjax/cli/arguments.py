@@ -1,7 +1,8 @@
 """`key=value` command-line arguments into a settings dataclass (the tools beside the run command:
 hintsjax.generator, hintsjax.rank), checked against its fields' types in one line each; `--help`
 lists the settings with their defaults and the registries' choices (hintsjax.cli.choices). The
-argparse commands share its one-line parser errors (`ArgumentParser`) and int32 type (`int32_arg`)."""
+argparse commands share its one-line parser errors (`ArgumentParser`) and int32 type
+(`int32_arg`)."""
 
 from __future__ import annotations
 
@@ -17,7 +18,8 @@ T = TypeVar("T")
 
 
 def help_page(cls: type, prog: str, about: str) -> str:
-    """The --help page of a `key=value` command: what it does, its settings and their defaults, the choices."""
+    """The --help page of a `key=value` command: what it does, its settings and their defaults, the
+    choices."""
     settings = [
         f"  {f.name}={'null' if f.default is None else f.default}" for f in dataclasses.fields(cls)
     ]
@@ -37,8 +39,9 @@ def help_page(cls: type, prog: str, about: str) -> str:
 
 def parse_key_values(cls: type[T], argv: list[str], prog: str = "", about: str = "") -> T:
     """`cls(**values)` from `key=value` arguments (str fields take the text as it is; int and float
-    fields a number; `null`, or nothing for a number, gives None where the field allows it); UsageError naming
-    the valid keys or the expected type. `-h` or `--help` prints `help_page` and exits 0, as argparse does."""
+    fields a number; `null`, or nothing for a number, gives None where the field allows it);
+    UsageError naming the valid keys or the expected type. `-h` or `--help` prints `help_page` and
+    exits 0, as argparse does."""
     if {"-h", "--help"} & set(argv):
         print(help_page(cls, prog, about))
         raise SystemExit(0)

@@ -31,11 +31,15 @@ def text() -> str:
         *(f"  {name:<16}{spec.about}" for name, spec in AGENTS.items()),
         f"scheme: {', '.join(SCHEMES)}",
         f"env:    {', '.join(suite + adapted)}",
-        "Each env's hints (hint=<name>, or names joined by '+'; none for no hint) and variants (variant=, eval_variants=):",
+        (
+            "Each env's hints (hint=<name>, or names joined by '+'; none for no hint) and variants "
+            "(variant=, eval_variants=):"
+        ),
     ]
     for name in suite:
         lines += env_lines(name)
     lines.append(
-        f"  {', '.join(adapted)}: adapted tasks, with generic hints and their own (docs/playground.md)"
+        f"  {', '.join(adapted)}: adapted tasks, with generic hints and their own "
+        "(docs/playground.md)"
     )
     return "\n".join(lines)

@@ -47,8 +47,8 @@ def make_task_evaluator(
     params on any variant of the env, acting with the policy's mean or, where `stochastic` (a bool,
     or a traced one), sampling around it. Both are arguments, so one compiled program serves every
     variant, and a trained and a sampling agent alike.
-    With `hint` (a group's env hint, hintsjax.algorithms.group) the agent sees the hint that `pick` (a member's
-    Hyper) picks out of it: one program then evaluates every member of a group."""
+    With `hint` (a group's env hint, hintsjax.algorithms.group) the agent sees the hint that `pick`
+    (a member's Hyper) picks out of it: one program then evaluates every member of a group."""
     env = cfg.make_env(hint=hint, deploy=True)
     network = make_network(cfg, env)
     metrics_of = jax.vmap(env.metrics, in_axes=(0, None))
@@ -103,7 +103,8 @@ def make_task_evaluator(
 def make_evaluator(
     cfg: RunConfig, variant: str | None, num_episodes: int, stochastic: bool = False
 ) -> Callable[[Any, jax.Array], EvalResult]:
-    """`evaluate(params, key) -> EvalResult[E]` for one seed's params on `variant`; vmap it over seeds."""
+    """`evaluate(params, key) -> EvalResult[E]` for one seed's params on `variant`; vmap it over
+    seeds."""
     evaluate = make_task_evaluator(cfg, num_episodes)
     task_params = cfg.task_params(variant, deploy=True)
     return lambda params, key: evaluate(params, key, task_params, stochastic)
@@ -115,8 +116,9 @@ def eval_keys(cfg: RunConfig) -> jax.Array:
 
 
 def return_summary(returns: np.ndarray) -> dict[str, Any]:
-    """[S, E] episode returns -> their mean and std over all seeds x episodes, per seed, and the seeds
-    that ended far below the others (`summarize`'s keys of the returns; reproduce/pool.py pools with it)."""
+    """[S, E] episode returns -> their mean and std over all seeds x episodes, per seed, and the
+    seeds that ended far below the others (`summarize`'s keys of the returns; reproduce/pool.py
+    pools with it)."""
     seed_means = returns.mean(axis=1)
     return {
         "mean": float(returns.mean()),
@@ -157,7 +159,8 @@ def metrics_text(summary: dict[str, Any]) -> str:
 
 
 def one_device(cfg: RunConfig, layout: SeedLayout | None) -> SeedLayout:
-    """`layout`, or cfg's seeds on this process's first device (params with exactly the run's seeds)."""
+    """`layout`, or cfg's seeds on this process's first device (params with exactly the run's
+    seeds)."""
     return layout or SeedLayout.of(cfg.seeds, jax.local_devices()[:1])
 
 
@@ -230,7 +233,8 @@ def evaluate_variants(
 def variant_summary(
     cfg: RunConfig, variant: str | None, stochastic: bool, result: EvalResult
 ) -> dict[str, Any]:
-    """An evaluation's summary (`summarize`) under the name of its variant (None: the env's default)."""
+    """An evaluation's summary (`summarize`) under the name of its variant (None: the env's
+    default)."""
     return {
         "variant": variant or envs.variant_names(cfg.env)[0],
         "stochastic": stochastic,
@@ -241,10 +245,10 @@ def variant_summary(
 def evaluate_group(
     group: Any, state: Any, layout: SeedLayout | None = None
 ) -> tuple[list[list[dict]], float]:
-    """Evaluate every member of a group (hintsjax.algorithms.group) from the group's seed-batched state
-    ([S, K, ...], hint axes padded) with one compiled program, each on its own variants, episodes
-    and sampling as its own run would; (per member its summaries per variant, compile seconds).
-    With a `layout` of several devices, `state` holds its padded seeds.
+    """Evaluate every member of a group (hintsjax.algorithms.group) from the group's seed-batched
+    state ([S, K, ...], hint axes padded) with one compiled program, each on its own variants,
+    episodes and sampling as its own run would; (per member its summaries per variant, compile
+    seconds). With a `layout` of several devices, `state` holds its padded seeds.
     The program is the group env's (every member's hint parts) with the member's hint picked
     and its padded weights (exact zeros) in place: what the member alone computes, its sums
     over the hint axis padded with zero terms."""

@@ -6,8 +6,8 @@ The rule: a seed is far below when its mean return is less than the seeds' media
 their spread, the spread being the larger of 1.4826 MAD (the median absolute deviation, scaled
 to estimate a normal's standard deviation) and |median|. The median and MAD ignore up to half
 the seeds, so one collapse cannot hide itself by widening the spread; the |median| floor keeps
-near-identical seeds (Table 3 ant seeds at 985 to 996) from flagging their noise, and says that a seed
-must fall short by K times the typical return itself. K = 3 is set by the committed results:
+near-identical seeds (Table 3 ant seeds at 985 to 996) from flagging their noise, and says that a
+seed must fall short by K times the typical return itself. K = 3 is set by the committed results:
 no row of Table 3 at 20 seeds comes within half of it (the largest shortfall, the cheetah's
 hints-fc-max_velocity seed at -502 against a median of 213, is 1.46 spreads; car_learning's 5-seed
 rows, whose medians are near zero, reach 2.5), while the issue's -3006 against 997 is 4.0.
@@ -28,7 +28,8 @@ MAD_TO_STD = 1.4826
 
 
 def spread(seed_means: Sequence[float]) -> tuple[float, float]:
-    """(median, spread) of [S] seed means: spread = max(1.4826 MAD, |median|), over the finite ones."""
+    """(median, spread) of [S] seed means: spread = max(1.4826 MAD, |median|), over the finite
+    ones."""
     finite = np.asarray(seed_means, np.float64)
     finite = finite[np.isfinite(finite)]
     if finite.size == 0:
@@ -47,7 +48,8 @@ def far_below(seed_means: Sequence[float]) -> list[int]:
 
 def far_below_text(summary: dict[str, Any], run: str | Path) -> str:
     """'seed 3 ended far below the others (-3006 against a median of 997): ...' for an evaluation
-    summary with `seed_means` and `outlier_seeds` of the run in folder `run`; '' when it names none."""
+    summary with `seed_means` and `outlier_seeds` of the run in folder `run`; '' when it names
+    none."""
     seeds = summary.get("outlier_seeds") or []
     if not seeds:
         return ""

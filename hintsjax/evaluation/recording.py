@@ -4,7 +4,8 @@ One seed's params act as the run is evaluated (the policy mean, or sampled actio
 run's `stochastic_eval` is on: the car's default) for up to `steps` steps in a single jitted scan
 (frames stop where the episode ends). Each frame is the env's picture, upscaled by `scale`
 (nearest neighbour), beside the agent's hint as labelled bars (none for an agent without a
-hint), the step and the return so far. The command is `python -m hintsjax.video` (hintsjax/video.py).
+hint), the step and the return so far. The command is `python -m hintsjax.video`
+(hintsjax/video.py).
 """
 
 from __future__ import annotations
@@ -141,7 +142,8 @@ def frame_shape(image_size: int, scale: int) -> tuple[int, int]:
 
 
 class FrameComposer:
-    """Draws frames of one video: a matplotlib figure (Agg, no pyplot) built once, updated per frame."""
+    """Draws frames of one video: a matplotlib figure (Agg, no pyplot) built once, updated per
+    frame."""
 
     def __init__(
         self,

@@ -1,7 +1,9 @@
 """hintsjax.gym: hintsjax's envs as Gymnasium 1.x envs, for learners outside hintsjax (docs/gym.md).
 
     import gymnasium, hintsjax.gym
-    envs = gymnasium.make_vec("hintsjax/pendulum-v0", num_envs=64, hint="composite", variant="swingup")
+    envs = gymnasium.make_vec(
+        "hintsjax/pendulum-v0", num_envs=64, hint="composite", variant="swingup"
+    )
     env = gymnasium.make("hintsjax/pendulum-v0")        # one env, for gymnasium.utils.env_checker
 
 Importing it registers `hintsjax/<env>-v0` for every env of the suite and every Brax env
@@ -27,7 +29,8 @@ NAMESPACE = "hintsjax"
 
 def env_id(name: str) -> str:
     """The Gymnasium id of hintsjax env `name`: `hintsjax/<name>-v0`, a source's colon a dot
-    (`brax:hopper` -> `hintsjax/brax.hopper-v0`), since Gymnasium reads a colon as a module prefix."""
+    (`brax:hopper` -> `hintsjax/brax.hopper-v0`), since Gymnasium reads a colon as a module
+    prefix."""
     return f"{NAMESPACE}/{name.replace(':', '.')}-v0"
 
 

@@ -58,7 +58,8 @@ def _observe(observe: str | Sequence[str] | None, hint: envs.Hint) -> tuple[tupl
         envs.choose("observation key", key, dict.fromkeys(envs.OBS_KEYS))
     if not keys or len(set(keys)) != len(keys):
         raise ValueError(
-            f"observe={observe!r}: name each of {', '.join(envs.OBS_KEYS)} at most once, at least one"
+            f"observe={observe!r}: name each of {', '.join(envs.OBS_KEYS)} at most once, at least "
+            "one"
         )
     if "hint" in keys and not hint.dim:
         raise ValueError(
@@ -180,7 +181,8 @@ class _Settings:
 
 def _host(tree: Any) -> Any:
     """`tree`'s arrays on the host, in one transfer, as writable NumPy arrays (a CPU array comes
-    back as a read-only view of JAX's buffer, which a learner that edits observations cannot use)."""
+    back as a read-only view of JAX's buffer, which a learner that edits observations cannot
+    use)."""
     return jax.tree.map(lambda x: x if x.flags.writeable else x.copy(), jax.device_get(tree))
 
 
@@ -207,9 +209,9 @@ def _no_options(options: dict[str, Any] | None) -> None:
 
 class VectorEnv(gymnasium.vector.VectorEnv):
     """`num_envs` copies of hintsjax env `env`, stepped by one jitted, vmapped call (on the device
-    JAX picks) with one transfer to NumPy a step. Observations: a Dict of `pixels` (uint8[N, S, S, 3])
-    and `hint` (float32[N, d]) by default, `observe=` any of pixels, state and hint (one name as a
-    string: that array alone); actions float32[N, A] in the env's own range. Autoreset SAME_STEP.
+    JAX picks) with one transfer to NumPy a step. Observations: a Dict of `pixels` (uint8[N, S, S,
+    3]) and `hint` (float32[N, d]) by default, `observe=` any of pixels, state and hint (one name as
+    a string: that array alone); actions float32[N, A] in the env's own range. Autoreset SAME_STEP.
 
     `gymnasium.make_vec("hintsjax/<env>-v0", num_envs, hint=, variant=, observe=, image_size=,
     physics=)` makes one (`import hintsjax.gym` registers the ids); unknown names raise ChoiceError,
@@ -290,9 +292,9 @@ class VectorEnv(gymnasium.vector.VectorEnv):
 
 
 class SingleEnv(gymnasium.Env):
-    """One hintsjax env as a `gymnasium.Env` (`gymnasium.make("hintsjax/<env>-v0", ...)`): the vector
-    env's spaces without the batch axis, no autoreset (reset after terminated or truncated), and
-    `render_mode="rgb_array"` returning the env's picture (uint8[S, S, 3])."""
+    """One hintsjax env as a `gymnasium.Env` (`gymnasium.make("hintsjax/<env>-v0", ...)`): the
+    vector env's spaces without the batch axis, no autoreset (reset after terminated or truncated),
+    and `render_mode="rgb_array"` returning the env's picture (uint8[S, S, 3])."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
 
@@ -315,7 +317,8 @@ class SingleEnv(gymnasium.Env):
         self._key = self._state = None
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        """(obs, {}) of a fresh episode; a seed restarts the env's random stream, None goes on with it."""
+        """(obs, {}) of a fresh episode; a seed restarts the env's random stream, None goes on with
+        it."""
         _no_options(options)
         super().reset(seed=seed)
         if seed is None and self._key is None:
@@ -327,7 +330,8 @@ class SingleEnv(gymnasium.Env):
         return self.settings.to_numpy(_host(ts.obs)), {}
 
     def step(self, action):
-        """(obs, reward, terminated, truncated, {}) after `action` (float32[A]; clipped by the env)."""
+        """(obs, reward, terminated, truncated, {}) after `action` (float32[A]; clipped by the
+        env)."""
         if self._key is None:
             raise gymnasium.error.ResetNeeded("call reset() before step()")
         action = jnp.asarray(np.asarray(action, np.float32).reshape(self.action_space.shape))

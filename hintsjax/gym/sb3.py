@@ -4,10 +4,10 @@ it as they take their own `DummyVecEnv`:
     venv = hintsjax.gym.sb3.VecEnv(gymnasium.make_vec("hintsjax/pendulum-v0", num_envs=16))
     PPO("MultiInputPolicy", venv).learn(100_000)
 
-SB3 resets where an episode ends in the same step, as the vector env does (`AutoresetMode.SAME_STEP`),
-so this only renames: `terminated | truncated` is SB3's `done`, an ended episode's last observation
-its info's `terminal_observation`, and a time limit `TimeLimit.truncated`. The batch is stepped in
-one call, not env by env.
+SB3 resets where an episode ends in the same step, as the vector env does
+(`AutoresetMode.SAME_STEP`), so this only renames: `terminated | truncated` is SB3's `done`, an
+ended episode's last observation its info's `terminal_observation`, and a time limit
+`TimeLimit.truncated`. The batch is stepped in one call, not env by env.
 """
 
 from __future__ import annotations
@@ -30,7 +30,8 @@ class VecEnv(_sb3.VecEnv):
         mode = venv.metadata.get("autoreset_mode")
         if mode != gymnasium.vector.AutoresetMode.SAME_STEP:
             raise ValueError(
-                f"SB3 resets in the step an episode ends (autoreset_mode SAME_STEP); this env's is {mode}"
+                "SB3 resets in the step an episode ends (autoreset_mode SAME_STEP); this env's is "
+                f"{mode}"
             )
         self.venv = venv
         super().__init__(venv.num_envs, venv.single_observation_space, venv.single_action_space)

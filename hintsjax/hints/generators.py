@@ -46,13 +46,14 @@ from hintsjax.hints import rollouts
 POLICIES = {"random": "N(0, 1) actions", "expert": "the packaged expert in part of the envs"}
 
 
-# -- training ---------------------------------------------------------------------------------------
+# -- training --------------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
 class GeneratorConfig:
     """What `python -m hintsjax.generator` trains: a generator of `env`'s `hint` from the last
-    `frames` pictures, on `num_envs` x `steps` rollout steps (held out: `held_out_envs` x `steps`)."""
+    `frames` pictures, on `num_envs` x `steps` rollout steps (held out: `held_out_envs` x
+    `steps`)."""
 
     env: str = "pendulum"
     hint: str = "composite"
@@ -248,7 +249,8 @@ def write_folder(
     metrics: GeneratorMetrics,
     seconds: dict[str, float],
 ) -> dict[str, Any]:
-    """Write a trained generator's folder; generator.json last (a folder without it is incomplete)."""
+    """Write a trained generator's folder; generator.json last (a folder without it is
+    incomplete)."""
     names = dimension_names(cfg.generator.spec)
     m = jax.tree.map(np.asarray, metrics)
     with (folder / "metrics.csv").open("w", newline="") as f:

@@ -41,7 +41,9 @@ SCORES = {
     "probe": "area under a short training run's learning curve",
 }
 POLICIES = {
-    "auto": "the packaged expert in half the envs where the env has one, N(0, 1) actions in the rest",
+    "auto": (
+        "the packaged expert in half the envs where the env has one, N(0, 1) actions in the rest"
+    ),
     "random": "N(0, 1) actions",
 }
 
@@ -97,7 +99,8 @@ class RankConfig:
             for hint in self.candidates:
                 if envs.make_hint(self.env, hint).dim == 0:
                     raise UsageError(
-                        f"hint '{hint}' is empty: give hints of {self.env} ({', '.join(envs.hint_names(self.env))})"
+                        f"hint '{hint}' is empty: give hints of {self.env} "
+                        f"({', '.join(envs.hint_names(self.env))})"
                     )
         except ChoiceError as e:
             raise UsageError(str(e)) from None
@@ -126,7 +129,7 @@ class RankConfig:
         return self
 
 
-# -- the information score --------------------------------------------------------------------------
+# -- the information score -------------------------------------------------------------------------
 
 
 class ReturnProbe(nn.Module):
@@ -235,7 +238,7 @@ def make_information(cfg: RankConfig, policy: Any = None) -> Callable[[jax.Array
     return information
 
 
-# -- the short training probe -----------------------------------------------------------------------
+# -- the short training probe ----------------------------------------------------------------------
 
 
 def probe_configs(cfg: RankConfig) -> list:
@@ -262,7 +265,8 @@ def probe_configs(cfg: RankConfig) -> list:
 
 
 def probe_scores(cfg: RankConfig) -> tuple[np.ndarray, str]:
-    """([S, K] each seed's and candidate's area under its short run's learning curve, its measure)."""
+    """([S, K] each seed's and candidate's area under its short run's learning curve, its
+    measure)."""
     cfgs = probe_configs(cfg)
     trainer = make_group_trainer(make_group(cfgs))
     _, metrics = jax.jit(jax.vmap(trainer.train))(cfgs[0].seed_keys())
@@ -273,15 +277,15 @@ def learning_curve_area(metrics: dict[str, np.ndarray]) -> tuple[np.ndarray, str
     """From a group's metrics ([S, U, K] per name), each run's area under its learning curve: the
     mean training return over the updates ("episode_return"), or, where some run saw no episode
     end (episodes longer than the probe: halfcheetah's 1000 steps against 784 steps per env at 10 %
-    of its budget), every run's mean reward per step ("step_reward": a fixed-length episode's return over its
-    length); ([S, K], the measure's name)."""
+    of its budget), every run's mean reward per step ("step_reward": a fixed-length episode's return
+    over its length); ([S, K], the measure's name)."""
     returns = metrics["episode_return"]  # NaN where no episode ended in an update
     if not np.isnan(returns).all(axis=1).any():
         return np.nanmean(returns, axis=1), "episode_return"
     return metrics["step_reward"].mean(axis=1), "step_reward"
 
 
-# -- the command ---------------------------------------------------------------------------------------
+# -- the command -----------------------------------------------------------------------------------
 
 
 def rank_hints(cfg: RankConfig) -> dict[str, Any]:

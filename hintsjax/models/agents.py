@@ -1,6 +1,6 @@
 """The agents as registry entries: the paper's Table 1, and the baselines that use the hint's
-privileged signal in training only. Each says which inputs it sees, what the hint is to it, and which
-algorithm trains it (hintsjax.algorithms.registry: "ppo", "dagger" or "gail")."""
+privileged signal in training only. Each says which inputs it sees, what the hint is to it, and
+which algorithm trains it (hintsjax.algorithms.registry: "ppo", "dagger" or "gail")."""
 
 from __future__ import annotations
 
@@ -10,10 +10,12 @@ from hintsjax.envs.hints import NO_HINT
 
 
 # What the hint is to an agent that has one (AgentSpec.hint_use):
-#   input:  the policy's and the critic's input (HINTS: the scheme conditions the picture's features on it);
-#   critic: the critic's input only, beside the picture's features (asymmetric actor-critic, Pinto et al. 2018);
-#   target: no network's input; the picture's features predict it through a head, an extra loss (UNREAL's
-#           auxiliary tasks, Jaderberg et al. 2017).
+#   input:  the policy's and the critic's input (HINTS: the scheme conditions the picture's
+#           features on it);
+#   critic: the critic's input only, beside the picture's features (asymmetric actor-critic,
+#           Pinto et al. 2018);
+#   target: no network's input; the picture's features predict it through a head, an extra loss
+#           (UNREAL's auxiliary tasks, Jaderberg et al. 2017).
 HINT_USES = ("input", "critic", "target")
 
 
@@ -21,7 +23,8 @@ HINT_USES = ("input", "critic", "target")
 class AgentSpec:
     """What an agent observes and what the hint is to it. `hint_override` fixes its hint (HINTS-x
     always sees the state); `drops_hint` replaces it by zeros with probability ppo.hint_dropout a
-    training step, and always at deployment (privileged-information dropout, Kamienny et al. 2020)."""
+    training step, and always at deployment (privileged-information dropout, Kamienny et al.
+    2020)."""
 
     pixels: bool = False
     state: bool = False
@@ -69,7 +72,8 @@ class AgentSpec:
         return tuple(k for k in self.observe if k not in self.deploy_sees)
 
     def hint_for(self, hint: str) -> str:
-        """The hint the env computes when a run asks for `hint`: none without a hint input, `state` for HINTS-x."""
+        """The hint the env computes when a run asks for `hint`: none without a hint input, `state`
+        for HINTS-x."""
         if not self.hint:
             return NO_HINT
         return self.hint_override or hint
@@ -86,7 +90,8 @@ class AgentSpec:
 
 # the agent whose trained policy is exported as an env's expert (hintsjax.expert)
 EXPERT_AGENT = "expert_ppo"
-# The converged references (tier 3): an env's `learners` layer is every other agent's (env_defaults).
+# The converged references (tier 3): an env's `learners` layer is every other agent's
+# (env_defaults).
 REFERENCES = (EXPERT_AGENT, "dagger", "gail")
 AGENTS: dict[str, AgentSpec] = {
     "ppo_rgb": AgentSpec(pixels=True, about="PPO-RGB: PPO on the pictures"),

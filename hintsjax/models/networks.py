@@ -111,8 +111,9 @@ class ActorCritic(nn.Module):
     stop-gradient: its loss trains the critic's MLP alone.
     The hint's role is the agent's `hint_use`: the features' input (conditioned by the scheme), the
     critic's alone (embedded beside z', "critic_hint"), or a target that z' predicts ("hint_head",
-    given by `predict_hint`). Top-level parameter names are the optimiser's learning-rate groups. With `normalize_state` the state passes through the running
-    normaliser first (hintsjax.models.normalization; its statistics are the "obs_stats" collection).
+    given by `predict_hint`). Top-level parameter names are the optimiser's learning-rate groups.
+    With `normalize_state` the state passes through the running normaliser first
+    (hintsjax.models.normalization; its statistics are the "obs_stats" collection).
     """
 
     agent: AgentSpec
@@ -163,13 +164,15 @@ class ActorCritic(nn.Module):
         value = MLP((*self.hidden, 1), out_scale=1.0, name="critic")(critic_in)[..., 0]
         if self.agent.hint_use != "target":
             return mean, log_std, value
-        # Built at every call (init included), returned when asked: the loss's prediction of the hint.
+        # Built at every call (init included), returned when asked: the loss's prediction of the
+        # hint.
         prediction = MLP((self.hidden[0], obs["hint"].shape[-1]), name="hint_head")(z)
         return (mean, log_std, value, prediction) if predict_hint else (mean, log_std, value)
 
 
-# "frozen": the normaliser's statistics, which the optimiser leaves alone (normalization.update sets them).
-# The hint's head trains with the encoder it shapes; the critic's hint embedding with the critic.
+# "frozen": the normaliser's statistics, which the optimiser leaves alone (normalization.update sets
+# them). The hint's head trains with the encoder it shapes; the critic's hint embedding with the
+# critic.
 LR_GROUPS = {
     "encoder": "encoder",
     "conditioning": "encoder",

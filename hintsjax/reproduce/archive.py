@@ -1,4 +1,5 @@
-"""The committed archive of finished runs: what the result tables need of each, kept in the checkout.
+"""The committed archive of finished runs: what the result tables need of each, kept in the
+checkout.
 
 runs/ is not committed (checkpoints, full logs). What the tables need of each finished run is
 kept in experiments/results/runs/<sweep>/<env>/<label>/ (`archive_runs`, which every `--report`

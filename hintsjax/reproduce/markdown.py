@@ -1,4 +1,5 @@
-"""Writing the reports: markdown tables, the committed report's rows read back, shared files' sections.
+"""Writing the reports: markdown tables, the committed report's rows read back, shared files'
+sections.
 
 `markdown_table` renders every table of the reports; `write_report` writes one, refusing to
 blank cells that the committed one fills (`refuse_lost_cells`); `kept_rows` reads the committed
@@ -23,12 +24,14 @@ def table_line(cells: list[str]) -> str:
 
 
 def markdown_table(header: list[str], rows: list[list[str]]) -> list[str]:
-    """The lines of a markdown table: its header, the rule under it, then one line per row of cells."""
+    """The lines of a markdown table: its header, the rule under it, then one line per row of
+    cells."""
     return [table_line(header), "|" + "---|" * len(header), *map(table_line, rows)]
 
 
 def section_name(heading: str) -> str:
-    """A report section's name from its '## ' heading line: 'ant' of '## ant (5 M env steps per seed)'."""
+    """A report section's name from its '## ' heading line: 'ant' of '## ant (5 M env steps per
+    seed)'."""
     return heading[3:].split(" (")[0]
 
 
@@ -80,7 +83,8 @@ def table_cells(text: str) -> dict[tuple[str, str, int], str]:
 
 
 def lost_cells(old: str, new: str) -> list[str]:
-    """'section/label' of every row with a cell that the report `old` filled and `new` leaves '-'."""
+    """'section/label' of every row with a cell that the report `old` filled and `new` leaves
+    '-'."""
     after = table_cells(new)
     return list(
         dict.fromkeys(
@@ -97,9 +101,10 @@ def refuse_lost_cells(path: Path, lines: list[str]) -> None:
     were lost). --force skips this check."""
     if path.exists() and (lost := lost_cells(path.read_text(), "\n".join(lines))):
         sys.stderr.write(
-            f"error: {path.name} not rewritten: it would blank {len(lost)} rows whose runs are in neither "
-            f"--runs nor {ARCHIVE} ({', '.join(lost[:5])}{', ...' if len(lost) > 5 else ''}); "
-            "--force rewrites it anyway\n"
+            f"error: {path.name} not rewritten: it would blank {len(lost)} rows whose runs are in "
+            f"neither --runs nor {ARCHIVE} "
+            f"({', '.join(lost[:5])}{', ...' if len(lost) > 5 else ''}); --force rewrites it "
+            "anyway\n"
         )
         raise SystemExit(2)
 

@@ -67,12 +67,14 @@ class PoolError(ValueError):
 
 def pool_runs(parts: list[Path], into: Path, run_ids: list[str]) -> list[str]:
     """Archive the parts' finished runs, then pool each run of `run_ids` finished in every part into
-    ARCHIVE/<into's name>/env/label; the parts' sweeps.jsonl go to its sweeps.jsonl. Returns the pooled ids."""
+    ARCHIVE/<into's name>/env/label; the parts' sweeps.jsonl go to its sweeps.jsonl. Returns the
+    pooled ids."""
     kept = archive.ARCHIVE
     names = [p.name for p in parts]
     if len(parts) < 2 or len(set(names)) < len(names) or into.name in names:
         raise PoolError(
-            f"give two or more parts with other folder names than --runs ({into.name}); got {', '.join(names) or 'none'}"
+            f"give two or more parts with other folder names than --runs ({into.name}); got "
+            f"{', '.join(names) or 'none'}"
         )
     missing = [part for part in parts if not part.is_dir() and not (kept / part.name).is_dir()]
     if missing:
@@ -85,8 +87,8 @@ def pool_runs(parts: list[Path], into: Path, run_ids: list[str]) -> list[str]:
     shadowed = [r for r in pooled if (into / r / "eval.json").exists()]
     if shadowed:
         raise PoolError(
-            f"{into / shadowed[0]} finished there, and the reports would read it rather than the pooled run: "
-            "give --runs another folder"
+            f"{into / shadowed[0]} finished there, and the reports would read it rather than the "
+            "pooled run: give --runs another folder"
         )
     # every run checked before any is written
     files = {run: pool_run([kept / p.name / run for p in parts]) for run in pooled}
@@ -154,7 +156,8 @@ def pooled_eval(results: list[dict], folders: list[Path], configs: list[dict]) -
         other = [k for k in shared if result.get(k) != shared[k]]
         if other or len(result["evaluations"]) != len(first["evaluations"]):
             raise PoolError(
-                f"{folder}'s eval.json differs from {folders[0]}'s: {', '.join(other) or 'the evaluations'}"
+                f"{folder}'s eval.json differs from {folders[0]}'s: "
+                f"{', '.join(other) or 'the evaluations'}"
             )
     parts = [
         {
@@ -185,9 +188,9 @@ def joined(lists: list[list | None]) -> list | None:
 
 
 def pooled_evaluation(parts: list[dict]) -> dict:
-    """One evaluation (evaluator.summarize's keys) over the seeds of `parts`: the returns' statistics
-    from the episodes' returns, each env metric's mean and std over all episodes from the parts'
-    (population) means and stds, its seed means in seed order."""
+    """One evaluation (evaluator.summarize's keys) over the seeds of `parts`: the returns'
+    statistics from the episodes' returns, each env metric's mean and std over all episodes from the
+    parts' (population) means and stds, its seed means in seed order."""
     first = parts[0]
     fixed = {
         k: v
@@ -197,7 +200,8 @@ def pooled_evaluation(parts: list[dict]) -> dict:
     for part in parts[1:]:
         if any(part.get(k) != v for k, v in fixed.items()):
             raise PoolError(
-                f"evaluations of other kinds cannot be pooled: {first.get('variant')} against {part.get('variant')}"
+                f"evaluations of other kinds cannot be pooled: {first.get('variant')} against "
+                f"{part.get('variant')}"
             )
     returns = np.concatenate([np.asarray(p["returns"], np.float64) for p in parts])
     seeds = np.array([p["seeds"] for p in parts])

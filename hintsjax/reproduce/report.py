@@ -67,7 +67,8 @@ def interval_text(ci) -> str:
 
 
 def verdict(interval) -> str:
-    """An interval of P(X > Y) -> 'decided for' (above 0.5), 'decided against' (below) or 'undecided'."""
+    """An interval of P(X > Y) -> 'decided for' (above 0.5), 'decided against' (below) or
+    'undecided'."""
     from hintsjax.reproduce import stats
 
     return {1: "decided for", -1: "decided against", 0: "undecided"}[stats.direction(interval)]
@@ -85,7 +86,8 @@ def poi_cell(x: dict | None, y: dict | None, variant: int = 0) -> str:
 
 
 def ordering_line(tag: str, name_x: str, x: dict, name_y: str, y: dict, variant: int = 0) -> str:
-    """'- O1 (...): P(x > y) = p [low, high]: decided for' over the two runs' per-seed mean returns."""
+    """'- O1 (...): P(x > y) = p [low, high]: decided for' over the two runs' per-seed mean
+    returns."""
     from hintsjax.reproduce import stats
 
     ci = stats.poi_ci(seed_means(x, variant), seed_means(y, variant))
@@ -93,18 +95,19 @@ def ordering_line(tag: str, name_x: str, x: dict, name_y: str, y: dict, variant:
 
 
 ORDERINGS_ABOUT = (
-    "Orderings: probabilities of improvement P(X > Y) over the per-seed mean returns with 95 % bootstrap intervals "
-    "(hintsjax/reproduce/stats.py). Decided for: the interval lies above 0.5; decided against: below 0.5; undecided: it "
-    "contains 0.5. The best hint is the hint row with the highest IQM, chosen on the same seeds, which favours "
-    "it a little."
+    "Orderings: probabilities of improvement P(X > Y) over the per-seed mean returns with 95 % "
+    "bootstrap intervals (hintsjax/reproduce/stats.py). Decided for: the interval lies above 0.5; "
+    "decided against: below 0.5; undecided: it contains 0.5. The best hint is the hint row with "
+    "the highest IQM, chosen on the same seeds, which favours it a little."
 )
 
 
 def ppo_text(ppo) -> str:
     """A line of the PPO settings (config.PPOConfig) that a report states beside its rows."""
     return (
-        f"{ppo.num_envs} envs per seed, batches of {ppo.batch_size}, {ppo.epochs} epochs of minibatches of "
-        f"{ppo.minibatch_size}, learning rates encoder {ppo.encoder_lr:g}, actor {ppo.actor_lr:g}, critic {ppo.critic_lr:g}"
+        f"{ppo.num_envs} envs per seed, batches of {ppo.batch_size}, {ppo.epochs} epochs of "
+        f"minibatches of {ppo.minibatch_size}, learning rates encoder {ppo.encoder_lr:g}, actor "
+        f"{ppo.actor_lr:g}, critic {ppo.critic_lr:g}"
         + (f", KL early stop at {ppo.target_kl:g}" if ppo.target_kl else "")
         + (" with the learning rates adapted to the KL" if ppo.kl_adaptive_lr else "")
         + (", the encoder trained by the actor alone" if not ppo.critic_trains_encoder else "")
@@ -140,7 +143,8 @@ def metric_cell(result: dict | None, name: str, variant: int = 0, percent: bool 
 
 
 def metrics_path(runs: Path, env: str, label: str) -> Path | None:
-    """A run's metrics.csv (archived ones hold runlog.CURVE_POINTS bins of updates), or None when not run."""
+    """A run's metrics.csv (archived ones hold runlog.CURVE_POINTS bins of updates), or None when
+    not run."""
     path = run_folder(runs, env, label) / "metrics.csv"
     return path if path.exists() else None
 
@@ -198,16 +202,23 @@ def references_note(runs: Path, env: str, references: tuple[str, ...]) -> str:
     if (result := load(runs, env, "expert_ppo")) is not None:  # the one its sweep exported
         evaluation = result["evaluations"][0]
         best = best_seed(evaluation)
-        source += f" (seed {best}, {evaluation['seed_means'][best]:.0f} over {evaluation['episodes_per_seed']} episodes)"
+        source += (
+            f" (seed {best}, {evaluation['seed_means'][best]:.0f} over "
+            f"{evaluation['episodes_per_seed']} episodes)"
+        )
     # not trained here: the packaged expert
     elif (meta := EXPERTS_DIR / env / EXPERT_JSON).exists():
         m = json.loads(meta.read_text())
-        source += f" (seed {m['seed_index']}, {m['seed_eval_mean']:.0f} over {m['episodes_per_seed']} episodes; hintsjax/experts/{env})"
+        source += (
+            f" (seed {m['seed_index']}, {m['seed_eval_mean']:.0f} over {m['episodes_per_seed']} "
+            f"episodes; hintsjax/experts/{env})"
+        )
     text = (
-        f"References (no budget limit): expert_ppo is PPO on the state for {expert.total_env_steps / 1e6:g} M steps "
-        f"({expert.num_envs} envs per seed, batches of {expert.batch_size}, {expert.epochs} epochs of minibatches of "
-        f"{expert.minibatch_size}); dagger learns from {source} over {cfg['dagger'].ppo.total_env_steps / 1e3:g} K "
-        f"expert-labelled steps"
+        "References (no budget limit): expert_ppo is PPO on the state for "
+        f"{expert.total_env_steps / 1e6:g} M steps ({expert.num_envs} envs per seed, batches of "
+        f"{expert.batch_size}, {expert.epochs} epochs of minibatches of {expert.minibatch_size}); "
+        f"dagger learns from {source} over {cfg['dagger'].ppo.total_env_steps / 1e3:g} K "
+        "expert-labelled steps"
     )
     if "gail" in cfg:
         gail = cfg["gail"]
@@ -218,12 +229,14 @@ def references_note(runs: Path, env: str, references: tuple[str, ...]) -> str:
             f"; gail learns from {gail.gail.demonstrations} of that expert's episodes, by PPO for "
             f"{gail.ppo.total_env_steps / 1e6:g} M steps on the discriminator's reward {reward}"
             + (
-                ", the discriminator reading the state standardised by the demonstrations' statistics"
+                ", the discriminator reading the state standardised by the demonstrations' "
+                "statistics"
                 if gail.gail.normalize_state
                 else ""
             )
             + (
-                f" and held smooth by an R1 penalty of {gail.gail.grad_penalty:g} on the expert's pairs"
+                f" and held smooth by an R1 penalty of {gail.gail.grad_penalty:g} on the expert's "
+                "pairs"
                 if gail.gail.grad_penalty
                 else ""
             )
@@ -301,6 +314,7 @@ def sweep_hardware(runs: Path, table: str, run_ids: list[str]) -> str:
 def footer(runs: Path, table: str, run_ids: list[str]) -> str:
     """The report's last line: the sweeps' GPU wall-clock and hardware."""
     return (
-        f"Sweep wall-clock recorded in {runs}/sweeps.jsonl on the GPU: {sweep_seconds(runs, table):.0f} s"
-        f" ({sweep_hardware(runs, table, run_ids) or 'none yet'})."
+        f"Sweep wall-clock recorded in {runs}/sweeps.jsonl on the GPU: "
+        f"{sweep_seconds(runs, table):.0f} s "
+        f"({sweep_hardware(runs, table, run_ids) or 'none yet'})."
     )

@@ -78,7 +78,8 @@ def iqm(scores) -> float:
 
 
 def _resample(a: np.ndarray, rng: np.random.Generator, resamples: int) -> np.ndarray:
-    """[seeds] -> [resamples, seeds]; [seeds, tasks] -> [resamples, seeds, tasks], each task on its own."""
+    """[seeds] -> [resamples, seeds]; [seeds, tasks] -> [resamples, seeds, tasks], each task on its
+    own."""
     n = a.shape[0]
     if a.ndim == 1:
         return a[rng.integers(0, n, size=(resamples, n))]
@@ -100,7 +101,8 @@ def bootstrap_ci(
     resamples: int = RESAMPLES,
     seed: int = 0,
 ) -> Interval:
-    """[seeds] or [seeds, tasks] -> Interval: percentile bootstrap CI of statistic(scores), seeds resampled per task."""
+    """[seeds] or [seeds, tasks] -> Interval: percentile bootstrap CI of statistic(scores), seeds
+    resampled per task."""
     a = _scores(scores)
     _check_bootstrap_args(level, resamples)
     rng = np.random.default_rng(seed)
@@ -131,8 +133,8 @@ def probability_of_improvement(x, y) -> float:
 
 
 def _two_agent_resamples(x, y, level: float, resamples: int, seed: int):
-    """[n], [m] -> (x, y, [resamples, n], [resamples, m]) as checked float arrays and their bootstrap
-    resamples. The two agents' seeds are independent runs, so each is resampled on its own
+    """[n], [m] -> (x, y, [resamples, n], [resamples, m]) as checked float arrays and their
+    bootstrap resamples. The two agents' seeds are independent runs, so each is resampled on its own
     (stratified by agent), x's draws first from one generator seeded with `seed`."""
     a = _scores(x, "x", ndims=(1,))
     b = _scores(y, "y", ndims=(1,))
@@ -142,7 +144,8 @@ def _two_agent_resamples(x, y, level: float, resamples: int, seed: int):
 
 
 def poi_ci(x, y, level: float = LEVEL, resamples: int = RESAMPLES, seed: int = 0) -> Interval:
-    """[n], [m] -> Interval: percentile bootstrap CI of P(X > Y), x and y resampled independently."""
+    """[n], [m] -> Interval: percentile bootstrap CI of P(X > Y), x and y resampled
+    independently."""
     a, b, xs, ys = _two_agent_resamples(x, y, level, resamples, seed)
     return _percentile_interval(probability_of_improvement(a, b), _poi_rows(xs, ys), level)
 
@@ -157,7 +160,8 @@ def difference_ci(
 
 
 def direction(interval: Interval) -> int:
-    """Interval of P(X > Y) -> +1 if it lies wholly above 0.5 (X better), -1 if wholly below, else 0."""
+    """Interval of P(X > Y) -> +1 if it lies wholly above 0.5 (X better), -1 if wholly below, else
+    0."""
     # strict: an interval that touches 0.5 does not exclude it
     if interval.low > 0.5:
         return 1

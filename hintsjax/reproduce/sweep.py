@@ -1,17 +1,18 @@
-"""The machinery that the reproduction sweeps share (classic_control.py, locomotion.py, car_racing.py, playground.py).
+"""The machinery that the reproduction sweeps share (classic_control.py, locomotion.py,
+car_racing.py, playground.py).
 
 A run is named `env/label`, where the label is `RunConfig.label` (agent[-scheme][-hint], e.g.
-hints-fc-composite or asym_ac-state); its folder runs/<sweep>/env/label holds config.yaml, metrics.csv,
-checkpoints and, once finished, eval.json. `sweep` groups the unfinished runs of a list that
-share a network's shapes (hintsjax.algorithms.group: e.g. HINTS-FC with every hint, or PPO-x with
-PPO-x+N(0,1)) and trains each group, all its runs and seeds in one compiled program,
+hints-fc-composite or asym_ac-state); its folder runs/<sweep>/env/label holds config.yaml,
+metrics.csv, checkpoints and, once finished, eval.json. `sweep` groups the unfinished runs of a list
+that share a network's shapes (hintsjax.algorithms.group: e.g. HINTS-FC with every hint, or PPO-x
+with PPO-x+N(0,1)) and trains each group, all its runs and seeds in one compiled program,
 `workers` processes at a time, each a call of this module with `--one` and the group's runs:
 
     python -m hintsjax.reproduce.sweep --runs runs/classic --seeds 20 --one idp/ppo_rgb [--smoke]
     python -m hintsjax.reproduce.sweep --runs runs/classic --seeds 20 --one pendulum/ppo_state,pendulum/ppo_noisy_state
 
 More of what it owns and why: docs/design.md, "Module notes", hintsjax/reproduce/sweep.py.
-"""
+"""  # noqa: E501
 
 from __future__ import annotations
 
@@ -95,7 +96,8 @@ def saved_physics(run: Path, default: str | None) -> str | None:
 
 
 def job_folder(runs: Path, run_ids: list[str]) -> Path:
-    """Where a job keeps its checkpoints and train.log: a single run's own folder, or its group's."""
+    """Where a job keeps its checkpoints and train.log: a single run's own folder, or its
+    group's."""
     return runs / run_ids[0] if len(run_ids) == 1 else group_folder(runs, run_ids)
 
 
@@ -126,7 +128,8 @@ def train_one(
 
     folder = job_folder(runs, run_ids)
     # An interrupted run (killed by a time limit) goes on from its newest checkpoint; its
-    # wall-clock counts the kept work of earlier calls, not what was lost after their last checkpoint.
+    # wall-clock counts the kept work of earlier calls, not what was lost after their last
+    # checkpoint.
     resume = checkpoint.latest_update(folder) is not None
     cfgs = []
     for run_id in run_ids:
@@ -227,7 +230,8 @@ def todo_jobs(
     settings: dict | None = None,
 ) -> list[list[str]]:
     """The jobs that train the unfinished runs of `run_ids`: the groups begun earlier
-    (`begun_groups`), resumed as they were, then the other unfinished runs grouped by `plan_jobs`."""
+    (`begun_groups`), resumed as they were, then the other unfinished runs grouped by
+    `plan_jobs`."""
     begun = begun_groups(runs, run_ids, seeds)
     taken = {r for job in begun for r in job}
     rest = [r for r in run_ids if r not in taken and not (runs / r / "eval.json").exists()]
@@ -274,10 +278,10 @@ def sweep(
 ) -> None:
     """Train every unfinished run, grouped (`todo_jobs`: a group begun earlier resumes whole),
     `workers` groups at a time, starting none after `launch_until` seconds (so that a
-    time-limited call ends with finished runs, not killed ones); append the sweep's wall-clock to runs/sweeps.jsonl. With `gpus` (CUDA device
-    ids), each worker gets the least busy of them to itself (CUDA_VISIBLE_DEVICES); without, all
-    workers share the visible devices. `group_size` caps the runs of a group (`plan_jobs`);
-    `settings` (--set) go to every run."""
+    time-limited call ends with finished runs, not killed ones); append the sweep's wall-clock to
+    runs/sweeps.jsonl. With `gpus` (CUDA device ids), each worker gets the least busy of them to
+    itself (CUDA_VISIBLE_DEVICES); without, all workers share the visible devices. `group_size` caps
+    the runs of a group (`plan_jobs`); `settings` (--set) go to every run."""
     unfinished = [r for r in run_ids if not (runs / r / "eval.json").exists()]
     todo = sorted(
         todo_jobs(runs, run_ids, seeds, smoke, group_size, settings),
@@ -286,7 +290,8 @@ def sweep(
     )
     print(
         f"table {table}: {len(run_ids) - len(unfinished)} of {len(run_ids)} runs done already; "
-        f"training {len(unfinished)} in {len(todo)} group(s), {workers} at a time, {seeds} seeds each",
+        f"training {len(unfinished)} in {len(todo)} group(s), {workers} at a time, {seeds} seeds "
+        "each",
         flush=True,
     )
     launched = 0
@@ -302,8 +307,8 @@ def sweep(
         while todo or active:
             if todo and time.time() - start > launch_until:
                 print(
-                    f"[{time.time() - start:6.0f} s] --launch-until reached: {sum(map(len, todo))} runs left for "
-                    "the next sweep",
+                    f"[{time.time() - start:6.0f} s] --launch-until reached: {sum(map(len, todo))} "
+                    "runs left for the next sweep",
                     flush=True,
                 )
                 todo = []
@@ -392,7 +397,8 @@ def sweep(
 
 
 def main() -> None:
-    """A worker: train and evaluate one run, or one group, of a sweep (`WORKER`, launched by `sweep`)."""
+    """A worker: train and evaluate one run, or one group, of a sweep (`WORKER`, launched by
+    `sweep`)."""
     parser = argparse.ArgumentParser(
         description="train and evaluate one run of a sweep (a worker process)"
     )

@@ -1,4 +1,5 @@
-"""--set KEY=VALUE: the top-level run settings a sweep gives every run (e.g. physics, the first seed).
+"""--set KEY=VALUE: the top-level run settings a sweep gives every run (e.g. physics, the first
+seed).
 
 A table script reads and checks them before it plans its runs (hintsjax.reproduce.table_script), and
 each worker reads them again from its own command line (`worker_settings`, python -m

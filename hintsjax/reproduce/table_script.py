@@ -1,4 +1,5 @@
-"""A table script's command line: what the script declares (`TableScript`) and its one entry point (`table_main`).
+"""A table script's command line: what the script declares (`TableScript`) and its one entry point
+(`table_main`).
 
 A table script of experiments/ (classic_control.py, locomotion.py, car_racing.py, playground.py)
 declares its runs, the tables they make and its reports, and calls `table_main`, which trains the
@@ -54,7 +55,8 @@ class TableScript:
 def add_arguments(
     parser: argparse.ArgumentParser, runs: str, envs: tuple[str, ...], seeds: int = 5
 ) -> None:
-    """The options every sweep script takes (`runs`: the default runs folder; `seeds`: the default seeds per run)."""
+    """The options every sweep script takes (`runs`: the default runs folder; `seeds`: the default
+    seeds per run)."""
     parser.add_argument(
         "--report", action="store_true", help="only write the result tables and curves"
     )
@@ -76,14 +78,16 @@ def add_arguments(
         const=1,
         default=0,
         dest="group_size",
-        help="train every run in its own program (default: runs that share shapes train as one group)",
+        help="train every run in its own program (default: runs that share shapes train as one "
+        "group)",
     )
     parser.add_argument(
         "--group-size",
         type=int,
         default=0,
         metavar="N",
-        help="at most N runs per group (default: no limit), e.g. so that each group ends within a time limit",
+        help="at most N runs per group (default: no limit), e.g. so that each group ends within a "
+        "time limit",
     )
     parser.add_argument(
         "--smoke", action="store_true", help="tiny budgets: check the plumbing on a CPU"
@@ -100,14 +104,16 @@ def add_arguments(
         type=float,
         default=float("inf"),
         metavar="SECONDS",
-        help="start no run after this many seconds; running ones finish (for time-limited machines)",
+        help="start no run after this many seconds; running ones finish (for time-limited "
+        "machines)",
     )
     parser.add_argument(
         "--only",
         type=lambda s: tuple(x for x in s.split(",") if x),
         default=(),
         metavar="LABELS",
-        help="comma-separated run labels (e.g. ppo_rgb,hints-fc-speed): train only these of the table's runs",
+        help="comma-separated run labels (e.g. ppo_rgb,hints-fc-speed): train only these of the "
+        "table's runs",
     )
     parser.add_argument(
         "--experts",
@@ -122,7 +128,8 @@ def add_arguments(
 def chosen_envs(
     parser: argparse.ArgumentParser, args: argparse.Namespace, envs: tuple[str, ...]
 ) -> list[str]:
-    """The envs of --envs; exit 2 naming the valid ones on an unknown env, --workers or --seeds < 1, --group-size < 0."""
+    """The envs of --envs; exit 2 naming the valid ones on an unknown env, --workers or --seeds < 1,
+    --group-size < 0."""
     names = [n.strip() for n in args.envs.split(",") if n.strip()]
     unknown = [n for n in names if n not in envs]
     if unknown:
@@ -153,8 +160,9 @@ def chosen_runs(
 
 def table_main(script: TableScript) -> None:
     """A table script's command line: train the runs of --envs (of --table's table, where it has
-    several), or --report or --archive (only archive the finished runs; every report archives first), and where
-    the script has them, --learners-report FILE (the learner rows at any seed count) and its own mode."""
+    several), or --report or --archive (only archive the finished runs; every report archives
+    first), and where the script has them, --learners-report FILE (the learner rows at any seed
+    count) and its own mode."""
     tables = list(script.tables)
     parser = argparse.ArgumentParser(description=script.description)
     if len(tables) > 1:  # classic_control.py's --table 2 or 4: the type of the tables' names
@@ -168,7 +176,8 @@ def table_main(script: TableScript) -> None:
             type=Path,
             default=None,
             metavar="FILE",
-            help="write the learner rows of --envs from --runs (any seed count) with IQM and orderings",
+            help="write the learner rows of --envs from --runs (any seed count) with IQM and "
+            "orderings",
         )
     parser.add_argument(
         "--archive",
@@ -181,9 +190,9 @@ def table_main(script: TableScript) -> None:
         type=lambda s: [Path(x) for x in s.split(",") if x],
         default=None,
         metavar="DIRS",
-        help="comma-separated --runs folders, each a part of the rows' seeds (trained with --set seed=K): "
-        "only pool each run finished in all of them into one archived run of all their seeds, "
-        "under --runs' name in experiments/results/runs (hintsjax/reproduce/pool.py)",
+        help="comma-separated --runs folders, each a part of the rows' seeds (trained with --set "
+        "seed=K): only pool each run finished in all of them into one archived run of all their "
+        "seeds, under --runs' name in experiments/results/runs (hintsjax/reproduce/pool.py)",
     )
     if script.extra_arguments is not None:
         script.extra_arguments(parser)
@@ -194,7 +203,8 @@ def table_main(script: TableScript) -> None:
     if args.archive:
         done = archive_runs(args.runs, script.run_ids())
         print(
-            f"archived {len(done)} finished run(s) of {args.runs} in {ARCHIVE / args.runs.name}: {', '.join(done)}"
+            f"archived {len(done)} finished run(s) of {args.runs} in {ARCHIVE / args.runs.name}: "
+            f"{', '.join(done)}"
         )
         return
     if args.pool is not None:
@@ -203,8 +213,8 @@ def table_main(script: TableScript) -> None:
         except PoolError as e:
             parser.exit(2, f"error: {e}\n")
         print(
-            f"pooled {len(done)} run(s) finished in every part of {', '.join(map(str, args.pool))} into "
-            f"{ARCHIVE / args.runs.name}: {', '.join(done) or 'none'}"
+            f"pooled {len(done)} run(s) finished in every part of {', '.join(map(str, args.pool))} "
+            f"into {ARCHIVE / args.runs.name}: {', '.join(done) or 'none'}"
         )
         return
     if getattr(args, "learners_report", None):

@@ -1,6 +1,6 @@
 """Each training algorithm's settings: PPO's, DAgger's and GAIL's, the `ppo`, `dagger` and `gail`
-sections of a RunConfig (hintsjax.settings.config). Per-env values over these defaults live beside each
-env (hintsjax.settings.env_defaults)."""
+sections of a RunConfig (hintsjax.settings.config). Per-env values over these defaults live beside
+each env (hintsjax.settings.env_defaults)."""
 
 from __future__ import annotations
 
@@ -15,13 +15,15 @@ from hintsjax.settings.fields import check_choices, setting
 # The policy's action distribution (`ppo.action_head`; the car's learning measurements, issue 26):
 #   gaussian: N(mean, std), mean linear in the features, std learnt and state-independent; the env
 #             clips the action into its range (so on the car half the gas and brake draws are 0);
-#   tanh:     the same Gaussian, its draw squashed into the env's action range (envs.SquashedActions);
-#             the entropy bonus stays the Gaussian's, before the squash (no closed form after it);
-#   sigmoid:  the authors' head: mean = 2 sigmoid(x) - 1 in [-1, 1], std floored at 0.01; clipped as gaussian.
+#   tanh:     the same Gaussian, its draw squashed into the env's action range
+#             (envs.SquashedActions); the entropy bonus stays the Gaussian's, before the squash
+#             (no closed form after it);
+#   sigmoid:  the authors' head: mean = 2 sigmoid(x) - 1 in [-1, 1], std floored at 0.01; clipped
+#             as gaussian.
 ACTION_HEADS = ("gaussian", "tanh", "sigmoid")
-# How max_grad_norm clips (hintsjax.algorithms.ppo.make_optimizer): "global", the norm of every part's
-# gradient together (a large critic loss then shrinks the actor's step as well); "per_part", the
-# encoder's, the actor's and the critic's each alone.
+# How max_grad_norm clips (hintsjax.algorithms.ppo.make_optimizer): "global", the norm of every
+# part's gradient together (a large critic loss then shrinks the actor's step as well); "per_part",
+# the encoder's, the actor's and the critic's each alone.
 GRAD_CLIPS = ("global", "per_part")
 
 
@@ -56,7 +58,8 @@ class PPOConfig:
     reward_scale: float = setting(
         1.0, "rewards are multiplied by this for learning (not for logging)", traced=True
     )
-    # For envs whose reset is dear (the car's track is 800 sequential trace steps): AutoReset.step's `fresh`.
+    # For envs whose reset is dear (the car's track is 800 sequential trace steps): AutoReset.step's
+    # `fresh`.
     starts_per_rollout: bool = setting(
         False, "each env's next episode start is drawn once a rollout, not at every reset"
     )
@@ -107,8 +110,8 @@ class PPOConfig:
         "through a stop-gradient, so only the policy's loss moves them",
         saved_may_lack=True,
     )
-    # hintsjax/algorithms/kl_rate.py: divided by 1.5 while a minibatch's approx. KL is above 2 x target_kl,
-    # multiplied by 1.5 (up to 1) while below 0.5 x.
+    # hintsjax/algorithms/kl_rate.py: divided by 1.5 while a minibatch's approx. KL is above 2 x
+    # target_kl, multiplied by 1.5 (up to 1) while below 0.5 x.
     kl_adaptive_lr: bool = setting(
         False,
         "scale the learning rates by the steps' KL against target_kl (rsl_rl's "
@@ -123,16 +126,16 @@ class PPOConfig:
         "resets as Playground's DM Control settings give them)",
         saved_may_lack=True,
     )
-    # Bears on the KL storms of experiments/results/locomotion_ppo_stability.md: a std that collapses
-    # makes the ratio of the next update's steps explode.
+    # Bears on the KL storms of experiments/results/locomotion_ppo_stability.md: a std that
+    # collapses makes the ratio of the next update's steps explode.
     min_log_std: float | None = setting(
         None,
         "a floor on the policy's log std (Brax's networks floor the std at "
         "0.001, log -6.9); null: none",
         saved_may_lack=True,
     )
-    # The privileged-signal baselines (hintsjax/models/agents.py). Shapes, not traced: a Hyper leaf more
-    # would keep the checkpoints saved before it from restoring.
+    # The privileged-signal baselines (hintsjax/models/agents.py). Shapes, not traced: a Hyper leaf
+    # more would keep the checkpoints saved before it from restoring.
     hint_dropout: float = setting(
         0.5,
         "pi_dropout: the chance that a training step's hint is replaced by zeros "
@@ -166,15 +169,18 @@ class PPOConfig:
         )
         if self.batch_size % self.num_envs:
             raise UsageError(
-                f"ppo.batch_size ({self.batch_size}) must be a multiple of ppo.num_envs ({self.num_envs})"
+                f"ppo.batch_size ({self.batch_size}) must be a multiple of ppo.num_envs "
+                f"({self.num_envs})"
             )
         if self.batch_size % self.minibatch_size:
             raise UsageError(
-                f"ppo.batch_size ({self.batch_size}) must be a multiple of ppo.minibatch_size ({self.minibatch_size})"
+                f"ppo.batch_size ({self.batch_size}) must be a multiple of ppo.minibatch_size "
+                f"({self.minibatch_size})"
             )
         if self.total_env_steps < self.batch_size:
             raise UsageError(
-                f"ppo.total_env_steps ({self.total_env_steps}) is less than one update's batch ({self.batch_size})"
+                f"ppo.total_env_steps ({self.total_env_steps}) is less than one update's batch "
+                f"({self.batch_size})"
             )
         require_positive(
             self,
@@ -211,7 +217,8 @@ class PPOConfig:
             )
         if self.min_log_std is not None and not math.isfinite(self.min_log_std):
             raise UsageError(
-                f"ppo.min_log_std must be a finite number, or null for no floor, got {self.min_log_std}"
+                "ppo.min_log_std must be a finite number, or null for no floor, got "
+                f"{self.min_log_std}"
             )
         if self.target_kl is not None and not self.target_kl > 0:
             raise UsageError(
@@ -219,8 +226,8 @@ class PPOConfig:
             )
         if self.kl_adaptive_lr and self.target_kl is None:
             raise UsageError(
-                "ppo.kl_adaptive_lr needs ppo.target_kl (the KL it steers the rates to): set ppo.target_kl, "
-                "or ppo.kl_adaptive_lr=false"
+                "ppo.kl_adaptive_lr needs ppo.target_kl (the KL it steers the rates to): set "
+                "ppo.target_kl, or ppo.kl_adaptive_lr=false"
             )
 
 
@@ -259,9 +266,9 @@ class GailConfig:
     disc_steps: int = setting(
         4, "discriminator minibatch steps a PPO update (minibatches of ppo.minibatch_size)"
     )
-    # "logit" is mostly negative while the discriminator wins, so ending an episode early pays (idp's
-    # agents learn to fall); "original" pays for every step alive (an agent then avoids a task's
-    # terminating goal, e.g. acrobot's).
+    # "logit" is mostly negative while the discriminator wins, so ending an episode early pays
+    # (idp's agents learn to fall); "original" pays for every step alive (an agent then avoids a
+    # task's terminating goal, e.g. acrobot's).
     reward: str = setting(
         "logit",
         "the policy's reward: logit, log D - log(1 - D); original, -log(1 - D) (Ho and Ermon's)",

@@ -77,7 +77,8 @@ class RunConfig:
     eval_hint_source: str | None = setting(
         None, "the hints at deploy (evaluation, videos); null: as hint_source"
     )
-    # Resolved when the config is built (layers.run_config), so a run folder keeps what it stepped with.
+    # Resolved when the config is built (layers.run_config), so a run folder keeps what it stepped
+    # with.
     physics: str = setting(
         "auto",
         "MJCF envs: auto (warp on an NVIDIA GPU with warp-lang, else jax), jax "
@@ -136,7 +137,8 @@ class RunConfig:
         return envs.SquashedActions(env) if self.ppo.action_head == "tanh" else env
 
     def task_params(self, variant: str | None, deploy: bool = False) -> Any:
-        """The params of `make_env(deploy=deploy)`'s env on `variant` (None: the training variant's default)."""
+        """The params of `make_env(deploy=deploy)`'s env on `variant` (None: the training variant's
+        default)."""
         return hinted_params(
             self.env,
             env_params(self.env, variant),
@@ -166,8 +168,9 @@ class RunConfig:
             )
         if self.agent_spec.hint and not names:
             raise UsageError(
-                f"agent={self.agent} sees a hint, so hint=none leaves it nothing; valid for {self.env}: "
-                f"{', '.join(envs.hint_names(self.env))} (or agent=ppo_rgb, which sees none)"
+                f"agent={self.agent} sees a hint, so hint=none leaves it nothing; valid for "
+                f"{self.env}: {', '.join(envs.hint_names(self.env))} (or agent=ppo_rgb, which "
+                "sees none)"
             )
         if self.hints_from is not None:
             self._check_hint_widths(hint)
@@ -182,8 +185,8 @@ class RunConfig:
         require_positive(self, ("seeds", "eval_episodes", "checkpoint_every"))
         if not 0 <= self.seed <= INT_MAX - self.seeds + 1:  # seed i's key is key(seed + i): 32 bits
             raise UsageError(
-                f"seed must be 0 to {INT_MAX - self.seeds + 1} (seed + i for each of {self.seeds} seeds "
-                f"is a 32-bit key), got {self.seed}"
+                f"seed must be 0 to {INT_MAX - self.seeds + 1} (seed + i for each of {self.seeds} "
+                f"seeds is a 32-bit key), got {self.seed}"
             )
         if not self.checkpoint_seconds >= 0:  # NaN too
             raise UsageError(f"checkpoint_seconds must be 0 or more, got {self.checkpoint_seconds}")
@@ -193,17 +196,19 @@ class RunConfig:
             self.agent_spec.imitates or self.agent == EXPERT_AGENT
         ):
             raise UsageError(
-                f"ppo.action_head={self.ppo.action_head} is for PPO's learners; {self.agent} keeps the "
-                "gaussian head (an expert's policy drives dagger and gail as a Gaussian's mean)"
+                f"ppo.action_head={self.ppo.action_head} is for PPO's learners; {self.agent} keeps "
+                "the gaussian head (an expert's policy drives dagger and gail as a Gaussian's mean)"
             )
         if self.agent_spec.algorithm == "dagger" and self.dagger.buffer_size < self.ppo.batch_size:
             raise UsageError(
-                f"dagger.buffer_size ({self.dagger.buffer_size}) must hold one round, ppo.batch_size ({self.ppo.batch_size})"
+                f"dagger.buffer_size ({self.dagger.buffer_size}) must hold one round, "
+                f"ppo.batch_size ({self.ppo.batch_size})"
             )
         return self
 
     def _check_hint_widths(self, hint: envs.Hint) -> None:
-        """UsageError naming a hint (of a hint file) that returns another width than it registered."""
+        """UsageError naming a hint (of a hint file) that returns another width than it
+        registered."""
         env = envs.make(self.env, envs.NO_HINT, ("state",))
         params = env_params(self.env, self.variant)
         state = jax.eval_shape(env.initial_state, jax.random.key(0), params)
@@ -213,7 +218,8 @@ class RunConfig:
             raise UsageError(f"hints_from={self.hints_from}: {e}") from None
 
     def _check_image_size(self) -> None:
-        """UsageError where `image_size` is no side the encoder takes, or one the env cannot draw."""
+        """UsageError where `image_size` is no side the encoder takes, or one the env cannot
+        draw."""
         if self.image_size is None:
             return
         own = envs.REGISTRY[self.env].cls
@@ -223,8 +229,9 @@ class RunConfig:
             or not MIN_IMAGE_SIZE <= self.image_size <= MAX_IMAGE_SIZE
         ):
             raise UsageError(
-                f"image_size must be a whole number of pixels from {MIN_IMAGE_SIZE} (the encoder's smallest) "
-                f"to {MAX_IMAGE_SIZE}, or null for the env's own ({own.image_size}); got {self.image_size!r}"
+                f"image_size must be a whole number of pixels from {MIN_IMAGE_SIZE} (the encoder's "
+                f"smallest) to {MAX_IMAGE_SIZE}, or null for the env's own ({own.image_size}); got "
+                f"{self.image_size!r}"
             )
         try:
             own.check_image_size(self.image_size)
@@ -235,7 +242,8 @@ class RunConfig:
         ):
             raise UsageError(
                 f"image_size={self.image_size}: a generator's hints are read off the env's own "
-                f"{own.image_size}x{own.image_size} pictures; leave image_size null with hint_source=<generator folder>"
+                f"{own.image_size}x{own.image_size} pictures; leave image_size null with "
+                "hint_source=<generator folder>"
             )
 
     def _check_hint_sources(self) -> None:

@@ -16,7 +16,8 @@ from hintsjax.models.agents import AGENTS, REFERENCES
 
 def stack_layers(*layers: Mapping[str, Any]) -> dict[str, Any]:
     """Later layers override earlier ones, key by key and a section's (a mapping's) setting by
-    setting; None is no value (hintsjax.settings.layers.run_config stacks a run's layers with it too)."""
+    setting; None is no value (hintsjax.settings.layers.run_config stacks a run's layers with it
+    too)."""
     merged: dict[str, Any] = {}
     for layer in layers:
         for k, v in layer.items():
@@ -73,7 +74,8 @@ class EnvDefaults(dict):
         return envs.REGISTRY.keys()
 
 
-# Per env, defaults over the dataclasses' (hintsjax.settings.algorithm_settings, hintsjax.settings.config.RunConfig).
+# Per env, defaults over the dataclasses' (hintsjax.settings.algorithm_settings,
+# hintsjax.settings.config.RunConfig).
 ENV_DEFAULTS: EnvDefaults = EnvDefaults(
     {name: _env_defaults(entry.training) for name, entry in envs.REGISTRY.items()}
 )

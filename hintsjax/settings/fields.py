@@ -32,10 +32,11 @@ def setting(
 ) -> Any:
     """A settings dataclass's field. `help`: one line for --help and docs/settings.md. `traced`: a
     number carried as an array in the runner state (PPO's `Hyper`), so a group's members may differ
-    in it; otherwise it fixes shapes or the program's structure and they must agree. `saved_may_lack`:
-    added after runs were first saved, so a saved config without it means its default.
-    `choices`: the valid values of a text setting. `per_env`: a top-level setting that an env's
-    `TRAINING` may set (every section's setting may), so the command line's schema leaves it null."""
+    in it; otherwise it fixes shapes or the program's structure and they must agree.
+    `saved_may_lack`: added after runs were first saved, so a saved config without it means its
+    default. `choices`: the valid values of a text setting. `per_env`: a top-level setting that an
+    env's `TRAINING` may set (every section's setting may), so the command line's schema leaves it
+    null."""
     if not help:
         raise TypeError("a setting needs its help line")
     metadata = {
@@ -49,7 +50,8 @@ def setting(
 
 
 def settings_of(cls: type) -> tuple[dataclasses.Field, ...]:
-    """The fields of a settings dataclass that are settings (`setting(...)`), in declaration order."""
+    """The fields of a settings dataclass that are settings (`setting(...)`), in declaration
+    order."""
     return tuple(f for f in dataclasses.fields(cls) if HELP in f.metadata)
 
 

@@ -1,14 +1,14 @@
 """Where an agent's hint comes from: the simulator's state (programmatic), or a learned generator.
 
-A generator (trained by `python -m hintsjax.generator`, hintsjax/hints/generators.py) is a small network
-that reads the hint off the last `frames` pictures. Its folder holds generator.json and the
+A generator (trained by `python -m hintsjax.generator`, hintsjax/hints/generators.py) is a small
+network that reads the hint off the last `frames` pictures. Its folder holds generator.json and the
 seed-batched params as an orbax checkpoint; `load` reads one seed of it. `hinted_env` and
 `hinted_params` give the env an agent acts in for a hint source: the programmatic env, or
 `GeneratedHintEnv`, which keeps the last pictures in its state and the generator's params in its
 params, so it is as pure and jittable as the env it wraps.
 
-This sits below the settings (hintsjax/settings/config.py builds its envs through it) and above envs/ and
-the networks; it imports nothing that trains.
+This sits below the settings (hintsjax/settings/config.py builds its envs through it) and above
+envs/ and the networks; it imports nothing that trains.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ GENERATOR_JSON = "generator.json"
 PARAMS = "generator"  # the orbax checkpoint inside a generator folder
 
 
-# -- the network ------------------------------------------------------------------------------------
+# -- the network -----------------------------------------------------------------------------------
 
 
 class HintGenerator(nn.Module):
@@ -168,7 +168,7 @@ class GeneratedHintEnv(Env):
         return self.inner.metrics(state.env_state, params.task)
 
 
-# -- a generator folder -----------------------------------------------------------------------------
+# -- a generator folder ----------------------------------------------------------------------------
 
 
 def describe(folder: str | Path) -> dict[str, Any]:
@@ -237,7 +237,8 @@ def _load(folder: str, mtime: float) -> tuple[Generator, GeneratorParams]:
     except Exception as e:  # orbax raises many types for unreadable or mismatched files
         reason = str(e).strip().splitlines()[0][:200] if str(e).strip() else type(e).__name__
         raise UsageError(
-            f"the generator checkpoint in {folder} is corrupt or does not match {GENERATOR_JSON}: {reason}"
+            f"the generator checkpoint in {folder} is corrupt or does not match {GENERATOR_JSON}: "
+            f"{reason}"
         ) from None
     return generator, params
 

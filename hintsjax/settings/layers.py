@@ -108,19 +108,21 @@ VALUED_ON_THE_COMMAND_LINE = {
 
 def _check_env_layers(env: str, layers: list[Mapping[str, Any]]) -> None:
     """TypeError where an env's TRAINING sets a top-level setting that the command line gives a
-    value (declare it `per_env` on its field): the command line's value would win over the env's there
-    but not in run_config, so the two would train differently."""
+    value (declare it `per_env` on its field): the command line's value would win over the env's
+    there but not in run_config, so the two would train differently."""
     fixed = sorted({k for layer in layers for k in layer if k in VALUED_ON_THE_COMMAND_LINE})
     if fixed:
         raise TypeError(
             f"env {env}'s TRAINING sets {', '.join(fixed)}, which the command line gives a value; "
-            "an env may set a section's settings and those declared per_env (hintsjax/settings/config.py)"
+            "an env may set a section's settings and those declared per_env "
+            "(hintsjax/settings/config.py)"
         )
 
 
 def hint_file(source: str) -> str:
     """`hints_from`'s file or module loaded (its registered hints added): the absolute path of a
-    file, so that a run folder's config finds it from elsewhere; UsageError if it does not import."""
+    file, so that a run folder's config finds it from elsewhere; UsageError if it does not
+    import."""
     try:
         envs.load_hints(source)
     except envs.HintFileError as e:

@@ -23,7 +23,8 @@ def _plain(value: Any) -> Any:
 def command_line_defaults() -> dict[str, Any]:
     """What the run command starts from before its arguments: every setting, nested by section; null
     where an env may set it (every section's setting, and a top-level one marked `per_env`), so
-    that the env's layer decides (hintsjax.settings.layers.run_config), else the dataclass's default."""
+    that the env's layer decides (hintsjax.settings.layers.run_config), else the dataclass's
+    default."""
     top = {
         f.name: None if f.metadata[PER_ENV] else _plain(f.default) for f in settings_of(RunConfig)
     }
@@ -50,7 +51,8 @@ def keys() -> list[str]:
 
 
 def saved_may_lack() -> set[str]:
-    """The settings (section.key for a section's) whose absence from a saved config means their default."""
+    """The settings (section.key for a section's) whose absence from a saved config means their
+    default."""
     return {key for key, f in declared() if f.metadata[SAVED_MAY_LACK]}
 
 
@@ -91,11 +93,26 @@ def markdown() -> str:
     lines = [
         "# Settings",
         "",
-        "Every setting of `python -m hintsjax.run key=value`, its default and what it does, written by",
-        "`python -m hintsjax.settings.schema` from the fields that declare them (hintsjax/settings/config.py,",
-        "hintsjax/settings/algorithm_settings.py); `tests/test_config_schema.py` fails when this page is stale.",
-        "A default here is the dataclass's: an env's `TRAINING` (envs/<env>.py) sets its own over it, and",
-        "`null` on the command line takes the env's. A resumed run keeps the settings it was started with.",
+        (
+            "Every setting of `python -m hintsjax.run key=value`, its default and what it does, "
+            "written by"
+        ),
+        (
+            "`python -m hintsjax.settings.schema` from the fields that declare them "
+            "(hintsjax/settings/config.py,"
+        ),
+        (
+            "hintsjax/settings/algorithm_settings.py); `tests/test_config_schema.py` fails when "
+            "this page is stale."
+        ),
+        (
+            "A default here is the dataclass's: an env's `TRAINING` (envs/<env>.py) sets its own "
+            "over it, and"
+        ),
+        (
+            "`null` on the command line takes the env's. A resumed run keeps the settings it was "
+            "started with."
+        ),
         "",
         "## The run",
         "",

@@ -117,7 +117,8 @@ def writing(run_dir: Path):
     exception, so an interrupted run keeps the checkpoint it was writing. Meanwhile a failed write's
     "Event loop is closed" noise is dropped (`_quiet_closed_loops`), and from then on its unawaited
     writes (`_drop_unawaited_writes`) and the same error that tensorstore's threads print through
-    sys.excepthook, which can come after the block (`_drop_closed_loop_noise`, as a failed restore's)."""
+    sys.excepthook, which can come after the block (`_drop_closed_loop_noise`, as a failed
+    restore's)."""
     _WRITERS[Path(run_dir).absolute()] = _manager(run_dir, create=True, background=True)
     _drop_unawaited_writes()
     _drop_closed_loop_noise()
@@ -296,7 +297,8 @@ def restore_latest(run_dir: Path, abstract, set_aside: bool = False):
     else:
         newest, reason = failed[0]
         raise UsageError(
-            f"checkpoint {newest} in {run_dir} is corrupt or does not match its config.yaml: {reason}"
+            f"checkpoint {newest} in {run_dir} is corrupt or does not match its "
+            f"config.yaml: {reason}"
             + (f" (and the {len(failed) - 1} before it)" if len(failed) > 1 else "")
         )
     if failed:
@@ -311,7 +313,8 @@ def restore_latest(run_dir: Path, abstract, set_aside: bool = False):
             kept = f"; set aside in {aside}"
         newest, reason = failed[0]
         print(
-            f"warning: checkpoint {newest} in {Path(run_dir) / CHECKPOINTS} cannot be restored ({reason[:120]}); "
+            f"warning: checkpoint {newest} in {Path(run_dir) / CHECKPOINTS} cannot be restored "
+            f"({reason[:120]}); "
             f"using checkpoint {update}, the newest that restores{kept}",
             file=sys.stderr,
         )

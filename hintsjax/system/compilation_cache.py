@@ -53,7 +53,8 @@ def enable(
         probe.unlink()
     except OSError as e:
         print(
-            f"warning: compilation cache off: cannot write {path} ({e.strerror or type(e).__name__})",
+            f"warning: compilation cache off: cannot write {path} "
+            f"({e.strerror or type(e).__name__})",
             file=sys.stderr,
         )
         return None

@@ -1,4 +1,5 @@
-"""Where a run's seeds live: its seed axis split over every device it can use, whatever its seed count.
+"""Where a run's seeds live: its seed axis split over every device it can use, whatever its seed
+count.
 
 A run of S seeds on D devices holds ceil(S / D) x D of them: the seed axis is padded to a
 multiple of D with copies of its first seeds, and each device runs the per-seed program
@@ -7,11 +8,11 @@ result (`crop`): metrics, checkpoints (always S seeds, so a run resumes on any d
 and evaluations. With several processes (`jax.distributed`), the devices are the global ones
 and `fetch` gathers an array to every process's host.
 
-What a layout changes (docs/design.md, "Several devices and processes"): a seed's keys, and so its draws, are
-the same on any layout, and the same command on the same kind and number of devices gives the
-same numbers bit for bit. Another device count compiles another program (another share per
-device, or one device's program against an SPMD one), whose floating-point sums may round
-differently: a seed's numbers then agree statistically, not bit for bit.
+What a layout changes (docs/design.md, "Several devices and processes"): a seed's keys, and so
+its draws, are the same on any layout, and the same command on the same kind and number of
+devices gives the same numbers bit for bit. Another device count compiles another program
+(another share per device, or one device's program against an SPMD one), whose floating-point
+sums may round differently: a seed's numbers then agree statistically, not bit for bit.
 """
 
 from __future__ import annotations
@@ -30,8 +31,8 @@ AXIS = "seeds"
 
 
 def join_processes() -> int:
-    """Join the run's other processes, if it has any, before JAX touches a device; the process count.
-    hintsjax/__init__.py calls it on import, so every command joins before its modules load.
+    """Join the run's other processes, if it has any, before JAX touches a device; the process
+    count. hintsjax/__init__.py calls it on import, so every command joins before its modules load.
 
     With JAX_NUM_PROCESSES > 1 (and JAX_COORDINATOR_ADDRESS, JAX_PROCESS_ID), or inside a SLURM
     job step of several tasks (`srun`), every process calls jax.distributed.initialize; the
@@ -124,7 +125,8 @@ class SeedLayout:
 
     @property
     def everywhere(self) -> NamedSharding:
-        """A whole copy on every device (what `spread`'s shared arguments and `crop`'s result are)."""
+        """A whole copy on every device (what `spread`'s shared arguments and `crop`'s result
+        are)."""
         return NamedSharding(self.mesh, PartitionSpec())
 
     @property

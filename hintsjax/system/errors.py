@@ -1,8 +1,8 @@
 """Bad input (UsageError) and the boundary every command's entry point keeps (`command`): bad
 input is one line and exit 2, Ctrl-C (or SIGTERM) one line and exit 130 (143), output to a reader
-that went away (`| head`) silence and exit 141, what the machine refused (hintsjax/system/refusals.py)
-one line and exit 1, and anything else a bug in hintsjax, reported in one line that says so and
-where its traceback was written, exit 1."""
+that went away (`| head`) silence and exit 141, what the machine refused
+(hintsjax/system/refusals.py) one line and exit 1, and anything else a bug in hintsjax, reported
+in one line that says so and where its traceback was written, exit 1."""
 
 from __future__ import annotations
 

@@ -93,9 +93,9 @@ def check_episodes(cfg: Any, seeds_per_device: int, episodes: int, key: str) -> 
     need = seeds_per_device * episodes * one
     if need > have:
         raise UsageError(
-            f"{key}={episodes} cannot fit: evaluating {seeds_per_device} seeds x {episodes} episodes at once "
-            f"holds at least {sized(need)} of pictures, actions and activations, a device has {sized(have)} "
-            f"(at most {have // (seeds_per_device * one)} episodes)"
+            f"{key}={episodes} cannot fit: evaluating {seeds_per_device} seeds x {episodes} "
+            f"episodes at once holds at least {sized(need)} of pictures, actions and activations, "
+            f"a device has {sized(have)} (at most {have // (seeds_per_device * one)} episodes)"
         )
 
 

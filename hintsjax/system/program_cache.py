@@ -135,7 +135,8 @@ def _spec(x: Any) -> jax.ShapeDtypeStruct:
 
 
 def _shape_of(x: Any) -> jax.ShapeDtypeStruct:
-    """A traced program's argument or result: its shape and dtype (a stored program keeps no weak types)."""
+    """A traced program's argument or result: its shape and dtype (a stored program keeps no weak
+    types)."""
     return jax.ShapeDtypeStruct(x.shape, x.dtype)
 
 
@@ -177,7 +178,8 @@ class Program:
         leaves, tree = jax.tree.flatten(args)
         if tree != self.in_tree:
             raise TypeError(
-                f"arguments of another structure than the program was traced for: {tree} != {self.in_tree}"
+                "arguments of another structure than the program was traced for: "
+                f"{tree} != {self.in_tree}"
             )
         leaves = [
             x if isinstance(x, jax.Array) else np.asarray(x, a.dtype)
@@ -235,7 +237,8 @@ def _load(path: Path) -> Traced | None:
         return Traced(export.deserialize(bytearray(blob)), in_tree, out_tree, loaded=True)
     except Exception as e:  # noqa: BLE001  an unreadable entry of any kind is traced afresh
         print(
-            f"warning: traced program {path.name} unreadable ({type(e).__name__}); tracing it again",
+            f"warning: traced program {path.name} unreadable ({type(e).__name__}); "
+            "tracing it again",
             file=sys.stderr,
         )
         return None

@@ -1,6 +1,7 @@
 """What the machine refuses, told apart from bugs: a write (a full disk, a read-only mount, a
 missing permission: WriteFailed, naming the path) and memory (OutOfMemory, naming the settings
-that size the work). Each is one line and exit 1 at a command's boundary (hintsjax/system/errors.py)."""
+that size the work). Each is one line and exit 1 at a command's boundary
+(hintsjax/system/errors.py)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ import sys
 from typing import Any
 
 MACHINE = 1  # the exit status of a command the machine stopped: a write it refused, memory it lacks
-# A write that fails with one of these is the machine's doing (its disk, mount or permissions), not a bug.
+# A write that fails with one of these is the machine's doing (its disk, mount or permissions), not
+# a bug.
 WRITE_ERRNOS = {
     errno.ENOSPC,
     errno.EROFS,
@@ -24,7 +26,8 @@ WRITE_ERRNOS = {
 
 
 class WriteFailed(OSError):
-    """A write the machine refused (`WRITE_ERRNOS`), with the path it was writing: one line, exit 1."""
+    """A write the machine refused (`WRITE_ERRNOS`), with the path it was writing: one
+    line, exit 1."""
 
 
 def machine_write(error: OSError, path: Any = None) -> WriteFailed | None:
@@ -50,7 +53,8 @@ def machine_write(error: OSError, path: Any = None) -> WriteFailed | None:
 
 @contextlib.contextmanager
 def writing_to(path: Any):
-    """A write to `path`: a refusal of the machine's (`machine_write`) raised as a WriteFailed naming it."""
+    """A write to `path`: a refusal of the machine's (`machine_write`) raised as a WriteFailed
+    naming it."""
     try:
         yield
     except OSError as e:
@@ -103,10 +107,10 @@ def report_machine(error: BaseException, path: Any = None) -> int:
     if isinstance(error, OSError) and machine_write(error) is not None:
         print(f"error: {machine_write(error, path).strerror}", file=sys.stderr)
     else:
-        print(
-            f"error: {error if isinstance(error, OutOfMemory) else _memory_line(error, 'the sizes you gave')}",
-            file=sys.stderr,
+        line = (
+            error if isinstance(error, OutOfMemory) else _memory_line(error, "the sizes you gave")
         )
+        print(f"error: {line}", file=sys.stderr)
     return MACHINE
 
 

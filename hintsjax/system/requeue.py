@@ -39,7 +39,8 @@ class Preempted(Terminated):
 
 
 def executor() -> str | None:
-    """submitit's executor running this process ("slurm", "local"), or None outside a submitit job."""
+    """submitit's executor running this process ("slurm", "local"), or None outside a submitit
+    job."""
     return os.environ.get("SUBMITIT_EXECUTOR") or None
 
 

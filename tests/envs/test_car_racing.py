@@ -1,4 +1,5 @@
-"""car_racing: the track generator against Gymnasium's, reward and lap rules, the car, hints, picture.
+"""car_racing: the track generator against Gymnasium's, reward and lap rules, the car, hints,
+picture.
 
 Needs Gymnasium's Box2D extra (`gymnasium[box2d]==1.4.0`, i.e. box2d 2.3.10 and pygame-ce).
 """
@@ -92,7 +93,8 @@ def one(batch, i: int) -> Track:
 
 
 def stadium(straight: float, radius: float) -> Track:
-    """A hand-built counter-clockwise stadium: start at the foot of the right straight heading north."""
+    """A hand-built counter-clockwise stadium: start at the foot of the right straight heading
+    north."""
     length = 2 * straight + 2 * math.pi * radius
     n = round(length / STEP)
     s = np.arange(n) * length / n
@@ -145,7 +147,8 @@ def north(x, y, **kw) -> Car:
 
 
 def gym_track(env, seed: int):
-    """Gymnasium's `_create_track` with the RNG `reset(seed)` gives it; None where that first try fails."""
+    """Gymnasium's `_create_track` with the RNG `reset(seed)` gives it; None where that first try
+    fails."""
     env._np_random, _ = seeding.np_random(seed)
     env.road, env.road_poly = [], []
     ok = env._create_track()
@@ -156,10 +159,10 @@ def gym_track(env, seed: int):
 
 
 def test_trace_equals_gymnasium_for_the_same_checkpoints():
-    """Gymnasium's checkpoints drawn from its own RNG stream (seeds 0..23, whose first try it keeps),
-    traced by ours for 2500 steps: the 5th lap, which Gymnasium keeps, equals its track (measured:
-    |d xy| <= 3.1e-4 u); the 2nd lap, which our env keeps, has the same tile count on 22 of 24
-    seeds (the trace has settled by then) and is 2 tiles off on the others."""
+    """Gymnasium's checkpoints drawn from its own RNG stream (seeds 0..23, whose first try it
+    keeps), traced by ours for 2500 steps: the 5th lap, which Gymnasium keeps, equals its track
+    (measured: |d xy| <= 3.1e-4 u); the 2nd lap, which our env keeps, has the same tile count on 22
+    of 24 seeds (the trace has settled by then) and is 2 tiles off on the others."""
     genv = gym.make("CarRacing-v3").unwrapped
     trace5 = jax.jit(lambda a, r: trace(a, r, 2500))
     same_count, compared = 0, 0
@@ -203,9 +206,10 @@ def test_trace_equals_gymnasium_for_the_same_checkpoints():
 
 
 def test_gymnasium_tracks_load_into_our_track():
-    """track_from_gymnasium keeps Gymnasium's tile count, centre points and tile quads (its Box2D tile
-    fixtures' vertices, float32 apart), and flags as many kerb tiles as Gymnasium draws kerbs, but
-    for its spreading across the joint (test_kerbs_as_gymnasium_flags_them; seed 0: 76 against 75)."""
+    """track_from_gymnasium keeps Gymnasium's tile count, centre points and tile quads (its Box2D
+    tile fixtures' vertices, float32 apart), and flags as many kerb tiles as Gymnasium draws kerbs,
+    but for its spreading across the joint (test_kerbs_as_gymnasium_flags_them; seed 0: 76 against
+    75)."""
     genv = gym.make("CarRacing-v3").unwrapped
     quads = jax.jit(lambda track: _quads(track, jnp.arange(MAX_TILES)))
     for seed in (0, 1):
@@ -396,7 +400,8 @@ def test_pure_pursuit_laps(env, tracks):
 
 def test_a_tile_is_paid_once(env, step, tracks):
     """The car at rest on tile 5's centre touches tiles 4, 5 and 6 with its wheels: paid for them in
-    the first frame only. Also: the evaluation metric progress is P = visited / all tiles, here 3 / n."""
+    the first frame only. Also: the evaluation metric progress is P = visited / all tiles, here
+    3 / n."""
     track = one(tracks["standard"][0], 0)
     n = int(track.n_tiles)
     centre = 0.5 * (track.xy[5] + track.xy[4])
@@ -414,12 +419,13 @@ def test_a_tile_is_paid_once(env, step, tracks):
 
 
 def test_a_tile_is_visited_when_a_wheel_touches_it(step, on_track_hint):
-    """On the stadium's right straight (x = 40 +- TRACK_WIDTH, heading north; tile k spans y_{k-1}..y_k),
-    a car whose centre is on the grass 0.5 u left of the road, its right wheels (1.1 u right of the
-    centre, 0.28 u either side) reaching 0.88 u onto it: the tiles under those wheels are visited
-    though the centre is on none. Front wheels 1.06..2.14 u ahead, rear ones 1.10..2.18 u behind: on
-    a tile's centre they touch its neighbours too; at a seam y_m, tiles m and m+1 only. A car 1.6 u
-    off the road touches nothing; its wheels then grip as grass, the centred car's as road."""
+    """On the stadium's right straight (x = 40 +- TRACK_WIDTH, heading north; tile k spans
+    y_{k-1}..y_k), a car whose centre is on the grass 0.5 u left of the road, its right wheels
+    (1.1 u right of the centre, 0.28 u either side) reaching 0.88 u onto it: the tiles under those
+    wheels are visited though the centre is on none. Front wheels 1.06..2.14 u ahead, rear ones
+    1.10..2.18 u behind: on a tile's centre they touch its neighbours too; at a seam y_m, tiles m
+    and m+1 only. A car 1.6 u off the road touches nothing; its wheels then grip as grass, the
+    centred car's as road."""
     state = on_stadium(north(40.0, 0.0))
     n = int(state.track.n_tiles)
     y = -70.0 + np.arange(n) * (280 + 2 * math.pi * 40) / n  # the straight's centre points
@@ -496,8 +502,8 @@ FRAMES = 750
 
 @pytest.fixture(scope="module")
 def run_car():
-    """jitted (car, action[3], grip[2]) -> the car after each of FRAMES frames, and per frame: forward
-    speed, yaw rate, kinematic yaw rate u tan(delta) / L, lateral speed, rim speeds."""
+    """jitted (car, action[3], grip[2]) -> the car after each of FRAMES frames, and per frame:
+    forward speed, yaw rate, kinematic yaw rate u tan(delta) / L, lateral speed, rim speeds."""
 
     def run(car, action, grip):
         def frame(car, _):
@@ -561,8 +567,9 @@ class Road:
 
 
 def box2d_car(actions: np.ndarray, on_road: bool) -> np.ndarray:
-    """float[T, 3] forward speed, yaw rate and leftward speed of Gymnasium's Box2D car from rest under
-    actions [T, 3], stepped as CarRacing-v3 steps it, its wheels on a tile or (no tiles) the grass."""
+    """float[T, 3] forward speed, yaw rate and leftward speed of Gymnasium's Box2D car from rest
+    under actions [T, 3], stepped as CarRacing-v3 steps it, its wheels on a tile or (no tiles) the
+    grass."""
     import Box2D
     from gymnasium.envs.box2d.car_dynamics import Car as Box2DCar
 
@@ -594,7 +601,8 @@ def test_the_car_steps_beside_box2ds_car():
     frames at half gas, then full right lock coasting (yaw -4.3 in both; speeds and yaw rate at most
     0.08 apart), or with full gas, when the rear steps out (at most 1.0 apart over 20 frames; 28
     frames in, yaw -8.4 Box2D, -8.1 ours); on the grass, half gas then a quarter lock, where both
-    spin (yaw -6.1 / -6.2 after 100 frames; at most 0.83 apart). Tolerances: those gaps, rounded up."""
+    spin (yaw -6.1 / -6.2 after 100 frames; at most 0.83 apart). Tolerances: those gaps, rounded
+    up."""
     follow = jax.jit(
         lambda actions, grip: jax.lax.scan(
             lambda car, a: (lambda c: (c, jnp.stack([c.vel[0], c.yaw_rate, c.vel[1]])))(
@@ -635,8 +643,8 @@ def test_the_car_steps_beside_box2ds_car():
 
 def test_two_wheels_on_the_grass_turn_the_car_towards_them(env):
     """Each wheel grips by the surface under it (Box2D's per-wheel friction limit). From rest, full
-    gas, straight wheels, the car centred on the stadium straight's left edge (its left wheels on the
-    grass, 0.6 grip, its right ones on the road): the right rear wheel pushes harder and the car
+    gas, straight wheels, the car centred on the stadium straight's left edge (its left wheels on
+    the grass, 0.6 grip, its right ones on the road): the right rear wheel pushes harder and the car
     yaws left, onto the grass, and spins (measured: 1.8 rad in 1 s); on the right edge it yaws right
     as much; on the road's centre it keeps straight. Braking from 60 u/s with its left wheels on the
     grass, the road side brakes harder and it yaws right, away from the grass."""
@@ -738,7 +746,8 @@ def test_the_scripted_driver_keeps_to_the_road_at_30():
     """experiments/car_driver.py's pure-pursuit driver at 30 u/s on our tracks 0 and 1: it never
     leaves the road, and in 1000 frames (20 s, about 600 u at 30 u/s, a track being about 290 tiles
     of 3.5 u) it visits about 60% of the tiles (on Gymnasium's tracks for seeds 0..9 under the same
-    driver, Gymnasium's car 0.637 +- 0.052, ours 0.638 +- 0.052; experiments/results/car_driver.md)."""
+    driver, Gymnasium's car 0.637 +- 0.052, ours 0.638 +- 0.052;
+    experiments/results/car_driver.md)."""
     import car_driver  # experiments/car_driver.py (experiments/ is on pytest's path)
 
     result = car_driver.drive_ours(car_driver.our_tracks(2), 30.0)

@@ -60,7 +60,8 @@ def test_parity_with_gymnasium(idp_step, idp_state_at):
         alive += not terminated
         limit += obs[-1] != 0.0
     print(
-        f"max |d obs| {worst_obs:.2g}, |d reward| {worst_reward:.2g}; {terminal} terminal, {limit} at the limit"
+        f"max |d obs| {worst_obs:.2g}, |d reward| {worst_reward:.2g}; {terminal} terminal, {limit} "
+        "at the limit"
     )
     assert terminal > 10 and alive > 50 and limit > 5  # every branch was exercised
     assert worst_obs > 0  # float32 against float64

@@ -126,7 +126,8 @@ def test_wrap_angle_matches_gymnasium():
 
 
 def test_initial_state_distribution(env, params, swingto_params):
-    """Pendulum-v1's reset: theta ~ U[-pi, pi], dtheta ~ U[-1, 1]; goal 0 (swingup) or U[-pi/2, pi/2]."""
+    """Pendulum-v1's reset: theta ~ U[-pi, pi], dtheta ~ U[-1, 1]; goal 0 (swingup) or
+    U[-pi/2, pi/2]."""
     keys = jax.random.split(jax.random.key(7), 2000)
     init = jax.jit(jax.vmap(env.initial_state, in_axes=(0, None)))
     for p, goal_bound in ((params, 0.0), (swingto_params, np.pi / 2)):

@@ -28,15 +28,17 @@ warp_lang = pytest.mark.skipif(
     not physics.warp_installed(), reason="warp-lang not installed (pip install -e '.[gpu]')"
 )
 
-# The default tier's programs compile at LLVM's cheapest level (tests/conftest.py); Warp's CPU kernels
-# here too (warp.config.optimization_level 0, not Warp's -O2): with Warp's kernel cache cold, the file
-# took 118 s at -O2 and 96 s at 0, alone (2026-11-29, 2 cores). The slow tier keeps Warp's -O2.
+# The default tier's programs compile at LLVM's cheapest level (tests/conftest.py); Warp's CPU
+# kernels here too (warp.config.optimization_level 0, not Warp's -O2): with Warp's kernel cache
+# cold, the file took 118 s at -O2 and 96 s at 0, alone (2026-11-29, 2 cores). The slow tier keeps
+# Warp's -O2.
 KERNELS_AT_O0 = xla_tier.at_o0() and jax.default_backend() == "cpu"
 
 
 @pytest.fixture(scope="module", autouse=True)
 def warp_kernels_at_o0():
-    """Warp's CPU kernels at -O0 while this file runs in the default tier (its subprocess sets the same)."""
+    """Warp's CPU kernels at -O0 while this file runs in the default tier (its subprocess sets the
+    same)."""
     if not (KERNELS_AT_O0 and physics.warp_installed()):
         yield
         return
@@ -185,10 +187,10 @@ def test_warp_halfcheetah_parity(warp_cheetah):
 @warp_lang
 def test_warp_ant_parity_as_shipped(warp_ant):
     """MJX-Warp against Ant-v5 as Gymnasium ships it (pyramidal cones; Newton capped at 8
-    iterations since 2026-11-26, 4 when measured), with the JAX path's bounds (test_ant_parity_as_shipped; JAX measured |d obs|
-    1.49, |d reward| 0.41). Measured (CPU, 60 steps, 24 with contacts): |d obs| 2.0 (a clipped
-    contact force at +1 on one side, -1 on the other), |d qvel| 1.49, |d reward| 0.41;
-    termination identical."""
+    iterations since 2026-11-26, 4 when measured), with the JAX path's bounds
+    (test_ant_parity_as_shipped; JAX measured |d obs| 1.49, |d reward| 0.41). Measured (CPU, 60
+    steps, 24 with contacts): |d obs| 2.0 (a clipped contact force at +1 on one side, -1 on the
+    other), |d qvel| 1.49, |d reward| 0.41; termination identical."""
     worst = parity(warp_ant, "Ant-v5", 60)
     assert worst["contact"] > 20 and worst["terminal"] >= 0
     assert worst["obs"] < 3.0 and worst["reward"] < 1.0
@@ -242,7 +244,7 @@ model = InvertedDoublePendulum.make_mj_model()
 warp = physics.WarpPhysics(model)
 out = jax.jit(lambda q: warp.run(q, jnp.zeros(model.nv), jnp.zeros(model.nu), 1, False))(jnp.asarray(model.qpos0))
 print("stepped", bool(jnp.isfinite(out.qpos).all()))
-"""
+"""  # noqa: E501
 )
 
 

@@ -182,7 +182,8 @@ def test_normals_are_unit_face_the_camera_and_are_tangent_to_the_surface(world):
         )
     cos = np.concatenate(cos)
     print(
-        f"|cos| over {cos.size} pairs: 90th percentile {np.percentile(cos, 90):.2g}, max {cos.max():.2g}"
+        f"|cos| over {cos.size} pairs: 90th percentile {np.percentile(cos, 90):.2g}, max "
+        f"{cos.max():.2g}"
     )
     assert cos.size > 1000 and np.percentile(cos, 90) < 1e-3 and cos.max() < 0.2
 
@@ -325,7 +326,7 @@ def test_mesh_geoms_are_refused_unless_hidden():
       <asset><mesh name="tet" vertex="0 0 0  1 0 0  0 1 0  0 0 1"/></asset>
       <worldbody><geom type="plane" size="1 1 1"/><geom name="rock" type="mesh" mesh="tet" group="{}"/></worldbody>
     </mujoco>
-    """
+    """  # noqa: E501
     with pytest.raises(
         ValueError, match="'rock' is a mesh.*plane, sphere, capsule, ellipsoid, cylinder, box"
     ):

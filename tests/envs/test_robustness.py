@@ -1,15 +1,16 @@
 """Every registered env under extreme actions: observations, rewards and pictures stay finite, and
 AutoReset keeps starting episodes. Slow (`make test-slow`): 10^6 steps per env where they cost a few
-minutes on a 2-core CPU, fewer where they cost more and episodes end sooner (DRIVE_STEPS). Measured in
-the slow tier on 2 cores (2026-11-28, two tests at once), a step under these actions cost 6.1 ms for
-the ant (8 Newton iterations and 16 line-search steps since 2026-11-26: its 2 x 10^5 steps took 20
-minutes), 2.5 ms for the humanoid, 0.62 for the halfcheetah, 0.54 for the car, 0.39 for ant_fast and
-0.17 for the idp. HINTSJAX_DRIVE_STEPS=1000000 drives every env the full 10^6.
+minutes on a 2-core CPU, fewer where they cost more and episodes end sooner (DRIVE_STEPS). Measured
+in the slow tier on 2 cores (2026-11-28, two tests at once), a step under these actions cost 6.1 ms
+for the ant (8 Newton iterations and 16 line-search steps since 2026-11-26: its 2 x 10^5 steps took
+20 minutes), 2.5 ms for the humanoid, 0.62 for the halfcheetah, 0.54 for the car, 0.39 for ant_fast
+and 0.17 for the idp. HINTSJAX_DRIVE_STEPS=1000000 drives every env the full 10^6.
 
 Actions of +-1e6 are clipped by each env to its range (the pendulum's torque to +-2, MJX envs'
 controls to their ctrlrange, the car's steering, gas and brake to theirs). A NaN action is not
 sanitised: it makes that env's state NaN, as Gymnasium's envs do; in training the non-finite guard
-(hintsjax/training/guards.py) stops the run at the first non-finite loss, before any such state is saved.
+(hintsjax/training/guards.py) stops the run at the first non-finite loss, before any such state is
+saved.
 """
 
 from __future__ import annotations
@@ -24,16 +25,17 @@ import pytest
 from hintsjax import envs
 
 STEPS_PER_ENV = 10**6
-# Steps for the envs whose 10^6 would take more than about 5 minutes of the slow tier (the docstring's costs)
-# The halfcheetah and the car keep 10^6: their episodes end only at the 1000-step limit under these actions, which
-# 1000 envs reach only in 10^6 steps (at 5 x 10^5 none ended, 2026-11-28)
+# Steps for the envs whose 10^6 would take more than about 5 minutes of the slow tier (the
+# docstring's costs)
+# The halfcheetah and the car keep 10^6: their episodes end only at the 1000-step limit under these
+# actions, which 1000 envs reach only in 10^6 steps (at 5 x 10^5 none ended, 2026-11-28)
 DRIVE_STEPS = {"ant": 10**5, "humanoid": 10**5, "ant_fast": 5 * 10**5}
 EXTREMES = jnp.array([1e6, -1e6, 0.0])
 
 
 def steps_for(name: str) -> int:
-    """How many steps the drive gives env `name` (a multiple of 10^5): $HINTSJAX_DRIVE_STEPS for every env, else
-    STEPS_PER_ENV, or DRIVE_STEPS' count."""
+    """How many steps the drive gives env `name` (a multiple of 10^5): $HINTSJAX_DRIVE_STEPS for
+    every env, else STEPS_PER_ENV, or DRIVE_STEPS' count."""
     return int(os.environ.get("HINTSJAX_DRIVE_STEPS", 0)) or DRIVE_STEPS.get(name, STEPS_PER_ENV)
 
 

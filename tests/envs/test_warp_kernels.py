@@ -67,7 +67,7 @@ def first(keys):
     return jax.vmap(env.step, in_axes=(0, 0, 0, None))(keys, ts.state, jnp.zeros((2, env.action_size)), params)
 out = jax.jit(first)(keys)
 print("stepped", bool(jnp.isfinite(out.obs["state"]).all()))
-"""
+"""  # noqa: E501
 
 
 # Warp's CPU kernels for the idp built twice into empty caches: about 2 minutes on 2 cores
