@@ -98,7 +98,8 @@ def env_lines(runs: Path, env: str) -> list[str]:
     if all(result is None for _, result in results):
         return []
     learned = learned_result(env)
-    results.append(("learned", learned))
+    if learned is not None:
+        results.append(("learned", learned))
     rgb, hints = dict(results)["ppo_rgb"], dict(results)["hints"]
 
     def poi(x: dict | None, y: dict | None) -> str:
@@ -128,8 +129,8 @@ def env_lines(runs: Path, env: str) -> list[str]:
         )
     ppo = trained_ppo(runs, env, labels(env)[0])
     lines = [
-        f"## {env}: the privileged signal is the {SIGNAL[env]} "
-        f"{'state' if SIGNAL[env] == 'state' else 'hint'}",
+        f"## {env}: the privileged signal is the "
+        f"{'state' if SIGNAL[env] == 'state' else f'{SIGNAL[env]} hint'}",
         "",
         *markdown_table(
             [
@@ -153,6 +154,11 @@ def env_lines(runs: Path, env: str) -> list[str]:
             "The learned generator's row is learned_hints.py's archived "
             f"run {env}-{SIGNAL[env]}-learned-k{LEARNED_FRAMES} "
             "(experiments/results/learned_hints.md), trained apart from this sweep.",
+            "",
+        ]
+    else:
+        lines += [
+            f"No learned generator row: learned_hints.py trained none of the {SIGNAL[env]}.",
             "",
         ]
     return lines
