@@ -32,6 +32,32 @@ def test_the_readme_is_short_and_reaches_every_doc():
     assert "make run" in readme and "make test" in readme
 
 
+LIBRARY = sorted([*(ROOT / "hintsjax").rglob("*.py"), *(ROOT / "envs").rglob("*.py")])
+# a measurement's date or machine, which belongs in docs/ beside the command that made it
+DATED = re.compile(r"\b(H100|H200|A100|RTX ?\d{4}|20\d\d-[01]\d-[0-3]\d)\b")
+
+
+def test_library_modules_keep_short_docstrings_and_no_dated_measurements():
+    """A module's docstring says what it owns and why in at most 15 lines; dates and GPU names
+    (which go stale) stay out of hintsjax/ and envs/ (docs/ holds them with their commands)."""
+    import ast
+
+    long = {}
+    dated = []
+    for path in LIBRARY:
+        text = path.read_text()
+        doc = ast.get_docstring(ast.parse(text), clean=False) or ""
+        if len(doc.splitlines()) > 15:
+            long[str(path.relative_to(ROOT))] = len(doc.splitlines())
+        dated += [
+            f"{path.relative_to(ROOT)}:{n}"
+            for n, line in enumerate(text.splitlines(), 1)
+            if DATED.search(line)
+        ]
+    assert not long, long
+    assert not dated, dated
+
+
 def test_every_envs_resolved_configuration_matches_the_snapshot():
     """The resolved config of every shipped env x agent, as `python -m hintsjax.run env=E agent=A`
     resolves it, equals the stored snapshot (tests/data/resolved_configs.json). A deliberate change

@@ -12,8 +12,7 @@ Importing it registers `hintsjax/<env>-v0` for every env of the suite and every 
 "hintsjax.gym.playground:hintsjax/playground.CartpoleSwingup-v0", ...)`), and an env of your own
 by `register("mine")`. `hintsjax.gym.sb3` makes a vector env a Stable-Baselines3 VecEnv.
 
-Owns: the Gymnasium envs (core.py), their ids. Imports hintsjax.envs (and Gymnasium, the `gym`
-extra's), nothing of the learner.
+Owns: the Gymnasium envs (core.py), their ids; imports hintsjax.envs and Gymnasium (`gym` extra).
 """
 
 from __future__ import annotations
