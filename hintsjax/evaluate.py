@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 
 
-from hintsjax.system import checkpoint, memory, paths
+from hintsjax.system import checkpoint, folder_lock, memory, paths
 from hintsjax.system.devices import SeedLayout
 from hintsjax.cli.arguments import int32_arg, ArgumentParser
 from hintsjax.system.errors import UsageError, command
@@ -69,6 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     cfg = load_run_config(args.run)
+    folder_lock.say_if_training(args.run)
     if args.hint_source is not None:
         cfg = dataclasses.replace(cfg, eval_hint_source=args.hint_source).validate()
     variants = tuple(v.strip() for v in args.variant.split(",")) if args.variant else (cfg.variant,)

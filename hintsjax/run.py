@@ -21,7 +21,15 @@ import hydra
 from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
 
-from hintsjax.system import checkpoint, compilation_cache, devices, paths, requeue, xla_flags
+from hintsjax.system import (
+    checkpoint,
+    compilation_cache,
+    devices,
+    folder_lock,
+    paths,
+    requeue,
+    xla_flags,
+)
 from hintsjax.system.errors import (
     INTERRUPTED,
     TERMINATED,
@@ -87,15 +95,20 @@ def _run(values: dict[str, Any]) -> int:
     compilation_cache.enable(compilation_cache.folder(values.get("compilation_cache")))
     folder = RunFolder(asked, existed=paths.existing_part(asked.out_dir))
     try:
-        folder.open()
-    except Exception as e:  # noqa: BLE001  the boundary: a full disk or read-only folder, else a bug
-        where = folder.path or asked.out_dir
-        return report_machine(e, where) if machine_refused(e) else report_bug(e, folder.path)
-    try:
-        train(asked.cfg, folder.path, resume=folder.resume)
-    except (Exception, KeyboardInterrupt) as e:  # noqa: BLE001  each kind has its line
-        return stopped_early(e, folder)
-    return 0
+        try:
+            folder.open()
+        except UsageError as e:  # another run holds the folder
+            return report_usage(e)
+        except Exception as e:  # noqa: BLE001  the boundary: a full disk or read-only folder, else a bug
+            where = folder.path or asked.out_dir
+            return report_machine(e, where) if machine_refused(e) else report_bug(e, folder.path)
+        try:
+            train(asked.cfg, folder.path, resume=folder.resume)
+        except (Exception, KeyboardInterrupt) as e:  # noqa: BLE001  each kind has its line
+            return stopped_early(e, folder)
+        return 0
+    finally:
+        folder.release()
 
 
 @dataclass
@@ -109,28 +122,38 @@ class RunFolder:
     path: Path | None = None
     made: bool = False
     resume: bool = False
+    lock: folder_lock.FolderLock | None = None  # process 0's: one run at a time writes a folder
 
     def open(self) -> None:
-        """Make (or find) the folder and write its config; the folder is set as soon as it
-        exists."""
+        """Make (or find) the folder, take its lock (UsageError naming the run that holds it)
+        and write its config; the folder is set as soon as it exists."""
         asked = self.asked
         if asked.run_dir is not None:
             self.path, self.resume = asked.run_dir, True
-            if asked.longer and devices.is_main():
-                save_run_config(self.path, asked.cfg)  # the budget it now trains to
+            if devices.is_main():
+                self.lock = folder_lock.acquire(self.path)  # before anything is written
+                if asked.longer:
+                    save_run_config(self.path, asked.cfg)  # the budget it now trains to
             return
         if devices.is_main():
             self.path = requeued_run(asked.out_dir, asked.cfg)
             if self.path is None:
                 self.path, self.made = new_run_dir(asked.out_dir, asked.name, asked.cfg), True
+                self.lock = folder_lock.acquire(self.path)
                 save_run_config(self.path, asked.cfg)
                 requeue.record(self.path)
+            else:
+                self.lock = folder_lock.acquire(self.path)
         # the folder process 0 made (or found), on every process
         self.path = Path(devices.agree(str(self.path)))
         # a requeued run's newest checkpoint, if it had one (process 0 looks: the look tidies it)
         self.resume = devices.agree_that(
             devices.is_main() and checkpoint.latest_update(self.path) is not None
         )
+
+    def release(self) -> None:
+        if self.lock is not None:
+            self.lock.release()
 
     def take_back(self) -> None:
         """Remove the folder this call made if it holds only its config (and job.json)."""
@@ -139,7 +162,8 @@ class RunFolder:
             paths.unmake(path, self.existed)
 
 
-UNTRAINED = {CONFIG_YAML, requeue.JOB_JSON}  # what a run folder holds before its first update
+# what a run folder holds before its first update
+UNTRAINED = {CONFIG_YAML, requeue.JOB_JSON, folder_lock.LOCK}
 
 
 def stopped_early(error: BaseException, folder: RunFolder) -> int:

@@ -17,7 +17,7 @@ from pathlib import Path
 import jax
 
 from hintsjax import envs
-from hintsjax.system import checkpoint, memory, paths
+from hintsjax.system import checkpoint, folder_lock, memory, paths
 from hintsjax.cli.arguments import int32_arg, ArgumentParser
 from hintsjax.system.errors import UsageError, command
 from hintsjax.system.refusals import sized_by
@@ -70,6 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--fps", type=int32_arg, default=25, help="frames per second (default: 25)")
     args = parser.parse_args(argv)
     cfg = load_run_config(args.run)
+    folder_lock.say_if_training(args.run)
     variant = args.variant or cfg.variant or envs.variant_names(cfg.env)[0]
     env_params(cfg.env, variant)
     if not 0 <= args.seed < cfg.seeds:

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import orbax.checkpoint as ocp
 from flax import struct
 
-from hintsjax.system import checkpoint, paths
+from hintsjax.system import checkpoint, folder_lock, paths
 from hintsjax.system.checkpoint import on_this_device, require_same_arrays
 from hintsjax.system.errors import UsageError
 from hintsjax.models import normalization
@@ -87,6 +87,7 @@ def export(run_dir: Path, out_dir: Path | None = None, force: bool = False) -> P
     """Export the best seed of a finished state-based run as an expert folder; returns its path.
     An expert that is there already (a packaged one, by default) is replaced only with `force`."""
     cfg = load_run_config(run_dir)
+    folder_lock.say_if_training(run_dir)
     if cfg.agent_spec.observe != ("state",) or cfg.agent_spec.algorithm != "ppo":
         raise UsageError(
             f"{run_dir} trained {cfg.agent}; an expert comes from a state PPO run "
