@@ -182,7 +182,7 @@ def stopped_early(error: BaseException, folder: RunFolder) -> int:
         good = checkpoint.latest_update(run_dir)  # read once the background writes are done
         if devices.is_main():
             found = {**error.found, "last_good_checkpoint": good}
-            (run_dir / NONFINITE_JSON).write_text(json.dumps(found) + "\n")
+            paths.write_text_whole(run_dir / NONFINITE_JSON, json.dumps(found) + "\n")
         last = f"update {good}" if good else "none"
         print(f"error: {error}; last good checkpoint: {last} ({run_dir})", file=sys.stderr)
         return 1

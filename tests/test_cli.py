@@ -372,6 +372,30 @@ def test_sigterm_saves_the_newest_logged_state_the_uninterrupted_runs_bit_for_bi
     assert logged_returns(folder) == [r for r in logged_returns(finished_run) if int(r[0]) <= 2]
 
 
+def test_a_resume_with_damaged_small_files_repairs_them_and_ends_as_the_uninterrupted_run(
+    finished_run, tmp_path, capsys
+):
+    """The run folder's small files as a stop while they were written leaves them: seconds.json
+    empty, metrics.csv cut off in its last row after its checkpoint at update 2. The resume says
+    so in one line each, goes on from the checkpoint, and ends as the uninterrupted run: the same
+    logged returns and a whole eval.json (it once ended in a JSONDecodeError, a KeyError, or a
+    ValueError after training)."""
+    folder = tmp_path / "damaged"
+    shutil.copytree(finished_run, folder)
+    shutil.rmtree(folder / "checkpoints" / "4")
+    (folder / "eval.json").unlink()
+    (folder / "seconds.json").write_text("")
+    text = (folder / "metrics.csv").read_text()
+    cut = text.index("\n3,1,")  # into update 3's second row, written after the checkpoint
+    (folder / "metrics.csv").write_text(text[: cut + 8])
+    capsys.readouterr()
+    assert run.main_from_values({"resume": str(folder)}) == 0
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("warning")]
+    assert len(err) == 1 and "seconds.json is unreadable" in err[0], err
+    assert logged_returns(folder) == logged_returns(finished_run)
+    assert json.loads((folder / "eval.json").read_text())["evaluations"]
+
+
 # the dropped exception, as Python reports it
 @pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
 def test_a_sigterm_python_dropped_is_raised_again_where_training_checks():

@@ -61,9 +61,10 @@ def check_file(path: str | os.PathLike, what: str) -> None:
 
 
 def write_whole(path: str | os.PathLike, write: Callable[[Path], None]) -> None:
-    """`write(p)` of the file at `path`, whole or not at all: into a sibling, then renamed over it,
-    so a failed write (a full disk) leaves what was there; a path that is not a regular file
-    (/dev/stdout) is written directly. A refusal of the machine's is a WriteFailed naming `path`."""
+    """`write(p)` of the file at `path`, whole or not at all: into a sibling, flushed to the disk,
+    then renamed over it, so a failed write (a full disk) or a stop in the middle (Ctrl-C, a crash)
+    leaves what was there; a path that is not a regular file (/dev/stdout) is written directly. A
+    refusal of the machine's is a WriteFailed naming `path`."""
     path = Path(path)
     with writing_to(path):
         if path.exists() and not path.is_file():
@@ -72,6 +73,16 @@ def write_whole(path: str | os.PathLike, write: Callable[[Path], None]) -> None:
         part = path.with_name(f".{path.name}.part")
         try:
             write(part)
+            fd = os.open(part, os.O_RDONLY)
+            try:
+                os.fsync(fd)  # its bytes on the disk before the rename makes them the file
+            finally:
+                os.close(fd)
             part.replace(path)
         finally:
             part.unlink(missing_ok=True)
+
+
+def write_text_whole(path: str | os.PathLike, text: str) -> None:
+    """`text` as the file at `path`, whole or not at all (`write_whole`)."""
+    write_whole(path, lambda part: part.write_text(text))

@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from hintsjax.envs import physics
-from hintsjax.system import devices
+from hintsjax.system import devices, paths
 from hintsjax.system.errors import UsageError
 from hintsjax.settings.config import RunConfig
 
@@ -73,7 +73,7 @@ def first_nonfinite(metrics: dict[str, np.ndarray], after: int) -> dict[str, Any
 def stop_nonfinite(run_dir: Path, label: str, found: dict[str, Any]) -> None:
     """Record `found` in the run folder and raise NonFiniteError."""
     if devices.is_main():
-        (run_dir / NONFINITE_JSON).write_text(json.dumps(found) + "\n")
+        paths.write_text_whole(run_dir / NONFINITE_JSON, json.dumps(found) + "\n")
     where = f"seed(s) {found['seeds']}" + (
         f", member(s) {found['members']}" if "members" in found else ""
     )

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +21,7 @@ from tqdm import tqdm
 
 from hintsjax import envs
 from hintsjax.envs import physics
-from hintsjax.system import checkpoint, devices
+from hintsjax.system import checkpoint, devices, paths
 from hintsjax.system.signals import Terminated, raise_stop_asked, stops_deferred
 from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms.trainer import Trainer
@@ -43,9 +44,24 @@ MetricsWriter = Callable[[dict[str, np.ndarray], int], None]
 
 
 def seconds_trained(run_dir: Path) -> float:
-    """Training seconds that the newest checkpoint of `run_dir` holds (0 for a fresh folder)."""
+    """Training seconds that the newest checkpoint of `run_dir` holds (0 for a fresh folder). One
+    that cannot be read (damaged by hand, or cut by a stop before it was written whole) counts
+    from 0, with one line saying so: only eval.json's timings read it."""
     path = Path(run_dir) / SECONDS_JSON
-    return json.loads(path.read_text())["seconds"] if path.exists() else 0.0
+    if not path.exists():
+        return 0.0
+    try:
+        seconds = float(json.loads(path.read_text())["seconds"])
+        if not 0 <= seconds < float("inf"):
+            raise ValueError(seconds)
+        return seconds
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        print(
+            f"warning: {path} is unreadable ({type(e).__name__}); this run's training seconds "
+            "count from this call",
+            file=sys.stderr,
+        )
+        return 0.0
 
 
 @dataclass
@@ -278,7 +294,7 @@ class ChunkLoop:
                 "compile_seconds": self.compiled.seconds,
                 "trace_seconds": self.compiled.trace_seconds,
             }
-            (self.run_dir / SECONDS_JSON).write_text(json.dumps(seconds))
+            paths.write_text_whole(self.run_dir / SECONDS_JSON, json.dumps(seconds))
 
     def save_before_stopping(self, stop: KeyboardInterrupt) -> None:
         """Ctrl-C: `state` (at `done`, its metrics logged) is saved when a checkpoint is due;

@@ -10,7 +10,7 @@ from typing import Any
 
 import jax
 
-from hintsjax.system import devices, xla_flags
+from hintsjax.system import devices, paths, xla_flags
 from hintsjax.settings.config import RunConfig
 from hintsjax.evaluation.evaluator import metrics_text
 from hintsjax.evaluation.outliers import far_below_text
@@ -74,7 +74,7 @@ def write_results(
         return results
     # per seed; None where PPO logged no KL
     results["kl_storms"] = storms = kl_storms(run_dir / METRICS_CSV)
-    (run_dir / EVAL_JSON).write_text(json.dumps(results, indent=1))
+    paths.write_text_whole(run_dir / EVAL_JSON, json.dumps(results, indent=1))
     if (run_dir / METRICS_CSV).exists():
         plot_curves(
             {cfg.label: read_curves(run_dir / METRICS_CSV)},

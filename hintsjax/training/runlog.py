@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import csv
+import sys
 import warnings
+from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from hintsjax.system import paths
 from hintsjax.system.errors import UsageError
 
 METRICS_CSV = "metrics.csv"
@@ -32,6 +35,26 @@ def fresh_folder(base: Path) -> Path:
             folder, i = Path(base).with_name(f"{Path(base).name}-{i}"), i + 1
 
 
+def _complete(row: dict[str, str | None]) -> bool:
+    """Whether a metrics row was written whole: every column there, each a number, the update a
+    whole one (a row cut off mid-write lacks columns or ends in part of a number)."""
+    try:
+        values = [float(v) for v in row.values()]
+        return None not in row and float(row["update"]).is_integer() and bool(values)
+    except (TypeError, ValueError):
+        return False
+
+
+def _spans(numbers: list[int]) -> str:
+    """1, 2, 3, 7 -> '1-3, 7'."""
+    spans, start = [], numbers[0]
+    for prev, n in zip(numbers, [*numbers[1:], None]):
+        if n != prev + 1 if n is not None else True:
+            spans.append(f"{start}-{prev}" if prev > start else f"{start}")
+            start = n
+    return ", ".join(spans)
+
+
 class RunLog:
     """Appends per-update, per-seed metric rows to metrics.csv and means to TensorBoard."""
 
@@ -51,28 +74,55 @@ class RunLog:
             return list(csv.DictReader(f))
 
     def _rewrite(self, rows: Iterable[dict[str, str]]) -> None:
-        """The file anew with `self.columns` and `rows` (NaN in a column a row lacks)."""
-        with self.path.open("w", newline="") as f:
-            writer = csv.DictWriter(f, self.columns, restval="nan")
-            writer.writeheader()
-            writer.writerows(rows)
+        """The file anew with `self.columns` and `rows` (NaN in a column a row lacks), whole or not
+        at all (paths.write_whole)."""
+        rows = list(rows)
+
+        def write(part: Path) -> None:
+            with part.open("w", newline="") as f:
+                writer = csv.DictWriter(f, self.columns, restval="nan")
+                writer.writeheader()
+                writer.writerows(rows)
+
+        paths.write_whole(self.path, write)
 
     def _truncate(self, update: int) -> None:
-        """Drop rows written after the checkpoint being resumed from; UsageError, the file left as
-        it is, if it is not a metrics.csv this package wrote (no `update` column, or a row whose
-        update is not a whole number)."""
+        """Keep the rows of the `update` updates the resumed checkpoint holds: rows written after
+        it go, and so does a row cut off as it was written (a stop mid-append), with one line
+        naming the updates the file lacks, if any (its curve goes on without them); an empty
+        file starts anew. UsageError, the file left as it is, if it is not a metrics.csv this
+        package wrote (no `update` column, or a row whose update is not a whole number)."""
         try:
-            rows = self._rows()
-            kept = [r for r in rows if int(r["update"]) <= update]
+            with self.path.open(newline="") as f:
+                reader = csv.DictReader(f)
+                rows, columns = list(reader), reader.fieldnames
+            if columns is None:  # empty: nothing was logged, or nothing survived
+                self.path.unlink()
+                self._say_missing(range(1, update + 1))
+                return
+            if "update" not in columns:
+                raise KeyError("update")
+            whole = [r for r in rows if _complete(r)]
+            kept = [r for r in whole if int(r["update"]) <= update]
         except (KeyError, TypeError, ValueError, UnicodeDecodeError, csv.Error) as e:
             raise UsageError(
                 f"{self.path} is not a metrics file of this run ({type(e).__name__}); "
                 "move it away to resume (the run's checkpoints are intact)"
             ) from None
-        if not rows:
-            return
-        self.columns = list(rows[0])
+        self.columns = list(columns)
+        seeds = {r["seed"] for r in kept}  # an update is logged when each seed has its row
+        rows_of = Counter(int(r["update"]) for r in kept)
+        self._say_missing([u for u in range(1, update + 1) if rows_of[u] < max(len(seeds), 1)])
         self._rewrite(kept)
+
+    def _say_missing(self, updates: Iterable[int]) -> None:
+        updates = list(updates)
+        if updates:
+            print(
+                f"warning: {self.path} lacks the rows of updates {_spans(updates)} (lost from the "
+                "file); the run goes on from its checkpoint, its curve without them",
+                file=sys.stderr,
+            )
 
     def _widen(self, names: list[str]) -> None:
         """Add columns for metrics that a resumed run's file predates (a metric added to the code
