@@ -20,7 +20,7 @@ from pathlib import Path
 
 from hintsjax.system import checkpoint, folder_lock, memory, paths
 from hintsjax.system.devices import SeedLayout
-from hintsjax.cli.arguments import int32_arg, ArgumentParser
+from hintsjax.cli.arguments import ArgumentParser, int32_arg
 from hintsjax.system.errors import UsageError, command
 from hintsjax.system.refusals import sized_by
 from hintsjax.settings.config import env_params

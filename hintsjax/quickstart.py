@@ -21,7 +21,7 @@ from pathlib import Path
 import jax
 
 from hintsjax.system import checkpoint, compilation_cache, paths
-from hintsjax.cli.arguments import int32_arg, ArgumentParser
+from hintsjax.cli.arguments import ArgumentParser, int32_arg
 from hintsjax.system.errors import command
 from hintsjax.system.refusals import writing_to
 from hintsjax.cli import choices

@@ -39,7 +39,7 @@ from hintsjax.system.errors import (
     report_usage,
 )
 from hintsjax.system.refusals import machine_refused, report_machine
-from hintsjax.system.signals import sigterm_as_interrupt, Terminated
+from hintsjax.system.signals import Terminated, sigint_as_interrupt, sigterm_as_interrupt
 from hintsjax.settings import schema
 from hintsjax.settings.config import RunConfig
 from hintsjax.settings.layers import CONFIG_YAML, load_run_config, save_run_config
@@ -55,8 +55,8 @@ def main_from_values(values: dict[str, Any]) -> int:
     cluster's time limit or preemption) is handled as Ctrl-C is, and always saves the newest state
     whose metrics are logged; so is submitit's preemption signal, after which submitit requeues
     the job (system/requeue.py)."""
-    # submitit's own handler kept, whatever its signal
-    with requeue.preemption_as_interrupt(), sigterm_as_interrupt():
+    # submitit's own handler kept, whatever its signal; Ctrl-C while compiling is not lost
+    with requeue.preemption_as_interrupt(), sigterm_as_interrupt(), sigint_as_interrupt():
         try:
             return _run(values)
         except requeue.Preempted as e:  # before the run had a folder: nothing to save
@@ -129,11 +129,16 @@ class RunFolder:
         and write its config; the folder is set as soon as it exists."""
         asked = self.asked
         if asked.run_dir is not None:
-            self.path, self.resume = asked.run_dir, True
+            self.path = asked.run_dir
             if devices.is_main():
                 self.lock = folder_lock.acquire(self.path)  # before anything is written
-                if asked.longer:
-                    save_run_config(self.path, asked.cfg)  # the budget it now trains to
+            self.resume = devices.agree_that(
+                devices.is_main() and checkpoint.latest_update(self.path) is not None
+            )
+            if not self.resume:  # stopped before its first checkpoint: it trains from the start
+                self.check_startable()
+            if asked.longer and devices.is_main():
+                save_run_config(self.path, asked.cfg)  # the budget it now trains to
             return
         if devices.is_main():
             self.path = requeued_run(asked.out_dir, asked.cfg)
@@ -150,6 +155,21 @@ class RunFolder:
         self.resume = devices.agree_that(
             devices.is_main() and checkpoint.latest_update(self.path) is not None
         )
+
+    def check_startable(self) -> None:
+        """UsageError for a resumed folder without a checkpoint that finished (its eval.json: its
+        checkpoints were lost, not yet written); else one line saying it trains from the start."""
+        if (self.path / EVAL_JSON).exists():
+            raise UsageError(
+                f"{self.path} finished (its eval.json) but holds no checkpoint in "
+                f"{self.path / checkpoint.CHECKPOINTS} to go on from"
+            )
+        if devices.is_main():
+            print(
+                f"note: {self.path} holds no checkpoint yet (stopped before its first): it trains "
+                "from the start",
+                file=sys.stderr,
+            )
 
     def release(self) -> None:
         if self.lock is not None:

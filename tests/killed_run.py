@@ -63,13 +63,14 @@ def main() -> None:
     if mode == "interrupt":
         # Python raises KeyboardInterrupt on SIGINT only if the signal was not ignored when it
         # started (a test runner's child may inherit SIG_IGN; a terminal's never does), and a
-        # library may take the handler over: set Python's own, and check it is still there
+        # library may take the handler over: set Python's own, and check that at the first report
+        # the run's own stands in for it (hintsjax/system/signals.py's sigint_as_interrupt)
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
         def interrupt() -> None:
             handler = signal.getsignal(signal.SIGINT)
-            if handler is not signal.default_int_handler:
-                sys.exit(f"SIGINT's handler at the first report is {handler!r}, not Python's own")
+            if getattr(handler, "__qualname__", "") != "signal_as_interrupt.<locals>.handler":
+                sys.exit(f"SIGINT's handler at the first report is {handler!r}, not hintsjax's")
             # As Ctrl-C, but raised in this (the main) thread, so it takes effect here and now
             signal.raise_signal(signal.SIGINT)
 

@@ -427,6 +427,57 @@ def test_a_sigterm_python_dropped_is_raised_again_where_training_checks():
                 signals.raise_stop_asked()
 
 
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
+@pytest.mark.parametrize("sent", [signal.SIGTERM, signal.SIGINT], ids=["sigterm", "ctrl-c"])
+def test_a_stop_while_compiling_is_honoured_and_its_folder_resumes_from_the_start(
+    sent, finished_run, tmp_path, monkeypatch, capsys
+):
+    """A signal while the run still compiles, its exception dropped by Python inside a garbage
+    collector's callback (as JAX's gc callback did: "Exception ignored in ... KeyboardInterrupt",
+    and the run then trained to its end), stops the run before its first state with the line
+    that names the command going on (exit 143 or 130); that resume, of a folder with its config
+    and no checkpoint, trains from the start and ends as the uninterrupted run, bit for bit."""
+    real = loop.compile_training
+
+    def signalled_inside(phase, info):
+        if phase == "start":
+            gc.callbacks.remove(signalled_inside)
+            signal.raise_signal(sent)
+
+    def compiling(*args, **kwargs):
+        compiled = real(*args, **kwargs)
+        gc.callbacks.append(signalled_inside)
+        gc.collect()  # the signal's exception is raised in the callback, and dropped
+        return compiled
+
+    monkeypatch.setattr(loop, "compile_training", compiling)
+    folder = tmp_path / "compiling"
+    status = run.main_from_values(tiny_values(out_dir=str(tmp_path), name="compiling"))
+    assert status == {signal.SIGTERM: 143, signal.SIGINT: 130}[sent]
+    stopped = "terminated (SIGTERM)" if sent == signal.SIGTERM else "interrupted"
+    assert capsys.readouterr().err.strip().splitlines()[-1] == (
+        f"{stopped}; no checkpoint yet; go on with: python -m hintsjax.run resume={folder}"
+    )
+    assert checkpoint.latest_update(folder) is None and not (folder / "metrics.csv").exists()
+    monkeypatch.setattr(loop, "compile_training", real)
+    assert run.main_from_values({"resume": str(folder)}) == 0
+    assert "holds no checkpoint yet (stopped before its first): it trains from the start" in (
+        capsys.readouterr().err
+    )
+    for a, b in zip(state_arrays(folder), state_arrays(finished_run), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert logged_returns(folder) == logged_returns(finished_run)
+
+
+def test_a_finished_folder_that_lost_its_checkpoints_is_refused_on_resume(finished_run, tmp_path):
+    folder = tmp_path / "lost"
+    shutil.copytree(finished_run, folder)
+    shutil.rmtree(folder / "checkpoints")
+    before = {p.name: p.stat().st_mtime_ns for p in folder.iterdir()}
+    assert run.main_from_values({"resume": str(folder)}) == 2
+    assert {p.name: p.stat().st_mtime_ns for p in folder.iterdir()} == before
+
+
 def test_a_sweep_is_expanded_in_hydras_order_with_every_value_checked_first():
     jobs = overrides.sweep_jobs(
         ["-m", "seeds=1,2", "scheme=lc,fc", "ppo.num_envs=4", "hydra/launcher=basic"]

@@ -22,7 +22,7 @@ from typing import Any, Callable
 
 from hintsjax.system import paths
 from hintsjax.system.errors import TERMINATED
-from hintsjax.system.signals import signal_as_interrupt, Terminated
+from hintsjax.system.signals import Terminated, signal_as_interrupt
 
 # {"job_id", "executor", "cluster"}: the submitit job that made the run folder
 JOB_JSON = "job.json"

@@ -78,3 +78,10 @@ def raise_stop_asked() -> None:
 def sigterm_as_interrupt():
     """Within this block SIGTERM raises Terminated in the main thread (`signal_as_interrupt`)."""
     return signal_as_interrupt(signal.SIGTERM, lambda number, frame: Terminated())
+
+
+def sigint_as_interrupt():
+    """Within this block Ctrl-C (SIGINT) raises KeyboardInterrupt as Python's own handler does, and
+    keeps its stop (`signal_as_interrupt`): one that Python drops inside a garbage collector's
+    callback (JAX's, while a program compiles) is raised at the next safe point, not lost."""
+    return signal_as_interrupt(signal.SIGINT, lambda number, frame: KeyboardInterrupt())

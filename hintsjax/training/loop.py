@@ -111,6 +111,7 @@ def start_training(
         check_fits(compiled.run_chunk, label)
     else:
         check_run_fits(compiled.run_chunk, cfg)
+    raise_stop_asked()  # a signal while compiling (whose exception Python may have dropped)
     before_first_state()
     # a checkpoint holds the run's own seeds, restored onto one device: padded and placed as at the
     # start

@@ -45,6 +45,17 @@ def _complete(row: dict[str, str | None]) -> bool:
         return False
 
 
+def _cut_short(row: dict[str, str | None]) -> bool:
+    """Whether a metrics row is the start of one (a stop as it was appended): its columns run out
+    early, and those there are numbers (the last perhaps a part of one)."""
+    present = [v for k, v in row.items() if k is not None and v is not None]
+    try:
+        [float(v) for v in present if v != ""]
+    except ValueError:
+        return False
+    return None not in row and len(present) < len(row)
+
+
 def _spans(numbers: list[int]) -> str:
     """1, 2, 3, 7 -> '1-3, 7'."""
     spans, start = [], numbers[0]
@@ -88,7 +99,7 @@ class RunLog:
 
     def _truncate(self, update: int) -> None:
         """Keep the rows of the `update` updates the resumed checkpoint holds: rows written after
-        it go, and so does a row cut off as it was written (a stop mid-append), with one line
+        it go, and so does a last row cut off as it was written (a stop mid-append), with one line
         naming the updates the file lacks, if any (its curve goes on without them); an empty
         file starts anew. UsageError, the file left as it is, if it is not a metrics.csv this
         package wrote (no `update` column, or a row whose update is not a whole number)."""
@@ -102,8 +113,11 @@ class RunLog:
                 return
             if "update" not in columns:
                 raise KeyError("update")
-            whole = [r for r in rows if _complete(r)]
-            kept = [r for r in whole if int(r["update"]) <= update]
+            if rows and _cut_short(rows[-1]):  # cut off as it was appended
+                rows = rows[:-1]
+            kept = [r for r in rows if int(r["update"]) <= update]
+            if not all(_complete(r) for r in kept):
+                raise ValueError("a row that is not numbers")
         except (KeyError, TypeError, ValueError, UnicodeDecodeError, csv.Error) as e:
             raise UsageError(
                 f"{self.path} is not a metrics file of this run ({type(e).__name__}); "
