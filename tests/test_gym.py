@@ -120,6 +120,55 @@ def test_a_bad_name_is_one_line_naming_the_valid_choices(kwargs, says):
         )
 
 
+@pytest.mark.parametrize(
+    "make, error, says",
+    [
+        (lambda: VectorEnv("pendulum", 2.7), TypeError, "num_envs must be an int, got 2.7"),
+        (lambda: VectorEnv("pendulum", True), TypeError, "num_envs must be an int, got True"),
+        (lambda: VectorEnv("pendulum", 2, observe=5), TypeError, "observe must be one of"),
+        (lambda: VectorEnv("pendulum", 10**9), ValueError, "num_envs=1000000000 cannot fit"),
+        (lambda: VectorEnv("pendulum", 2).reset(seed="12"), TypeError, "seed must be an int"),
+        (lambda: VectorEnv("pendulum", 2).reset(seed=[0.5, 1.9]), TypeError, "seed must be an int"),
+        (lambda: VectorEnv("pendulum", 2).reset(seed=2.0), TypeError, "seed must be an int"),
+    ],
+    ids=[
+        "num_envs-float",
+        "num_envs-bool",
+        "observe-int",
+        "num_envs-huge",
+        "seed-str",
+        "seed-floats",
+        "seed-float",
+    ],
+)
+def test_a_bad_value_is_one_line_naming_the_argument(make, error, says):
+    """Gymnasium's conventions: a TypeError or ValueError naming the argument, never a value
+    rounded (num_envs=2.7 made 2 envs) or read digit by digit (seed="12" as [1, 2]), and a batch
+    that cannot fit refused before anything is allocated (10**9 envs grew past 6 GB)."""
+    with pytest.raises(error) as raised:
+        make()
+    assert says in str(raised.value) and "\n" not in str(raised.value), str(raised.value)
+
+
+def test_a_non_finite_action_is_refused_naming_the_env():
+    """A NaN or infinite action raises a ValueError naming the env, in the vector and the single
+    env alike (it went on silently: NaN hints and rewards, black pictures, for good); the env's
+    state is as before, so a finite action then steps on."""
+    env = gymnasium.make_vec(ID, num_envs=N, **SETTINGS)
+    env.reset(seed=SEED)
+    for bad in (np.nan, np.inf):
+        a = np.zeros((N, 1), np.float32)
+        a[1, 0] = bad
+        with pytest.raises(ValueError, match="actions must be finite numbers; env 1 got"):
+            env.step(a)
+    obs, reward, *_ = env.step(np.zeros((N, 1), np.float32))
+    assert np.isfinite(reward).all() and np.isfinite(obs["hint"]).all()
+    single = SingleEnv("pendulum", **SETTINGS)
+    single.reset(seed=SEED)
+    with pytest.raises(ValueError, match="actions must be finite numbers; env 0 got"):
+        single.step(np.array([np.nan], np.float32))
+
+
 def test_every_registered_env_has_an_id():
     # Playground's ids come with `import hintsjax.gym.playground`; another test file may have
     # registered one of its tasks in hintsjax's registry before this runs

@@ -16,6 +16,7 @@ ended episode is in `info["final_obs"]`, as Gymnasium's vector envs put it).
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any, Callable, Sequence
@@ -53,6 +54,11 @@ def _observe(observe: str | Sequence[str] | None, hint: envs.Hint) -> tuple[tupl
     (one key as a string). None: the pixels, and the hint where it has a width."""
     if observe is None:
         observe = ("pixels", "hint") if hint.dim else ("pixels",)
+    names = ", ".join(envs.OBS_KEYS)
+    if not isinstance(observe, str) and not (
+        isinstance(observe, Sequence) and all(isinstance(k, str) for k in observe)
+    ):
+        raise TypeError(f"observe must be one of {names}, or a list of them; got {observe!r}")
     keys = (observe,) if isinstance(observe, str) else tuple(observe)
     for key in keys:
         envs.choose("observation key", key, dict.fromkeys(envs.OBS_KEYS))
@@ -187,17 +193,56 @@ def _host(tree: Any) -> Any:
 
 
 def _seeds(seed: int | Sequence[int] | None, num_envs: int) -> list[int] | None:
-    """Each env's seed: s + i for a seed s, a list as given (one per env), None for none."""
+    """Each env's seed: s + i for a seed s, a list as given (one per env), None for none;
+    TypeError for anything else (a string, a float: never read digit by digit or rounded)."""
     if seed is None:
         return None
-    seeds = (
-        [int(seed) + i for i in range(num_envs)]
-        if isinstance(seed, (int, np.integer))
-        else [int(s) for s in seed]
-    )
+    if _whole(seed):
+        seeds = [int(seed) + i for i in range(num_envs)]
+    elif isinstance(seed, Sequence) and not isinstance(seed, str) and all(map(_whole, seed)):
+        seeds = [int(s) for s in seed]
+    else:
+        raise TypeError(f"seed must be an int or a list of {num_envs} ints, got {seed!r}")
     if len(seeds) != num_envs or min(seeds) < 0:
         raise ValueError(f"seed={seed!r}: give one non-negative int, or a list of {num_envs}")
     return seeds
+
+
+def _whole(value: Any) -> bool:
+    """An int as Gymnasium takes one (NumPy's too), not a bool."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+def _finite(actions: np.ndarray) -> np.ndarray:
+    """`actions` (float32), or ValueError naming the first env whose action is NaN or infinite:
+    the physics would carry it on silently (NaN states, hints and rewards, black pictures)."""
+    bad = ~np.isfinite(actions.reshape(actions.shape[0], -1)).all(axis=1)
+    if bad.any():
+        raise ValueError(
+            f"actions must be finite numbers; env {int(np.flatnonzero(bad)[0])} got "
+            f"{actions[int(np.flatnonzero(bad)[0])].tolist()}"
+        )
+    return actions
+
+
+def _check_fits(settings: _Settings, num_envs: int) -> None:
+    """ValueError naming num_envs when its pictures alone (uint8, and the float32 the renderer
+    draws them in) pass the device's memory: found before anything is allocated."""
+    side = settings.programs.env.image_size if "pixels" in settings.keys else 0
+    need = num_envs * side * side * 3 * (1 + 4)
+    device = jax.local_devices()[0]
+    stats = device.memory_stats() if device.platform != "cpu" else None
+    have = (
+        int(stats["bytes_limit"])
+        if stats and "bytes_limit" in stats
+        else os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    )
+    if need > have:
+        most = have // max(side * side * 3 * 5, 1)
+        raise ValueError(
+            f"num_envs={num_envs} cannot fit: its pictures alone need {need / 2**30:.1f} GiB, a "
+            f"device has {have / 2**30:.1f} GiB; at most about {most} envs"
+        )
 
 
 def _no_options(options: dict[str, Any] | None) -> None:
@@ -230,9 +275,12 @@ class VectorEnv(gymnasium.vector.VectorEnv):
         image_size: int | None = None,
         physics: str = envs.AUTO,
     ):
-        if int(num_envs) < 1:
+        if not _whole(num_envs):
+            raise TypeError(f"num_envs must be an int, got {num_envs!r}")
+        if num_envs < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
         self.settings = _Settings(env, hint, variant, observe, image_size, physics)
+        _check_fits(self.settings, int(num_envs))
         self.num_envs = int(num_envs)
         self.single_observation_space = self.settings.observation_space
         self.single_action_space = self.settings.action_space
@@ -265,7 +313,8 @@ class VectorEnv(gymnasium.vector.VectorEnv):
         ended, info['final_obs'][i] is its last observation (`_final_obs` marks which)."""
         if self._keys is None:
             raise gymnasium.error.ResetNeeded("call reset() before step()")
-        actions = jnp.asarray(np.asarray(actions, np.float32).reshape(self.action_space.shape))
+        actions = _finite(np.asarray(actions, np.float32).reshape(self.action_space.shape))
+        actions = jnp.asarray(actions)
         self._keys, self._states, *out = self.settings.programs.vector_step(
             self._keys, self._states, actions, self.settings.params
         )
@@ -334,7 +383,8 @@ class SingleEnv(gymnasium.Env):
         env)."""
         if self._key is None:
             raise gymnasium.error.ResetNeeded("call reset() before step()")
-        action = jnp.asarray(np.asarray(action, np.float32).reshape(self.action_space.shape))
+        action = np.asarray(action, np.float32).reshape(self.action_space.shape)
+        action = jnp.asarray(_finite(action[None])[0])
         self._key, sub = self.settings.programs.split(self._key)
         ts = self.settings.programs.step(sub, self._state, action, self.settings.params)
         self._state = ts.state
