@@ -78,8 +78,13 @@ def _playground() -> Adapter:
 
 
 def _brax() -> Adapter:
-    from hintsjax.envs import brax_env  # imports brax only when a brax: env is asked for
-
+    try:  # imports brax only when a brax: env is asked for
+        from hintsjax.envs import brax_env
+    except ImportError as e:  # a pinned dependency that does not import here: the machine's set-up
+        raise adapter.EnvUnavailable(
+            f"env=brax:<name> needs Brax, which does not import here ({type(e).__name__}: {e}); "
+            "reinstall the project's pins: pip install -e ."
+        ) from None
     return Adapter(brax_env.load, brax_env.training)
 
 

@@ -45,6 +45,7 @@ from hintsjax.settings.config import RunConfig
 from hintsjax.settings.layers import CONFIG_YAML, load_run_config, save_run_config
 from hintsjax.cli import choices, overrides
 from hintsjax.training.guards import NONFINITE_JSON, NonFiniteError
+from hintsjax.training.loop import SECONDS_JSON
 from hintsjax.training.outputs import EVAL_JSON, new_run_dir
 from hintsjax.training.pipeline import train
 from hintsjax.training.request import Request, checked_request, rounded_budget
@@ -84,8 +85,8 @@ def _run(values: dict[str, Any]) -> int:
         asked = checked_request(values)
     except UsageError as e:
         return report_usage(e)
-    except Exception as e:  # noqa: BLE001  the boundary: a bug, not bad input
-        return report_bug(e)
+    except Exception as e:  # noqa: BLE001  the boundary: the machine's set-up, else a bug
+        return report_machine(e) if machine_refused(e) else report_bug(e)
     named = any(
         (values.get("ppo") or {}).get(k) is not None for k in ("total_env_steps", "batch_size")
     )
@@ -130,8 +131,7 @@ class RunFolder:
         asked = self.asked
         if asked.run_dir is not None:
             self.path = asked.run_dir
-            if devices.is_main():
-                self.lock = folder_lock.acquire(self.path)  # before anything is written
+            self.take_lock()  # before anything is written
             self.resume = devices.agree_that(
                 devices.is_main() and checkpoint.latest_update(self.path) is not None
             )
@@ -144,26 +144,41 @@ class RunFolder:
             self.path = requeued_run(asked.out_dir, asked.cfg)
             if self.path is None:
                 self.path, self.made = new_run_dir(asked.out_dir, asked.name, asked.cfg), True
-                self.lock = folder_lock.acquire(self.path)
-                save_run_config(self.path, asked.cfg)
-                requeue.record(self.path)
-            else:
-                self.lock = folder_lock.acquire(self.path)
         # the folder process 0 made (or found), on every process
         self.path = Path(devices.agree(str(self.path)))
+        self.take_lock()
+        if self.made:
+            save_run_config(self.path, asked.cfg)
+            requeue.record(self.path)
         # a requeued run's newest checkpoint, if it had one (process 0 looks: the look tidies it)
         self.resume = devices.agree_that(
             devices.is_main() and checkpoint.latest_update(self.path) is not None
         )
 
+    def take_lock(self) -> None:
+        """Process 0 takes the folder's lock; every process raises the same UsageError if another
+        run holds it (none waits on a process that has given up)."""
+        refused = ""
+        if devices.is_main():
+            try:
+                self.lock = folder_lock.acquire(self.path)
+            except UsageError as e:
+                refused = str(e)
+        refused = devices.agree(refused)
+        if refused:
+            raise UsageError(refused)
+
     def check_startable(self) -> None:
-        """UsageError for a resumed folder without a checkpoint that finished (its eval.json: its
-        checkpoints were lost, not yet written); else one line saying it trains from the start."""
-        if (self.path / EVAL_JSON).exists():
-            raise UsageError(
-                f"{self.path} finished (its eval.json) but holds no checkpoint in "
-                f"{self.path / checkpoint.CHECKPOINTS} to go on from"
-            )
+        """UsageError for a resumed folder without a checkpoint that once had one (its eval.json or
+        seconds.json, which every save writes: its checkpoints were lost, and training from the
+        start would drop its log); else one line saying it trains from the start."""
+        for saved in (EVAL_JSON, SECONDS_JSON):
+            if (self.path / saved).exists():
+                raise UsageError(
+                    f"{self.path} has no checkpoint in {self.path / checkpoint.CHECKPOINTS} but "
+                    f"saved one before (its {saved}): its checkpoints were lost; start a new run "
+                    "(or put them back)"
+                )
         if devices.is_main():
             print(
                 f"note: {self.path} holds no checkpoint yet (stopped before its first): it trains "

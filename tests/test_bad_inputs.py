@@ -8,8 +8,10 @@ Writes the machine refuses (a full disk) and memory it lacks are one line too, e
 from __future__ import annotations
 
 import errno
+import os
 from pathlib import Path
 
+import jax
 import pytest
 import yaml
 
@@ -181,6 +183,77 @@ def test_a_file_written_whole_keeps_what_was_there_when_the_disk_fills(tmp_path)
     with pytest.raises(PermissionError):  # not the machine's refusal of a write: passes as it was
         with refusals.writing_to(out):
             raise PermissionError(errno.ENOTDIR, "not this")
+
+
+def _has_cuda() -> bool:
+    try:
+        return bool(jax.devices("cuda"))
+    except RuntimeError:
+        return False
+
+
+@pytest.mark.parametrize(
+    "platforms, command",
+    [
+        ("bogus", "run"),
+        pytest.param("bogus", "evaluate", marks=pytest.mark.slow),
+        pytest.param(
+            "cuda",
+            "run",
+            marks=[pytest.mark.slow, pytest.mark.skipif(_has_cuda(), reason="a GPU is here")],
+        ),
+        pytest.param(
+            "cuda",
+            "evaluate",
+            marks=[pytest.mark.slow, pytest.mark.skipif(_has_cuda(), reason="a GPU is here")],
+        ),
+    ],
+)
+def test_a_platform_jax_cannot_start_is_the_machines_set_up_in_one_line(
+    platforms, command, tmp_path
+):
+    """JAX_PLATFORMS naming a platform the machine lacks (cuda without a GPU: JAX's own
+    AssertionError; an unknown one: its RuntimeError) is one line naming it and what to do, exit 1,
+    nothing written; it was 'a bug in hintsjax (AssertionError)'."""
+    import subprocess
+    import sys
+
+    from hintsjax.settings.layers import run_config, save_run_config
+
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    save_run_config(folder, run_config({"env": "pendulum"}))
+    args = ["env=pendulum", "out_dir=runs"] if command == "run" else [str(folder)]
+    out = subprocess.run(
+        [sys.executable, "-m", f"hintsjax.{command}", *args],
+        cwd=tmp_path,
+        env={**os.environ, "JAX_PLATFORMS": platforms, "HINTSJAX_DEBUG": "0"},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    lines = out.stderr.strip().splitlines()
+    assert out.returncode == 1 and len(lines) == 1, out.stderr[-2000:]
+    assert lines[0].startswith(
+        f"error: JAX could not start a backend for JAX_PLATFORMS='{platforms}'"
+    )
+    assert "set JAX_PLATFORMS to one this machine has (cpu)" in lines[0]
+    assert not (tmp_path / "runs").exists()
+
+
+def test_an_adapter_whose_package_does_not_import_is_one_line(monkeypatch):
+    """Brax (a pinned dependency) that does not import here: one line naming it and the install
+    command, as Playground's absence already was; it was 'a bug (ModuleNotFoundError)'."""
+    import sys
+
+    from hintsjax import envs as registry
+
+    monkeypatch.setitem(sys.modules, "hintsjax.envs.brax_env", None)  # import fails
+    monkeypatch.delattr(registry, "brax_env", raising=False)  # (imported by an earlier test)
+    with pytest.raises(
+        ValueError, match="needs Brax, which does not import here .*pip install -e ."
+    ):
+        registry.ADAPTERS["brax"]()  # what env=brax:<name> calls first
 
 
 def test_a_run_whose_folder_is_read_only_or_whose_device_runs_out_of_memory_says_so_in_one_line(

@@ -428,7 +428,11 @@ def test_a_sigterm_python_dropped_is_raised_again_where_training_checks():
 
 
 @pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
-@pytest.mark.parametrize("sent", [signal.SIGTERM, signal.SIGINT], ids=["sigterm", "ctrl-c"])
+@pytest.mark.parametrize(
+    "sent",
+    [pytest.param(signal.SIGTERM, marks=pytest.mark.slow), signal.SIGINT],
+    ids=["sigterm", "ctrl-c"],
+)
 def test_a_stop_while_compiling_is_honoured_and_its_folder_resumes_from_the_start(
     sent, finished_run, tmp_path, monkeypatch, capsys
 ):
@@ -469,13 +473,40 @@ def test_a_stop_while_compiling_is_honoured_and_its_folder_resumes_from_the_star
     assert logged_returns(folder) == logged_returns(finished_run)
 
 
-def test_a_finished_folder_that_lost_its_checkpoints_is_refused_on_resume(finished_run, tmp_path):
+@pytest.mark.parametrize("finished", [True, False], ids=["finished", "unfinished"])
+def test_a_folder_that_lost_its_checkpoints_is_refused_on_resume(
+    finished, finished_run, tmp_path, capsys
+):
+    """A folder that once saved a checkpoint (its eval.json, or the seconds.json every save
+    writes) and has none now lost them: a resume is refused in one line, its log kept, where
+    training from the start would have dropped it."""
     folder = tmp_path / "lost"
     shutil.copytree(finished_run, folder)
     shutil.rmtree(folder / "checkpoints")
-    before = {p.name: p.stat().st_mtime_ns for p in folder.iterdir()}
+    if not finished:
+        (folder / "eval.json").unlink()
+    before = {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()}
+    capsys.readouterr()
     assert run.main_from_values({"resume": str(folder)}) == 2
-    assert {p.name: p.stat().st_mtime_ns for p in folder.iterdir()} == before
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "its checkpoints were lost" in err[0], err
+    assert {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()} == before
+
+
+def test_a_second_ctrl_c_stops_at_once():
+    """The first Ctrl-C is kept for a safe point (and raised there); a second, while the first is
+    under way (a save, an evaluation), is raised at once: the run can always be stopped."""
+    with signals.sigint_as_interrupt():
+        with signals.stops_deferred():
+            signal.raise_signal(signal.SIGINT)  # kept
+            with pytest.raises(KeyboardInterrupt):
+                signal.raise_signal(signal.SIGINT)  # at once
+        with pytest.raises(KeyboardInterrupt):
+            signals.raise_stop_asked()
+    with signals.sigterm_as_interrupt():  # a second SIGTERM is not: the save goes on
+        with signals.stops_deferred():
+            signal.raise_signal(signal.SIGTERM)
+            signal.raise_signal(signal.SIGTERM)
 
 
 def test_a_sweep_is_expanded_in_hydras_order_with_every_value_checked_first():

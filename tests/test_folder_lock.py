@@ -142,3 +142,19 @@ def test_a_second_run_on_a_folder_in_training_is_refused_and_leaves_its_log_whol
     n = len(logged) // 2  # TINY's 2 seeds
     assert n > 0 and logged == [(u, s) for u in range(1, n + 1) for s in (0, 1)], logged[:6]
     assert not (folder / folder_lock.LOCK).exists()
+
+
+def test_a_file_system_that_takes_no_locks_is_one_line_and_the_run_goes_on(
+    tmp_path, monkeypatch, capsys
+):
+    import errno
+    import fcntl
+
+    def unsupported(fd, how):
+        raise OSError(errno.ENOLCK, os.strerror(errno.ENOLCK))
+
+    monkeypatch.setattr(fcntl, "flock", unsupported)
+    lock = folder_lock.acquire(tmp_path)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"warning: {tmp_path} takes no lock"), err
+    lock.release()  # nothing to release

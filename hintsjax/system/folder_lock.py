@@ -48,26 +48,45 @@ def acquire(folder: Path) -> FolderLock:
         with writing_to(path):
             fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
         try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            held = _holder_text(_read(fd))
-            os.close(fd)
-            raise UsageError(
-                f"{folder} is being written by another run ({held}); one run at a time trains "
-                "in a folder: wait for it to end or stop it, then run again"
-            ) from None
-        try:
-            same = os.fstat(fd).st_ino == os.stat(path).st_ino
-        except FileNotFoundError:  # its holder removed the file between our open and our lock
-            same = False
-        if same:
-            break
+            if not _locked(fd, folder):  # a file system that takes no locks
+                os.close(fd)
+                return FolderLock(folder, None)
+            try:
+                same = os.fstat(fd).st_ino == os.stat(path).st_ino
+            except FileNotFoundError:  # its holder removed the file between our open and our lock
+                same = False
+            if same:
+                mine = {"pid": os.getpid(), "host": socket.gethostname()}
+                mine["since"] = time.strftime("%H:%M:%S")
+                with writing_to(path):
+                    os.ftruncate(fd, 0)
+                    os.write(fd, json.dumps(mine).encode())
+                return FolderLock(folder, fd)
+        except BaseException:
+            os.close(fd)  # the lock goes with it
+            raise
         os.close(fd)
-    mine = {"pid": os.getpid(), "host": socket.gethostname(), "since": time.strftime("%H:%M:%S")}
-    with writing_to(path):
-        os.ftruncate(fd, 0)
-        os.write(fd, json.dumps(mine).encode())
-    return FolderLock(folder, fd)
+
+
+def _locked(fd: int, folder: Path) -> bool:
+    """Take the lock on `fd`: True; UsageError naming the holder if another run has it; False,
+    with one line saying so, on a file system that takes no locks (NFS without its lock daemon,
+    Lustre's noflock), where nothing then keeps a second run out."""
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        raise UsageError(
+            f"{folder} is being written by another run ({_holder_text(_read(fd))}); one run at a "
+            "time trains in a folder: wait for it to end or stop it, then run again"
+        ) from None
+    except OSError as e:
+        print(
+            f"warning: {folder} takes no lock ({os.strerror(e.errno)}): nothing keeps a second "
+            "run from writing it at once",
+            file=sys.stderr,
+        )
+        return False
+    return True
 
 
 def holder(folder: Path) -> str | None:

@@ -9,6 +9,7 @@ import contextlib
 import errno
 import os
 import sys
+import traceback
 from typing import Any
 
 MACHINE = 1  # the exit status of a command the machine stopped: a write it refused, memory it lacks
@@ -106,6 +107,8 @@ def report_machine(error: BaseException, path: Any = None) -> int:
     the settings to lower); the exit status."""
     if isinstance(error, OSError) and machine_write(error) is not None:
         print(f"error: {machine_write(error, path).strerror}", file=sys.stderr)
+    elif backend_failed(error):
+        print(f"error: {_backend_line(error)}", file=sys.stderr)
     else:
         line = (
             error if isinstance(error, OutOfMemory) else _memory_line(error, "the sizes you gave")
@@ -114,6 +117,29 @@ def report_machine(error: BaseException, path: Any = None) -> int:
     return MACHINE
 
 
+def backend_failed(error: BaseException) -> bool:
+    """Whether `error` is JAX failing to start its backend (JAX_PLATFORMS naming a platform this
+    machine lacks, a plugin that does not load): the machine's set-up, not a bug."""
+    frames = traceback.extract_tb(error.__traceback__)
+    return isinstance(error, (AssertionError, RuntimeError)) and any(
+        frame.filename.endswith(os.path.join("jax", "_src", "xla_bridge.py")) for frame in frames
+    )
+
+
+def _backend_line(error: BaseException) -> str:
+    platforms = os.environ.get("JAX_PLATFORMS")
+    asked = f"JAX_PLATFORMS={platforms!r}" if platforms else "its default platforms"
+    why = f": {str(error).splitlines()[0][:200]}" if str(error).strip() else ""
+    return (
+        f"JAX could not start a backend for {asked}{why}; set JAX_PLATFORMS to one this machine "
+        "has (cpu), or install its plugin (CUDA: make setup-gpu)"
+    )
+
+
 def machine_refused(error: BaseException) -> bool:
     """Whether `error` is the machine's refusal (`report_machine`), not a bug."""
-    return (isinstance(error, OSError) and machine_write(error) is not None) or out_of_memory(error)
+    return (
+        (isinstance(error, OSError) and machine_write(error) is not None)
+        or out_of_memory(error)
+        or backend_failed(error)
+    )

@@ -23,7 +23,9 @@ _deferring: list[bool] = []  # `stops_deferred` blocks open now
 
 
 @contextlib.contextmanager
-def signal_as_interrupt(number: int, make: Callable[[int, Any], KeyboardInterrupt]):
+def signal_as_interrupt(
+    number: int, make: Callable[[int, Any], KeyboardInterrupt], again: bool = False
+):
     """Within this block the signal `number` raises `make(number, frame)` in the main thread, as
     Ctrl-C raises KeyboardInterrupt (once: another signal while a stop is under way is ignored,
     and SIGKILL still kills); the signal's handler is put back after. Outside the main thread
@@ -43,6 +45,8 @@ def signal_as_interrupt(number: int, make: Callable[[int, Any], KeyboardInterrup
             _stops.append(make(signum, frame))
             if not _deferring:
                 raise _stops[0]
+        elif again:  # a second Ctrl-C: at once, wherever it lands (a save under way too)
+            raise make(signum, frame)
 
     previous = signal.signal(number, handler)
     _blocks.append(number)
@@ -83,5 +87,6 @@ def sigterm_as_interrupt():
 def sigint_as_interrupt():
     """Within this block Ctrl-C (SIGINT) raises KeyboardInterrupt as Python's own handler does, and
     keeps its stop (`signal_as_interrupt`): one that Python drops inside a garbage collector's
-    callback (JAX's, while a program compiles) is raised at the next safe point, not lost."""
-    return signal_as_interrupt(signal.SIGINT, lambda number, frame: KeyboardInterrupt())
+    callback (JAX's, while a program compiles) is raised at the next safe point, not lost; a
+    second Ctrl-C is raised at once, wherever it lands."""
+    return signal_as_interrupt(signal.SIGINT, lambda number, frame: KeyboardInterrupt(), again=True)

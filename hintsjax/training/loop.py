@@ -187,7 +187,7 @@ class ChunkLoop:
             None  # (metrics, after, n): not yet logged
         )
         self.logged = self.saved = training.done  # the newest update logged; saved (or being saved)
-        self.started = self.saved_at = time.perf_counter()
+        self.started = self.saved_at = 0.0  # perf_counter when `run` began (and last saved)
         self.arrivals: list[tuple[float, int]] = []
         self.bar: Any = None
 
@@ -198,6 +198,7 @@ class ChunkLoop:
         self.bar = tqdm(
             total=self.total, initial=self.done, unit="upd", disable=not show, desc=desc
         )
+        self.started = self.saved_at = time.perf_counter()
         try:
             with checkpoint.writing(
                 self.run_dir

@@ -7,7 +7,7 @@ from __future__ import annotations
 import contextlib
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import jax
 import numpy as np
@@ -16,6 +16,7 @@ from hintsjax.envs import physics, warp_kernels
 from hintsjax.system import checkpoint, compilation_cache, devices
 from hintsjax.system.devices import SeedLayout
 from hintsjax.system.refusals import sized_by
+from hintsjax.system.signals import raise_stop_asked
 from hintsjax.system.wall import Laps
 from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms.group import cell_state, make_group, make_group_trainer
@@ -82,28 +83,28 @@ def params_shapes(trainer: Trainer, layout: SeedLayout) -> Any:
     )
 
 
-@contextlib.contextmanager
-def evaluation_compiling(cfg: RunConfig, trainer: Trainer, layout: SeedLayout):
-    """The evaluation program compiling on the host in a thread from the start: it needs only the
-    params' shapes, so it compiles beside the training program's compile (mostly one core's work)
-    and then while the device trains, adding nothing to the wall-clock of a run that trains
-    longer; under physics=warp first, alone (`evaluation_compiles_first`). Yields the function
+def compile_evaluation(
+    pool: ThreadPoolExecutor, cfg: RunConfig, trainer: Trainer, layout: SeedLayout
+) -> Callable[[], Any]:
+    """The evaluation program compiling on the host in `pool`'s thread from the start: it needs only
+    the params' shapes, so it compiles beside the training program's compile (mostly one core's
+    work) and then while the device trains, adding nothing to the wall-clock of a run that trains
+    longer; under physics=warp first, alone (`evaluation_compiles_first`). Returns the function
     that waits for it."""
-    with ThreadPoolExecutor(max_workers=1) as pool:
 
-        def compile_it() -> Any:
-            shapes = params_shapes(trainer, layout)
-            return compile_evaluator(cfg, shapes, cfg.variant, cfg.eval_episodes, layout=layout)
+    def compile_it() -> Any:
+        shapes = params_shapes(trainer, layout)
+        return compile_evaluator(cfg, shapes, cfg.variant, cfg.eval_episodes, layout=layout)
 
-        future = pool.submit(compile_it)
+    future = pool.submit(compile_it)
 
-        def compiled() -> Any:
-            with sized_by(EVALUATION_SIZES):
-                return future.result()
+    def compiled() -> Any:
+        with sized_by(EVALUATION_SIZES):
+            return future.result()
 
-        if evaluation_compiles_first(cfg):
-            compiled()
-        yield compiled
+    if evaluation_compiles_first(cfg):
+        compiled()
+    return compiled
 
 
 def train_logged(training: Training, cfg: RunConfig, run_dir: Path, progress: bool) -> Training:
@@ -118,15 +119,17 @@ def train(
     """Train all seeds (in chunks, with checkpoints: loop.py), evaluate, plot; returns eval results.
     A child process builds MuJoCo Warp's kernels (envs/warp_kernels.py) beside the compiles,
     waited for before the first state; the evaluation compiles in a thread
-    (`evaluation_compiling`)."""
+    (`compile_evaluation`)."""
     laps = Laps()  # eval.json's wall_split_seconds: where this call's wall-clock went
     say_compiling(cfg, cfg.label)
     trainer, layout = make_trainer(cfg), seed_layout(cfg)
     backend = jax.default_backend()
+    # leaving it (even by an error) ends the kernels' child first, then waits for the compile
     with (
+        ThreadPoolExecutor(max_workers=1) as pool,
         warp_kernels.start(cfg.env, cfg.physics, cfg.warp_capacity, backend) as kernel_builds,
-        evaluation_compiling(cfg, trainer, layout) as evaluation_program,
     ):
+        evaluation_program = compile_evaluation(pool, cfg, trainer, layout)
         with sized_by(TRAINING_SIZES):
             training = start_training(
                 trainer, cfg, run_dir, resume, cfg.label, before_first_state=kernel_builds.wait
@@ -136,6 +139,7 @@ def train(
             training = train_logged(training, cfg, run_dir, progress)
             laps.mark("training")  # the chunks, logs and checkpoints, the last one written
         compiled = evaluation_program()
+    raise_stop_asked()  # a Ctrl-C Python dropped since the last save: the end is saved
     with sized_by(EVALUATION_SIZES):
         variants = (cfg.variant, *cfg.eval_variants)
         params, placed = training.state.params, training.compiled.layout

@@ -118,13 +118,13 @@ class RunLog:
             kept = [r for r in rows if int(r["update"]) <= update]
             if not all(_complete(r) for r in kept):
                 raise ValueError("a row that is not numbers")
+            seeds = {r["seed"] for r in kept}  # an update is logged when each seed has its row
         except (KeyError, TypeError, ValueError, UnicodeDecodeError, csv.Error) as e:
             raise UsageError(
                 f"{self.path} is not a metrics file of this run ({type(e).__name__}); "
                 "move it away to resume (the run's checkpoints are intact)"
             ) from None
         self.columns = list(columns)
-        seeds = {r["seed"] for r in kept}  # an update is logged when each seed has its row
         rows_of = Counter(int(r["update"]) for r in kept)
         self._say_missing([u for u in range(1, update + 1) if rows_of[u] < max(len(seeds), 1)])
         self._rewrite(kept)
@@ -155,7 +155,8 @@ class RunLog:
         elif missing := [k for k in names if k not in self.columns]:
             self._widen(missing)
         with self.path.open("a", newline="") as f:
-            writer = csv.DictWriter(f, self.columns)
+            # NaN in a column of the file that this code no longer logs
+            writer = csv.DictWriter(f, self.columns, restval="nan")
             if new:
                 writer.writeheader()
             for i in range(n):
