@@ -5,8 +5,8 @@
 For each env and each K x S (K hint configurations of Table 2, S seeds) it compiles the group's
 training chunk (`compilation.compile_training`, what the sweeps run) without running it and reads
 XLA's memory analysis: arguments + outputs + temporaries, the figure `compilation.check_fits`
-compares with 90 % of the device's memory. The need grows linearly in K x S (the rows show it); the last line
-per env extrapolates the number of runs that fit.
+compares with 90 % of the device's memory. The need grows linearly in K x S (the rows show it);
+the last line per env extrapolates the number of runs that fit.
 """
 
 from __future__ import annotations
