@@ -132,9 +132,8 @@ class RunFolder:
         if asked.run_dir is not None:
             self.path = asked.run_dir
             self.take_lock()  # before anything is written
-            self.resume = devices.agree_that(
-                devices.is_main() and checkpoint.latest_update(self.path) is not None
-            )
+            # process 0 looks at the folder alone (the restore, on every process, reads it whole)
+            self.resume = devices.agree_that(devices.is_main() and checkpoint.any_saved(self.path))
             if not self.resume:  # stopped before its first checkpoint: it trains from the start
                 self.check_startable()
             if asked.longer and devices.is_main():

@@ -246,6 +246,15 @@ def drop_empty_step_folders(run_dir: Path) -> None:
             folder.rmdir()
 
 
+def any_saved(run_dir: Path) -> bool:
+    """Whether `run_dir` holds a numbered checkpoint folder with something in it, read off the
+    folder alone: no orbax manager, whose opening is a collective every process must join."""
+    path = Path(run_dir) / CHECKPOINTS
+    return path.is_dir() and any(
+        step.is_dir() and step.name.isdigit() and any(step.iterdir()) for step in path.iterdir()
+    )
+
+
 def latest_update(run_dir: Path) -> int | None:
     """The update of the newest complete checkpoint in `run_dir` (None without any; an empty
     numbered folder is none: `drop_empty_step_folders`)."""
