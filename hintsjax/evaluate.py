@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
         text = json.dumps(
             {"label": cfg.label, "env": cfg.env, "hint_source": source, **result}, indent=1
         )
-        paths.write_whole(out, lambda part: part.write_text(text))
+        paths.write_text_whole(out, text)
         print(
             f"{cfg.label} on {cfg.env}/{result['variant']} ({mode}, {cfg.seeds} seeds x {episodes} "
             "episodes"

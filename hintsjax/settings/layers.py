@@ -163,7 +163,7 @@ def save_run_config(run_dir: Path, cfg: RunConfig) -> None:
     """Write the resolved config into a run folder (what load_run_config reads back), whole or
     not at all (a resumed run that trains longer rewrites it)."""
     text = yaml.safe_dump(to_dict(cfg), sort_keys=False)
-    paths.write_whole(Path(run_dir) / CONFIG_YAML, lambda part: part.write_text(text))
+    paths.write_text_whole(Path(run_dir) / CONFIG_YAML, text)
 
 
 # Settings added since runs were first saved whose absence means their default (`saved_may_lack` on

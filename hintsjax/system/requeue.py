@@ -82,7 +82,7 @@ def record(run_dir: Path) -> None:
     """Write this job's names into a new run folder (nothing outside a submitit job)."""
     if (job := _job()) is not None:
         # a full disk: one line
-        paths.write_whole(Path(run_dir) / JOB_JSON, lambda p: p.write_text(json.dumps(job) + "\n"))
+        paths.write_text_whole(Path(run_dir) / JOB_JSON, json.dumps(job) + "\n")
 
 
 def folders_of_this_job(out_dir: str | Path) -> list[Path]:
