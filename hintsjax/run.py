@@ -38,7 +38,7 @@ from hintsjax.system.errors import (
     report_bug,
     report_usage,
 )
-from hintsjax.system.refusals import machine_refused, report_machine
+from hintsjax.system.refusals import MACHINE, machine_refused, report_machine
 from hintsjax.system.signals import Terminated, sigint_as_interrupt, sigterm_as_interrupt
 from hintsjax.settings import schema
 from hintsjax.settings.config import RunConfig
@@ -208,8 +208,14 @@ def stopped_early(error: BaseException, folder: RunFolder) -> int:
         folder.take_back()
         return report_usage(error)
     if isinstance(error, checkpoint.CheckpointWriteError):  # the newest complete one stays
-        print(f"error: {error}", file=sys.stderr)
-        return 1
+        good = checkpoint.latest_update(run_dir)
+        kept = f"the newest complete one is at update {good}" if good else "none is complete"
+        print(
+            f"error: {error}; {kept}; once it can be written, go on with: "
+            f"python -m hintsjax.run resume={run_dir}",
+            file=sys.stderr,
+        )
+        return MACHINE
     if isinstance(error, KeyboardInterrupt):
         return interrupted(error, run_dir)
     if isinstance(error, NonFiniteError):  # its checkpoints were all written before it went so

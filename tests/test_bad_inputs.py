@@ -173,7 +173,10 @@ def test_a_file_written_whole_keeps_what_was_there_when_the_disk_fills(tmp_path)
 
     with pytest.raises(refusals.WriteFailed) as failed:
         paths.write_whole(out, half_then_full)
-    assert failed.value.strerror == f"could not write {out}: No space left on device"
+    assert failed.value.strerror == (
+        f"could not write {out}: No space left on device; free space there (or give out_dir on "
+        "another disk) and run again"
+    )
     assert out.read_text() == "old\n" and [p.name for p in tmp_path.iterdir()] == ["eval.json"]
     paths.write_whole(out, lambda part: part.write_text("new\n"))
     assert out.read_text() == "new\n" and [p.name for p in tmp_path.iterdir()] == ["eval.json"]

@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import os
 import sys
+import tempfile
 import time
 import types
 import warnings
@@ -21,7 +23,9 @@ from pathlib import Path
 import jax
 import orbax.checkpoint as ocp
 
+from hintsjax.system import devices
 from hintsjax.system.errors import UsageError
+from hintsjax.system.refusals import cause_text
 
 CHECKPOINTS = "checkpoints"
 
@@ -179,33 +183,54 @@ def _raw_keys(state):
     )
 
 
+def _writable(folder: Path) -> str | None:
+    """Why `folder` takes no new checkpoint folder (full, read-only, immutable, too many open
+    files), or None: process 0 makes and removes one there, and its answer holds for every
+    process. A save orbax cannot even begin leaves its background threads waiting for each other
+    until its ten-minute timeout, and the process with them."""
+    why = None
+    if devices.is_main():
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            os.rmdir(tempfile.mkdtemp(prefix=".probe-", dir=folder))
+        except OSError as e:
+            why = cause_text(e)
+    if devices.agree_that(why is None):
+        return None
+    return why or "process 0 could not write there"
+
+
 def save(run_dir: Path, state, update: int) -> None:
     """Save the seed-batched runner state after `update` updates: in the background inside
     `writing(run_dir)` (after this folder's previous write is done), else blocking.
-    CheckpointWriteError if this or an earlier background write failed, naming the one that did."""
+    CheckpointWriteError if this or an earlier background write failed, naming the one that did,
+    or if the folder takes no new checkpoint (`_writable`), found before orbax is asked."""
     key = Path(run_dir).absolute()
     manager = _WRITERS.get(key)
+
+    def failed(at: int, why: str) -> CheckpointWriteError:
+        where = key / CHECKPOINTS
+        return CheckpointWriteError(f"could not write checkpoint {at} in {where}: {why}")
+
+    if manager is not None:
+        try:  # the write handed over last (the run loop saves only once it is done)
+            manager.wait_until_finished()
+            manager.check_for_errors()
+        except Exception as e:
+            raise failed(_HANDED.get(key, update), cause_text(e)) from None
+    why = _writable(key / CHECKPOINTS)
+    if why is not None:
+        raise failed(update, why)
     try:
         if manager is None:
             with _manager(run_dir, create=True) as blocking:
                 blocking.save(update, args=ocp.args.StandardSave(_raw_keys(state)))
                 blocking.wait_until_finished()
             return
-        # the write handed over last (the run loop saves only once it is done)
-        manager.wait_until_finished()
-        manager.check_for_errors()
-    except Exception as e:
-        failed = _HANDED.get(key, update) if manager is not None else update
-        raise CheckpointWriteError(
-            f"could not write checkpoint {failed} in {key / CHECKPOINTS}: {_first_line(e)}"
-        ) from None
-    try:
         manager.save(update, args=ocp.args.StandardSave(_raw_keys(state)))
         _HANDED[key] = update
     except Exception as e:
-        raise CheckpointWriteError(
-            f"could not write checkpoint {update} in {key / CHECKPOINTS}: {_first_line(e)}"
-        ) from None
+        raise failed(update, cause_text(e)) from None
 
 
 def saving(run_dir: Path) -> bool:
@@ -226,7 +251,7 @@ def flush(run_dir: Path) -> None:
         manager.check_for_errors()
     except Exception as e:
         raise CheckpointWriteError(
-            f"could not write checkpoint {handed} in {key / CHECKPOINTS}: {_first_line(e)}"
+            f"could not write checkpoint {handed} in {key / CHECKPOINTS}: {cause_text(e)}"
         ) from None
     finally:
         with contextlib.suppress(Exception):

@@ -1,8 +1,9 @@
 """Bad input (UsageError) and the boundary every command's entry point keeps (`command`): bad
 input is one line and exit 2, Ctrl-C (or SIGTERM) one line and exit 130 (143), output to a reader
 that went away (`| head`) silence and exit 141, what the machine refused
-(hintsjax/system/refusals.py) one line and exit 1, and anything else a bug in hintsjax, reported
-in one line that says so and where its traceback was written, exit 1."""
+(hintsjax/system/refusals.py; limits too low for JAX, before anything runs) one line and exit
+1, and anything else a bug in hintsjax, reported in one line that says so and where its
+traceback was written, exit 1."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ import traceback
 from pathlib import Path
 from typing import Any, Callable
 
-from hintsjax.system.refusals import machine_refused, report_machine
+from hintsjax.system.refusals import MACHINE, limits_too_low, machine_refused, report_machine
 from hintsjax.system.signals import Terminated
 
 INTERRUPTED = 130  # the exit status of a command stopped by Ctrl-C (128 + SIGINT), as a shell's
@@ -76,6 +77,10 @@ def command(main: Callable[..., int]) -> Callable[..., int]:
 
     @functools.wraps(main)
     def guarded(*args: Any, **kwargs: Any) -> int:
+        refused = limits_too_low()  # under them XLA aborts in C++, past any boundary's reach
+        if refused is not None:
+            print(f"error: {refused}", file=sys.stderr)
+            return MACHINE
         try:
             try:
                 return main(*args, **kwargs)

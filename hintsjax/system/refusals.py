@@ -1,13 +1,16 @@
-"""What the machine refuses, told apart from bugs: a write (a full disk, a read-only mount, a
-missing permission: WriteFailed, naming the path) and memory (OutOfMemory, naming the settings
-that size the work). Each is one line and exit 1 at a command's boundary
-(hintsjax/system/errors.py)."""
+"""What the machine refuses, told apart from bugs and by its cause: a write (a full disk, a
+read-only mount, a missing permission: WriteFailed, naming the path), too many open files, memory
+(OutOfMemory, naming the settings that size the work) and limits too low to start JAX at all
+(`limits_too_low`, checked before a command runs). Each is one line and exit 1 at a command's
+boundary (hintsjax/system/errors.py)."""
 
 from __future__ import annotations
 
 import contextlib
 import errno
 import os
+import re
+import resource
 import sys
 import traceback
 from typing import Any
@@ -24,6 +27,83 @@ WRITE_ERRNOS = {
     errno.EFBIG,
     errno.EIO,
 }
+
+
+# Too many files open at once: the process's limit (ulimit -n) or the system's table
+FILE_LIMIT_ERRNOS = {errno.EMFILE, errno.ENFILE}
+# A disk with no room, whatever error carries it (tensorstore's, XLA's): the machine's doing
+DISK_FULL_ERRNOS = {errno.ENOSPC, errno.EDQUOT}
+# What to do, beside the cause's own words, where these say more than the path
+ADVICE = {
+    errno.ENOSPC: "free space there (or give out_dir on another disk) and run again",
+    errno.EDQUOT: "free space within your quota there (or give out_dir elsewhere) and run again",
+    errno.EFBIG: "a file outgrew the size limit (ulimit -f): raise it and run again",
+    errno.EMFILE: "raise the limit (ulimit -n 4096) and run again",
+}
+# Below these a command is refused before it starts (`limits_too_low`): XLA aborts in C++ when it
+# cannot map its threads' data or its compiled code, and a run opens about 20 files at once
+# (docs/tests.md, "Faults of the machine", gives the measurements).
+MIN_ADDRESS_SPACE = 4 * 2**30  # bytes: ulimit -v (RLIMIT_AS) and ulimit -d (RLIMIT_DATA)
+MIN_OPEN_FILES = 64  # ulimit -n (RLIMIT_NOFILE)
+
+
+def os_errno(error: BaseException) -> int | None:
+    """The errno of the OS's refusal behind `error`, or behind the errors it was raised from or
+    while handling: an OSError's own; else one its text names, as tensorstore's does under orbax
+    (`[os_error_code='28']`, `[Errno 24]`) or by the refusal's own words ("No space left on
+    device"). None when nothing says the OS refused something."""
+    seen: set[int] = set()
+    while error is not None and id(error) not in seen:
+        seen.add(id(error))
+        if isinstance(error, OSError) and error.errno is not None:
+            return error.errno
+        text = str(error)
+        found = re.search(r"os_error_code='(\d+)'|\[Errno (\d+)\]", text)
+        if found:
+            return int(found.group(1) or found.group(2))
+        for code in (*WRITE_ERRNOS, *FILE_LIMIT_ERRNOS):
+            if os.strerror(code) in text:
+                return code
+        error = error.__cause__ or error.__context__
+    return None
+
+
+def cause_text(error: BaseException) -> str:
+    """`error`'s cause in a few words: the OS's refusal behind it (`os_errno`; too many open files
+    with the limit that says how many), else the first line of its text."""
+    code = os_errno(error)
+    if code in FILE_LIMIT_ERRNOS:
+        soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+        return f"too many open files (this process may open {soft} at once: ulimit -n)"
+    if code is not None:
+        return os.strerror(code)
+    text = str(error).strip()
+    return text.splitlines()[0][:200] if text else type(error).__name__
+
+
+def _advised(text: str, code: int | None) -> str:
+    advice = ADVICE.get(errno.EMFILE if code in FILE_LIMIT_ERRNOS else code)
+    return f"{text}; {advice}" if advice else text
+
+
+def limits_too_low() -> str | None:
+    """The one line refusing to start under a limit too low for JAX (`MIN_ADDRESS_SPACE`,
+    `MIN_OPEN_FILES`), naming it and how to raise it; None when the limits leave room."""
+    for limit, flag in ((resource.RLIMIT_AS, "-v"), (resource.RLIMIT_DATA, "-d")):
+        soft, _ = resource.getrlimit(limit)
+        if soft != resource.RLIM_INFINITY and soft < MIN_ADDRESS_SPACE:
+            return (
+                f"this process may map at most {soft / 2**30:.1f} GiB of memory (ulimit {flag} "
+                f"{soft // 1024}); JAX needs {MIN_ADDRESS_SPACE // 2**30} GiB or more to start "
+                f"and compile: raise it (ulimit {flag} unlimited) and run again"
+            )
+    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft != resource.RLIM_INFINITY and soft < MIN_OPEN_FILES:
+        return (
+            f"this process may open only {soft} files at once (ulimit -n); a run needs "
+            f"{MIN_OPEN_FILES} or more: raise it (ulimit -n 4096) and run again"
+        )
+    return None
 
 
 class WriteFailed(OSError):
@@ -47,8 +127,11 @@ def machine_write(error: OSError, path: Any = None) -> WriteFailed | None:
     )
     return WriteFailed(
         error.errno,
-        f"could not {verb} {where if where is not None else 'a file'}: "
-        f"{error.strerror or os.strerror(error.errno)}",
+        _advised(
+            f"could not {verb} {where if where is not None else 'a file'}: "
+            f"{error.strerror or os.strerror(error.errno)}",
+            error.errno,
+        ),
     )
 
 
@@ -71,12 +154,13 @@ class OutOfMemory(RuntimeError):
 
 def out_of_memory(error: BaseException) -> bool:
     """Whether `error` is an allocation that failed (XLA's RESOURCE_EXHAUSTED or "Out of memory",
-    Python's MemoryError): the machine's limit, not a bug."""
+    Python's MemoryError): the machine's limit, not a bug. A file's refusal is not memory, though
+    tensorstore calls a full disk RESOURCE_EXHAUSTED too (`os_errno`)."""
+    if isinstance(error, OutOfMemory):
+        return True
     text = str(error)
-    return (
-        isinstance(error, (MemoryError, OutOfMemory))
-        or "RESOURCE_EXHAUSTED" in text
-        or "Out of memory" in text
+    return os_errno(error) is None and (
+        isinstance(error, MemoryError) or "RESOURCE_EXHAUSTED" in text or "Out of memory" in text
     )
 
 
@@ -107,6 +191,12 @@ def report_machine(error: BaseException, path: Any = None) -> int:
     the settings to lower); the exit status."""
     if isinstance(error, OSError) and machine_write(error) is not None:
         print(f"error: {machine_write(error, path).strerror}", file=sys.stderr)
+    elif (code := os_errno(error)) in FILE_LIMIT_ERRNOS:
+        print(f"error: {_advised(cause_text(error), code)}", file=sys.stderr)
+    elif code in DISK_FULL_ERRNOS:
+        where = path if path is not None else "a file"
+        line = _advised(f"could not write {where}: {cause_text(error)}", code)
+        print(f"error: {line}", file=sys.stderr)
     elif backend_failed(error):
         print(f"error: {_backend_line(error)}", file=sys.stderr)
     else:
@@ -140,6 +230,7 @@ def machine_refused(error: BaseException) -> bool:
     """Whether `error` is the machine's refusal (`report_machine`), not a bug."""
     return (
         (isinstance(error, OSError) and machine_write(error) is not None)
+        or os_errno(error) in FILE_LIMIT_ERRNOS | DISK_FULL_ERRNOS
         or out_of_memory(error)
         or backend_failed(error)
     )
