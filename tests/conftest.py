@@ -35,6 +35,7 @@ Compiling is most of the suite's time on a CPU (the runs it trains are tiny), so
 
 import os
 import shutil
+import subprocess
 import tempfile
 
 import pytest
@@ -82,3 +83,28 @@ def traced_programs_kept():
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv(program_cache.ENV_VAR, "on")
         yield
+
+
+@pytest.fixture
+def unwritable():
+    """A function that makes a folder take no new file, undone after the test: chattr +i as root
+    (root ignores permissions), else mode 555; the test skips where neither holds."""
+    made = []
+
+    def refuse(folder) -> None:
+        if os.geteuid() == 0:
+            if shutil.which("chattr") is None:
+                pytest.skip("root without chattr: no way to make a folder refuse root's writes")
+            out = subprocess.run(["chattr", "+i", str(folder)], capture_output=True, text=True)
+            if out.returncode != 0:
+                pytest.skip(f"this file system has no immutable flag: {out.stderr.strip()}")
+        else:
+            os.chmod(folder, 0o555)
+        made.append(folder)
+
+    yield refuse
+    for folder in made:
+        if os.geteuid() == 0:
+            subprocess.run(["chattr", "-i", str(folder)], capture_output=True)
+        else:
+            os.chmod(folder, 0o755)

@@ -203,6 +203,8 @@ def test_parts_pool_into_what_archiving_the_whole_row_gives(parts, capsys):
         ({"seed": 3}, "do not follow on"),  # an overlap: seed 3 twice
         ({"ppo": {"epochs": 2}}, "other settings than"),
         ({"eval_episodes": 10}, "other settings than"),
+        ({"seeds": 0}, "names no seeds to pool (seed 4, seeds 0)"),
+        ({"seed": "4"}, "names no seeds to pool (seed '4', seeds 2)"),
     ],
 )
 def test_parts_that_cannot_be_one_row_are_one_line(parts, capsys, change, message):
@@ -211,6 +213,13 @@ def test_parts_that_cannot_be_one_row_are_one_line(parts, capsys, change, messag
     for key, value in change.items():
         values[key] = {**values[key], **value} if isinstance(value, dict) else value
     path.write_text(yaml.safe_dump(values))
+    refused_in_one_line(parts, capsys, message)
+
+
+def refused_in_one_line(parts: Path, capsys, message: str) -> None:
+    """Pooling part0 and part4 exits 2 with one line holding `message`, naming the parts' own
+    folders (not a staging one), and writes nothing: neither the pooled run nor the parts' own
+    archives."""
     with pytest.raises(SystemExit) as e:
         pool_command(
             ["--pool", f"{parts / 'part0'},{parts / 'part4'}", "--runs", str(parts / "pooled")]
@@ -218,8 +227,30 @@ def test_parts_that_cannot_be_one_row_are_one_line(parts, capsys, change, messag
     err = capsys.readouterr().err
     assert (
         e.value.code == 2 and err.count("\n") == 1 and err.startswith("error: ") and message in err
-    )
-    assert not (archive.ARCHIVE / "pooled").exists()  # nothing written
+    ), err
+    assert "hintsjax-pool-" not in err, err
+    assert not archive.ARCHIVE.exists()  # nothing written, the parts' archives neither
+
+
+@pytest.mark.parametrize(
+    "damage, message",
+    [
+        (lambda run: (run / "eval.json").write_text("{not json"), "eval.json cannot be read"),
+        (lambda run: (run / "eval.json").write_text("[1, 2]"), "eval.json is not a mapping"),
+        (
+            lambda run: (run / "eval.json").write_text('{"label": "ppo_rgb", "evaluations": []}'),
+            "eval.json holds no evaluations",
+        ),
+        (lambda run: (run / "config.yaml").write_text("env: [\n"), "config.yaml cannot be read"),
+        (lambda run: (run / "metrics.csv").unlink(), "has a learning curve"),
+        (lambda run: (run / "metrics.csv").write_text("update,seed\n1\n"), "cannot be archived"),
+    ],
+)
+def test_a_damaged_part_is_one_line_naming_its_file_and_nothing_is_written(
+    parts, capsys, damage, message
+):
+    damage(parts / "part4" / RUN)
+    refused_in_one_line(parts, capsys, message)
 
 
 @pytest.mark.parametrize(
@@ -253,3 +284,31 @@ def test_a_part_still_training_is_left_out_until_it_finishes(parts, capsys):
     )
     assert capsys.readouterr().out.rstrip().endswith(": none")
     assert not (archive.ARCHIVE / "pooled" / RUN).exists()
+
+
+def test_archiving_a_runs_folder_that_is_not_there_is_refused(parts, capsys):
+    with pytest.raises(SystemExit) as e:
+        pool_command(["--archive", "--runs", str(parts / "nope")])
+    assert e.value.code == 2 and capsys.readouterr().err == (
+        f"error: no runs folder at {parts / 'nope'}: nothing to archive\n"
+    )
+    with pytest.raises(SystemExit) as e:
+        pool_command(["--report", "--runs", str(parts / "nope")])
+    assert e.value.code == 2 and capsys.readouterr().err == (
+        f"error: no runs folder at {parts / 'nope'} and no archived one at "
+        f"{archive.ARCHIVE / 'nope'}\n"
+    )
+    assert not archive.ARCHIVE.exists()
+
+
+def test_an_archive_that_takes_no_file_is_one_line_exit_1(parts, capsys, monkeypatch, unwritable):
+    """A results folder the machine refuses (read-only, immutable) is the machine's refusal as
+    for every command: one line naming the path, exit 1, no traceback."""
+    monkeypatch.delenv("HINTSJAX_DEBUG")
+    archive.ARCHIVE.mkdir()
+    unwritable(archive.ARCHIVE)
+    with pytest.raises(SystemExit) as e:
+        pool_command(["--archive", "--runs", str(parts / "whole")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert e.value.code == 1 and len(err) == 1, err
+    assert err[0].startswith(f"error: could not write {archive.ARCHIVE / 'whole'}"), err

@@ -126,25 +126,6 @@ def test_limits_too_low_for_jax_are_refused_before_the_command_runs(monkeypatch,
     assert a_command() == 0 and ran == [True, True]
 
 
-def _immutable(folder: Path) -> None:
-    """`folder` takes no new file: chattr +i as root (root ignores permissions), else mode 555."""
-    if os.geteuid() == 0:
-        if shutil.which("chattr") is None:
-            pytest.skip("root without chattr: no way to make a folder refuse root's writes")
-        made = subprocess.run(["chattr", "+i", str(folder)], capture_output=True, text=True)
-        if made.returncode != 0:
-            pytest.skip(f"this file system has no immutable flag: {made.stderr.strip()}")
-    else:
-        folder.chmod(0o555)
-
-
-def _mutable(folder: Path) -> None:
-    if os.geteuid() == 0:
-        subprocess.run(["chattr", "-i", str(folder)], capture_output=True)
-    else:
-        folder.chmod(0o755)
-
-
 def _waiting_threads(before: set[threading.Thread]) -> list[str]:
     """Threads started since `before` still alive after a few seconds: what would keep the process
     from exiting (orbax's signalling threads are not daemons)."""
@@ -158,7 +139,7 @@ def _waiting_threads(before: set[threading.Thread]) -> list[str]:
 
 
 def test_a_checkpoints_folder_that_takes_no_new_file_is_named_and_leaves_no_thread_waiting(
-    tmp_path,
+    tmp_path, unwritable
 ):
     """The write a folder made immutable refuses is found before orbax is asked: a background save
     orbax cannot even begin left its signalling threads waiting for each other (for its ten-minute
@@ -168,14 +149,11 @@ def test_a_checkpoints_folder_that_takes_no_new_file_is_named_and_leaves_no_thre
     before = set(threading.enumerate())
     checkpoint.save(tmp_path, state, 1)
     checkpoint.save(tmp_path, state, 2)
-    _immutable(tmp_path / checkpoint.CHECKPOINTS)
-    try:
-        with pytest.raises(checkpoint.CheckpointWriteError) as refused:
-            with checkpoint.writing(tmp_path):  # leaving it waits for the background writes
-                checkpoint.save(tmp_path, state, 3)
-        waiting = _waiting_threads(before)
-    finally:
-        _mutable(tmp_path / checkpoint.CHECKPOINTS)
+    unwritable(tmp_path / checkpoint.CHECKPOINTS)
+    with pytest.raises(checkpoint.CheckpointWriteError) as refused:
+        with checkpoint.writing(tmp_path):  # leaving it waits for the background writes
+            checkpoint.save(tmp_path, state, 3)
+    waiting = _waiting_threads(before)
     cause = "Operation not permitted" if os.geteuid() == 0 else "Permission denied"
     assert str(refused.value) == (
         f"could not write checkpoint 3 in {tmp_path.absolute() / 'checkpoints'}: {cause}"

@@ -1270,7 +1270,6 @@ def test_archive_flag_archives_the_finished_runs_and_nothing_else(tmp_path, monk
     import locomotion
 
     monkeypatch.setattr(archive, "ARCHIVE", tmp_path / "archive")
-    monkeypatch.setattr(table_script, "ARCHIVE", tmp_path / "archive")
     runs = tmp_path / "runs" / "t20"
     write_run(
         runs,

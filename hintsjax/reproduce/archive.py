@@ -31,6 +31,17 @@ SUMMARY_JSON = "summary.json"
 # them: what a collapsed seed's policy did (its std, its steps' KL, the critic's loss, the reward,
 # and the adaptive rate's scale where ppo.kl_adaptive_lr chose one)
 DIAGNOSTICS = ("entropy", "approx_kl", "value_loss", "step_reward", "lr_scale")
+# What reading a run's files raises when they are damaged (a file missing, cut or garbled), not
+# refused by the machine
+DAMAGED = (
+    FileNotFoundError,
+    IsADirectoryError,
+    NotADirectoryError,
+    ValueError,
+    KeyError,
+    IndexError,
+    TypeError,
+)
 
 
 def run_folder(runs: Path, env: str, label: str) -> Path:
@@ -148,16 +159,17 @@ def kl_storms(folder: Path) -> list[dict] | None:
     return runlog.kl_storms(folder / "metrics.csv")
 
 
-def archive_run(runs: Path, env: str, label: str) -> Path:
+def archive_run(runs: Path, env: str, label: str, into: Path | None = None) -> Path:
     """Copy what the tables need of the finished run runs/env/label into
-    ARCHIVE/<runs' name>/env/label (see the module's docstring); returns that folder. A run cut
-    short (no eval.json: its machine went away) keeps its config and its log as far as it went."""
+    `into` (default ARCHIVE)/<runs' name>/env/label (see the module's docstring); returns that
+    folder. A run cut short (no eval.json: its machine went away) keeps its config and its log as
+    far as it went."""
     import numpy as np
 
     from hintsjax.settings.layers import CONFIG_YAML
     from hintsjax.training.runlog import bin_means, carried, read_log, storms_of
 
-    src, dest = runs / env / label, ARCHIVE / runs.name / env / label
+    src, dest = runs / env / label, (into or ARCHIVE) / runs.name / env / label
     dest.mkdir(parents=True, exist_ok=True)
     for name in ("eval.json", "metrics.csv"):
         (dest / name).unlink(missing_ok=True)  # the archive mirrors the run as it stands
@@ -202,14 +214,20 @@ def archive_run(runs: Path, env: str, label: str) -> Path:
     return dest
 
 
-def archive_runs(runs: Path, run_ids: list[str]) -> list[str]:
-    """Archive every run of `run_ids` that finished in `runs` (and the sweeps' records); the
-    archived ids."""
+def archive_runs(runs: Path, run_ids: list[str], into: Path | None = None) -> list[str]:
+    """Archive every run of `run_ids` that finished in `runs` (and the sweeps' records) into
+    `into` (default ARCHIVE); the archived ids."""
+    from hintsjax.system.errors import UsageError
+
     done = [r for r in run_ids if (runs / r / "eval.json").exists()]
     for r in done:
-        archive_run(runs, *r.split("/"))
+        try:
+            archive_run(runs, *r.split("/"), into=into)
+        except DAMAGED as e:  # a run's files as no run leaves them; the machine's refusals pass
+            what = f"{type(e).__name__}: {str(e).strip().splitlines()[0][:200]}" if str(e) else ""
+            raise UsageError(f"{runs / r} cannot be archived: {what or type(e).__name__}") from None
     if (runs / "sweeps.jsonl").exists():
-        path = ARCHIVE / runs.name / "sweeps.jsonl"
+        path = (into or ARCHIVE) / runs.name / "sweeps.jsonl"
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text("".join(line + "\n" for line in unique_lines(path, runs / "sweeps.jsonl")))
     return done

@@ -20,6 +20,8 @@ from __future__ import annotations
 import csv
 import io
 import json
+import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +31,7 @@ from hintsjax.evaluation.evaluator import return_summary
 from hintsjax.reproduce import archive
 from hintsjax.reproduce.archive import SUMMARY_JSON, archive_runs, unique_lines
 from hintsjax.settings.layers import CONFIG_YAML
+from hintsjax.system.errors import UsageError
 
 SUMMED = ("train_seconds", "wall_seconds")  # an eval.json's seconds: the parts' total
 PER_PART = (
@@ -68,7 +71,8 @@ class PoolError(ValueError):
 def pool_runs(parts: list[Path], into: Path, run_ids: list[str]) -> list[str]:
     """Archive the parts' finished runs, then pool each run of `run_ids` finished in every part into
     ARCHIVE/<into's name>/env/label; the parts' sweeps.jsonl go to its sweeps.jsonl. Returns the
-    pooled ids."""
+    pooled ids. Everything is checked first, on the parts archived into a folder of their own:
+    parts that cannot be pooled (PoolError) leave the archive as it was."""
     kept = archive.ARCHIVE
     names = [p.name for p in parts]
     if len(parts) < 2 or len(set(names)) < len(names) or into.name in names:
@@ -81,17 +85,17 @@ def pool_runs(parts: list[Path], into: Path, run_ids: list[str]) -> list[str]:
         raise PoolError(
             f"no runs folder at {missing[0]} and no archived one at {kept / missing[0].name}"
         )
-    for part in parts:
+    with tempfile.TemporaryDirectory(prefix="hintsjax-pool-") as staging:
+        stage = Path(staging)
+        try:
+            files = _checked(parts, into, run_ids, stage)
+        except PoolError as e:  # named by the parts' own folders, not the staging one
+            text = str(e)
+            for part in parts:
+                text = text.replace(str(stage / part.name), str(_source(part)))
+            raise PoolError(text) from None
+    for part in parts:  # all checked: now into the archive
         archive_runs(part, run_ids)
-    pooled = [r for r in run_ids if all((kept / p.name / r / "eval.json").exists() for p in parts)]
-    shadowed = [r for r in pooled if (into / r / "eval.json").exists()]
-    if shadowed:
-        raise PoolError(
-            f"{into / shadowed[0]} finished there, and the reports would read it rather than the "
-            "pooled run: give --runs another folder"
-        )
-    # every run checked before any is written
-    files = {run: pool_run([kept / p.name / run for p in parts]) for run in pooled}
     for run, contents in files.items():
         dest = kept / into.name / run
         dest.mkdir(parents=True, exist_ok=True)
@@ -102,15 +106,77 @@ def pool_runs(parts: list[Path], into: Path, run_ids: list[str]) -> list[str]:
     records = unique_lines(
         *(kept / p.name / "sweeps.jsonl" for p in parts), kept / into.name / "sweeps.jsonl"
     )
-    if pooled and records:
+    if files and records:
         (kept / into.name / "sweeps.jsonl").write_text("".join(line + "\n" for line in records))
-    return pooled
+    return list(files)
+
+
+def _source(part: Path) -> Path:
+    """Where a part's runs are read from: its runs folder, else its archived copy."""
+    return part if part.is_dir() else archive.ARCHIVE / part.name
+
+
+def _checked(parts: list[Path], into: Path, run_ids: list[str], stage: Path) -> dict:
+    """The pooled runs' files by run id, worked out on the parts as they would stand archived
+    (their archived copies, with their runs here archived over them, in `stage`); PoolError
+    naming the first part that cannot be pooled."""
+    kept = archive.ARCHIVE
+    for part in parts:
+        if (kept / part.name).is_dir():
+            shutil.copytree(kept / part.name, stage / part.name)
+        if part.is_dir():
+            try:
+                archive_runs(part, run_ids, into=stage)
+            except UsageError as e:  # a damaged run, named
+                raise PoolError(str(e)) from None
+    pooled = [r for r in run_ids if all((stage / p.name / r / "eval.json").exists() for p in parts)]
+    shadowed = [r for r in pooled if (into / r / "eval.json").exists()]
+    if shadowed:
+        raise PoolError(
+            f"{into / shadowed[0]} finished there, and the reports would read it rather than the "
+            "pooled run: give --runs another folder"
+        )
+    files = {}
+    for run in pooled:
+        folders = [stage / p.name / run for p in parts]
+        try:
+            files[run] = pool_run(folders)
+        except PoolError:
+            raise
+        except (*archive.DAMAGED, ZeroDivisionError) as e:
+            raise PoolError(
+                f"the parts of {run} ({', '.join(map(str, folders))}) cannot be pooled: {_why(e)}"
+            ) from None
+    return files
+
+
+def _why(error: Exception) -> str:
+    text = str(error).strip().splitlines()[0][:200] if str(error).strip() else ""
+    return f"{type(error).__name__}: {text}" if text else type(error).__name__
+
+
+def _read(path: Path, parse) -> dict:
+    """A part's file read as a mapping by `parse` (json.loads, yaml.safe_load); PoolError naming
+    it when it is missing, unreadable or not a mapping."""
+    try:
+        value = parse(path.read_text())
+    except (*archive.DAMAGED, yaml.YAMLError) as e:
+        raise PoolError(f"{path} cannot be read: {_why(e)}") from None
+    if not isinstance(value, dict):
+        raise PoolError(f"{path} is not a mapping: {type(value).__name__}")
+    return value
 
 
 def pool_run(folders: list[Path]) -> dict[str, str]:
     """The archived runs `folders` (parts of one row's seeds, in any order) pooled: the files of the
     pooled run's archive folder, by name."""
-    configs = [yaml.safe_load((f / CONFIG_YAML).read_text()) for f in folders]
+    configs = [_read(f / CONFIG_YAML, yaml.safe_load) for f in folders]
+    for folder, cfg in zip(folders, configs):
+        seed, seeds = cfg.get("seed"), cfg.get("seeds")
+        if not (type(seed) is int and type(seeds) is int and seed >= 0 and seeds >= 1):
+            raise PoolError(
+                f"{folder / CONFIG_YAML} names no seeds to pool (seed {seed!r}, seeds {seeds!r})"
+            )
     order = sorted(range(len(folders)), key=lambda i: configs[i]["seed"])
     folders, configs = [folders[i] for i in order], [configs[i] for i in order]
     first = configs[0]
@@ -131,7 +197,10 @@ def pool_run(folders: list[Path]) -> dict[str, str]:
                 f"({cb['seed']} to {cb['seed'] + cb['seeds'] - 1}) do not follow on"
             )
     seeds = [c["seeds"] for c in configs]
-    results = [json.loads((f / "eval.json").read_text()) for f in folders]
+    results = [_read(f / "eval.json", json.loads) for f in folders]
+    for folder, result in zip(folders, results):
+        if not isinstance(result.get("evaluations"), list) or not result["evaluations"]:
+            raise PoolError(f"{folder / 'eval.json'} holds no evaluations")
     files = {
         CONFIG_YAML: yaml.safe_dump({**first, "seeds": sum(seeds)}, sort_keys=False),
         "eval.json": json.dumps(pooled_eval(results, folders, configs), indent=1) + "\n",
@@ -262,7 +331,7 @@ def pooled_metrics(paths: list[Path], seeds: list[int]) -> str:
 def pooled_summary(paths: list[Path], seeds: list[int]) -> dict:
     """The parts' summary.json as one: per-seed lists joined in seed order, the KL share (of the
     seeds' updates) weighted by the parts' seeds; a value one part lacks (None) is None."""
-    kept = [json.loads(p.read_text()) for p in paths]
+    kept = [_read(p, json.loads) for p in paths]
     tails = [k["training_return_seed_means"] for k in kept]
     shares = [k["kl_share"] for k in kept]
     return {

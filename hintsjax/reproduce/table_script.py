@@ -13,14 +13,18 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from hintsjax.reproduce.archive import ARCHIVE, archive_runs
+from hintsjax.reproduce import archive
+from hintsjax.reproduce.archive import archive_runs
 from hintsjax.reproduce.pool import PoolError, pool_runs
 from hintsjax.reproduce.sweep import sweep
 from hintsjax.reproduce.sweep_settings import add_settings, chosen_settings
+from hintsjax.system.errors import command
+from hintsjax.system.refusals import writing_to
 
 
 @dataclass(frozen=True)
@@ -162,7 +166,20 @@ def table_main(script: TableScript) -> None:
     """A table script's command line: train the runs of --envs (of --table's table, where it has
     several), or --report or --archive (only archive the finished runs; every report archives
     first), and where the script has them, --learners-report FILE (the learner rows at any seed
-    count) and its own mode."""
+    count) and its own mode. Behind the commands' boundary (hintsjax.system.errors.command): a
+    results folder it cannot write is one line, exit 1, as for every command."""
+    status = _table_command(script)
+    if status:
+        sys.exit(status)
+
+
+@command
+def _table_command(script: TableScript) -> int:
+    _table_main(script)
+    return 0
+
+
+def _table_main(script: TableScript) -> None:
     tables = list(script.tables)
     parser = argparse.ArgumentParser(description=script.description)
     if len(tables) > 1:  # classic_control.py's --table 2 or 4: the type of the tables' names
@@ -200,33 +217,10 @@ def table_main(script: TableScript) -> None:
     if script.extra_mode is not None and script.extra_mode(parser, args):
         return
     os.environ["JAX_PLATFORMS"] = "cpu"  # the parent only reads configs; workers get the devices
-    if args.archive:
-        done = archive_runs(args.runs, script.run_ids())
-        print(
-            f"archived {len(done)} finished run(s) of {args.runs} in {ARCHIVE / args.runs.name}: "
-            f"{', '.join(done)}"
-        )
-        return
-    if args.pool is not None:
-        try:
-            done = pool_runs(args.pool, args.runs, script.run_ids())
-        except PoolError as e:
-            parser.exit(2, f"error: {e}\n")
-        print(
-            f"pooled {len(done)} run(s) finished in every part of {', '.join(map(str, args.pool))} "
-            f"into {ARCHIVE / args.runs.name}: {', '.join(done) or 'none'}"
-        )
-        return
-    if getattr(args, "learners_report", None):
-        archive_runs(args.runs, script.run_ids())
-        script.learners_report(
-            args.runs, chosen_envs(parser, args, script.envs), args.learners_report, args.force
-        )
-        return
-    if args.report:
-        archive_runs(args.runs, script.run_ids())
-        script.report(args.runs, args.force)
-        return
+    # the archive and the tables beside it: a write the machine refuses names them
+    with writing_to(archive.ARCHIVE.parent):
+        if _archive_or_report(script, parser, args):
+            return
     table = args.table if len(tables) > 1 else tables[0]
     if table is None:
         parser.exit(2, f"error: give {', '.join(f'--table {t}' for t in tables)} or --report\n")
@@ -247,3 +241,41 @@ def table_main(script: TableScript) -> None:
         args.group_size,
         chosen_settings(parser, args),
     )
+
+
+def _archive_or_report(
+    script: TableScript, parser: argparse.ArgumentParser, args: argparse.Namespace
+) -> bool:
+    """--archive, --pool, --learners-report or --report, where one is given (True), checked
+    before anything is written."""
+    kept = archive.ARCHIVE / args.runs.name
+    if args.archive:
+        if not args.runs.is_dir():
+            parser.exit(2, f"error: no runs folder at {args.runs}: nothing to archive\n")
+        done = archive_runs(args.runs, script.run_ids())
+        print(f"archived {len(done)} finished run(s) of {args.runs} in {kept}: {', '.join(done)}")
+        return True
+    reads = args.report or getattr(args, "learners_report", None)
+    if reads and not args.runs.is_dir() and not kept.is_dir():
+        parser.exit(2, f"error: no runs folder at {args.runs} and no archived one at {kept}\n")
+    if args.pool is not None:
+        try:
+            done = pool_runs(args.pool, args.runs, script.run_ids())
+        except PoolError as e:
+            parser.exit(2, f"error: {e}\n")
+        print(
+            f"pooled {len(done)} run(s) finished in every part of {', '.join(map(str, args.pool))} "
+            f"into {kept}: {', '.join(done) or 'none'}"
+        )
+        return True
+    if getattr(args, "learners_report", None):
+        archive_runs(args.runs, script.run_ids())
+        script.learners_report(
+            args.runs, chosen_envs(parser, args, script.envs), args.learners_report, args.force
+        )
+        return True
+    if args.report:
+        archive_runs(args.runs, script.run_ids())
+        script.report(args.runs, args.force)
+        return True
+    return False
