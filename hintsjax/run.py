@@ -11,6 +11,7 @@ Bad input is reported in one line with the valid choices, exit status 2, nothing
 
 from __future__ import annotations
 
+import errno
 import json
 import sys
 from dataclasses import dataclass
@@ -105,6 +106,8 @@ def _run(values: dict[str, Any]) -> int:
             return report_machine(e, where) if machine_refused(e) else report_bug(e, folder.path)
         try:
             train(asked.cfg, folder.path, resume=folder.resume)
+            if not (folder.path / CONFIG_YAML).is_file():  # removed, and made again by a write
+                raise FileNotFoundError(errno.ENOENT, "removed", str(folder.path / CONFIG_YAML))
         except (Exception, KeyboardInterrupt) as e:  # noqa: BLE001  each kind has its line
             return stopped_early(e, folder)
         return 0
@@ -207,6 +210,13 @@ def stopped_early(error: BaseException, folder: RunFolder) -> int:
     if isinstance(error, UsageError):
         folder.take_back()
         return report_usage(error)
+    if not (run_dir / CONFIG_YAML).is_file():  # removed (or moved) under the run
+        print(
+            f"error: the run folder {run_dir} was removed while the run went on "
+            f"({type(error).__name__}); the run stopped",
+            file=sys.stderr,
+        )
+        return MACHINE
     if isinstance(error, checkpoint.CheckpointWriteError):  # the newest complete one stays
         good = checkpoint.latest_update(run_dir)
         kept = f"the newest complete one is at update {good}" if good else "none is complete"

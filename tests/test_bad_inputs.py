@@ -174,8 +174,8 @@ def test_a_file_written_whole_keeps_what_was_there_when_the_disk_fills(tmp_path)
     with pytest.raises(refusals.WriteFailed) as failed:
         paths.write_whole(out, half_then_full)
     assert failed.value.strerror == (
-        f"could not write {out}: No space left on device; free space there (or give out_dir on "
-        "another disk) and run again"
+        f"could not write {out}: No space left on device; free space there (or write to another "
+        "disk) and run again"
     )
     assert out.read_text() == "old\n" and [p.name for p in tmp_path.iterdir()] == ["eval.json"]
     paths.write_whole(out, lambda part: part.write_text("new\n"))
@@ -346,3 +346,32 @@ def test_the_table_holds_at_least_120_cases_across_all_seven_commands():
         isinstance(section, dict) and all(isinstance(m, str) for m in section.values())
         for section in TABLE.values()
     )
+
+
+def test_a_run_whose_folder_is_removed_while_it_trains_says_so_in_one_line(
+    monkeypatch, tmp_path, capsys
+):
+    """The run folder removed under a training run: the next write fails (metrics.csv, once a bug
+    in hintsjax), or a write makes the folder again without its config (the run exited 0 naming a
+    folder that had gone). Either way one line naming the folder, exit 1."""
+    import shutil
+
+    monkeypatch.delenv(errors.DEBUG)
+
+    def removed(cfg, run_dir, resume=False):
+        shutil.rmtree(run_dir)
+        (run_dir / "metrics.csv").open("a")  # as the run loop appends a chunk's rows
+
+    def made_again(cfg, run_dir, resume=False):
+        shutil.rmtree(run_dir)
+        (run_dir / "checkpoints").mkdir(parents=True)  # as orbax makes its folder
+
+    for name, trained in (("gone", removed), ("again", made_again)):
+        monkeypatch.setattr(run, "train", trained)
+        values = {**TINY, "out_dir": str(tmp_path), "name": name}
+        assert run.main_from_values(values) == refusals.MACHINE
+        error = "FileNotFoundError"
+        assert capsys.readouterr().err.strip().splitlines() == [
+            f"error: the run folder {tmp_path / name} was removed while the run went on ({error}); "
+            "the run stopped"
+        ]

@@ -20,6 +20,7 @@ from hintsjax.settings import layers
 from hintsjax.settings.algorithm_settings import GAIL_REWARDS
 from hintsjax.algorithms import dagger, experts, gail
 from hintsjax.algorithms.registry import make_trainer
+from hintsjax.system import checkpoint
 
 # 24 rounds of 128 steps (8 envs x 16) and 64 student steps per round on minibatches of 64.
 DAGGER = dict(
@@ -277,6 +278,29 @@ def test_expert_errors_name_the_problem(expert_run, tmp_path):
             f.write_bytes(b"garbage")
     with pytest.raises(UsageError, match="corrupt"):
         experts.load("linear", out)
+
+
+def test_an_expert_is_not_exported_from_an_older_checkpoint_than_its_score(expert_run, tmp_path):
+    """A run whose final checkpoint cannot be read falls back to an older one; eval.json scored the
+    final policy, so exporting the older one under that score is refused, naming both updates and
+    the resume that trains the last updates again. Nothing is written."""
+    import shutil
+
+    cfg, run_dir = expert_run
+    copy = tmp_path / run_dir.name
+    shutil.copytree(run_dir, copy)
+    final = copy / checkpoint.CHECKPOINTS / str(cfg.ppo.num_updates)
+    shutil.copytree(final, final.parent / "1")  # an older checkpoint (its arrays those of 2)
+    for f in [f for f in final.rglob("*") if f.is_file()]:
+        f.write_bytes(b"")  # the final one renamed into place, its data never flushed
+    with pytest.raises(UsageError) as refused:
+        experts.export(copy, tmp_path / "expert")
+    assert str(refused.value) == (
+        f"{copy}'s checkpoint of update 2, the policy eval.json scored, cannot be read (the newest "
+        f"that can is update 1): train its last updates again (python -m hintsjax.run "
+        f"resume={copy}), then export"
+    )
+    assert not (tmp_path / "expert").exists()
 
 
 PACKAGED = ["acrobot", "ant", "car_racing", "halfcheetah", "humanoid", "idp", "pendulum"]

@@ -65,8 +65,8 @@ def test_a_full_disk_is_not_memory_though_tensorstore_says_resource_exhausted():
     [
         (
             ValueError(TENSORSTORE_FULL),
-            "error: could not write /runs/r: No space left on device; free space there (or give "
-            "out_dir on another disk) and run again",
+            "error: could not write /runs/r: No space left on device; free space there (or write "
+            "to another disk) and run again",
         ),
         (
             OSError(errno.EMFILE, "Too many open files"),

@@ -109,6 +109,12 @@ def export(run_dir: Path, out_dir: Path | None = None, force: bool = False) -> P
     evaluation = json.loads(eval_json.read_text())["evaluations"][0]
     best = best_seed(evaluation)
     state, update = checkpoint.restore_latest(run_dir, ppo.make_trainer(cfg).abstract_state())
+    if update != cfg.ppo.num_updates:  # the newest could not be read: eval.json scored another
+        raise UsageError(
+            f"{run_dir}'s checkpoint of update {cfg.ppo.num_updates}, the policy eval.json scored, "
+            f"cannot be read (the newest that can is update {update}): train its last updates "
+            f"again (python -m hintsjax.run resume={run_dir}), then export"
+        )
     params = jax.tree.map(lambda x: x[best], state.params["params"])
     policy = {"actor": params["actor"], "log_std": params["log_std"]}
     if normalization.COLLECTION in state.params:

@@ -35,8 +35,8 @@ FILE_LIMIT_ERRNOS = {errno.EMFILE, errno.ENFILE}
 DISK_FULL_ERRNOS = {errno.ENOSPC, errno.EDQUOT}
 # What to do, beside the cause's own words, where these say more than the path
 ADVICE = {
-    errno.ENOSPC: "free space there (or give out_dir on another disk) and run again",
-    errno.EDQUOT: "free space within your quota there (or give out_dir elsewhere) and run again",
+    errno.ENOSPC: "free space there (or write to another disk) and run again",
+    errno.EDQUOT: "free space within your quota (or write to another disk) and run again",
     errno.EFBIG: "a file outgrew the size limit (ulimit -f): raise it and run again",
     errno.EMFILE: "raise the limit (ulimit -n 4096) and run again",
 }

@@ -238,12 +238,17 @@ class ChunkLoop:
         )  # returns at once; the device works on
         # queued behind the chunk, so reading it once the chunk has run never stalls the device
         following_finite = finite_seeds(following.params)
-        if self.pending is not None:
-            self.log(*self.pending)
-        # here `state` (at `done`) has its metrics logged, and no write is half-made
-        raise_stop_asked()
-        if self.checkpoint_due():
-            self.save(self.done)  # computed, and copied off as the chunk runs
+        try:
+            if self.pending is not None:
+                self.log(*self.pending)
+            # here `state` (at `done`) has its metrics logged, and no write is half-made
+            raise_stop_asked()
+            if self.checkpoint_due():
+                self.save(self.done)  # computed, and copied off as the chunk runs
+        except BaseException:
+            # the chunk still runs: the process must not exit under it (XLA's teardown crashed)
+            jax.block_until_ready((following, metrics, following_finite))
+            raise
         self.state, self.finite = following, following_finite
         self.pending, self.done = (metrics, self.done, n), self.done + n
 
