@@ -799,6 +799,30 @@ def test_plan_jobs_groups_the_classic_table_by_shape():
     assert sorted(r for job in capped for r in job) == sorted(ids)
 
 
+def test_a_worker_on_a_folder_another_run_writes_is_refused_before_it_writes(tmp_path):
+    """One writer a folder, for a sweep's workers too: with a member's folder held (another sweep,
+    or a run command, training there), a group's worker is refused naming the holder, its other
+    folders' locks let go and nothing written; once the holder is gone the locks are free."""
+    import cue_env  # noqa: F401  (tests/cue_env.py: the "cue" env and its hints)
+    from hintsjax.system import folder_lock
+    from hintsjax.system.errors import UsageError
+
+    ids = ["cue/hints-fc-cue", "cue/hints-fc-cue_pair"]
+    (tmp_path / ids[1]).mkdir(parents=True)
+    held = folder_lock.acquire(tmp_path / ids[1])
+    try:
+        with pytest.raises(UsageError, match="is being written by another run .*pid"):
+            sweep.train_one(tmp_path, ids, seeds=2, smoke=True, experts=None)
+    finally:
+        held.release()
+    assert not (tmp_path / ids[0] / "config.yaml").exists()
+    assert not (tmp_path / ids[1] / "config.yaml").exists()
+    group = sweep.group_folder(tmp_path, ids)
+    assert sorted(p.name for p in group.iterdir()) == []  # its lock taken, then let go
+    with folder_lock.holding([group, tmp_path / ids[0], tmp_path / ids[1]]):
+        pass  # every lock free again
+
+
 # 34 s on 2 cores: in the slow tier, to keep `make test` within its minutes (plan_jobs' splits stay
 # above)
 @pytest.mark.slow

@@ -119,14 +119,34 @@ def train_one(
 ) -> None:
     """Train and evaluate runs `env/label` (one, or a group that shares a program) into
     runs/env/label; export an expert's. A group that does not fit in memory is split in halves."""
-    import jax
-
-    from hintsjax.system import checkpoint
-    from hintsjax.settings.layers import run_config, save_run_config
-    from hintsjax.algorithms import experts
-    from hintsjax.training import compilation, loop, pipeline
+    from hintsjax.system import folder_lock
 
     folder = job_folder(runs, run_ids)
+    # one writer a folder: another sweep's worker on these runs is refused (folder_lock.py)
+    with folder_lock.holding([folder, *(runs / r for r in run_ids)]):
+        halves = _train_held(runs, run_ids, seeds, smoke, experts, settings, folder)
+    for part in halves:  # a group too big for memory, in halves (their own locks)
+        train_one(runs, part, seeds, smoke, experts, settings)
+
+
+def _train_held(
+    runs: Path,
+    run_ids: list[str],
+    seeds: int,
+    smoke: bool,
+    experts: Path | None,
+    settings: dict | None,
+    folder: Path,
+) -> list[list[str]]:
+    """`train_one` with its folders' locks held; the halves to train instead where the group does
+    not fit ([] once trained)."""
+    import jax
+
+    from hintsjax.system import checkpoint, paths
+    from hintsjax.settings.layers import run_config, save_run_config
+    from hintsjax.algorithms import experts as expert_export
+    from hintsjax.training import compilation, loop, pipeline
+
     # An interrupted run (killed by a time limit) goes on from its newest checkpoint; its
     # wall-clock counts the kept work of earlier calls, not what was lost after their last
     # checkpoint.
@@ -151,8 +171,7 @@ def train_one(
     if len(run_ids) == 1:
         results = [pipeline.train(cfgs[0], folder, resume=resume, progress=False)]
     else:
-        folder.mkdir(parents=True, exist_ok=True)
-        (folder / "group.json").write_text(json.dumps({"runs": run_ids, "seeds": seeds}))
+        paths.write_text_whole(folder / "group.json", json.dumps({"runs": run_ids, "seeds": seeds}))
         try:
             results = pipeline.train_group(
                 cfgs, folder, [runs / r for r in run_ids], resume=resume, progress=False
@@ -162,20 +181,20 @@ def train_one(
             print(
                 f"{e}: splitting the group into {half} and {len(run_ids) - half} runs", flush=True
             )
-            for part in (run_ids[:half], run_ids[half:]):
-                train_one(runs, part, seeds, smoke, experts, settings)
-            return
+            return [run_ids[:half], run_ids[half:]]
     extra = {"wall_seconds": before + time.time() - t, "device": jax.devices()[0].device_kind}
     for run_id, result in zip(run_ids, results):
-        (runs / run_id / "eval.json").write_text(json.dumps({**result, **extra}, indent=1))
+        written = json.dumps({**result, **extra}, indent=1)
+        paths.write_text_whole(runs / run_id / "eval.json", written)
     for run_id in run_ids:
         if run_id.split("/")[1] == EXPERT_RUN:
-            exported = experts.export(
+            exported = expert_export.export(
                 runs / run_id,
                 None if experts is None else experts / run_id.split("/")[0],
                 force=True,
             )
             print(f"exported the expert to {exported}", flush=True)
+    return []
 
 
 def plan_jobs(
@@ -412,7 +431,13 @@ def main() -> None:
     add_settings(parser)
     args = parser.parse_args()
     settings = worker_settings(parser, args)
-    train_one(args.runs, args.one.split(","), args.seeds, args.smoke, args.experts, settings)
+    from hintsjax.system.errors import UsageError
+
+    try:
+        train_one(args.runs, args.one.split(","), args.seeds, args.smoke, args.experts, settings)
+    except UsageError as e:  # another sweep's worker holds a folder: one line in train.log
+        print(f"error: {e}", file=sys.stderr, flush=True)
+        sys.exit(2)
 
 
 if __name__ == "__main__":

@@ -6,6 +6,7 @@ reader (evaluate, video, expert) whether a run is training in the folder now."""
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import json
 import os
@@ -66,6 +67,18 @@ def acquire(folder: Path) -> FolderLock:
             os.close(fd)  # the lock goes with it
             raise
         os.close(fd)
+
+
+@contextlib.contextmanager
+def holding(folders: list[Path]):
+    """The locks of `folders` (each made if missing, each once) for the block; UsageError naming
+    the first held by another run, with those taken before it let go. A sweep's worker writes its
+    group's folder and each member's."""
+    with contextlib.ExitStack() as stack:
+        for folder in dict.fromkeys(Path(f).absolute() for f in folders):
+            folder.mkdir(parents=True, exist_ok=True)
+            stack.callback(acquire(folder).release)
+        yield
 
 
 def _locked(fd: int, folder: Path) -> bool:
