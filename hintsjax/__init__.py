@@ -1,6 +1,7 @@
 """hintsjax: HINTs (Human-INTuited cues for RL) in JAX. See README.md."""
 
 import os as _os
+import sys as _sys
 from pathlib import Path as _Path
 
 # `hintsjax.envs` is the checkout's top-level envs/ folder (pyproject.toml's package-dir): an
@@ -10,6 +11,14 @@ from pathlib import Path as _Path
 _here = _Path(__file__).resolve().parent
 if not (_here / "envs").is_dir() and (_here.parent / "envs" / "__init__.py").is_file():
     __path__.append(str(_here.parent))
+
+# A command's process (`python -m hintsjax.<command>`: argv[0] is "-m" while its package imports;
+# the `hintsjax` console script): a Ctrl-C or SIGTERM while its modules import is kept for the
+# command to raise as it begins (hintsjax/system/signals.py), not lost in JAX's gc callback.
+if _sys.argv[:1] == ["-m"] or _Path(_sys.argv[0] if _sys.argv else "").name == "hintsjax":
+    from hintsjax.system import signals as _signals
+
+    _signals.keep_while_starting()
 
 # XLA's flags, before anything starts JAX's backend: deterministic GPU ops (same seed, same
 # result), their autotuning persisted when the user turns them off, no deadlock on a CPU

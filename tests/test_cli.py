@@ -1453,3 +1453,25 @@ def test_a_config_saved_before_the_brax_knobs_resumes_under_their_defaults(tmp_p
     assert layers.load_run_config(tmp_path, complete=True) == cfg
     del values["ppo"]["clip_eps"]
     assert layers.missing_keys(values) == ["ppo.clip_eps"]
+
+
+def test_a_ctrl_c_while_the_command_still_imports_stops_it_before_anything_is_written(tmp_path):
+    """A command's process keeps a Ctrl-C that comes while its modules import (hintsjax/__init__.py
+    under `python -m`) and its boundary raises it as the command begins: one line, exit 130, no
+    run folder. Python's own handler raised it wherever it landed; inside JAX's garbage-collector
+    callback it was dropped and the run trained to its end, exit 0. The signal is sent once the
+    package has imported, as `python -m hintsjax.run` does before importing the run module."""
+    script = (
+        "import os, runpy, signal, sys\n"
+        "sys.argv = ['-m']\n"  # as Python sets it while it imports the -m module's package
+        "import hintsjax\n"
+        "os.kill(os.getpid(), signal.SIGINT)\n"  # kept, not raised: the imports go on
+        "sys.argv = ['hintsjax.run', 'env=pendulum', 'out_dir=runs', 'name=r']\n"
+        "runpy.run_module('hintsjax.run', run_name='__main__', alter_sys=True)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True, timeout=300
+    )
+    assert out.returncode == errors.INTERRUPTED, out.stderr[-2000:]
+    assert out.stderr.strip().splitlines() == ["interrupted"]
+    assert not (tmp_path / "runs").exists()

@@ -7,8 +7,10 @@ traceback was written, exit 1."""
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
+import signal
 import sys
 import tempfile
 import time
@@ -17,7 +19,12 @@ from pathlib import Path
 from typing import Any, Callable
 
 from hintsjax.system.refusals import MACHINE, limits_too_low, machine_refused, report_machine
-from hintsjax.system.signals import Terminated
+from hintsjax.system.signals import (
+    Terminated,
+    command_begins,
+    raise_stop_asked,
+    sigint_as_interrupt,
+)
 
 INTERRUPTED = 130  # the exit status of a command stopped by Ctrl-C (128 + SIGINT), as a shell's
 TERMINATED = 143  # the exit status of a command stopped by SIGTERM (128 + SIGTERM), as a shell's
@@ -70,6 +77,19 @@ def report_bug(error: BaseException, folder: Path | None = None) -> int:
     return BUG
 
 
+def _device_settled() -> None:
+    """Wait for the computations still running on the device (a stop leaves them behind): the
+    process must not exit under them, where XLA's teardown crashed (SIGABRT, a corrupted heap)."""
+    jax = sys.modules.get("jax")
+    if jax is None:
+        return
+    for array in jax.live_arrays():
+        try:
+            array.block_until_ready()
+        except Exception:  # noqa: BLE001  a failed computation is settled too
+            pass
+
+
 def command(main: Callable[..., int]) -> Callable[..., int]:
     """A command's entry point (returning its exit status) behind the boundary: UsageError one
     line, exit 2; Ctrl-C one line, exit 130; output whose reader has gone, nothing more, exit 141;
@@ -83,7 +103,15 @@ def command(main: Callable[..., int]) -> Callable[..., int]:
             return MACHINE
         try:
             try:
-                return main(*args, **kwargs)
+                command_begins()  # a stop asked while the command's modules imported: raised
+                # Ctrl-C raises (not where the user's shell ignores it, as for `cmd &`), and one
+                # that Python drops in JAX's gc callback stops the command as it ends
+                ignored = signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+                with contextlib.nullcontext() if ignored else sigint_as_interrupt():
+                    status = main(*args, **kwargs)
+                    if not status:
+                        raise_stop_asked()
+                return status
             finally:
                 # a closed pipe shows here, in the boundary, not at the interpreter's exit
                 sys.stdout.flush()
@@ -91,9 +119,11 @@ def command(main: Callable[..., int]) -> Callable[..., int]:
             return report_usage(e)
         except Terminated:
             print("terminated (SIGTERM)", file=sys.stderr)
+            _device_settled()
             return TERMINATED
         except KeyboardInterrupt:
             print("interrupted", file=sys.stderr)
+            _device_settled()
             return INTERRUPTED
         except BrokenPipeError:  # `... --help | head`: the reader has what it wanted
             # nor fail flushing at exit

@@ -1,7 +1,8 @@
 """Signals as interrupts: within `signal_as_interrupt` a signal (SIGTERM: `sigterm_as_interrupt`;
 submitit's preemption: hintsjax/system/requeue.py) raises in the main thread as Ctrl-C does, so
 whatever handles Ctrl-C handles it too; within `stops_deferred` (training's loop) the stop is kept
-and raised at the loop's safe points (`raise_stop_asked`)."""
+and raised at the loop's safe points (`raise_stop_asked`), as is one asked while a command's
+modules still import (`keep_while_starting`)."""
 
 from __future__ import annotations
 
@@ -90,3 +91,36 @@ def sigint_as_interrupt():
     callback (JAX's, while a program compiles) is raised at the next safe point, not lost; a
     second Ctrl-C is raised at once, wherever it lands."""
     return signal_as_interrupt(signal.SIGINT, lambda number, frame: KeyboardInterrupt(), again=True)
+
+
+def keep_while_starting() -> None:
+    """For a command's process, before its modules import (hintsjax/__init__.py): Ctrl-C and
+    SIGTERM keep their stop until the command's boundary begins (`command_begins`); a second
+    Ctrl-C is raised at once. Python's own handler raised it wherever it landed, and inside JAX's
+    garbage-collector callback it was dropped: the run then trained to its end."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for number in (signal.SIGINT, signal.SIGTERM):
+        if signal.getsignal(number) in (signal.default_int_handler, signal.SIG_DFL):
+            signal.signal(number, _kept_while_starting)
+
+
+def _kept_while_starting(signum, frame) -> None:
+    if not _stops:
+        _stops.append(Terminated() if signum == signal.SIGTERM else KeyboardInterrupt())
+    elif signum == signal.SIGINT:
+        raise KeyboardInterrupt()
+
+
+def command_begins() -> None:
+    """A command's boundary begins (hintsjax.system.errors.command): Python's own handlers back in
+    place of `keep_while_starting`'s, then the stop it kept, if any, raised."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    kept = False
+    for number, default in ((signal.SIGINT, signal.default_int_handler), (signal.SIGTERM, None)):
+        if signal.getsignal(number) is _kept_while_starting:
+            signal.signal(number, signal.SIG_DFL if default is None else default)
+            kept = True
+    if kept and _stops and not _blocks:
+        raise _stops.pop()
