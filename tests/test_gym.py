@@ -130,6 +130,13 @@ def test_a_bad_name_is_one_line_naming_the_valid_choices(kwargs, says):
         (lambda: VectorEnv("pendulum", 2).reset(seed="12"), TypeError, "seed must be an int"),
         (lambda: VectorEnv("pendulum", 2).reset(seed=[0.5, 1.9]), TypeError, "seed must be an int"),
         (lambda: VectorEnv("pendulum", 2).reset(seed=2.0), TypeError, "seed must be an int"),
+        (
+            lambda: VectorEnv("pendulum", 2, image_size=2.5),
+            TypeError,
+            "image_size must be an int (pixels a side), got 2.5",
+        ),
+        (lambda: VectorEnv("pendulum", 2, image_size=64.0), TypeError, "image_size must be an int"),
+        (lambda: VectorEnv("pendulum", 2, hint=5), TypeError, "hint must be a name or names"),
     ],
     ids=[
         "num_envs-float",
@@ -139,6 +146,9 @@ def test_a_bad_name_is_one_line_naming_the_valid_choices(kwargs, says):
         "seed-str",
         "seed-floats",
         "seed-float",
+        "image_size-float",
+        "image_size-whole-float",
+        "hint-int",
     ],
 )
 def test_a_bad_value_is_one_line_naming_the_argument(make, error, says):

@@ -303,6 +303,21 @@ def test_an_expert_is_not_exported_from_an_older_checkpoint_than_its_score(exper
     assert not (tmp_path / "expert").exists()
 
 
+@pytest.mark.parametrize("damaged", ["", "{}", '{"evaluations": 5}', '{"evaluations": [{}]}'])
+def test_an_expert_from_a_damaged_eval_json_is_one_line_naming_it(expert_run, tmp_path, damaged):
+    """eval.json damaged (empty, without evaluations, of another shape): one line naming it and
+    the resume that writes it again, not a bug report; nothing exported."""
+    import shutil
+
+    _, run_dir = expert_run
+    copy = tmp_path / run_dir.name
+    shutil.copytree(run_dir, copy)
+    (copy / "eval.json").write_text(damaged)
+    with pytest.raises(UsageError, match=r"eval.json is not a run's evaluation \(\w+\); resume"):
+        experts.export(copy, tmp_path / "expert")
+    assert not (tmp_path / "expert").exists()
+
+
 PACKAGED = ["acrobot", "ant", "car_racing", "halfcheetah", "humanoid", "idp", "pendulum"]
 
 

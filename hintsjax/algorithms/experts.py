@@ -106,8 +106,14 @@ def export(run_dir: Path, out_dir: Path | None = None, force: bool = False) -> P
             f"({cfg.env}'s{' packaged' if out.parent == EXPERTS_DIR.absolute() else ''} one); give "
             "--out another folder, or --force to replace it"
         )
-    evaluation = json.loads(eval_json.read_text())["evaluations"][0]
-    best = best_seed(evaluation)
+    try:
+        evaluation = json.loads(eval_json.read_text())["evaluations"][0]
+        best = best_seed(evaluation)
+    except (ValueError, KeyError, IndexError, TypeError) as e:  # a damaged file, not a bug
+        raise UsageError(
+            f"{eval_json} is not a run's evaluation ({type(e).__name__}); resume the run to "
+            f"write it again (python -m hintsjax.run resume={run_dir}), then export"
+        ) from None
     state, update = checkpoint.restore_latest(run_dir, ppo.make_trainer(cfg).abstract_state())
     if update != cfg.ppo.num_updates:  # the newest could not be read: eval.json scored another
         raise UsageError(

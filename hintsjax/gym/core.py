@@ -159,6 +159,10 @@ class _Settings:
         physics: str,
     ):
         self.name = env
+        if hint is not None and not isinstance(hint, str):
+            raise TypeError(f"hint must be a name or names joined by '+', got {hint!r}")
+        if image_size is not None and not _whole(image_size):  # never rounded
+            raise TypeError(f"image_size must be an int (pixels a side), got {image_size!r}")
         self.hint = default_hint(env) if hint is None else hint
         resolved = envs.make_hint(env, self.hint)
         self.keys, self.as_dict = _observe(observe, resolved)
