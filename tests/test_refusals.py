@@ -251,3 +251,26 @@ def test_limits_too_low_are_refused_by_every_command_before_jax_starts(tmp_path)
             assert out.returncode == refusals.MACHINE and len(lines) == 1, (module, out.stderr)
             assert lines[0].startswith("error: this process ") and words in lines[0], lines
     assert list(tmp_path.iterdir()) == []
+
+
+def test_orbax_reads_left_unretrieved_are_dropped_from_the_log_and_nothing_else():
+    """asyncio's "exception was never retrieved" for tensorstore's reads (a Task's or a
+    _GatheringFuture's: orbax's other reads of a checkpoint it passed over; the re-try of issue 81
+    saw 296 such lines before the one naming the checkpoint) is dropped; others are kept."""
+    import logging
+
+    def record(text: str) -> logging.LogRecord:
+        return logging.LogRecord("asyncio", logging.ERROR, __file__, 1, text, None, None)
+
+    reads = 'future: <_GatheringFuture finished exception=Exception("... TensorStore details")>'
+    dropped = [
+        f"_GatheringFuture exception was never retrieved\n{reads}",
+        "Task exception was never retrieved\nfuture: <Task ... TensorStore({...})>",
+    ]
+    kept = [
+        "_GatheringFuture exception was never retrieved\nfuture: <... ValueError('mine')>",
+        "Task exception was never retrieved\nfuture: <Task ... ZeroDivisionError>",
+        "Unclosed client session",
+    ]
+    assert [checkpoint._unretrieved_reads(record(t)) for t in dropped] == [False, False]
+    assert [checkpoint._unretrieved_reads(record(t)) for t in kept] == [True, True, True]

@@ -86,11 +86,13 @@ def _drop_closed_loop_noise() -> None:
 
 
 def _unretrieved_reads(record: logging.LogRecord) -> bool:
-    """A logging filter that drops asyncio's "Task exception was never retrieved" for a read of
-    tensorstore's (orbax's reads of a checkpoint's other arrays, left when one failed)."""
+    """A logging filter that drops asyncio's "Task (or _GatheringFuture) exception was never
+    retrieved" for a read of tensorstore's (orbax's reads of a checkpoint's other arrays, left
+    when one failed)."""
     text = record.getMessage()
     return not (
-        text.startswith("Task exception was never retrieved") and "tensorstore" in text.lower()
+        text.startswith(("Task exception was never retrieved", "_GatheringFuture exception was"))
+        and "tensorstore" in text.lower()
     )
 
 
