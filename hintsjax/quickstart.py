@@ -150,7 +150,7 @@ def main(argv: list[str] | None = None) -> int:
                 pool.submit(swing_up_gif, cfg, run_dir),
             )
             baseline, gif = baseline_done.result(), gif_done.result()
-        (run_dir / BASELINE_JSON).write_text(json.dumps(baseline, indent=1))
+        paths.write_text_whole(run_dir / BASELINE_JSON, json.dumps(baseline, indent=1))
     print(
         f"\n{cfg.env}/{trained['variant']}, {cfg.eval_episodes} episodes each "
         f"({time.perf_counter() - t:.0f} s in all):\n"

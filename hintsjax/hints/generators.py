@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import io
 import json
 import time
 from dataclasses import dataclass
@@ -30,6 +31,7 @@ from flax import struct
 
 from hintsjax import envs
 from hintsjax.envs.errors import ChoiceError, choose
+from hintsjax.system import paths
 from hintsjax.system.checks import require_positive, require_range
 from hintsjax.system.errors import UsageError
 from hintsjax.settings.hint_sources import (
@@ -253,32 +255,33 @@ def write_folder(
     incomplete)."""
     names = dimension_names(cfg.generator.spec)
     m = jax.tree.map(np.asarray, metrics)
-    with (folder / "metrics.csv").open("w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(
-            [
-                "seed",
-                "dimension",
-                "train_mse",
-                "heldout_mse",
-                "train_r2",
-                "heldout_r2",
-                "final_loss",
-            ]
-        )
-        for s in range(cfg.seeds):
-            for i, name in enumerate(names):
-                writer.writerow(
-                    [
-                        s,
-                        name,
-                        *(
-                            f"{float(getattr(m, a)[s, i]):.6g}"
-                            for a in ("train_mse", "heldout_mse", "train_r2", "heldout_r2")
-                        ),
-                        f"{m.loss[s, -1]:.6g}",
-                    ]
-                )
+    rows = io.StringIO(newline="")  # written whole once complete (paths.write_whole)
+    writer = csv.writer(rows)
+    writer.writerow(
+        [
+            "seed",
+            "dimension",
+            "train_mse",
+            "heldout_mse",
+            "train_r2",
+            "heldout_r2",
+            "final_loss",
+        ]
+    )
+    for s in range(cfg.seeds):
+        for i, name in enumerate(names):
+            writer.writerow(
+                [
+                    s,
+                    name,
+                    *(
+                        f"{float(getattr(m, a)[s, i]):.6g}"
+                        for a in ("train_mse", "heldout_mse", "train_r2", "heldout_r2")
+                    ),
+                    f"{m.loss[s, -1]:.6g}",
+                ]
+            )
+    paths.write_text_whole(folder / "metrics.csv", rows.getvalue())
     with ocp.StandardCheckpointer() as saver:
         saver.save((folder / PARAMS).absolute(), stored(params), force=True)
     meta = {
@@ -296,7 +299,7 @@ def write_folder(
         "device": jax.devices()[0].device_kind,
         "config": dataclasses.asdict(cfg),
     }
-    (folder / GENERATOR_JSON).write_text(json.dumps(meta, indent=1))
+    paths.write_text_whole(folder / GENERATOR_JSON, json.dumps(meta, indent=1))
     return meta
 
 
@@ -304,7 +307,9 @@ def train_folder(cfg: GeneratorConfig) -> tuple[Path, dict[str, Any]]:
     """Train cfg's seeds in one jitted call and write their folder; (folder, generator.json)."""
     name = cfg.name or f"generator-{cfg.env}-{cfg.hint}-{time.strftime('%Y%m%d-%H%M%S')}"
     folder = fresh_folder(Path(cfg.out_dir) / name)
-    (folder / "config.yaml").write_text(yaml.safe_dump(dataclasses.asdict(cfg), sort_keys=False))
+    paths.write_text_whole(
+        folder / "config.yaml", yaml.safe_dump(dataclasses.asdict(cfg), sort_keys=False)
+    )
     keys = jnp.stack([jax.random.key(cfg.seed + i) for i in range(cfg.seeds)])
     start = time.perf_counter()
     train = jax.jit(jax.vmap(make_train(cfg))).lower(keys).compile()
