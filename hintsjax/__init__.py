@@ -12,10 +12,15 @@ _here = _Path(__file__).resolve().parent
 if not (_here / "envs").is_dir() and (_here.parent / "envs" / "__init__.py").is_file():
     __path__.append(str(_here.parent))
 
-# A command's process (`python -m hintsjax.<command>`: argv[0] is "-m" while its package imports;
-# the `hintsjax` console script): a Ctrl-C or SIGTERM while its modules import is kept for the
-# command to raise as it begins (hintsjax/system/signals.py), not lost in JAX's gc callback.
-if _sys.argv[:1] == ["-m"] or _Path(_sys.argv[0] if _sys.argv else "").name == "hintsjax":
+# A command's process (`python -m hintsjax.<command>`, the `hintsjax` console script): a Ctrl-C or
+# SIGTERM while its modules import is kept for the command's boundary to raise as it begins
+# (hintsjax/system/signals.py), not lost in JAX's gc callback. Only for the commands that have
+# that boundary: any other process keeps Python's own handlers.
+_COMMANDS = ("run", "evaluate", "video", "expert", "quickstart", "rank", "generator", "console")
+_argv = getattr(_sys, "orig_argv", [])
+_module = _argv[_argv.index("-m") + 1] if "-m" in _argv[:-1] else None
+_script = _Path(_sys.argv[0]).name if _sys.argv else ""
+if _module in {f"hintsjax.{c}" for c in _COMMANDS} or (_module is None and _script == "hintsjax"):
     from hintsjax.system import signals as _signals
 
     _signals.keep_while_starting()

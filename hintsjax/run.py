@@ -40,7 +40,12 @@ from hintsjax.system.errors import (
     report_usage,
 )
 from hintsjax.system.refusals import MACHINE, machine_refused, report_machine
-from hintsjax.system.signals import Terminated, sigint_as_interrupt, sigterm_as_interrupt
+from hintsjax.system.signals import (
+    Terminated,
+    raise_stop_asked,
+    sigint_as_interrupt,
+    sigterm_as_interrupt,
+)
 from hintsjax.settings import schema
 from hintsjax.settings.config import RunConfig
 from hintsjax.settings.layers import CONFIG_YAML, load_run_config, save_run_config
@@ -60,6 +65,7 @@ def main_from_values(values: dict[str, Any]) -> int:
     # submitit's own handler kept, whatever its signal; Ctrl-C while compiling is not lost
     with requeue.preemption_as_interrupt(), sigterm_as_interrupt(), sigint_as_interrupt():
         try:
+            raise_stop_asked()  # one that Python dropped in an earlier job of this sweep
             return _run(values)
         except requeue.Preempted as e:  # before the run had a folder: nothing to save
             return requeue.hand_over(e, None, "nothing trained")
@@ -218,7 +224,7 @@ def stopped_early(error: BaseException, folder: RunFolder) -> int:
         )
         return MACHINE
     if isinstance(error, checkpoint.CheckpointWriteError):  # the newest complete one stays
-        good = checkpoint.latest_update(run_dir)
+        good = checkpoint.newest_listed(run_dir)  # read off the folder: no collective here
         kept = f"the newest complete one is at update {good}" if good else "none is complete"
         print(
             f"error: {error}; {kept}; once it can be written, go on with: "

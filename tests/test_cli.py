@@ -1463,7 +1463,9 @@ def test_a_ctrl_c_while_the_command_still_imports_stops_it_before_anything_is_wr
     package has imported, as `python -m hintsjax.run` does before importing the run module."""
     script = (
         "import os, runpy, signal, sys\n"
-        "sys.argv = ['-m']\n"  # as Python sets it while it imports the -m module's package
+        # as `python -m hintsjax.run` starts, its package importing
+        "sys.orig_argv = [sys.executable, '-m', 'hintsjax.run']\n"
+        "sys.argv = ['-m']\n"
         "import hintsjax\n"
         "os.kill(os.getpid(), signal.SIGINT)\n"  # kept, not raised: the imports go on
         "sys.argv = ['hintsjax.run', 'env=pendulum', 'out_dir=runs', 'name=r']\n"
@@ -1475,3 +1477,25 @@ def test_a_ctrl_c_while_the_command_still_imports_stops_it_before_anything_is_wr
     assert out.returncode == errors.INTERRUPTED, out.stderr[-2000:]
     assert out.stderr.strip().splitlines() == ["interrupted"]
     assert not (tmp_path / "runs").exists()
+
+
+@pytest.mark.parametrize(
+    "module, kept",
+    [("hintsjax.run", True), ("hintsjax.evaluate", True), ("hintsjax.reproduce.sweep", False)],
+)
+def test_only_a_command_with_the_boundary_keeps_a_stop_while_it_imports(module, kept):
+    """Keeping a stop while the modules import is for the commands whose boundary raises it; any
+    other process that imports hintsjax (a sweep's worker, a user's `python -m mypkg`) keeps
+    Python's own handlers, or SIGTERM would only be kept, never acted on."""
+    script = (
+        "import signal, sys\n"
+        f"sys.orig_argv = [sys.executable, '-m', {module!r}]\n"
+        "sys.argv = ['-m']\n"
+        "import hintsjax\n"
+        "print(signal.getsignal(signal.SIGINT) is signal.default_int_handler,"
+        " signal.getsignal(signal.SIGTERM) is signal.SIG_DFL)\n"
+    )
+    command = [sys.executable, "-c", script]
+    out = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == (["False", "False"] if kept else ["True", "True"])

@@ -39,15 +39,30 @@ def test_the_os_refusal_behind_an_error_is_found_by_its_code_or_its_words():
     assert refusals.os_errno(RuntimeError("mkdir: Read-only file system")) == errno.EROFS
     assert refusals.os_errno(OSError(errno.EMFILE, "Too many open files")) == errno.EMFILE
     assert refusals.os_errno(RuntimeError("RESOURCE_EXHAUSTED: Out of memory allocating")) is None
-    # raised while handling one, or from one (orbax's errors re-raised as ours)
+    # raised from one, or while handling one, not where `from None` hides it: an out-of-memory
+    # error raised in a handler of a missing file is memory, not the file
+    try:
+        try:
+            raise ValueError(TENSORSTORE_FULL)
+        except ValueError as e:
+            raise checkpoint.CheckpointWriteError("could not write checkpoint 2") from e
+    except checkpoint.CheckpointWriteError as e:
+        assert refusals.os_errno(e) == errno.ENOSPC
+        assert refusals.cause_text(e) == "No space left on device"
+    try:
+        try:
+            raise FileNotFoundError(errno.ENOENT, "No such file or directory", "cache")
+        except FileNotFoundError:
+            raise RuntimeError("RESOURCE_EXHAUSTED: Out of memory allocating 8 bytes")
+    except RuntimeError as e:
+        assert refusals.os_errno(e) == errno.ENOENT and refusals.out_of_memory(e)
     try:
         try:
             raise ValueError(TENSORSTORE_FULL)
         except ValueError:
-            raise checkpoint.CheckpointWriteError("could not write checkpoint 2") from None
-    except checkpoint.CheckpointWriteError as e:
-        assert refusals.os_errno(e) == errno.ENOSPC
-        assert refusals.cause_text(e) == "No space left on device"
+            raise RuntimeError("could not write checkpoint 2") from None
+    except RuntimeError as e:
+        assert refusals.os_errno(e) is None
 
 
 def test_a_full_disk_is_not_memory_though_tensorstore_says_resource_exhausted():

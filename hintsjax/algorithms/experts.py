@@ -107,17 +107,20 @@ def export(run_dir: Path, out_dir: Path | None = None, force: bool = False) -> P
             "--out another folder, or --force to replace it"
         )
     try:
-        evaluation = json.loads(eval_json.read_text())["evaluations"][0]
+        results = json.loads(eval_json.read_text())
+        evaluation = results["evaluations"][0]
         best = best_seed(evaluation)
+        scored = int(results.get("env_steps", cfg.ppo.num_updates * cfg.ppo.batch_size))
+        scored //= cfg.ppo.batch_size
     except (ValueError, KeyError, IndexError, TypeError) as e:  # a damaged file, not a bug
         raise UsageError(
             f"{eval_json} is not a run's evaluation ({type(e).__name__}); resume the run to "
             f"write it again (python -m hintsjax.run resume={run_dir}), then export"
         ) from None
     state, update = checkpoint.restore_latest(run_dir, ppo.make_trainer(cfg).abstract_state())
-    if update != cfg.ppo.num_updates:  # the newest could not be read: eval.json scored another
+    if update != scored:  # the newest could not be read: eval.json scored another
         raise UsageError(
-            f"{run_dir}'s checkpoint of update {cfg.ppo.num_updates}, the policy eval.json scored, "
+            f"{run_dir}'s checkpoint of update {scored}, the policy eval.json scored, "
             f"cannot be read (the newest that can is update {update}): train its last updates "
             f"again (python -m hintsjax.run resume={run_dir}), then export"
         )

@@ -20,6 +20,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import os
 import shutil
 import tempfile
 from pathlib import Path
@@ -91,8 +92,8 @@ def pool_runs(parts: list[Path], into: Path, run_ids: list[str]) -> list[str]:
             files = _checked(parts, into, run_ids, stage)
         except PoolError as e:  # named by the parts' own folders, not the staging one
             text = str(e)
-            for part in parts:
-                text = text.replace(str(stage / part.name), str(_source(part)))
+            for part in sorted(parts, key=lambda p: -len(p.name)):
+                text = text.replace(f"{stage / part.name}{os.sep}", f"{_source(part)}{os.sep}")
             raise PoolError(text) from None
     for part in parts:  # all checked: now into the archive
         archive_runs(part, run_ids)

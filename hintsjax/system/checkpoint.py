@@ -187,19 +187,17 @@ def _raw_keys(state):
 
 def _writable(folder: Path) -> str | None:
     """Why `folder` takes no new checkpoint folder (full, read-only, immutable, too many open
-    files), or None: process 0 makes and removes one there, and its answer holds for every
-    process. A save orbax cannot even begin leaves its background threads waiting for each other
+    files, its run folder gone), or None: process 0 makes and removes one there (the others answer
+    None). A save orbax cannot even begin leaves its background threads waiting for each other
     until its ten-minute timeout, and the process with them."""
-    why = None
-    if devices.is_main():
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-            os.rmdir(tempfile.mkdtemp(prefix=".probe-", dir=folder))
-        except OSError as e:
-            why = cause_text(e)
-    if devices.agree_that(why is None):
+    if not devices.is_main():
         return None
-    return why or "process 0 could not write there"
+    try:
+        folder.mkdir(exist_ok=True)  # not its parents: a run folder removed stays removed
+        os.rmdir(tempfile.mkdtemp(prefix=".probe-", dir=folder))
+    except OSError as e:
+        return cause_text(e)
+    return None
 
 
 def save(run_dir: Path, state, update: int) -> None:
@@ -214,15 +212,17 @@ def save(run_dir: Path, state, update: int) -> None:
         where = key / CHECKPOINTS
         return CheckpointWriteError(f"could not write checkpoint {at} in {where}: {why}")
 
+    at, why = update, None
     if manager is not None:
         try:  # the write handed over last (the run loop saves only once it is done)
             manager.wait_until_finished()
             manager.check_for_errors()
         except Exception as e:
-            raise failed(_HANDED.get(key, update), cause_text(e)) from None
-    why = _writable(key / CHECKPOINTS)
-    if why is not None:
-        raise failed(update, why)
+            at, why = _HANDED.get(key, update), cause_text(e)
+    why = why or _writable(key / CHECKPOINTS)
+    # one answer for all: a failure may show on one process only, and each joins orbax's save
+    if not devices.every_process(why is None):
+        raise failed(at, why or "another process of the run could not write it")
     try:
         if manager is None:
             with _manager(run_dir, create=True) as blocking:
@@ -280,6 +280,17 @@ def any_saved(run_dir: Path) -> bool:
     return path.is_dir() and any(
         step.is_dir() and step.name.isdigit() and any(step.iterdir()) for step in path.iterdir()
     )
+
+
+def newest_listed(run_dir: Path) -> int | None:
+    """The newest numbered checkpoint folder with something in it, read off the folder alone (no
+    orbax manager, whose opening is a collective): orbax renames a checkpoint into its number only
+    once it is complete."""
+    path = Path(run_dir) / CHECKPOINTS
+    if not path.is_dir():
+        return None
+    steps = [int(s.name) for s in path.iterdir() if s.is_dir() and s.name.isdigit()]
+    return max((u for u in steps if any((path / str(u)).iterdir())), default=None)
 
 
 def latest_update(run_dir: Path) -> int | None:

@@ -76,6 +76,14 @@ def agree_that(flag: bool) -> bool:
     return bool(multihost_utils.broadcast_one_to_all(np.asarray(flag)))
 
 
+def every_process(flag: bool) -> bool:
+    """Whether `flag` holds on every process, each giving its own (a collective all of them join):
+    a choice whose cause may show on one process only, as a failed write."""
+    if jax.process_count() == 1:
+        return flag
+    return bool(np.all(multihost_utils.process_allgather(np.asarray(flag))))
+
+
 @functools.lru_cache(maxsize=None)
 def _first_seeds(seeds: int, everywhere: NamedSharding) -> Callable[[Any], Any]:
     """A compiled program: a tree's first `seeds` of each leaf, a whole copy on every device."""

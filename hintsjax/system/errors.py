@@ -7,10 +7,8 @@ traceback was written, exit 1."""
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import os
-import signal
 import sys
 import tempfile
 import time
@@ -80,14 +78,20 @@ def report_bug(error: BaseException, folder: Path | None = None) -> int:
 def _device_settled() -> None:
     """Wait for the computations still running on the device (a stop leaves them behind): the
     process must not exit under them, where XLA's teardown crashed (SIGABRT, a corrupted heap)."""
-    jax = sys.modules.get("jax")
-    if jax is None:
-        return
-    for array in jax.live_arrays():
-        try:
-            array.block_until_ready()
-        except Exception:  # noqa: BLE001  a failed computation is settled too
-            pass
+    bridge = sys.modules.get("jax._src.xla_bridge")
+    try:  # only a backend already started (never start one to exit), in one process (no peers)
+        if bridge is None or not bridge.backends_are_initialized():
+            return
+        jax = sys.modules["jax"]
+        if jax.process_count() > 1:
+            return
+        for array in jax.live_arrays():
+            try:
+                array.block_until_ready()
+            except Exception:  # noqa: BLE001  a failed computation is settled too
+                pass
+    except Exception:  # noqa: BLE001  settling is a courtesy; the stop's line is printed already
+        pass
 
 
 def command(main: Callable[..., int]) -> Callable[..., int]:
@@ -104,10 +108,9 @@ def command(main: Callable[..., int]) -> Callable[..., int]:
         try:
             try:
                 command_begins()  # a stop asked while the command's modules imported: raised
-                # Ctrl-C raises (not where the user's shell ignores it, as for `cmd &`), and one
-                # that Python drops in JAX's gc callback stops the command as it ends
-                ignored = signal.getsignal(signal.SIGINT) == signal.SIG_IGN
-                with contextlib.nullcontext() if ignored else sigint_as_interrupt():
+                # Ctrl-C raises, and one that Python drops in JAX's gc callback stops the command
+                # as it ends
+                with sigint_as_interrupt():
                     status = main(*args, **kwargs)
                     if not status:
                         raise_stop_asked()

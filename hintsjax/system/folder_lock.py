@@ -134,7 +134,8 @@ def _holder_text(found: dict) -> str:
 def say_if_training(folder: Path) -> None:
     """A reader's one line when a run still trains in `folder` (it reads the newest checkpoint)."""
     held = holder(folder)
-    if held is not None:
+    mine = f"pid {os.getpid()} on {socket.gethostname()},"  # a sweep's worker exports its expert
+    if held is not None and not held.startswith(mine):
         print(
             f"note: {folder} is still training ({held}): this reads its newest checkpoint",
             file=sys.stderr,

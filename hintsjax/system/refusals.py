@@ -49,9 +49,10 @@ MIN_OPEN_FILES = 64  # ulimit -n (RLIMIT_NOFILE)
 
 def os_errno(error: BaseException) -> int | None:
     """The errno of the OS's refusal behind `error`, or behind the errors it was raised from or
-    while handling: an OSError's own; else one its text names, as tensorstore's does under orbax
-    (`[os_error_code='28']`, `[Errno 24]`) or by the refusal's own words ("No space left on
-    device"). None when nothing says the OS refused something."""
+    while handling (not those `raise ... from None` hides): an OSError's own; else one its text
+    names, as tensorstore's does under orbax (`[os_error_code='28']`, `[Errno 24]`) or by the
+    refusal's own words ("No space left on device"). None when nothing says the OS refused
+    something."""
     seen: set[int] = set()
     while error is not None and id(error) not in seen:
         seen.add(id(error))
@@ -64,7 +65,7 @@ def os_errno(error: BaseException) -> int | None:
         for code in (*WRITE_ERRNOS, *FILE_LIMIT_ERRNOS):
             if os.strerror(code) in text:
                 return code
-        error = error.__cause__ or error.__context__
+        error = error.__cause__ or (None if error.__suppress_context__ else error.__context__)
     return None
 
 
@@ -159,7 +160,7 @@ def out_of_memory(error: BaseException) -> bool:
     if isinstance(error, OutOfMemory):
         return True
     text = str(error)
-    return os_errno(error) is None and (
+    return os_errno(error) not in DISK_FULL_ERRNOS | FILE_LIMIT_ERRNOS and (
         isinstance(error, MemoryError) or "RESOURCE_EXHAUSTED" in text or "Out of memory" in text
     )
 

@@ -7,6 +7,7 @@ modules still import (`keep_while_starting`)."""
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import threading
 from typing import Any, Callable
@@ -89,7 +90,9 @@ def sigint_as_interrupt():
     """Within this block Ctrl-C (SIGINT) raises KeyboardInterrupt as Python's own handler does, and
     keeps its stop (`signal_as_interrupt`): one that Python drops inside a garbage collector's
     callback (JAX's, while a program compiles) is raised at the next safe point, not lost; a
-    second Ctrl-C is raised at once, wherever it lands."""
+    second Ctrl-C is raised at once, wherever it lands. A SIGINT the shell ignores stays ignored."""
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:  # the shell's choice (`cmd &`): kept
+        return contextlib.nullcontext()
     return signal_as_interrupt(signal.SIGINT, lambda number, frame: KeyboardInterrupt(), again=True)
 
 
@@ -110,6 +113,9 @@ def _kept_while_starting(signum, frame) -> None:
         _stops.append(Terminated() if signum == signal.SIGTERM else KeyboardInterrupt())
     elif signum == signal.SIGINT:
         raise KeyboardInterrupt()
+    else:  # a second SIGTERM: as if never handled (the process ends at once)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        os.kill(os.getpid(), signal.SIGTERM)
 
 
 def command_begins() -> None:

@@ -7,6 +7,7 @@ the deferred signals (hintsjax/system/signals.py) are the parts it calls by name
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import sys
@@ -247,7 +248,8 @@ class ChunkLoop:
                 self.save(self.done)  # computed, and copied off as the chunk runs
         except BaseException:
             # the chunk still runs: the process must not exit under it (XLA's teardown crashed)
-            jax.block_until_ready((following, metrics, following_finite))
+            with contextlib.suppress(Exception):  # a chunk that failed: the error raised stands
+                jax.block_until_ready((following, metrics, following_finite))
             raise
         self.state, self.finite = following, following_finite
         self.pending, self.done = (metrics, self.done, n), self.done + n
