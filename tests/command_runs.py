@@ -66,6 +66,16 @@ def outcomes(
     ]
 
 
+def said(stderr: str) -> list[str]:
+    """What a command printed on stderr beside its progress bar: the non-empty lines without
+    tqdm's rate (either way up: "s/upd" below one update a second, under load)."""
+    return [
+        line
+        for line in stderr.replace("\r", "\n").splitlines()
+        if line.strip() and "upd/s" not in line and "s/upd" not in line
+    ]
+
+
 def run_case(module: str, case: dict) -> None:
     """In the forked child: one `python -m module *args`; never returns."""
     code = 1

@@ -618,12 +618,7 @@ def test_a_checkpoint_that_cannot_be_written_is_the_one_named(tmp_path):
     )
     folder = (tmp_path / "runs" / "full").absolute()
     assert out.returncode == 1, out.stderr[-2000:]
-    bar = ("upd/s", "s/upd")  # tqdm's rate, either way up (below one update a second under load)
-    said = [
-        line
-        for line in out.stderr.replace("\r", "\n").splitlines()
-        if line.strip() and not any(b in line for b in bar)
-    ]
+    said = command_runs.said(out.stderr)
     # no "Event loop is closed" traces from orbax's closed loop before it
     assert len(said) == 1, said[:12]
     assert said[0].startswith(

@@ -213,23 +213,20 @@ def test_parts_that_cannot_be_one_row_are_one_line(parts, capsys, change, messag
     for key, value in change.items():
         values[key] = {**values[key], **value} if isinstance(value, dict) else value
     path.write_text(yaml.safe_dump(values))
-    refused_in_one_line(parts, capsys, message)
+    status, err = pool_refused(parts, capsys)
+    assert status == 2 and err.count("\n") == 1 and err.startswith("error: ") and message in err
+    assert "hintsjax-pool-" not in err, err  # the parts' own folders named, not the staging one
+    assert not archive.ARCHIVE.exists()  # nothing written, the parts' archives neither
 
 
-def refused_in_one_line(parts: Path, capsys, message: str) -> None:
-    """Pooling part0 and part4 exits 2 with one line holding `message`, naming the parts' own
-    folders (not a staging one), and writes nothing: neither the pooled run nor the parts' own
-    archives."""
+def pool_refused(parts: Path, capsys) -> tuple[int, str]:
+    """Pooling part0 and part4 into `pooled`, which must refuse (SystemExit): its exit status and
+    what it printed on stderr."""
     with pytest.raises(SystemExit) as e:
         pool_command(
             ["--pool", f"{parts / 'part0'},{parts / 'part4'}", "--runs", str(parts / "pooled")]
         )
-    err = capsys.readouterr().err
-    assert (
-        e.value.code == 2 and err.count("\n") == 1 and err.startswith("error: ") and message in err
-    ), err
-    assert "hintsjax-pool-" not in err, err
-    assert not archive.ARCHIVE.exists()  # nothing written, the parts' archives neither
+    return e.value.code, capsys.readouterr().err
 
 
 @pytest.mark.parametrize(
@@ -250,7 +247,10 @@ def test_a_damaged_part_is_one_line_naming_its_file_and_nothing_is_written(
     parts, capsys, damage, message
 ):
     damage(parts / "part4" / RUN)
-    refused_in_one_line(parts, capsys, message)
+    status, err = pool_refused(parts, capsys)
+    assert status == 2 and err.count("\n") == 1 and err.startswith("error: ") and message in err
+    assert "hintsjax-pool-" not in err, err  # the parts' own folders named, not the staging one
+    assert not archive.ARCHIVE.exists()  # nothing written, the parts' archives neither
 
 
 @pytest.mark.parametrize(

@@ -22,6 +22,7 @@ from pathlib import Path
 import jax
 import pytest
 
+import command_runs  # tests/command_runs.py
 from hintsjax.system import checkpoint, errors, refusals
 
 # tensorstore's words for a full disk under orbax (a real one, from a 256 KiB tmpfs), as
@@ -229,11 +230,7 @@ def test_a_full_disk_while_checkpointing_is_the_disk_in_one_line_and_resumes_whe
         timeout=600,
     )
     assert out.returncode == refusals.MACHINE, out.stderr[-2000:]
-    said = [
-        line
-        for line in out.stderr.replace("\r", "\n").splitlines()
-        if line.strip() and "upd/s" not in line and "s/upd" not in line
-    ]
+    said = command_runs.said(out.stderr)
     folder = disk / "full"
     assert said[-1] == (
         f"error: could not write checkpoint 2 in {folder / 'checkpoints'}: No space left on "

@@ -217,15 +217,14 @@ def archive_run(runs: Path, env: str, label: str, into: Path | None = None) -> P
 def archive_runs(runs: Path, run_ids: list[str], into: Path | None = None) -> list[str]:
     """Archive every run of `run_ids` that finished in `runs` (and the sweeps' records) into
     `into` (default ARCHIVE); the archived ids."""
-    from hintsjax.system.errors import UsageError
+    from hintsjax.system.errors import UsageError, described
 
     done = [r for r in run_ids if (runs / r / "eval.json").exists()]
     for r in done:
         try:
             archive_run(runs, *r.split("/"), into=into)
         except DAMAGED as e:  # a run's files as no run leaves them; the machine's refusals pass
-            what = f"{type(e).__name__}: {str(e).strip().splitlines()[0][:200]}" if str(e) else ""
-            raise UsageError(f"{runs / r} cannot be archived: {what or type(e).__name__}") from None
+            raise UsageError(f"{runs / r} cannot be archived: {described(e)}") from None
     if (runs / "sweeps.jsonl").exists():
         path = (into or ARCHIVE) / runs.name / "sweeps.jsonl"
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -32,7 +32,7 @@ from hintsjax.evaluation.evaluator import return_summary
 from hintsjax.reproduce import archive
 from hintsjax.reproduce.archive import SUMMARY_JSON, archive_runs, unique_lines
 from hintsjax.settings.layers import CONFIG_YAML
-from hintsjax.system.errors import UsageError
+from hintsjax.system.errors import UsageError, described
 
 SUMMED = ("train_seconds", "wall_seconds")  # an eval.json's seconds: the parts' total
 PER_PART = (
@@ -145,15 +145,10 @@ def _checked(parts: list[Path], into: Path, run_ids: list[str], stage: Path) -> 
         except PoolError:
             raise
         except (*archive.DAMAGED, ZeroDivisionError) as e:
-            raise PoolError(
-                f"the parts of {run} ({', '.join(map(str, folders))}) cannot be pooled: {_why(e)}"
-            ) from None
+            shown = ", ".join(map(str, folders))
+            why = described(e)
+            raise PoolError(f"the parts of {run} ({shown}) cannot be pooled: {why}") from None
     return files
-
-
-def _why(error: Exception) -> str:
-    text = str(error).strip().splitlines()[0][:200] if str(error).strip() else ""
-    return f"{type(error).__name__}: {text}" if text else type(error).__name__
 
 
 def _read(path: Path, parse) -> dict:
@@ -162,7 +157,7 @@ def _read(path: Path, parse) -> dict:
     try:
         value = parse(path.read_text())
     except (*archive.DAMAGED, yaml.YAMLError) as e:
-        raise PoolError(f"{path} cannot be read: {_why(e)}") from None
+        raise PoolError(f"{path} cannot be read: {described(e)}") from None
     if not isinstance(value, dict):
         raise PoolError(f"{path} is not a mapping: {type(value).__name__}")
     return value

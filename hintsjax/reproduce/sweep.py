@@ -431,13 +431,12 @@ def main() -> None:
     add_settings(parser)
     args = parser.parse_args()
     settings = worker_settings(parser, args)
-    from hintsjax.system.errors import UsageError
+    from hintsjax.system.errors import UsageError, report_usage
 
     try:
         train_one(args.runs, args.one.split(","), args.seeds, args.smoke, args.experts, settings)
     except UsageError as e:  # another sweep's worker holds a folder: one line in train.log
-        print(f"error: {e}", file=sys.stderr, flush=True)
-        sys.exit(2)
+        sys.exit(report_usage(e))
 
 
 if __name__ == "__main__":

@@ -200,6 +200,12 @@ def _writable(folder: Path) -> str | None:
     return None
 
 
+def _failed(run_dir: Path, update: int | None, why: str) -> CheckpointWriteError:
+    return CheckpointWriteError(
+        f"could not write checkpoint {update} in {run_dir / CHECKPOINTS}: {why}"
+    )
+
+
 def save(run_dir: Path, state, update: int) -> None:
     """Save the seed-batched runner state after `update` updates: in the background inside
     `writing(run_dir)` (after this folder's previous write is done), else blocking.
@@ -207,11 +213,6 @@ def save(run_dir: Path, state, update: int) -> None:
     or if the folder takes no new checkpoint (`_writable`), found before orbax is asked."""
     key = Path(run_dir).absolute()
     manager = _WRITERS.get(key)
-
-    def failed(at: int, why: str) -> CheckpointWriteError:
-        where = key / CHECKPOINTS
-        return CheckpointWriteError(f"could not write checkpoint {at} in {where}: {why}")
-
     at, why = update, None
     if manager is not None:
         try:  # the write handed over last (the run loop saves only once it is done)
@@ -222,7 +223,7 @@ def save(run_dir: Path, state, update: int) -> None:
     why = why or _writable(key / CHECKPOINTS)
     # one answer for all: a failure may show on one process only, and each joins orbax's save
     if not devices.every_process(why is None):
-        raise failed(at, why or "another process of the run could not write it")
+        raise _failed(key, at, why or "another process of the run could not write it")
     try:
         if manager is None:
             with _manager(run_dir, create=True) as blocking:
@@ -232,7 +233,7 @@ def save(run_dir: Path, state, update: int) -> None:
         manager.save(update, args=ocp.args.StandardSave(_raw_keys(state)))
         _HANDED[key] = update
     except Exception as e:
-        raise failed(update, cause_text(e)) from None
+        raise _failed(key, update, cause_text(e)) from None
 
 
 def saving(run_dir: Path) -> bool:
@@ -252,9 +253,7 @@ def flush(run_dir: Path) -> None:
         manager.wait_until_finished()
         manager.check_for_errors()
     except Exception as e:
-        raise CheckpointWriteError(
-            f"could not write checkpoint {handed} in {key / CHECKPOINTS}: {cause_text(e)}"
-        ) from None
+        raise _failed(key, handed, cause_text(e)) from None
     finally:
         with contextlib.suppress(Exception):
             manager.close()
@@ -273,24 +272,26 @@ def drop_empty_step_folders(run_dir: Path) -> None:
             folder.rmdir()
 
 
-def any_saved(run_dir: Path) -> bool:
-    """Whether `run_dir` holds a numbered checkpoint folder with something in it, read off the
-    folder alone: no orbax manager, whose opening is a collective every process must join."""
-    path = Path(run_dir) / CHECKPOINTS
-    return path.is_dir() and any(
-        step.is_dir() and step.name.isdigit() and any(step.iterdir()) for step in path.iterdir()
-    )
-
-
 def newest_listed(run_dir: Path) -> int | None:
     """The newest numbered checkpoint folder with something in it, read off the folder alone (no
-    orbax manager, whose opening is a collective): orbax renames a checkpoint into its number only
-    once it is complete."""
+    orbax manager, whose opening is a collective every process must join): orbax renames a
+    checkpoint into its number only once it is complete."""
     path = Path(run_dir) / CHECKPOINTS
     if not path.is_dir():
         return None
-    steps = [int(s.name) for s in path.iterdir() if s.is_dir() and s.name.isdigit()]
-    return max((u for u in steps if any((path / str(u)).iterdir())), default=None)
+    return max(
+        (
+            int(step.name)
+            for step in path.iterdir()
+            if step.is_dir() and step.name.isdigit() and any(step.iterdir())
+        ),
+        default=None,
+    )
+
+
+def any_saved(run_dir: Path) -> bool:
+    """Whether `run_dir` holds a checkpoint, read off the folder alone (`newest_listed`)."""
+    return newest_listed(run_dir) is not None
 
 
 def latest_update(run_dir: Path) -> int | None:

@@ -44,6 +44,12 @@ def report_usage(error: Exception) -> int:
     return USAGE
 
 
+def described(error: BaseException) -> str:
+    """`error` in a few words: its type and the first line of its text (200 characters at most)."""
+    text = str(error).strip()
+    return f"{type(error).__name__}: {text.splitlines()[0][:200]}" if text else type(error).__name__
+
+
 def report_bug(error: BaseException, folder: Path | None = None) -> int:
     """A bug in hintsjax (not bad input): its traceback written to `folder`/traceback.txt (a run
     folder), else to a file in the temporary folder; one line saying so and where; the exit status.
@@ -62,11 +68,7 @@ def report_bug(error: BaseException, folder: Path | None = None) -> int:
             break
         except OSError:
             continue
-    what = (
-        f"{type(error).__name__}: {str(error).strip().splitlines()[0][:200]}"
-        if str(error).strip()
-        else type(error).__name__
-    )
+    what = described(error)
     where = f"its traceback is in {path}" if path else f"{DEBUG}=1 prints its traceback"
     print(
         f"error: a bug in hintsjax ({what}); {where}; please report it with that traceback",
