@@ -6,6 +6,8 @@ imported as `mujoco_playground`). A task is loaded with MJX's JAX physics (`impl
 
 The table below (`DEFAULTS`) gives the DeepMind Control tasks this project trains (issue 48)
 their camera, a natural hint and their training settings; any other task takes `FALLBACK`.
+`playground:<task>:vision` is the task as Playground configures it for training from pixels
+(`VisionTask`), so that both pipelines can train on one reward (issue 83).
 """
 
 from __future__ import annotations
@@ -24,6 +26,11 @@ from hintsjax.envs.errors import ChoiceError
 from hintsjax.envs.hints import register_hint
 
 SOURCE = "playground"
+# `<task>:vision`: Playground's `vision=True` configuration of the task (`VisionTask`)
+VISION = "vision"
+CARTPOLES = ("CartpoleBalance", "CartpoleBalanceSparse", "CartpoleSwingup", "CartpoleSwingupSparse")
+# the tasks whose vision configuration hintsjax reproduces (the sparse ones have none)
+VISION_TASKS = ("CartpoleBalance", "CartpoleSwingup")
 
 
 @dataclass(frozen=True)
@@ -52,6 +59,8 @@ DEFAULTS: dict[str, TaskDefaults] = {
     "CheetahRun": TaskDefaults(TRACK, "torso_velocity", {**PIXEL_PPO, "starts_per_rollout": True}),
     "WalkerWalk": TaskDefaults(TRACK, "torso_height_velocity", PIXEL_PPO),
     "ReacherEasy": TaskDefaults("fixed", "fingertip_to_target", PIXEL_PPO),
+    # Playground's vision configuration renders the `fixed` camera (cam_active (True, False))
+    **{f"{task}:{VISION}": TaskDefaults("fixed", "pole_angle", PIXEL_PPO) for task in VISION_TASKS},
 }
 
 
@@ -79,27 +88,82 @@ def _mend_mujoco_version_check() -> None:
         mujoco.MjSpec.find_body = mujoco.MjSpec.body
 
 
+class VisionTask:
+    """A cartpole as Playground 0.2.0 configures it with `vision=True`, without its renderer
+    (MuJoCo Warp's, GPU only and built for one batch size): the additive `_dense_vision_reward`,
+    an end when the pole leaves the upper half-plane or the cart passes 3 m, 250 steps an episode,
+    and the vision reward's terms as its metrics. Its physics steps 0.01 s a control step, as
+    Playground's does: its vision branch sets the config's ctrl_dt to 0.02 after the env has read
+    it. The picture is the adapter's (render3d, the `fixed` camera); Playground's agent sees three
+    stacked grey frames of its own renderer instead."""
+
+    TERMS = ("alive", "pole_pos_penalty", "cart_pos_penalty", "cart_vel_penalty",
+             "pole_vel_penalty", "action_penalty")  # fmt: skip
+    EPISODE_LENGTH = 250
+    CART_LIMIT = 3.0
+
+    def __init__(self, env: Any):
+        self.env = env  # Playground's task with vision off: its physics, reset and observation
+        self.mj_model, self.mjx_model = env.mj_model, env.mjx_model
+        self.action_size = env.action_size
+
+    def reset(self, rng: jax.Array) -> Any:
+        state = self.env.reset(rng)
+        return state.replace(metrics={f"reward/{k}": jnp.zeros(()) for k in self.TERMS})
+
+    def step(self, state: Any, action: jax.Array) -> Any:
+        from mujoco_playground._src import mjx_env
+
+        env = self.env
+        data = mjx_env.step(env.mjx_model, state.data, action, env.n_substeps)
+        metrics = dict(state.metrics)  # the reward writes its terms into it
+        reward = env._dense_vision_reward(data, action, state.info, metrics)
+        cart, pole = data.qpos[env._slider_qposadr], data.qpos[env._hinge_1_qposadr]
+        done = (
+            jnp.isnan(data.qpos).any()
+            | jnp.isnan(data.qvel).any()
+            | (jnp.abs(cart) > self.CART_LIMIT)
+            | (jnp.abs(pole) > jnp.pi / 2)
+        )
+        return state.replace(
+            data=data,
+            obs=env._get_obs(data, state.info),
+            reward=reward,
+            done=done.astype(jnp.float32),
+            metrics=metrics,
+        )
+
+
 def load(task: str) -> Task:
-    """Playground's task `task` with MJX's JAX physics; ChoiceError naming every task for an
-    unknown one, EnvUnavailable for one that does not load here."""
+    """Playground's task `task` (or `<task>:vision`, `VisionTask`) with MJX's JAX physics;
+    ChoiceError naming every task for an unknown one, EnvUnavailable for one that does not load
+    here."""
     registry = _registry()
-    if task not in registry.ALL_ENVS:
-        raise ChoiceError("Playground env", task, registry.ALL_ENVS)
+    base, colon, configuration = task.partition(":")
+    if base not in registry.ALL_ENVS:
+        raise ChoiceError("Playground env", base, registry.ALL_ENVS)
+    if colon and configuration != VISION:
+        raise ChoiceError(f"configuration of {base}", configuration, [VISION])
+    if colon and base not in VISION_TASKS:
+        raise ChoiceError("Playground task with a vision configuration", base, VISION_TASKS)
     _mend_mujoco_version_check()
     try:
-        config = registry.get_default_config(task)
-        env = registry.load(task, config_overrides={"impl": "jax"})
+        config = registry.get_default_config(base)
+        env = registry.load(base, config_overrides={"impl": "jax"})
     except Exception as e:  # noqa: BLE001  Playground's own failure (a model it must download, ...), in one line
         raise EnvUnavailable(
-            f"playground:{task} does not load: {type(e).__name__}: "
+            f"playground:{base} does not load: {type(e).__name__}: "
             f"{str(e).splitlines()[0][:200] if str(e) else ''}"
         ) from None
+    length = int(config.episode_length)
+    if colon:
+        env, length = VisionTask(env), VisionTask.EPISODE_LENGTH
     return Task(
         f"{SOURCE}:{task}",
         env,
         env.mj_model,
         "data",
-        int(config.episode_length),
+        length,
         int(config.get("action_repeat", 1)),
         DEFAULTS.get(task, FALLBACK).camera,
     )
@@ -117,8 +181,8 @@ def training(task: str) -> dict[str, Any]:
 def register_task_hints(task: Task) -> None:
     """The hints that `DEFAULTS` names for `task` (none for a task outside it)."""
     model, name = task.mj_model, task.name
-    short = name.split(":", 1)[1]
-    if short == "CartpoleSwingup":
+    short = name.split(":")[1]  # the Playground task (`<task>:vision` too)
+    if short in CARTPOLES:
         hinge = int(model.jnt_qposadr[model.joint("hinge_1").id])
 
         @register_hint(name, "pole_angle", dim=1, unit="rad")

@@ -204,6 +204,66 @@ def test_an_adapted_env_takes_its_defaults_from_the_table_or_the_fallback():
     )
 
 
+VISION = "playground:CartpoleBalance:vision"
+
+
+def playground_vision_env(monkeypatch):
+    """Playground's own CartpoleBalance with `vision=True`, its renderer (MuJoCo Warp's, GPU only)
+    replaced by blank pictures: its physics, reward and ends are Playground's code, the oracle."""
+    from mujoco_playground import registry
+
+    class Context:
+        def pytree(self):
+            return None
+
+    monkeypatch.setattr(mjx, "create_render_context", lambda **kwargs: Context())
+    monkeypatch.setattr(mjx, "refit_bvh", lambda model, data, context: None)
+    monkeypatch.setattr(mjx, "render", lambda model, data, context: (None,))
+    monkeypatch.setattr(mjx, "get_rgb", lambda context, camera, out: jnp.zeros((64, 64, 3)))
+    return registry.load("CartpoleBalance", config_overrides={"vision": True, "impl": "jax"})
+
+
+def test_the_vision_configuration_pays_and_ends_as_playgrounds_vision_task(monkeypatch):
+    """`playground:CartpoleBalance:vision` steps, pays and ends exactly as Playground's
+    CartpoleBalance configured for pixels (its renderer aside), on random actions and from states
+    past each of its two limits; episodes of 250 steps at Playground's 0.01 s a step."""
+    own = playground_vision_env(monkeypatch)
+    env = envs.make(VISION, "pole_angle", ("state", "hint"))
+    params = envs.make_params(VISION)
+    assert env.max_steps == own._config.episode_length == 250 and params.camera == "fixed"
+    assert env.task.env.env.n_substeps == own.n_substeps == 1  # its config's ctrl_dt says 0.02
+    key = jax.random.key(1)
+    ts, ref = jax.jit(env.reset)(key, params), jax.jit(own.reset)(raw(key))
+    step, own_step = jax.jit(chex.assert_max_traces(env.step, n=1)), jax.jit(own.step)
+    actions = jax.random.uniform(jax.random.key(2), (STEPS, 1), minval=-1.0, maxval=1.0)
+    for action in actions:
+        ts, ref = step(key, ts.state, action, params), own_step(ref, action)
+        np.testing.assert_array_equal(ts.state.data.qpos, ref.data.qpos)
+        assert ts.reward == ref.reward and ts.state.task.metrics == ref.metrics
+        assert not ts.terminated and not ref.done
+    np.testing.assert_array_equal(ts.obs["hint"], ts.state.data.qpos[1:2])
+    data = ts.state.data
+    for qpos in ([0.1, 1.6], [3.05, 0.0]):  # the pole past horizontal; the cart past 3 m
+        state = ts.state.replace(
+            task=ts.state.task.replace(data=data.replace(qpos=jnp.asarray(qpos)))
+        )
+        ended = step(key, state, jnp.zeros(1), params)
+        ref_ended = own_step(
+            ref.replace(data=ref.data.replace(qpos=jnp.asarray(qpos))), jnp.zeros(1)
+        )
+        assert bool(ended.terminated) and not ended.truncated and bool(ref_ended.done)
+        assert ended.reward == ref_ended.reward
+
+
+def test_a_configuration_is_refused_for_a_task_without_it_or_by_another_name():
+    with pytest.raises(envs.ChoiceError, match="unknown configuration of CartpoleBalance 'pixels'"
+                       "; valid choices: vision"):  # fmt: skip
+        envs.make("playground:CartpoleBalance:pixels")
+    with pytest.raises(envs.ChoiceError, match="'CheetahRun'; valid choices: CartpoleBalance, "
+                       "CartpoleSwingup"):  # fmt: skip
+        envs.make("playground:CheetahRun:vision")
+
+
 def test_a_brax_env_is_adapted_with_brax_s_own_sizes_and_names():
     env = envs.make("brax:hopper", "reward", ("state", "hint"))
     own = env.task.env
