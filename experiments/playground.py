@@ -3,6 +3,7 @@
     python experiments/playground.py [--envs playground:CartpoleSwingup] [--workers 2]  # item 5
     python experiments/playground.py --versus-brax [--steps 60000000] [--side brax]     # item 6
     python experiments/playground.py --report      # experiments/results/playground.md
+    python experiments/playground_vision.py        # pixel PPO beside Playground's (its section)
     python experiments/playground.py --smoke --runs /tmp/pg --versus-brax &&
         python experiments/playground.py --smoke --runs /tmp/pg --report
 
@@ -442,6 +443,13 @@ def versus_lines(runs: Path) -> list[str]:
     return lines + [""]
 
 
+def vision_lines(runs: Path) -> list[str]:
+    """The section of experiments/playground_vision.py (issue 83), which writes its own record."""
+    import playground_vision
+
+    return playground_vision.section_lines(runs)
+
+
 def report(runs: Path, force: bool = False, out: Path | None = None) -> None:
     versus_record(runs, keep=out is None)
     hardware = sweep_hardware(runs, TABLE, run_ids(ENVS))
@@ -489,6 +497,7 @@ def report(runs: Path, force: bool = False, out: Path | None = None) -> None:
     lines += [
         "",
         *versus_lines(runs),
+        *vision_lines(runs),
         *about_lines(read_about(ARCHIVE / runs.name)),
         footer(runs, TABLE, run_ids(ENVS)),
     ]

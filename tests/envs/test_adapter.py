@@ -21,6 +21,7 @@ pytest.importorskip(
     reason="the Playground adapter needs the playground extra: pip install -e '.[playground]'",
 )
 
+import playground_stub  # noqa: E402
 from hintsjax import envs  # noqa: E402
 from hintsjax.envs import adapter, render3d  # noqa: E402
 
@@ -212,14 +213,7 @@ def playground_vision_env(monkeypatch):
     replaced by blank pictures: its physics, reward and ends are Playground's code, the oracle."""
     from mujoco_playground import registry
 
-    class Context:
-        def pytree(self):
-            return None
-
-    monkeypatch.setattr(mjx, "create_render_context", lambda **kwargs: Context())
-    monkeypatch.setattr(mjx, "refit_bvh", lambda model, data, context: None)
-    monkeypatch.setattr(mjx, "render", lambda model, data, context: (None,))
-    monkeypatch.setattr(mjx, "get_rgb", lambda context, camera, out: jnp.zeros((64, 64, 3)))
+    playground_stub.blank_renderer(monkeypatch)
     return registry.load("CartpoleBalance", config_overrides={"vision": True, "impl": "jax"})
 
 

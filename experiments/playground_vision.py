@@ -1,0 +1,525 @@
+"""hintsjax's pixel PPO beside MuJoCo Playground's vision PPO on CartpoleBalance (issue 83).
+
+    python experiments/playground_vision.py [--seeds 5] [--side playground|mapped|defaults]
+    python experiments/playground_vision.py --report    # archived, plotted, results/playground.md
+    python experiments/playground_vision.py --smoke --runs /tmp/pv --side mapped  # plumbing, a CPU
+
+Three sides, each in a process of its own (the script starts one per side unless `--side` names
+one), one after another on one GPU, every seed at the same env steps (Brax's own count for
+Playground's budget: 4 epochs of 31 training steps of 40,960, 5,079,040 a seed):
+- `playground`: Brax's `ppo.train` on Playground's CartpoleBalance with `vision=True` (MuJoCo
+  Warp's batch renderer: three stacked grey 64x64 frames from the `fixed` camera), its
+  `brax_vision_ppo_config` and `make_ppo_networks_vision`, as Playground's vision notebook calls
+  them (an evaluation env of its own, its renderer built for `num_eval_envs` worlds), seeds one
+  after another. Patched only where jax 0.11 needs it (`PATCHES`).
+- `mapped`: hintsjax's `ppo_rgb` on `playground:CartpoleBalance:vision` (the same physics, reward
+  and ends, envs/playground.py `VisionTask`; its own 64x64 RGB picture of the same camera) with
+  Playground's settings mapped onto hintsjax's (`mapped_values`), seeds vmapped in one program.
+- `defaults`: the same with hintsjax's defaults for the env.
+Each side's seconds run from its start (renderer build or trace) to the trained policies, with
+compile and renderer build given apart; each seed's final policy then plays `EVAL_EPISODES` fresh
+episodes, deterministic (mean action), in its own pipeline's evaluator on the same reward. The
+record is runs/<runs>/versus_vision.json, which each side fills in; --report writes its section.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+TASK = "CartpoleBalance"
+ENV = f"playground:{TASK}:vision"
+SIDES = ("playground", "mapped", "defaults")
+TRAINERS = {
+    "playground": "Playground + brax.training vision PPO",
+    "mapped": "hintsjax ppo_rgb, Playground's settings",
+    "defaults": "hintsjax ppo_rgb, its defaults",
+}
+EVAL_EPISODES = 128
+RECORD = "versus_vision.json"  # under the runs folder
+DEFAULT_RUNS = "runs/playground"
+RESULTS = Path(__file__).resolve().parent / "results"
+CURVES = "playground_vision_curves.png"  # under RESULTS
+CHUNK_STEPS = 2**17
+PATCHES = (
+    "jax.device_put_replicated put back (jax 0.10 removed it; brax 0.14.2 calls it once, to "
+    "replicate the training state on the one device)",
+)
+
+
+def vision_settings(smoke: bool) -> dict:
+    """Playground's published vision PPO settings for the task (tiny with `smoke`)."""
+    from mujoco_playground.config import dm_control_suite_params
+
+    settings = dict(dm_control_suite_params.brax_vision_ppo_config(TASK))
+    settings["network_factory"] = dict(settings["network_factory"])
+    if smoke:
+        settings.update(
+            num_timesteps=2048, num_evals=2, num_envs=16, batch_size=16, num_minibatches=2,
+            unroll_length=8, num_updates_per_batch=1, num_eval_envs=16,
+        )  # fmt: skip
+    return settings
+
+
+def steps_per_update(s: dict) -> int:
+    """Env steps of one Brax training step: batch_size x num_minibatches x unroll_length."""
+    return s["batch_size"] * s["num_minibatches"] * s["unroll_length"]
+
+
+def brax_updates(s: dict) -> int:
+    """The training steps Brax's `train` takes for `s` (brax/training/agents/ppo/train.py):
+    num_evals - 1 epochs (at least 1) x max(num_resets_per_eval, 1) x the ceiling of the budget
+    over that product's env steps."""
+    epochs = max(s["num_evals"] - 1, 1) * max(s.get("num_resets_per_eval", 0), 1)
+    return epochs * math.ceil(s["num_timesteps"] / (epochs * steps_per_update(s)))
+
+
+def mapped_values(s: dict, seeds: int, smoke: bool) -> dict:
+    """hintsjax's run config with Playground's vision settings where hintsjax has the knob: an
+    update of num_envs rollouts of batch_size x num_minibatches x unroll_length / num_envs steps,
+    num_updates_per_batch epochs of num_minibatches minibatches; GAE over each unroll (Brax's),
+    the discount, one learning rate for encoder, actor and critic, the entropy cost, the ratio
+    clip, clipping of the whole gradient, Brax's tanh-squashed Gaussian, Adam's epsilon (optax's
+    default), the MLPs' widths. Left at hintsjax's: the encoder (its three VALID convolutions,
+    32 8x8/4, 64 4x4/2, 64 3x3/1, ReLU, shared by actor and critic, beside Brax's two SAME ones,
+    16 5x5/2 and 32 3x3/2 with 2x2 max-pools and ELU, one per network), its inits, the value
+    loss's weight and the picture (one RGB frame, not three grey ones)."""
+    batch = steps_per_update(s)
+    rate = s["learning_rate"]
+    ppo = {
+        "total_env_steps": brax_updates(s) * batch,
+        "num_envs": s["num_envs"],
+        "batch_size": batch,
+        "minibatch_size": batch // s["num_minibatches"],
+        "epochs": s["num_updates_per_batch"],
+        "gae_segment": s["unroll_length"],
+        "gamma": s["discounting"],
+        "encoder_lr": rate,
+        "actor_lr": rate,
+        "critic_lr": rate,
+        "ent_coef": s["entropy_cost"],
+        "clip_eps": s["clipping_epsilon"],
+        "max_grad_norm": s["max_grad_norm"],
+        "grad_clip": "global",
+        "action_head": "tanh",
+        "adam_eps": 1e-8,
+        "reward_scale": s["reward_scaling"],
+        "hidden": list(s["network_factory"]["policy_hidden_layer_sizes"]),
+    }
+    return {**common_values(seeds, smoke), "ppo": ppo}
+
+
+def default_values(s: dict, seeds: int, smoke: bool) -> dict:
+    """hintsjax's defaults for the env, at the playground side's env steps a seed."""
+    return {
+        **common_values(seeds, smoke),
+        "ppo": {"total_env_steps": brax_updates(s) * steps_per_update(s)},
+    }
+
+
+def common_values(seeds: int, smoke: bool) -> dict:
+    values = {"env": ENV, "agent": "ppo_rgb", "seeds": seeds, "checkpoint_every": 10**9}
+    return {**values, "image_size": 36} if smoke else values
+
+
+class MemoryWatch:
+    """The device's largest memory in use while the side runs: XLA's own peak (what its allocator
+    handed out), and nvidia-smi's reading every half second (the process's whole use, Warp's
+    renderer and the CUDA context included; None without nvidia-smi)."""
+
+    def __init__(self) -> None:
+        self.smi_mib: int | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._watch, daemon=True)
+        self._thread.start()
+
+    def _watch(self) -> None:
+        while not self._stop.wait(0.5):
+            try:
+                out = subprocess.run(
+                    ["nvidia-smi", "--query-gpu=memory.used", "--format=csv,noheader,nounits"],
+                    capture_output=True, text=True, timeout=10, check=True,
+                )  # fmt: skip
+            except (OSError, subprocess.SubprocessError):
+                return
+            used = max(int(x) for x in out.stdout.split())
+            self.smi_mib = max(self.smi_mib or 0, used)
+
+    def result(self) -> dict:
+        import jax
+
+        self._stop.set()
+        stats = jax.devices()[0].memory_stats() or {}
+        peak = stats.get("peak_bytes_in_use")
+        return {"xla_peak_mib": peak and round(peak / 2**20), "nvidia_smi_peak_mib": self.smi_mib}
+
+
+def train_playground(s: dict, seeds: int, episodes: int) -> dict:
+    """Playground's side, as its vision notebook trains it: per seed, the env (its renderer built
+    for num_envs worlds) and an evaluation env (for num_eval_envs), then Brax's `train`; Brax's
+    progress calls (its own evaluations) timed from the seed's start. Then each seed's policy on
+    `episodes` fresh episodes, deterministic, by Brax's Evaluator on an env rendering as many."""
+    import jax
+    from brax.training import acting
+    from brax.training.agents.ppo import networks_vision
+    from brax.training.agents.ppo import train as ppo
+    from mujoco_playground import registry, wrapper
+
+    from hintsjax.envs.physics import enable_warp
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from playground import mend_brax_for_this_jax
+
+    mend_brax_for_this_jax()
+    enable_warp()  # Playground's physics and renderer are MuJoCo Warp's (hintsjax's MJX lacks it)
+
+    def vision_env(worlds: int):
+        config = registry.get_default_config(TASK)
+        config["vision"] = True
+        config.vision_config.nworld = worlds
+        return registry.load(TASK, config=config)
+
+    run = dict(s)
+    factory = functools.partial(
+        networks_vision.make_ppo_networks_vision, **run.pop("network_factory")
+    )
+    seeds_out, trained = [], []
+    for seed in range(seeds):
+        start = time.time()
+        env, eval_env = vision_env(run["num_envs"]), vision_env(run["num_eval_envs"])
+        built = time.time() - start
+        progress: list = []
+
+        def record(step, metrics, progress=progress, start=start):
+            row = {"step": int(step), "seconds": round(time.time() - start, 2)}
+            for key in ("eval/episode_reward", "training/sps", "training/walltime"):
+                if key in metrics:
+                    row[key] = round(float(metrics[key]), 3)
+            progress.append(row)
+            print(f"seed {seed}: {row}", flush=True)
+
+        make_policy, params, _ = ppo.train(
+            environment=env,
+            eval_env=eval_env,
+            wrap_env_fn=wrapper.wrap_for_brax_training,
+            network_factory=factory,
+            progress_fn=record,
+            seed=seed,
+            **run,
+        )
+        seeds_out.append(
+            {"seconds": time.time() - start, "renderer_build_seconds": built, "progress": progress}
+        )
+        trained.append((make_policy, params))
+    final_env = wrapper.wrap_for_brax_training(
+        vision_env(episodes), episode_length=run["episode_length"], action_repeat=1
+    )
+    returns = []
+    for seed, (make_policy, params) in enumerate(trained):
+        evaluator = acting.Evaluator(
+            final_env,
+            functools.partial(make_policy, deterministic=True),
+            num_eval_envs=episodes,
+            episode_length=run["episode_length"],
+            action_repeat=1,
+            key=jax.random.PRNGKey(1000 + seed),
+        )
+        returns.append(float(evaluator.run_evaluation(params, {})["eval/episode_reward"]))
+    return {
+        "seconds": sum(x["seconds"] for x in seeds_out),
+        "renderer_build_seconds": sum(x["renderer_build_seconds"] for x in seeds_out),
+        "seeds_run": seeds_out,
+        "deterministic": returns,
+        "env_steps_per_seed": seeds_out[0]["progress"][-1]["step"],
+        "settings": {**s, "num_timesteps_taken": brax_updates(s) * steps_per_update(s)},
+        "patches": list(PATCHES),
+    }
+
+
+def train_hintsjax(values: dict, episodes: int, label: str) -> dict:
+    """A hintsjax side: its seeds vmapped in one program, compiled ahead (the seconds given
+    apart), then run chunk by chunk to the configured updates, each chunk timed; then each seed's
+    final policy on `episodes` fresh episodes, deterministic."""
+    import jax
+    import numpy as np
+
+    from hintsjax.algorithms.registry import make_trainer
+    from hintsjax.evaluation.evaluator import compile_evaluator, evaluate_variants
+    from hintsjax.settings.layers import run_config, to_dict
+
+    cfg = run_config(values)
+    updates = cfg.ppo.num_updates
+    # chunks of at most CHUNK_STEPS env steps a seed: a curve of tens of points, few dispatches
+    most = max(1, CHUNK_STEPS // cfg.ppo.batch_size)
+    every = max(d for d in range(1, min(updates, most) + 1) if updates % d == 0)
+    trainer = make_trainer(cfg)
+    start = time.time()
+    state = jax.jit(jax.vmap(trainer.init))(cfg.seed_keys())
+    chunk = jax.jit(jax.vmap(lambda s: trainer.run(s, every))).lower(state).compile()
+    compiled = time.time() - start
+    progress = []
+    for _ in range(updates // every):
+        state, metrics = chunk(state)
+        returns = np.asarray(metrics["episode_return"])[:, -1]
+        progress.append(
+            {
+                "step": int(np.asarray(state.update)[0]) * cfg.ppo.batch_size,
+                "seconds": round(time.time() - start, 2),
+                "training_return": [round(float(x), 2) for x in returns],
+            }
+        )
+        print(f"{label}: {progress[-1]}", flush=True)
+    seconds = time.time() - start
+    evaluator = compile_evaluator(cfg, state.params, None, episodes)
+    summary = evaluate_variants(cfg, state.params, (None,), episodes, False, evaluator)[0][0]
+    return {
+        "seconds": seconds,
+        "compile_seconds": compiled,
+        "progress": progress,
+        "deterministic": [float(x) for x in summary["seed_means"]],
+        "env_steps_per_seed": updates * cfg.ppo.batch_size,
+        "settings": to_dict(cfg)["ppo"],
+    }
+
+
+def train_side(side: str, runs: Path, seeds: int, smoke: bool) -> None:
+    """One side in this process, into the record (re-read at the end, so other sides' entries
+    stay; a record of another budget is started afresh)."""
+    import jax
+
+    s = vision_settings(smoke)
+    episodes = 4 if smoke else EVAL_EPISODES
+    budget = {
+        "task": TASK,
+        "seeds": seeds,
+        "env_steps_per_seed": brax_updates(s) * steps_per_update(s),
+        "smoke": smoke,
+    }
+    print(
+        f"{TRAINERS[side]}: {seeds} seeds x {budget['env_steps_per_seed']:,} env steps", flush=True
+    )
+    if side == "playground" and jax.default_backend() != "gpu":
+        sys.exit("the playground side needs a GPU: MuJoCo Warp's batch renderer runs on CUDA only")
+    watch = MemoryWatch()
+    if side == "playground":
+        result = train_playground(s, seeds, episodes)
+    else:
+        make = mapped_values if side == "mapped" else default_values
+        result = train_hintsjax(make(s, seeds, smoke), episodes, TRAINERS[side])
+    path = runs / RECORD
+    record = json.loads(path.read_text()) if path.exists() else {}
+    if {k: record.get(k) for k in budget} != budget:
+        record = {**budget, "results": {}}
+    record["results"][side] = {
+        "trainer": TRAINERS[side],
+        **result,
+        "memory": watch.result(),
+        "eval_episodes": episodes,
+        "device": jax.devices()[0].device_kind,
+        "versions": versions(),
+        "date": time.strftime("%Y-%m-%d %H:%M"),
+        "command": " ".join(["python", f"experiments/{Path(sys.argv[0]).name}", *sys.argv[1:]]),
+    }
+    runs.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(record, indent=1))
+    print(f"{TRAINERS[side]}: {result['seconds']:.0f} s; returns {result['deterministic']}")
+
+
+def versions() -> dict:
+    from importlib import metadata
+
+    names = ("jax", "jaxlib", "mujoco", "mujoco-mjx", "warp-lang", "brax", "playground", "flax")
+    found = {}
+    for name in names:
+        try:
+            found[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            found[name] = None
+    return found
+
+
+# -- the report ----------------------------------------------------------------------------------
+
+
+def steady_rate(result: dict, side: str) -> float:
+    """Training env steps/s a seed, compile aside: Playground's from Brax's `training/sps` of its
+    epochs after the first (the first compiles), hintsjax's from its chunks after the first."""
+    if side == "playground":
+        rates = [
+            row["training/sps"]
+            for run in result["seeds_run"]
+            for row in run["progress"][2:]
+            if "training/sps" in row
+        ]
+        return sum(rates) / len(rates) if rates else float("nan")
+    rows = result["progress"]
+    if len(rows) < 2:
+        return float("nan")
+    return (rows[-1]["step"] - rows[0]["step"]) / (rows[-1]["seconds"] - rows[0]["seconds"])
+
+
+def section_lines(runs: Path) -> list[str]:
+    """The side by side's section of results/playground.md."""
+    from hintsjax.reproduce import stats
+    from hintsjax.reproduce.archive import ARCHIVE
+    from hintsjax.reproduce.markdown import markdown_table
+
+    lines = ["## Pixel PPO beside Playground's vision PPO (issue 83)", ""]
+    path = runs / RECORD
+    path = path if path.exists() else ARCHIVE / runs.name / RECORD
+    if not path.exists():
+        return lines + [f"Not run yet (`python experiments/{Path(__file__).name}`: {RECORD}).", ""]
+    record = json.loads(path.read_text())
+    results, rows = record["results"], []
+    episodes = max((r["eval_episodes"] for r in results.values()), default=EVAL_EPISODES)
+    for side in SIDES:
+        if side not in results:
+            rows.append([TRAINERS[side], *["-"] * 7, "not run yet"])
+            continue
+        r = results[side]
+        apart = r.get("renderer_build_seconds", 0.0) + r.get("compile_seconds", 0.0)
+        memory = r["memory"]
+        rows.append(
+            [
+                r["trainer"],
+                f"{r['env_steps_per_seed']:,}",
+                stats.iqm_cell(r["deterministic"]),
+                " ".join(f"{x:.1f}" for x in r["deterministic"]),
+                f"{r['seconds']:.0f}",
+                f"{apart:.0f}" if side != "playground" else f"{apart:.0f} (renderer)",
+                f"{steady_rate(r, side):,.0f}",
+                f"{memory['nvidia_smi_peak_mib'] or '-'} / {memory['xla_peak_mib'] or '-'}",
+                f"{r['device']}, {r['date']}: `{r['command']}`",
+            ]
+        )
+    lines += [
+        f"{record['task']} from 64x64 pictures, {record['seeds']} seeds x "
+        f"{record['env_steps_per_seed']:,} env steps a seed on every side"
+        f"{' (smoke: the numbers mean nothing)' if record['smoke'] else ''}. Final return: each "
+        f"seed's final policy on {episodes} fresh episodes, deterministic, in its own pipeline's "
+        "evaluator, on the vision task's reward (at most 250 steps). Wall-clock: from "
+        "the side's start to the trained policies, the renderer build (Playground) or the compile "
+        "(hintsjax) included and also given apart; Playground's seeds one after another, "
+        "hintsjax's vmapped in one program.",
+        "",
+    ]
+    lines += markdown_table(
+        [
+            "side",
+            "env steps a seed",
+            "final return: IQM [95% CI]",
+            "per seed",
+            "wall-clock (s)",
+            "of it apart (s)",
+            "training env steps/s a seed",
+            "peak GPU MiB (nvidia-smi / XLA)",
+            "GPU, date, command",
+        ],
+        rows,
+    )
+    if "playground" in results:
+        lines += [
+            "",
+            "Patches to Playground's side: " + "; ".join(results["playground"]["patches"]),
+        ]
+    for side in ("mapped", "defaults"):
+        if side in results and "playground" in results:
+            lines.append(
+                f"- {side}: "
+                + stats.ordering_text(
+                    TRAINERS[side],
+                    TRAINERS["playground"],
+                    stats.poi_ci(
+                        results[side]["deterministic"], results["playground"]["deterministic"]
+                    ),
+                )
+            )
+    return lines + [""]
+
+
+def plot(runs: Path, out: Path) -> None:
+    """Return against wall-clock per side and seed: Playground's from Brax's evaluations during
+    training (num_eval_envs episodes, stochastic), hintsjax's from its training episodes."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    record = json.loads((runs / RECORD).read_text())
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for side, colour in zip(SIDES, ("tab:gray", "tab:blue", "tab:orange")):
+        r = record["results"].get(side)
+        if r is None:
+            continue
+        if side == "playground":
+            for i, run in enumerate(r["seeds_run"]):
+                points = [(p["seconds"], p["eval/episode_reward"]) for p in run["progress"]
+                          if "eval/episode_reward" in p]  # fmt: skip
+                ax.plot(*zip(*points), color=colour, label=TRAINERS[side] if i == 0 else None)
+            continue
+        seconds = [p["seconds"] for p in r["progress"]]
+        for i in range(len(r["deterministic"])):
+            ax.plot(
+                seconds,
+                [p["training_return"][i] for p in r["progress"]],
+                color=colour,
+                alpha=0.7,
+                label=TRAINERS[side] if i == 0 else None,
+            )
+    ax.set(xlabel="seconds from the side's start", ylabel="episode return")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out, dpi=120)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--side", choices=SIDES, default=None, help="one side (default: each)")
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--runs", type=Path, default=Path(DEFAULT_RUNS))
+    parser.add_argument("--smoke", action="store_true", help="tiny budgets: the plumbing")
+    parser.add_argument("--report", action="store_true", help="archive the record, plot it")
+    args = parser.parse_args()
+    if args.seeds < 1:
+        parser.error(f"--seeds must be 1 or more, got {args.seeds}")
+    if args.report:  # the record archived and plotted, results/playground.md rewritten
+        from hintsjax.reproduce.archive import ARCHIVE
+
+        path = args.runs / RECORD
+        if not path.exists():
+            parser.error(f"no record to report: {path} (run the sides first)")
+        if args.smoke:
+            plot(args.runs, args.runs / CURVES)
+            print("\n".join(section_lines(args.runs)))
+            return
+        (ARCHIVE / args.runs.name).mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(path, ARCHIVE / args.runs.name / RECORD)
+        plot(args.runs, RESULTS / CURVES)
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        import playground
+
+        playground.report(args.runs)
+        return
+    if args.side:
+        train_side(args.side, args.runs, args.seeds, args.smoke)
+        return
+    env = {**os.environ, "XLA_PYTHON_CLIENT_PREALLOCATE": "false"}
+    for side in SIDES:  # a process each: its own memory peak and compile
+        command = [sys.executable, __file__, "--side", side, "--seeds", str(args.seeds)]
+        command += ["--runs", str(args.runs), *(["--smoke"] if args.smoke else [])]
+        done = subprocess.run(command, env=env)
+        if done.returncode:
+            sys.exit(f"the {side} side failed (exit {done.returncode}); the others' entries stay")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,123 @@
+"""experiments/playground_vision.py, hintsjax's pixel PPO beside Playground's vision PPO (issue
+83): the env steps both sides take (Brax's own count), Playground's settings as hintsjax's, the
+section's cells from a hand-written record, and (slow) Playground's side end to end on a CPU with
+its renderer blank."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+pytest.importorskip("mujoco_playground", reason="the side by side needs the playground extra")
+
+import playground_stub  # noqa: E402
+import playground_vision as pv  # noqa: E402
+
+from hintsjax.settings.layers import run_config  # noqa: E402
+
+
+def test_both_sides_take_brax_s_own_env_steps_with_playground_s_settings_mapped():
+    """Playground's 5 M env steps are 4 epochs of ceil(5 M / (4 x 40,960)) = 31 Brax training steps
+    of 256 x 8 x 20: 124 updates, 5,079,040 env steps, which both hintsjax sides take exactly."""
+    s = pv.vision_settings(smoke=False)
+    assert (s["num_timesteps"], s["num_evals"], s["num_resets_per_eval"]) == (5_000_000, 5, 0)
+    assert pv.steps_per_update(s) == 40_960 and pv.brax_updates(s) == 4 * 31 == 124
+    mapped = run_config(pv.mapped_values(s, seeds=5, smoke=False)).ppo
+    assert (mapped.num_envs, mapped.rollout_length, mapped.minibatch_size, mapped.epochs) == (
+        1024,
+        40,
+        5120,
+        8,
+    )
+    assert mapped.num_updates * mapped.batch_size == 5_079_040
+    assert (mapped.gae_segment, mapped.clip_eps, mapped.ent_coef, mapped.max_grad_norm) == (
+        20,
+        0.3,
+        0.02,
+        1.0,
+    )
+    assert mapped.action_head == "tanh" and mapped.hidden == (128, 64)
+    assert mapped.encoder_lr == mapped.actor_lr == mapped.critic_lr == 1e-3
+    defaults = run_config(pv.default_values(s, seeds=5, smoke=False))
+    assert (
+        defaults.env == pv.ENV and defaults.ppo.num_updates * defaults.ppo.batch_size == 5_079_040
+    )
+    assert defaults.ppo.num_envs == 128  # the env's own (envs/playground.py PIXEL_PPO)
+
+
+def test_the_section_gives_each_side_its_cells_and_hintsjax_against_playground(tmp_path):
+    """Steady training rates leave the compiling first epoch (Brax) or chunk (hintsjax) out: Brax's
+    `training/sps` of its later epochs, averaged; hintsjax's steps over seconds between its first
+    and last chunk."""
+    memory = {"xla_peak_mib": 900, "nvidia_smi_peak_mib": 2100}
+    side = {"eval_episodes": 128, "device": "NVIDIA H200", "date": "2026-12-03 10:00",
+            "command": "python x", "memory": memory}  # fmt: skip
+    run = {
+        "seconds": 100.0,
+        "renderer_build_seconds": 2.0,
+        "progress": [
+            {"step": 0, "seconds": 30.0, "eval/episode_reward": 1.0},
+            {"step": 100, "seconds": 60.0, "training/sps": 10.0},  # compiled in it
+            {"step": 200, "seconds": 70.0, "training/sps": 40.0},
+            {"step": 300, "seconds": 80.0, "training/sps": 60.0},
+        ],
+    }
+    record = {
+        "task": "CartpoleBalance",
+        "seeds": 3,
+        "env_steps_per_seed": 300,
+        "smoke": False,
+        "results": {
+            "playground": {
+                **side,
+                "trainer": pv.TRAINERS["playground"],
+                "seconds": 300.0,
+                "renderer_build_seconds": 6.0,
+                "seeds_run": [run] * 3,
+                "deterministic": [10.0, 11.0, 12.0],
+                "env_steps_per_seed": 300,
+                "patches": ["one patch"],
+            },  # fmt: skip
+            "mapped": {
+                **side,
+                "trainer": pv.TRAINERS["mapped"],
+                "seconds": 50.0,
+                "compile_seconds": 20.0,
+                "deterministic": [20.0, 21.0, 22.0],
+                "env_steps_per_seed": 300,
+                "progress": [{"step": 100, "seconds": 30.0}, {"step": 300, "seconds": 40.0}],
+            },
+        },  # fmt: skip
+    }
+    (tmp_path / pv.RECORD).write_text(json.dumps(record))
+    text = "\n".join(pv.section_lines(tmp_path))
+    assert "3 seeds x 300 env steps a seed on every side" in text
+    assert "| Playground + brax.training vision PPO | 300 | 11.0 [" in text
+    assert "| 10.0 11.0 12.0 | 300 | 6 (renderer) | 50 | 2100 / 900 |" in text
+    assert "| 20.0 21.0 22.0 | 50 | 20 | 20 | 2100 / 900 |" in text  # 200 steps in 10 s
+    assert (
+        "| hintsjax ppo_rgb, its defaults | - |" in text
+        and "Patches to Playground's side: one patch" in text
+    )
+    assert (
+        f"P({pv.TRAINERS['mapped']} > {pv.TRAINERS['playground']}) = 1.00 [1.00, 1.00]: decided"
+        in text
+    )
+
+
+@pytest.mark.slow
+def test_playground_s_side_trains_and_evaluates_with_its_renderer_blank(monkeypatch):
+    """Brax's vision PPO on Playground's CartpoleBalance, as the script calls it, on a CPU (its
+    renderer blank, its physics MuJoCo Warp's on the CPU): one seed at the smoke budget, Brax's
+    evaluations timed, the final policy on 4 fresh episodes."""
+    playground_stub.blank_renderer(monkeypatch)
+    s = pv.vision_settings(smoke=True)
+    out = pv.train_playground(s, seeds=1, episodes=4)
+    steps = pv.brax_updates(s) * pv.steps_per_update(s)
+    assert out["env_steps_per_seed"] == steps == 2048
+    progress = out["seeds_run"][0]["progress"]
+    assert [row["step"] for row in progress] == [0, 2048] and "training/sps" in progress[-1]
+    assert len(out["deterministic"]) == 1 and math.isfinite(out["deterministic"][0])
+    assert out["seconds"] >= progress[-1]["seconds"] > progress[0]["seconds"] > 0
