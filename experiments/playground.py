@@ -311,7 +311,6 @@ def versus_brax(
     of updates (`steps` // the update's env steps), into the record runs/versus_brax.json. Each side
     reads the record again when it ends and replaces its own entry only, so the two sides can run
     at once (on two devices); a record of another budget or seed count is started afresh."""
-    import jax
 
     brax = brax_settings(smoke)
     updates = max((steps or brax["num_timesteps"]) // steps_per_update(brax), 1)
@@ -335,24 +334,33 @@ def versus_brax(
             if side == "hintsjax"
             else train_brax(brax, seeds, updates, episodes)
         )
-        record = json.loads(path.read_text()) if path.exists() else {}
-        if {k: record.get(k) for k in budget} != budget:
-            record = {**budget, "results": {}}
-        record["results"][side] = {
-            "trainer": TRAINERS[side],
-            **result,
-            "eval_episodes": episodes,
-            "device": jax.devices()[0].device_kind,
-            "date": time.strftime("%Y-%m-%d %H:%M"),
-            "command": " ".join(["python", f"experiments/{Path(sys.argv[0]).name}", *sys.argv[1:]]),
-        }
-        runs.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(record, indent=1))
+        record_side(
+            path, budget, side, {"trainer": TRAINERS[side], **result, "eval_episodes": episodes}
+        )
         print(
             f"{TRAINERS[side]}: {result['seconds']:.0f} s; final returns (deterministic) "
             f"{[round(x, 1) for x in result['deterministic']]}",
             flush=True,
         )
+
+
+def record_side(path: Path, budget: dict, side: str, entry: dict) -> None:
+    """A side by side's record at `path` with `side`'s `entry` (and the device, date and command
+    that made it) in place of its previous one: read again just before, so that sides running at
+    once keep each other's entries; a record of another `budget` is started afresh."""
+    import jax
+
+    record = json.loads(path.read_text()) if path.exists() else {}
+    if {k: record.get(k) for k in budget} != budget:
+        record = {**budget, "results": {}}
+    record["results"][side] = {
+        **entry,
+        "device": jax.devices()[0].device_kind,
+        "date": time.strftime("%Y-%m-%d %H:%M"),
+        "command": " ".join(["python", f"experiments/{Path(sys.argv[0]).name}", *sys.argv[1:]]),
+    }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(record, indent=1))
 
 
 def seed_steps(result: dict) -> list[int]:

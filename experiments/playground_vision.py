@@ -36,6 +36,9 @@ import threading
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from playground import mend_brax_for_this_jax, record_side, steps_per_update  # noqa: E402
+
 TASK = "CartpoleBalance"
 ENV = f"playground:{TASK}:vision"
 SIDES = ("playground", "mapped", "defaults")
@@ -68,11 +71,6 @@ def vision_settings(smoke: bool) -> dict:
             unroll_length=8, num_updates_per_batch=1, num_eval_envs=16,
         )  # fmt: skip
     return settings
-
-
-def steps_per_update(s: dict) -> int:
-    """Env steps of one Brax training step: batch_size x num_minibatches x unroll_length."""
-    return s["batch_size"] * s["num_minibatches"] * s["unroll_length"]
 
 
 def brax_updates(s: dict) -> int:
@@ -175,9 +173,6 @@ def train_playground(s: dict, seeds: int, episodes: int) -> dict:
     from mujoco_playground import registry, wrapper
 
     from hintsjax.envs.physics import enable_warp
-
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from playground import mend_brax_for_this_jax
 
     mend_brax_for_this_jax()
     enable_warp()  # Playground's physics and renderer are MuJoCo Warp's (hintsjax's MJX lacks it)
@@ -315,22 +310,10 @@ def train_side(side: str, runs: Path, seeds: int, smoke: bool) -> None:
     else:
         make = mapped_values if side == "mapped" else default_values
         result = train_hintsjax(make(s, seeds, smoke), episodes, TRAINERS[side])
-    path = runs / RECORD
-    record = json.loads(path.read_text()) if path.exists() else {}
-    if {k: record.get(k) for k in budget} != budget:
-        record = {**budget, "results": {}}
-    record["results"][side] = {
-        "trainer": TRAINERS[side],
-        **result,
-        "memory": watch.result(),
-        "eval_episodes": episodes,
-        "device": jax.devices()[0].device_kind,
-        "versions": versions(),
-        "date": time.strftime("%Y-%m-%d %H:%M"),
-        "command": " ".join(["python", f"experiments/{Path(sys.argv[0]).name}", *sys.argv[1:]]),
-    }
-    runs.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(record, indent=1))
+    entry = {"trainer": TRAINERS[side], **result, "memory": watch.result()}
+    record_side(
+        runs / RECORD, budget, side, {**entry, "eval_episodes": episodes, "versions": versions()}
+    )
     print(f"{TRAINERS[side]}: {result['seconds']:.0f} s; returns {result['deterministic']}")
 
 
@@ -504,7 +487,6 @@ def main() -> None:
         (ARCHIVE / args.runs.name).mkdir(parents=True, exist_ok=True)
         shutil.copyfile(path, ARCHIVE / args.runs.name / RECORD)
         plot(args.runs, RESULTS / CURVES)
-        sys.path.insert(0, str(Path(__file__).resolve().parent))
         import playground
 
         playground.report(args.runs)
