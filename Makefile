@@ -31,13 +31,14 @@ run: setup
 	$(BIN)/python -m hintsjax.quickstart
 
 # Two processes, one test file each at a time (module fixtures stay shared): compiling is
-# single-threaded, so two processes use 2 cores (the time: README.md, "Reliability").
+# single-threaded, so two processes use 2 cores (the time: README.md, "Reliability"). Each tier
+# ends with its 25 longest tests, so a CI log shows where its minutes went.
 test: setup
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile --durations=25
 
 # The slow tier's files hold several long tests each (8 drives in one): spread test by test.
 test-slow: setup
-	$(BIN)/python -m pytest -q -m slow -n 2 --dist load
+	$(BIN)/python -m pytest -q -m slow -n 2 --dist load --durations=25
 
 lint: setup
 	$(BIN)/ruff check .

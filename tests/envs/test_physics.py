@@ -196,7 +196,10 @@ def test_warp_ant_parity_as_shipped(warp_ant):
     assert worst["obs"] < 3.0 and worst["reward"] < 1.0
 
 
+# slow tier (75 s on 2 cores, most of it compiling Warp's kernels and both physics' programs); the
+# default tier keeps Warp's kernels loaded and stepped in a process of its own (the test below)
 @warp_lang
+@pytest.mark.slow
 def test_warp_equals_jax_and_its_nested_vmap_equals_a_loop():
     """The inverted double pendulum (its cart's rail limits in the constraint solver, frame skip
     5): MJX-Warp and MJX's JAX solver agree to float32 rounding over a step of random states and
@@ -233,7 +236,7 @@ def test_warp_equals_jax_and_its_nested_vmap_equals_a_loop():
 
 
 # one idp step through MJX-Warp in a fresh process, where Warp initialises and loads its kernels
-# (the default tier's, at -O0: those the test above compiled)
+# (the default tier's, at -O0)
 _ONE_WARP_STEP = (
     ("import warp; warp.config.optimization_level = 0\n" if KERNELS_AT_O0 else "")
     + """

@@ -1,10 +1,10 @@
 """Every registered env under extreme actions: observations, rewards and pictures stay finite, and
-AutoReset keeps starting episodes. Slow (`make test-slow`): 10^6 steps per env where they cost a few
-minutes on a 2-core CPU, fewer where they cost more and episodes end sooner (DRIVE_STEPS). Measured
-in the slow tier on 2 cores (2026-11-28, two tests at once), a step under these actions cost 6.1 ms
-for the ant (8 Newton iterations and 16 line-search steps since 2026-11-26: its 2 x 10^5 steps took
-20 minutes), 2.5 ms for the humanoid, 0.62 for the halfcheetah, 0.54 for the car, 0.39 for ant_fast
-and 0.17 for the idp. HINTSJAX_DRIVE_STEPS=1000000 drives every env the full 10^6.
+AutoReset keeps starting episodes. Slow (`make test-slow`): 100 envs at once, each stepped past its
+1000-step time limit (so every env's episode ends and resets), except the ant and the humanoid,
+whose episodes end sooner: 1000 envs of 100 steps, as before (envs_for, STEPS_PER_ENV). Until
+2026-12-02 every env drove 1000 envs (10^6 steps where only the time limit ends episodes: the slow
+tier outgrew CI's 90 minutes); HINTSJAX_DRIVE_ENVS=1000 drives every env at that scale again, and
+HINTSJAX_DRIVE_STEPS=N gives every env N steps (a multiple of 100).
 
 Actions of +-1e6 are clipped by each env to its range (the pendulum's torque to +-2, MJX envs'
 controls to their ctrlrange, the car's steering, gas and brake to theirs). A NaN action is not
@@ -24,19 +24,27 @@ import pytest
 
 from hintsjax import envs
 
-STEPS_PER_ENV = 10**6
-# Steps for the envs whose 10^6 would take more than about 5 minutes of the slow tier (the
-# docstring's costs)
-# The halfcheetah and the car keep 10^6: their episodes end only at the 1000-step limit under these
-# actions, which 1000 envs reach only in 10^6 steps (at 5 x 10^5 none ended, 2026-11-28)
-DRIVE_STEPS = {"ant": 10**5, "humanoid": 10**5, "ant_fast": 5 * 10**5}
+CHUNK_STEPS = 100  # a picture of every env is drawn after each chunk
+# Steps each env takes: 1100 passes the 1000-step time limit, which alone ends the halfcheetah's and
+# the car's episodes under these actions (none of 1000 envs ended within 500 steps, 2026-11-28);
+# of 1000 ants or humanoids some fall within 100 steps (the drive before 2026-12-02)
+STEPS_PER_ENV = {"ant": 100, "humanoid": 100}
+LONGEST = 1100
+
+
+def envs_for(name: str) -> int:
+    """How many envs `name`'s drive steps at once: $HINTSJAX_DRIVE_ENVS, else 1000 for the envs of
+    100 steps and 100 for those driven past their time limit."""
+    return int(os.environ.get("HINTSJAX_DRIVE_ENVS", 0)) or (1000 if name in STEPS_PER_ENV else 100)
+
+
 EXTREMES = jnp.array([1e6, -1e6, 0.0])
 
 
 def steps_for(name: str) -> int:
-    """How many steps the drive gives env `name` (a multiple of 10^5): $HINTSJAX_DRIVE_STEPS for
-    every env, else STEPS_PER_ENV, or DRIVE_STEPS' count."""
-    return int(os.environ.get("HINTSJAX_DRIVE_STEPS", 0)) or DRIVE_STEPS.get(name, STEPS_PER_ENV)
+    """How many steps each env of `name`'s drive takes (a multiple of CHUNK_STEPS):
+    $HINTSJAX_DRIVE_STEPS for every env, else STEPS_PER_ENV's count or LONGEST."""
+    return int(os.environ.get("HINTSJAX_DRIVE_STEPS", 0)) or STEPS_PER_ENV.get(name, LONGEST)
 
 
 def drive(name: str, num_envs: int, chunks: int, chunk_steps: int) -> dict:
@@ -88,8 +96,8 @@ def drive(name: str, num_envs: int, chunks: int, chunk_steps: int) -> dict:
 @pytest.mark.slow
 @pytest.mark.parametrize("name", envs.env_names())
 def test_extreme_actions_keep_every_env_finite_and_resetting(name):
-    num_envs, chunk_steps, steps = 1000, 100, steps_for(name)
-    result = drive(name, num_envs, steps // (num_envs * chunk_steps), chunk_steps)
-    assert result["steps"] == steps
+    steps, num_envs = steps_for(name), envs_for(name)
+    result = drive(name, num_envs, steps // CHUNK_STEPS, CHUNK_STEPS)
+    assert result["steps"] == steps * num_envs
     assert result["finite"], f"{name}: a non-finite observation or reward under actions of +-1e6"
-    assert result["ended"] > 0, f"{name}: no episode ended (or was reset) in {steps} steps"
+    assert result["ended"] > 0, f"{name}: no episode ended (or was reset) in {steps} steps an env"
