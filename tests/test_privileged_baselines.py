@@ -208,8 +208,8 @@ def test_each_baseline_trains_through_the_command_and_says_it_deployed_on_pixels
     )
 
 
-# The slow tier trains one baseline on each other env (the three share everything an env gives them:
-# pictures and a hint), the locomotion ones with the state as their signal, as
+# The slow tier trains one baseline on each other env but the humanoid (the three share everything
+# an env gives them: pictures and a hint), the locomotion ones with the state as their signal, as
 # privileged_baselines.py does; HINTSJAX_TEST_EVERY_BASELINE=1 trains all three on every shipped env
 # (24 runs, 877 s on 2 cores).
 EVERY = os.environ.get("HINTSJAX_TEST_EVERY_BASELINE", "") not in ("", "0")

@@ -1,7 +1,7 @@
 """Every registered env under extreme actions: observations, rewards and pictures stay finite, and
 AutoReset keeps starting episodes. Slow (`make test-slow`): 100 envs at once, each stepped past its
 1000-step time limit (so every env's episode ends and resets), except the ant and the humanoid,
-whose episodes end sooner: 1000 envs of 100 steps, as before (envs_for, STEPS_PER_ENV). Until
+whose episodes end sooner: 1000 envs of 100 steps, as before (DRIVES). Until
 2026-12-02 every env drove 1000 envs (10^6 steps where only the time limit ends episodes: the slow
 tier outgrew CI's 90 minutes); HINTSJAX_DRIVE_ENVS=1000 drives every env at that scale again, and
 HINTSJAX_DRIVE_STEPS=N gives every env N steps (a multiple of 100).
@@ -25,26 +25,23 @@ import pytest
 from hintsjax import envs
 
 CHUNK_STEPS = 100  # a picture of every env is drawn after each chunk
-# Steps each env takes: 1100 passes the 1000-step time limit, which alone ends the halfcheetah's and
-# the car's episodes under these actions (none of 1000 envs ended within 500 steps, 2026-11-28);
-# of 1000 ants or humanoids some fall within 100 steps (the drive before 2026-12-02)
-STEPS_PER_ENV = {"ant": 100, "humanoid": 100}
-LONGEST = 1100
-
-
-def envs_for(name: str) -> int:
-    """How many envs `name`'s drive steps at once: $HINTSJAX_DRIVE_ENVS, else 1000 for the envs of
-    100 steps and 100 for those driven past their time limit."""
-    return int(os.environ.get("HINTSJAX_DRIVE_ENVS", 0)) or (1000 if name in STEPS_PER_ENV else 100)
-
-
+# (envs at once, steps each): 1100 steps pass the 1000-step time limit, which alone ends the
+# halfcheetah's and the car's episodes under these actions (none of 1000 envs ended within 500
+# steps, 2026-11-28); of 1000 ants or humanoids some fall within 100 steps (the drive before
+# 2026-12-02)
+DRIVES = {"ant": (1000, 100), "humanoid": (1000, 100)}
+PAST_THE_TIME_LIMIT = (100, 1100)
 EXTREMES = jnp.array([1e6, -1e6, 0.0])
 
 
-def steps_for(name: str) -> int:
-    """How many steps each env of `name`'s drive takes (a multiple of CHUNK_STEPS):
-    $HINTSJAX_DRIVE_STEPS for every env, else STEPS_PER_ENV's count or LONGEST."""
-    return int(os.environ.get("HINTSJAX_DRIVE_STEPS", 0)) or STEPS_PER_ENV.get(name, LONGEST)
+def drive_size(name: str) -> tuple[int, int]:
+    """(envs at once, steps each) for `name`'s drive: DRIVES' or PAST_THE_TIME_LIMIT, either
+    replaced by $HINTSJAX_DRIVE_ENVS and $HINTSJAX_DRIVE_STEPS (a multiple of CHUNK_STEPS)."""
+    num_envs, steps = DRIVES.get(name, PAST_THE_TIME_LIMIT)
+    return (
+        int(os.environ.get("HINTSJAX_DRIVE_ENVS", 0)) or num_envs,
+        int(os.environ.get("HINTSJAX_DRIVE_STEPS", 0)) or steps,
+    )
 
 
 def drive(name: str, num_envs: int, chunks: int, chunk_steps: int) -> dict:
@@ -96,7 +93,7 @@ def drive(name: str, num_envs: int, chunks: int, chunk_steps: int) -> dict:
 @pytest.mark.slow
 @pytest.mark.parametrize("name", envs.env_names())
 def test_extreme_actions_keep_every_env_finite_and_resetting(name):
-    steps, num_envs = steps_for(name), envs_for(name)
+    num_envs, steps = drive_size(name)
     result = drive(name, num_envs, steps // CHUNK_STEPS, CHUNK_STEPS)
     assert result["steps"] == steps * num_envs
     assert result["finite"], f"{name}: a non-finite observation or reward under actions of +-1e6"
