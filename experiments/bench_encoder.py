@@ -1,6 +1,7 @@
-"""Encoder implementations compared: patches x dense (ours) against nn.Conv, f32 and bf16.
+"""Encoder implementations compared: the convolution as patches x dense, as blocked matmuls
+(PatchConv's strided layers, hintsjax.models.networks.blocked_conv) and as nn.Conv, f32 and bf16.
 
-    python experiments/bench_encoder.py [--batch 8192] [--seeds 5]
+    python experiments/bench_encoder.py [--batch 8192] [--seeds 5] [--convs patches,blocks,conv]
 
 For each variant: samples/s of forward+backward+Adam for the pixel encoder plus a 256-256 head,
 once at one batch and once vmapped over `--seeds` weight copies (the seed-vmapped training case)
@@ -16,7 +17,27 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from hintsjax.models.networks import MLP, PatchConv
+from hintsjax.models.networks import MLP, blocked_conv, he_init, patch_conv
+
+CONVS = ("patches", "blocks", "conv")
+
+
+class MatmulConv(nn.Module):
+    """PatchConv's parameters with the convolution computed by `patch_conv` or `blocked_conv`."""
+
+    features: int
+    kernel: int
+    stride: int
+    blocked: bool
+    dtype: jnp.dtype
+
+    @nn.compact
+    def __call__(self, x):
+        k, c = self.kernel, x.shape[-1]
+        kernel = self.param("kernel", he_init(), (k, k, c, self.features)).astype(self.dtype)
+        bias = self.param("bias", nn.initializers.zeros, (self.features,)).astype(self.dtype)
+        blocked = self.blocked and self.stride > 1 and k % self.stride == 0
+        return (blocked_conv if blocked else patch_conv)(x, kernel, self.stride) + bias
 
 
 class Net(nn.Module):
@@ -27,8 +48,8 @@ class Net(nn.Module):
     def __call__(self, x):
         x = x.astype(self.dtype)
         for f, k, s in ((32, 8, 4), (64, 4, 2), (64, 3, 1)):
-            if self.conv == "patches":
-                x = nn.relu(PatchConv(f, k, s, dtype=self.dtype)(x))
+            if self.conv in ("patches", "blocks"):
+                x = nn.relu(MatmulConv(f, k, s, self.conv == "blocks", self.dtype)(x))
             else:
                 x = nn.relu(nn.Conv(f, (k, k), (s, s), "VALID", dtype=self.dtype)(x))
         x = x.reshape(x.shape[:-3] + (-1,)).astype(jnp.float32)
@@ -58,9 +79,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--batch", type=int, default=8192)
     parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--convs", default=",".join(CONVS), help=f"of {', '.join(CONVS)}")
     args = parser.parse_args()
+    convs = args.convs.split(",")
+    if unknown := [c for c in convs if c not in CONVS]:
+        parser.error(f"unknown --convs {', '.join(unknown)}; valid: {', '.join(CONVS)}")
     print(f"device: {jax.devices()[0].device_kind}")
-    for conv in ("patches", "conv"):
+    for conv in convs:
         for dtype in (jnp.float32, jnp.bfloat16):
             for seeds in (1, args.seeds):
                 r = rate(conv, dtype, args.batch, seeds)

@@ -15,7 +15,9 @@ from hintsjax.models.networks import (
     ActorCritic,
     Encoder,
     PatchConv,
+    blocked_conv,
     image_patches,
+    patch_conv,
     lr_labels,
     scale_pixels,
 )
@@ -31,6 +33,29 @@ def test_patch_conv_equals_nn_conv_with_the_same_params(size, channels, kernel, 
     params = jax.tree.map(lambda p: p + 0.1, params)  # a non-zero bias too
     ref = nn.Conv(16, (kernel, kernel), (stride, stride), "VALID").apply(params, x)
     np.testing.assert_allclose(layer.apply(params, x), ref, rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.parametrize(
+    "shape,kernel,stride",
+    [((2, 64, 64, 3), 8, 4), ((3, 2, 15, 15, 32), 4, 2), ((1, 37, 41, 5), 8, 4)],
+)
+def test_blocked_conv_equals_patch_conv_in_values_and_gradients(shape, kernel, stride):
+    """Odd sides (cropped blocks), leading batch axes (vmapped seeds) and both inputs' gradients."""
+    kx, kk, kc = jax.random.split(jax.random.key(2), 3)
+    x = jax.random.normal(kx, shape)
+    w = jax.random.normal(kk, (kernel, kernel, shape[-1], 8))
+    cot = jax.random.normal(kc, patch_conv(x, w, stride).shape)
+
+    def loss(conv):
+        return lambda x, w: (conv(x, w, stride) * cot).sum()
+
+    np.testing.assert_allclose(
+        blocked_conv(x, w, stride), patch_conv(x, w, stride), rtol=1e-4, atol=1e-4
+    )
+    for got, want in zip(
+        jax.grad(loss(blocked_conv), (0, 1))(x, w), jax.grad(loss(patch_conv), (0, 1))(x, w)
+    ):
+        np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-3)
 
 
 def test_image_patches_order_is_row_column_channel():

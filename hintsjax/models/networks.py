@@ -45,13 +45,49 @@ def image_patches(x: jax.Array, kernel: int, stride: int) -> jax.Array:
     return jnp.concatenate(slices, axis=-1)
 
 
+def blocked_conv(x: jax.Array, kernel: jax.Array, stride: int) -> jax.Array:
+    """A VALID convolution, stride s dividing the kernel's side k: [B, H, W, C] -> [B, H', W', F].
+
+    The picture is cut into s x s blocks (space to depth: [B, H/s, W/s, s*s*C]) and the kernel
+    into (k/s)^2 blocks of [s*s*C, F]; the output is the sum of the (k/s)^2 products of shifted
+    block views with their kernel blocks. Nothing the size of the patches ([B, H', W', k*k*C],
+    (k/s)^2 times the picture) is written: the 8x8/4 layer reads its picture once, not four times.
+    """
+    k, c, f = kernel.shape[0], kernel.shape[2], kernel.shape[3]
+    q = k // stride
+    h = (x.shape[-3] - k) // stride + 1
+    w = (x.shape[-2] - k) // stride + 1
+    hb, wb = h + q - 1, w + q - 1  # the blocks the output's receptive fields cover
+    batch = x.shape[:-3]
+    x = x[..., : hb * stride, : wb * stride, :]
+    x = x.reshape(*batch, hb, stride, wb, stride, c)
+    x = jnp.swapaxes(x, -4, -3).reshape(*batch, hb, wb, stride * stride * c)
+    # kernel [k, k, C, F] -> [q, s, q, s, C, F] -> [q, q, s, s, C, F]: the same (row, column,
+    # channel) order within a block as the picture's
+    blocks = jnp.swapaxes(kernel.reshape(q, stride, q, stride, c, f), 1, 2)
+    blocks = blocks.reshape(q, q, stride * stride * c, f)
+    out = None
+    for a in range(q):
+        for b in range(q):
+            term = x[..., a : a + h, b : b + w, :] @ blocks[a, b]
+            out = term if out is None else out + term
+    return out
+
+
+def patch_conv(x: jax.Array, kernel: jax.Array, stride: int) -> jax.Array:
+    """A VALID convolution as one matmul of the image patches with the flattened kernel."""
+    k, c, f = kernel.shape[0], kernel.shape[2], kernel.shape[3]
+    return image_patches(x, k, stride) @ kernel.reshape(k * k * c, f)
+
+
 class PatchConv(nn.Module):
-    """A VALID convolution as image patches times the kernel: [B, H, W, C] -> [B, H', W', F].
+    """A VALID convolution as matmuls: [B, H, W, C] -> [B, H', W', F].
 
     The same parameters (kernel [k, k, C, F], bias [F]) and result as `nn.Conv`; computed as
-    a matmul because that stays fast where `nn.Conv` does not: with seed-vmapped weights (a
+    matmuls because they stay fast where `nn.Conv` does not: with seed-vmapped weights (a
     grouped convolution, 4x slower on a GPU) and, on CPU, inside `scan` bodies whose weights
-    change each iteration (12x slower; docs/throughput.md).
+    change each iteration (12x slower; docs/throughput.md). A strided layer whose stride divides
+    its kernel computes as `blocked_conv` (no patches written), the others as `patch_conv`.
     """
 
     features: int
@@ -65,8 +101,9 @@ class PatchConv(nn.Module):
         kernel = self.param("kernel", he_init(), (k, k, c, self.features))
         bias = self.param("bias", nn.initializers.zeros, (self.features,))
         dtype = self.dtype or jnp.result_type(x, kernel)
-        patches = image_patches(x.astype(dtype), k, self.stride)
-        return patches @ kernel.reshape(k * k * c, self.features).astype(dtype) + bias.astype(dtype)
+        blocked = self.stride > 1 and k % self.stride == 0
+        conv = blocked_conv if blocked else patch_conv
+        return conv(x.astype(dtype), kernel.astype(dtype), self.stride) + bias.astype(dtype)
 
 
 # The smallest picture side the encoder takes: its VALID convolutions map 36 pixels to 8, 3 and 1.
