@@ -8,8 +8,10 @@ autotune folder beside $HINTSJAX_COMPILATION_CACHE: give each trial an empty one
 env's HINTS-FC cell (its default hint) with physics=warp for `--updates` updates through
 `run.main_from_values`, the command's own path, with `compilation.check_warp_run`'s refusal of this
 flag set lifted, and the evaluation program compiled beside training (as before this script) or
-first (`pipeline.evaluation_compiles_first`, what the command does now). It prints one JSON row: the
-exit status, the training rate and compile seconds from eval.json, and the tail of what went wrong.
+first (`pipeline.evaluation_compiles_first`, what the command does now: done before training,
+since issue 82 beside the training program's compile, without autotuning). It prints one JSON
+row: the exit status, the training rate and compile seconds from eval.json, and the tail of what
+went wrong.
 """
 
 from __future__ import annotations

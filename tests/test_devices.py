@@ -197,28 +197,43 @@ def test_physics_warp_stays_on_one_device_and_in_one_process(monkeypatch):
         compilation.seed_layout(cfg)
 
 
-def test_under_warp_the_evaluation_compiles_before_training_not_beside_it(monkeypatch, tmp_path):
+def test_under_warp_the_evaluation_compiles_before_training_beside_its_compile(
+    monkeypatch, tmp_path
+):
     """MuJoCo Warp's CUDA graph capture broke while XLA compiled beside it with deterministic ops
-    off, and its Python callbacks slow down while another thread compiles, so a Warp run compiles
-    its evaluation program first (experiments/results/warp_det_off_h100.json): here a run told
-    to, on the linear env, finishes that compile before its first chunk; told not to, it trains
-    while the compile runs (which waits until training has started)."""
+    off, and its Python callbacks slow down while another thread compiles, so a Warp run's
+    evaluation program finishes compiling before training
+    (experiments/results/warp_det_off_h100.json), though beside the training program's compile,
+    with no autotuning of its own: here a run told
+    to, on the linear env, compiles it (with those options) while the training program compiles
+    and before its first chunk; told not to, it trains while the compile runs (which waits until
+    training has started), with XLA's default options."""
     import threading
 
     from hintsjax.settings.layers import run_config
+    from hintsjax.training import loop
 
     assert pipeline.evaluation_compiles_first(run_config({"env": "ant", "physics": "warp"}))
     assert not pipeline.evaluation_compiles_first(run_config({"env": "ant", "physics": "jax"}))
     compile_evaluator, advance = pipeline.compile_evaluator, pipeline.train_in_chunks
+    compile_training = loop.compile_training
     for first in (True, False):
-        events, training = [], threading.Event()
+        events, options = [], []
+        training, training_compiles = threading.Event(), threading.Event()
 
         def compiled(*args, **kwargs):
-            if not first:
-                training.wait(timeout=120)  # beside: training starts without this compile
+            if first:  # beside the training program's compile: it has begun
+                events.append(f"training compile began: {training_compiles.wait(timeout=30)}")
+            else:  # beside training: training starts without this compile
+                training.wait(timeout=120)
+            options.append(kwargs.get("compiler_options"))
             result = compile_evaluator(*args, **kwargs)
             events.append("compiled")
             return result
+
+        def compiles(*args, **kwargs):
+            training_compiles.set()
+            return compile_training(*args, **kwargs)
 
         def advanced(*args, **kwargs):
             events.append("training")
@@ -226,6 +241,7 @@ def test_under_warp_the_evaluation_compiles_before_training_not_beside_it(monkey
             return advance(*args, **kwargs)
 
         monkeypatch.setattr(pipeline, "compile_evaluator", compiled)
+        monkeypatch.setattr(loop, "compile_training", compiles)
         monkeypatch.setattr(pipeline, "train_in_chunks", advanced)
         monkeypatch.setattr(pipeline, "evaluation_compiles_first", lambda cfg: first)
         values = {
@@ -245,7 +261,12 @@ def test_under_warp_the_evaluation_compiles_before_training_not_beside_it(monkey
             "name": f"first-{first}",
         }
         assert run.main_from_values(values) == 0
-        assert events == (["compiled", "training"] if first else ["training", "compiled"])
+        if first:
+            assert events == ["training compile began: True", "compiled", "training"]
+            assert options == [{"xla_gpu_autotune_level": 0}]
+        else:
+            assert events == ["training", "compiled"]
+            assert options == [None]
 
 
 def test_a_runs_first_state_waits_for_warp_kernels_built_beside_its_compiles(monkeypatch, tmp_path):

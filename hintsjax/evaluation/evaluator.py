@@ -172,6 +172,7 @@ def compile_evaluator(
     hint: str | None = None,
     pick: Hyper | None = None,
     layout: SeedLayout | None = None,
+    compiler_options: dict[str, Any] | None = None,
 ) -> tuple[Any, float]:
     """The evaluation program for seed-batched params shaped like `params` (arrays, or
     jax.ShapeDtypeStructs with their shardings: it can compile before training has finished, e.g.
@@ -179,7 +180,8 @@ def compile_evaluator(
     of the env and either way of acting (`stochastic`: a bool array), or with a group's `hint` and
     a member's `pick` (`evaluate_group`) `evaluate(params, keys, task_params, stochastic, pick)`
     for any member; (that executable, seconds spent compiling). With a `layout` of several
-    devices, params are its padded seeds, and each device evaluates its share."""
+    devices, params are its padded seeds, and each device evaluates its share. `compiler_options`
+    go to XLA for this program alone."""
     t = time.perf_counter()
     layout = one_device(cfg, layout)
     picked = () if pick is None else (pick,)
@@ -197,7 +199,7 @@ def compile_evaluator(
         *picked,
         name="evaluate",
         context=identity,
-    ).compile()
+    ).compile(compiler_options)
     return compiled, time.perf_counter() - t
 
 

@@ -210,11 +210,10 @@ class Traced:
     def out_info(self) -> Any:
         return jax.tree.unflatten(self.out_tree, [_shape_of(a) for a in self.exported.out_avals])
 
-    def compile(self) -> Program:
+    def compile(self, compiler_options: dict[str, Any] | None = None) -> Program:
         specs = [_shape_of(a) for a in self.exported.in_avals]
-        return Program(
-            jax.jit(self.exported.call).lower(*specs).compile(), self.in_tree, self.out_tree
-        )
+        lowered = jax.jit(self.exported.call).lower(*specs)
+        return Program(lowered.compile(compiler_options), self.in_tree, self.out_tree)
 
 
 def trace(fn: Callable[..., Any], leaves: list[Any], in_tree: Any) -> Traced:
@@ -260,8 +259,8 @@ def lower(fn: Callable[..., Any], *args: Any, name: str, context: str | None) ->
     """`jax.jit(fn).lower(*args)`, or, where the cache is on and `context` (a description of
     everything `fn` depends on besides its code and its arguments' shapes; None: it cannot be
     described) allows, the same program loaded from the cache or traced and kept there. Either
-    result has `out_info` and `compile()`, and the compiled program takes and returns the same
-    pytrees."""
+    result has `out_info` and `compile(compiler_options=None)`, and the compiled program takes and
+    returns the same pytrees."""
     leaves, in_tree = jax.tree.flatten(args)
     where = folder()
     single = all(len(getattr(getattr(x, "sharding", None), "device_set", ())) <= 1 for x in leaves)

@@ -31,14 +31,21 @@ from hintsjax.training.runlog import RunLog
 
 
 def evaluation_compiles_first(cfg: RunConfig) -> bool:
-    """Whether the evaluation program compiles before training rather than beside it: under
-    physics=warp. MuJoCo Warp captures CUDA graphs and launches its kernels from a Python
-    callback, so a compile in another thread slows every physics call (the ant's first 100
+    """Whether the evaluation program's compile must end before training starts rather than run
+    beside it: under physics=warp. MuJoCo Warp captures CUDA graphs and launches its kernels from
+    a Python callback, so a compile in another thread slows every physics call (the ant's first 100
     updates: 40.4 K env steps/s beside, 56.4 K first) and, with deterministic ops off (XLA's
     autotuner then runs kernels on the GPU while it compiles), broke the capture: a segfault, and
     earlier "Warp CUDA error 904", in 3 of 4 runs beside, none of 3 first
-    (experiments/results/warp_det_off_h100.json)."""
+    (experiments/results/warp_det_off_h100.json). It still compiles beside the training program's
+    compile and Warp's kernel builds (nothing is captured yet), with `FIRST_COMPILE_OPTIONS`."""
     return cfg.physics == physics.WARP
+
+
+# XLA's options for an evaluation program that compiles beside the training program's compile
+# (`evaluation_compiles_first`): no autotuning, so that it runs no kernels on the GPU while the
+# training program's autotuner times its own, and compiles sooner.
+FIRST_COMPILE_OPTIONS = {"xla_gpu_autotune_level": 0}
 
 
 def say_compiling(cfg: RunConfig, label: str) -> None:
@@ -89,12 +96,15 @@ def compile_evaluation(
     """The evaluation program compiling on the host in `pool`'s thread from the start: it needs only
     the params' shapes, so it compiles beside the training program's compile (mostly one core's
     work) and then while the device trains, adding nothing to the wall-clock of a run that trains
-    longer; under physics=warp first, alone (`evaluation_compiles_first`). Returns the function
-    that waits for it."""
+    longer; under physics=warp (`evaluation_compiles_first`) without autotuning, waited for before
+    the first state. Returns the function that waits for it."""
+    options = FIRST_COMPILE_OPTIONS if evaluation_compiles_first(cfg) else None
 
     def compile_it() -> Any:
         shapes = params_shapes(trainer, layout)
-        return compile_evaluator(cfg, shapes, cfg.variant, cfg.eval_episodes, layout=layout)
+        return compile_evaluator(
+            cfg, shapes, cfg.variant, cfg.eval_episodes, layout=layout, compiler_options=options
+        )
 
     future = pool.submit(compile_it)
 
@@ -102,8 +112,6 @@ def compile_evaluation(
         with sized_by(EVALUATION_SIZES):
             return future.result()
 
-    if evaluation_compiles_first(cfg):
-        compiled()
     return compiled
 
 
@@ -119,7 +127,7 @@ def train(
     """Train all seeds (in chunks, with checkpoints: loop.py), evaluate, plot; returns eval results.
     A child process builds MuJoCo Warp's kernels (envs/warp_kernels.py) beside the compiles,
     waited for before the first state; the evaluation compiles in a thread
-    (`compile_evaluation`)."""
+    (`compile_evaluation`), under Warp waited for there too."""
     laps = Laps()  # eval.json's wall_split_seconds: where this call's wall-clock went
     say_compiling(cfg, cfg.label)
     trainer, layout = make_trainer(cfg), seed_layout(cfg)
@@ -130,9 +138,15 @@ def train(
         warp_kernels.start(cfg.env, cfg.physics, cfg.warp_capacity, backend) as kernel_builds,
     ):
         evaluation_program = compile_evaluation(pool, cfg, trainer, layout)
+
+        def before_first_state() -> None:
+            kernel_builds.wait()
+            if evaluation_compiles_first(cfg):
+                evaluation_program()
+
         with sized_by(TRAINING_SIZES):
             training = start_training(
-                trainer, cfg, run_dir, resume, cfg.label, before_first_state=kernel_builds.wait
+                trainer, cfg, run_dir, resume, cfg.label, before_first_state=before_first_state
             )
             # compiles, the first state (and MuJoCo Warp's kernel builds), a restore
             laps.mark("before_training")
