@@ -73,6 +73,22 @@ def test_encoder_latent_is_1024_for_64x64():
     assert z.shape == (3, 1024)
 
 
+def test_a_bfloat16_encoder_keeps_float32_params_and_features_near_float32s():
+    """ppo.encoder_dtype=bfloat16: the same parameters (float32), features returned as float32,
+    within bfloat16's 8 bits of mantissa of the float32 encoder's, and its matmuls in bfloat16
+    (the features differ: the dtype reaches the convolutions)."""
+    x = jax.random.uniform(jax.random.key(5), (3, 64, 64, 3), minval=-1, maxval=1)
+    params = Encoder().init(jax.random.key(0), x)
+    assert (
+        Encoder(jnp.bfloat16).init(jax.random.key(0), x)["params"].keys() == params["params"].keys()
+    )
+    assert all(p.dtype == jnp.float32 for p in jax.tree.leaves(params))
+    full, half = Encoder().apply(params, x), Encoder(jnp.bfloat16).apply(params, x)
+    assert half.dtype == jnp.float32 and half.shape == full.shape
+    scale = float(jnp.abs(full).max())
+    assert 0 < float(jnp.abs(half - full).max()) <= 0.05 * scale
+
+
 def test_scale_pixels_maps_to_minus_one_one():
     np.testing.assert_allclose(scale_pixels(jnp.array([0, 255], jnp.uint8)), [-1.0, 1.0])
 

@@ -111,13 +111,16 @@ MIN_IMAGE_SIZE = 36
 
 
 class Encoder(nn.Module):
-    """Three conv layers (32 8x8/4, 64 4x4/2, 64 3x3/1, ReLU), flattened: [B, H, W, C] -> [B, k]."""
+    """Three conv layers (32 8x8/4, 64 4x4/2, 64 3x3/1, ReLU), flattened: [B, H, W, C] -> [B, k],
+    computed in `dtype` (None: the input's), returned as float32."""
+
+    dtype: Any = None
 
     @nn.compact
     def __call__(self, x: jax.Array) -> jax.Array:
         for features, kernel, stride in ((32, 8, 4), (64, 4, 2), (64, 3, 1)):
-            x = nn.relu(PatchConv(features, kernel, stride)(x))
-        return x.reshape(x.shape[:-3] + (-1,))
+            x = nn.relu(PatchConv(features, kernel, stride, dtype=self.dtype)(x))
+        return x.reshape(x.shape[:-3] + (-1,)).astype(jnp.float32)
 
 
 class MLP(nn.Module):
@@ -162,14 +165,16 @@ class ActorCritic(nn.Module):
     action_head: str = "gaussian"
     critic_trains_encoder: bool = True
     min_log_std: float | None = None  # a floor on the log std, after the head's own (None: none)
+    encoder_dtype: str = "float32"  # the pixel encoder's arithmetic
 
     def features(self, obs: dict[str, jax.Array]) -> jax.Array:
         agent = self.agent
+        encoder = lambda: Encoder(jnp.dtype(self.encoder_dtype), name="encoder")  # noqa: E731
         if agent.conditioned:
             cond = SCHEMES[self.scheme](self.hint_width, name="conditioning")
-            return cond(Encoder(name="encoder"), scale_pixels(obs["pixels"]), obs["hint"])
+            return cond(encoder(), scale_pixels(obs["pixels"]), obs["hint"])
         if agent.pixels:
-            return Encoder(name="encoder")(scale_pixels(obs["pixels"]))
+            return encoder()(scale_pixels(obs["pixels"]))
         if agent.hint and agent.hint_use == "input":
             return HintEmbedding(self.hint_width, name="conditioning")(obs["hint"])
         return (

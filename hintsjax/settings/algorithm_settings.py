@@ -25,6 +25,9 @@ ACTION_HEADS = ("gaussian", "tanh", "sigmoid")
 # part's gradient together (a large critic loss then shrinks the actor's step as well); "per_part",
 # the encoder's, the actor's and the critic's each alone.
 GRAD_CLIPS = ("global", "per_part")
+# The pixel encoder's arithmetic (`ppo.encoder_dtype`): its convolutions' inputs, weights and
+# products; the parameters, the heads and the losses stay float32.
+ENCODER_DTYPES = ("float32", "bfloat16")
 
 
 @dataclass(frozen=True)
@@ -132,6 +135,12 @@ class PPOConfig:
         None,
         "a floor on the policy's log std (Brax's networks floor the std at "
         "0.001, log -6.9); null: none",
+        saved_may_lack=True,
+    )
+    encoder_dtype: str = setting(
+        "float32",
+        "the pixel encoder's arithmetic: float32, or bfloat16 (its parameters stay float32)",
+        choices=ENCODER_DTYPES,
         saved_may_lack=True,
     )
     # The privileged-signal baselines (hintsjax/models/agents.py). Shapes, not traced: a Hyper leaf
