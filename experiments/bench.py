@@ -37,6 +37,7 @@ import optax
 
 from hintsjax import envs
 from hintsjax.system import compilation_cache
+from hintsjax.settings.algorithm_settings import ENCODER_DTYPES
 from hintsjax.settings.env_defaults import ENV_DEFAULTS
 from hintsjax.settings.layers import run_config
 from hintsjax.algorithms.ppo import Hyper, make_network, make_optimizer, make_trainer
@@ -300,6 +301,12 @@ def main() -> None:
         "without pictures) "
         "of each env's default cell at 5 seeds",
     )
+    parser.add_argument(
+        "--encoder-dtype",
+        choices=ENCODER_DTYPES,
+        default="float32",
+        help="with --parts: the pixel encoder's arithmetic (ppo.encoder_dtype)",
+    )
     parser.add_argument("--quick", action="store_true", help="small sizes (a CPU smoke run)")
     parser.add_argument(
         "--model-option",
@@ -336,13 +343,20 @@ def main() -> None:
     if args.parts:
         for name in names:
             cfg = run_config(
-                {"env": name, "agent": "hints", "scheme": "fc", "seeds": 5, "physics": args.physics}
+                {
+                    "env": name,
+                    "agent": "hints",
+                    "scheme": "fc",
+                    "seeds": 5,
+                    "physics": args.physics,
+                    "ppo": {"encoder_dtype": args.encoder_dtype},
+                }
             )
             state = jax.jit(jax.vmap(make_trainer(cfg).init))(cfg.seed_keys())
             parts = update_parts(cfg, state)
             print(
                 f"update  {name:>9} 5 seeds {cfg.ppo.num_envs} envs x "
-                f"{cfg.ppo.rollout_length} steps, {cfg.physics}: "
+                f"{cfg.ppo.rollout_length} steps, {cfg.physics}, {args.encoder_dtype} encoder: "
                 + ", ".join(f"{k} {1e3 * v:.1f} ms" for k, v in parts.items()),
                 flush=True,
             )
