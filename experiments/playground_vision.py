@@ -49,6 +49,9 @@ TRAINERS = {
 }
 EVAL_EPISODES = 128
 RECORD = "versus_vision.json"  # under the runs folder
+# The playground side's finished seeds, a row each (under the runs folder): its 5 seeds take longer
+# than one GPU lease, so a later process goes on from them
+SEEDS_DONE = "versus_vision_playground_seeds.jsonl"
 DEFAULT_RUNS = "runs/playground"
 RESULTS = Path(__file__).resolve().parent / "results"
 CURVES = "playground_vision_curves.png"  # under RESULTS
@@ -161,11 +164,21 @@ class MemoryWatch:
         return {"xla_peak_mib": peak and round(peak / 2**20), "nvidia_smi_peak_mib": self.smi_mib}
 
 
-def train_playground(s: dict, seeds: int, episodes: int) -> dict:
+def finished_seeds(path: Path, budget: dict) -> dict[int, dict]:
+    """The playground side's seeds finished at `budget` by earlier processes (SEEDS_DONE's rows:
+    one a seed, appended as each ends), so that a side longer than one GPU lease goes on."""
+    if not path.exists():
+        return {}
+    rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    return {row["seed"]: row for row in rows if row["budget"] == budget}
+
+
+def train_playground(s: dict, seeds: int, episodes: int, done_path: Path, budget: dict) -> dict:
     """Playground's side, as its vision notebook trains it: per seed, the env (its renderer built
     for num_envs worlds) and an evaluation env (for num_eval_envs), then Brax's `train`; Brax's
-    progress calls (its own evaluations) timed from the seed's start. Then each seed's policy on
-    `episodes` fresh episodes, deterministic, by Brax's Evaluator on an env rendering as many."""
+    progress calls (its own evaluations) timed from the seed's start. Then the seed's policy on
+    `episodes` fresh episodes, deterministic, by Brax's Evaluator on an env rendering as many
+    (built once), and the seed's row appended to `done_path`; seeds found there are skipped."""
     import jax
     from brax.training import acting
     from brax.training.agents.ppo import networks_vision
@@ -187,14 +200,17 @@ def train_playground(s: dict, seeds: int, episodes: int) -> dict:
     factory = functools.partial(
         networks_vision.make_ppo_networks_vision, **run.pop("network_factory")
     )
-    seeds_out, trained = [], []
+    done, final_env = finished_seeds(done_path, budget), None
     for seed in range(seeds):
+        if seed in done:
+            print(f"seed {seed}: finished by an earlier process ({done_path}), kept", flush=True)
+            continue
         start = time.time()
         env, eval_env = vision_env(run["num_envs"]), vision_env(run["num_eval_envs"])
         built = time.time() - start
         progress: list = []
 
-        def record(step, metrics, progress=progress, start=start):
+        def record(step, metrics, progress=progress, start=start, seed=seed):
             row = {"step": int(step), "seconds": round(time.time() - start, 2)}
             for key in ("eval/episode_reward", "training/sps", "training/walltime"):
                 if key in metrics:
@@ -211,15 +227,11 @@ def train_playground(s: dict, seeds: int, episodes: int) -> dict:
             seed=seed,
             **run,
         )
-        seeds_out.append(
-            {"seconds": time.time() - start, "renderer_build_seconds": built, "progress": progress}
-        )
-        trained.append((make_policy, params))
-    final_env = wrapper.wrap_for_brax_training(
-        vision_env(episodes), episode_length=run["episode_length"], action_repeat=1
-    )
-    returns = []
-    for seed, (make_policy, params) in enumerate(trained):
+        seconds = time.time() - start
+        if final_env is None:
+            final_env = wrapper.wrap_for_brax_training(
+                vision_env(episodes), episode_length=run["episode_length"], action_repeat=1
+            )
         evaluator = acting.Evaluator(
             final_env,
             functools.partial(make_policy, deterministic=True),
@@ -228,12 +240,30 @@ def train_playground(s: dict, seeds: int, episodes: int) -> dict:
             action_repeat=1,
             key=jax.random.PRNGKey(1000 + seed),
         )
-        returns.append(float(evaluator.run_evaluation(params, {})["eval/episode_reward"]))
+        done[seed] = {
+            "seed": seed,
+            "budget": budget,
+            "seconds": seconds,
+            "renderer_build_seconds": built,
+            "progress": progress,
+            "deterministic": float(evaluator.run_evaluation(params, {})["eval/episode_reward"]),
+            "device": jax.devices()[0].device_kind,
+            "date": time.strftime("%Y-%m-%d %H:%M"),
+        }
+        with done_path.open("a") as f:
+            f.write(json.dumps(done[seed]) + "\n")
+    seeds_out = [
+        {
+            k: done[seed][k]
+            for k in ("seconds", "renderer_build_seconds", "progress", "device", "date")
+        }
+        for seed in range(seeds)
+    ]
     return {
         "seconds": sum(x["seconds"] for x in seeds_out),
         "renderer_build_seconds": sum(x["renderer_build_seconds"] for x in seeds_out),
         "seeds_run": seeds_out,
-        "deterministic": returns,
+        "deterministic": [done[seed]["deterministic"] for seed in range(seeds)],
         "env_steps_per_seed": seeds_out[0]["progress"][-1]["step"],
         "settings": {**s, "num_timesteps_taken": brax_updates(s) * steps_per_update(s)},
         "patches": list(PATCHES),
@@ -306,7 +336,8 @@ def train_side(side: str, runs: Path, seeds: int, smoke: bool) -> None:
         sys.exit("the playground side needs a GPU: MuJoCo Warp's batch renderer runs on CUDA only")
     watch = MemoryWatch()
     if side == "playground":
-        result = train_playground(s, seeds, episodes)
+        runs.mkdir(parents=True, exist_ok=True)
+        result = train_playground(s, seeds, episodes, runs / SEEDS_DONE, budget)
     else:
         make = mapped_values if side == "mapped" else default_values
         result = train_hintsjax(make(s, seeds, smoke), episodes, TRAINERS[side])

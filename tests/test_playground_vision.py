@@ -108,16 +108,31 @@ def test_the_section_gives_each_side_its_cells_and_hintsjax_against_playground(t
 
 
 @pytest.mark.slow
-def test_playground_s_side_trains_and_evaluates_with_its_renderer_blank(monkeypatch):
+def test_playground_s_side_trains_and_evaluates_with_its_renderer_blank(monkeypatch, tmp_path):
     """Brax's vision PPO on Playground's CartpoleBalance, as the script calls it, on a CPU (its
     renderer blank, its physics MuJoCo Warp's on the CPU): one seed at the smoke budget, Brax's
-    evaluations timed, the final policy on 4 fresh episodes."""
+    evaluations timed, the final policy on 4 fresh episodes; the seed's row kept, so that a second
+    process takes it instead of training it again, and a row of another budget is not taken."""
+    from brax.training.agents.ppo import train as ppo
+
     playground_stub.blank_renderer(monkeypatch)
     s = pv.vision_settings(smoke=True)
-    out = pv.train_playground(s, seeds=1, episodes=4)
+    done, budget = tmp_path / pv.SEEDS_DONE, {"task": pv.TASK, "env_steps_per_seed": 2048}
+    out = pv.train_playground(s, seeds=1, episodes=4, done_path=done, budget=budget)
     steps = pv.brax_updates(s) * pv.steps_per_update(s)
     assert out["env_steps_per_seed"] == steps == 2048
     progress = out["seeds_run"][0]["progress"]
     assert [row["step"] for row in progress] == [0, 2048] and "training/sps" in progress[-1]
     assert len(out["deterministic"]) == 1 and math.isfinite(out["deterministic"][0])
     assert out["seconds"] >= progress[-1]["seconds"] > progress[0]["seconds"] > 0
+    assert [row["seed"] for row in map(json.loads, done.read_text().splitlines())] == [0]
+
+    def trains(**kwargs):
+        raise AssertionError("a finished seed trained again")
+
+    monkeypatch.setattr(ppo, "train", trains)
+    again = pv.train_playground(s, seeds=1, episodes=4, done_path=done, budget=budget)
+    assert again["deterministic"] == out["deterministic"]
+    assert again["seeds_run"] == out["seeds_run"]
+    with pytest.raises(AssertionError, match="trained again"):
+        pv.train_playground(s, 1, 4, done_path=done, budget={**budget, "env_steps_per_seed": 1})
