@@ -41,3 +41,19 @@ def test_a_training_row_says_which_physics_the_run_got():
     assert row["physics"] == "jax" and row["updates"] == 2
     assert row["env_steps_per_s"] > 0 and row["scan_env_steps_per_s"] > 0
     assert set(row["update_parts_s"]) >= {"rollout", "learn"}
+
+
+@pytest.mark.slow
+def test_the_ray_casters_bench_times_its_three_parts(capsys):
+    """experiments/bench_render.py on two ant pictures: a row with each part's milliseconds, the
+    pictures a second and the ray-geom tests a second, all positive."""
+    import re
+
+    import bench_render
+
+    bench_render.rows("ant", [2], "jax")
+    row = capsys.readouterr().out.strip().splitlines()[-1]
+    assert row.split()[:4] == ["ant", "2", "pictures", "64x64,"], row
+    times = [float(x) for x in re.findall(r"(?:nearest|cast|render) ([\d.]+) ms", row)]
+    assert len(times) == 3 and all(t > 0 for t in times), row
+    assert re.search(r"; [\d,]+ pictures/s, [\d.]+ G ray-geom tests/s$", row), row
