@@ -66,12 +66,13 @@ def blocked_conv(x: jax.Array, kernel: jax.Array, stride: int) -> jax.Array:
     # channel) order within a block as the picture's
     blocks = jnp.swapaxes(kernel.reshape(q, stride, q, stride, c, f), 1, 2)
     blocks = blocks.reshape(q, q, stride * stride * c, f)
-    out = None
+    out = None  # summed in float32 (a bfloat16 encoder's products too), as one matmul would
     for a in range(q):
         for b in range(q):
-            term = x[..., a : a + h, b : b + w, :] @ blocks[a, b]
+            view = x[..., a : a + h, b : b + w, :]
+            term = jnp.matmul(view, blocks[a, b], preferred_element_type=jnp.float32)
             out = term if out is None else out + term
-    return out
+    return out.astype(x.dtype)
 
 
 def patch_conv(x: jax.Array, kernel: jax.Array, stride: int) -> jax.Array:
