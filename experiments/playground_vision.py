@@ -201,6 +201,7 @@ def train_playground(s: dict, seeds: int, episodes: int, done_path: Path, budget
         networks_vision.make_ppo_networks_vision, **run.pop("network_factory")
     )
     done, final_env = finished_seeds(done_path, budget), None
+    process = time.strftime("%Y-%m-%d %H:%M:%S")  # which process trained a seed: its start
     for seed in range(seeds):
         if seed in done:
             print(f"seed {seed}: finished by an earlier process ({done_path}), kept", flush=True)
@@ -249,13 +250,14 @@ def train_playground(s: dict, seeds: int, episodes: int, done_path: Path, budget
             "deterministic": float(evaluator.run_evaluation(params, {})["eval/episode_reward"]),
             "device": jax.devices()[0].device_kind,
             "date": time.strftime("%Y-%m-%d %H:%M"),
+            "process": process,
         }
         with done_path.open("a") as f:
             f.write(json.dumps(done[seed]) + "\n")
     seeds_out = [
         {
             k: done[seed][k]
-            for k in ("seconds", "renderer_build_seconds", "progress", "device", "date")
+            for k in ("seconds", "renderer_build_seconds", "progress", "device", "date", "process")
         }
         for seed in range(seeds)
     ]
@@ -445,6 +447,15 @@ def section_lines(runs: Path) -> list[str]:
             "",
             "Patches to Playground's side: " + "; ".join(results["playground"]["patches"]),
         ]
+        processes = {run.get("process") for run in results["playground"]["seeds_run"]}
+        if len(processes) > 1:
+            lines += [
+                "",
+                f"Playground's seeds were trained in {len(processes)} processes, one a GPU lease "
+                "(versus_vision_playground_seeds.jsonl): each process's first seed paid its "
+                "compile, so its wall-clock is the sum of its seeds', and its peak memory is the "
+                "last process's.",
+            ]
     for side in ("mapped", "defaults"):
         if side in results and "playground" in results:
             lines.append(

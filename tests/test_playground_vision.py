@@ -105,6 +105,12 @@ def test_the_section_gives_each_side_its_cells_and_hintsjax_against_playground(t
         f"P({pv.TRAINERS['mapped']} > {pv.TRAINERS['playground']}) = 1.00 [1.00, 1.00]: decided"
         in text
     )
+    assert "processes" not in text  # Playground's seeds in one process
+    runs = [{**run, "process": p} for p in ("2026-12-03 10:00:00", "2026-12-04 09:00:00") * 2][:3]
+    record["results"]["playground"]["seeds_run"] = runs
+    (tmp_path / pv.RECORD).write_text(json.dumps(record))
+    text = "\n".join(pv.section_lines(tmp_path))
+    assert "Playground's seeds were trained in 2 processes, one a GPU lease" in text
 
 
 @pytest.mark.slow
