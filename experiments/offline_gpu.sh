@@ -3,9 +3,11 @@
 # the missing packages as wheels, install them beside the machine's own, run, and watch a run
 # started detached. Python 3.12, x86-64 (the wheels' tags; change PY and PLATFORMS for others).
 #
-#   bash experiments/offline_gpu.sh wheels            # here, with internet: .whl2/ (mujoco, mjx, hydra, this
-#                                                     #   project...), .wp/warp.part.0[0-7] (warp-lang in 8 parts)
-#                                                     #   and .whl3/ (MuJoCo Playground and Brax, 14 MB)
+#   bash experiments/offline_gpu.sh wheels            # here, with internet: .whl/ (mujoco alone, 27 MB), .whl2/
+#                                                     #   (mjx, hydra, this project...), .wp/warp.part.0[0-7]
+#                                                     #   (warp-lang in 8 parts), .whl3/ (Playground and Brax, 14 MB)
+#   bash experiments/offline_gpu.sh calls             # here: the device calls that carry them, in order (each
+#                                                     #   checked against the 64 MiB a call takes with the tree)
 #   bash experiments/offline_gpu.sh install [DIR]     # there, in the repo root: DIR's wheels (.whl2) into /tmp/site;
 #                                                     #   for env=playground:* also `install .whl3` (its own call)
 #   bash experiments/offline_gpu.sh warp              # there: keep the .wp parts carried so far; all 8 in: install
@@ -48,7 +50,24 @@ wheels)
     tmp=$(mktemp -d) && download "$tmp" warp-lang==1.18.0
     echo "$WARP_MD5  $tmp/$WARP" | md5sum -c -
     (cd .wp && rm -f warp.part.* && split -n "$WARP_PARTS" -d "$tmp/$WARP" warp.part.) && rm -r "$tmp"
-    du -sh .whl2 .whl3 .wp ;;
+    mkdir -p .whl && rm -f .whl/*.whl && mv .whl2/mujoco-[0-9]*.whl .whl/  # alone: 27 MB beside the tree
+    du -sh .whl .whl2 .whl3 .wp ;;
+calls)
+    # What one device call carries: the working tree (git's tracked files and the untracked ones it
+    # does not ignore) and its `carry` paths, at most 64 MiB together
+    tree=$( { git ls-files -z; git ls-files -z -o --exclude-standard; } | xargs -0 du -cb 2>/dev/null | awk '$2 == "total" {n += $1} END {print n}')
+    plan() {  # plan CARRY... -- COMMAND
+        local carried=() size=$tree
+        while [ "$1" != "--" ]; do carried+=("\"$1\""); size=$((size + $(du -cb "$1" | tail -1 | cut -f1))); shift; done
+        shift
+        local mark=ok; [ "$size" -le $((64 * 1024 * 1024)) ] || mark="OVER 64 MiB"
+        printf '%s MiB %s  carry [%s]  %s\n' "$((size / 1024 / 1024))" "$mark" "$(IFS=,; echo "${carried[*]}")" "$*"
+    }
+    plan .whl -- "mkdir -p /tmp/wheels && cp .whl/*.whl /tmp/wheels/"
+    plan .whl2 .wp/warp.part.00 -- "cp .whl2/*.whl /tmp/wheels/ && bash experiments/offline_gpu.sh install /tmp/wheels && bash experiments/offline_gpu.sh warp"
+    for part in .wp/warp.part.0[1-9]; do plan "$part" -- "bash experiments/offline_gpu.sh warp"; done
+    plan .whl3 -- "bash experiments/offline_gpu.sh install .whl3   # env=playground:* and experiments/playground*.py only"
+    echo "then, in the last of them or the next: (setsid nohup bash SCRIPT > /tmp/lease.out 2>&1 < /dev/null &), and keep a poll in flight" ;;
 install)
     python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site "${2:-.whl2}"/*.whl
     cd /tmp && PYTHONPATH=/tmp/site python3 -c "import jax, mujoco, hintsjax.envs; print('jax', jax.__version__, 'mujoco', mujoco.__version__, jax.devices())" ;;
