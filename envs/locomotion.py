@@ -183,12 +183,15 @@ class LocomotionEnv(MjxEnv):
     def state_obs(self, state: LocomotionState, params) -> jax.Array:
         return state.obs
 
+    def render_camera(self, state: LocomotionState) -> render3d.Camera:
+        """The camera that follows the robot's centre of mass, aimed at `camera_height`."""
+        target = jnp.stack([state.com[0], state.com[1], jnp.float32(self.camera_height)])
+        return render3d.tracking_camera(target, **self.camera)
+
     def render(self, state: LocomotionState, params) -> jax.Array:
         """uint8[64, 64, 3]: the robot from a camera following its centre of mass."""
-        target = jnp.stack([state.com[0], state.com[1], jnp.float32(self.camera_height)])
-        camera = render3d.tracking_camera(target, **self.camera)
         return render3d.render(
-            self.scene, state.geom_xpos, state.geom_xmat, camera, self.image_size
+            self.scene, state.geom_xpos, state.geom_xmat, self.render_camera(state), self.image_size
         )
 
 

@@ -17,27 +17,9 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from hintsjax.models.networks import MLP, blocked_conv, he_init, patch_conv
+from hintsjax.models.networks import MLP, PatchConv
 
 CONVS = ("patches", "blocks", "conv")
-
-
-class MatmulConv(nn.Module):
-    """PatchConv's parameters with the convolution computed by `patch_conv` or `blocked_conv`."""
-
-    features: int
-    kernel: int
-    stride: int
-    blocked: bool
-    dtype: jnp.dtype
-
-    @nn.compact
-    def __call__(self, x):
-        k, c = self.kernel, x.shape[-1]
-        kernel = self.param("kernel", he_init(), (k, k, c, self.features)).astype(self.dtype)
-        bias = self.param("bias", nn.initializers.zeros, (self.features,)).astype(self.dtype)
-        blocked = self.blocked and self.stride > 1 and k % self.stride == 0
-        return (blocked_conv if blocked else patch_conv)(x, kernel, self.stride) + bias
 
 
 class Net(nn.Module):
@@ -49,7 +31,8 @@ class Net(nn.Module):
         x = x.astype(self.dtype)
         for f, k, s in ((32, 8, 4), (64, 4, 2), (64, 3, 1)):
             if self.conv in ("patches", "blocks"):
-                x = nn.relu(MatmulConv(f, k, s, self.conv == "blocks", self.dtype)(x))
+                layer = PatchConv(f, k, s, dtype=self.dtype, blocked=self.conv == "blocks")
+                x = nn.relu(layer(x))
             else:
                 x = nn.relu(nn.Conv(f, (k, k), (s, s), "VALID", dtype=self.dtype)(x))
         x = x.reshape(x.shape[:-3] + (-1,)).astype(jnp.float32)

@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 
 import jax
-import jax.numpy as jnp
 
 from hintsjax import envs
 from hintsjax.settings.env_defaults import ENV_DEFAULTS
@@ -45,18 +44,15 @@ def rows(name: str, sizes: list[int], physics: str) -> None:
         name, ENV_DEFAULTS[name].get("hint", envs.NO_HINT), ("pixels",), physics=physics
     )
     params = envs.make_params(name)
-    if not hasattr(env, "scene"):
+    if not hasattr(env, "render_camera"):
         raise SystemExit(f"error: {name} does not draw with render3d (its own picture code)")
     scene, size = env.scene, env.image_size
-    target = lambda s: jnp.stack([s.com[0], s.com[1], jnp.float32(env.camera_height)])  # noqa: E731
 
     def nearest(s):
-        camera = render3d.tracking_camera(target(s), **env.camera)
-        return render3d.depth(scene, s.geom_xpos, s.geom_xmat, camera, size)
+        return render3d.depth(scene, s.geom_xpos, s.geom_xmat, env.render_camera(s), size)
 
     def cast(s):
-        camera = render3d.tracking_camera(target(s), **env.camera)
-        return render3d.cast(scene, s.geom_xpos, s.geom_xmat, camera, size).normal
+        return render3d.cast(scene, s.geom_xpos, s.geom_xmat, env.render_camera(s), size).normal
 
     programs = {
         "nearest": nearest,

@@ -95,6 +95,7 @@ class PatchConv(nn.Module):
     kernel: int
     stride: int
     dtype: Any = None  # computation dtype (params stay float32)
+    blocked: bool = True  # False: patches at every layer (experiments/bench_encoder.py compares)
 
     @nn.compact
     def __call__(self, x: jax.Array) -> jax.Array:
@@ -102,7 +103,7 @@ class PatchConv(nn.Module):
         kernel = self.param("kernel", he_init(), (k, k, c, self.features))
         bias = self.param("bias", nn.initializers.zeros, (self.features,))
         dtype = self.dtype or jnp.result_type(x, kernel)
-        blocked = self.stride > 1 and k % self.stride == 0
+        blocked = self.blocked and self.stride > 1 and k % self.stride == 0
         conv = blocked_conv if blocked else patch_conv
         return conv(x.astype(dtype), kernel.astype(dtype), self.stride) + bias.astype(dtype)
 
