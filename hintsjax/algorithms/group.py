@@ -48,6 +48,11 @@ def signature(cfg: RunConfig) -> dict[str, Any]:
     return {
         "env": cfg.env,
         "variant": cfg.variant,
+        # the env the group's first member builds, so every member's
+        "physics": cfg.physics,
+        "warp_capacity": cfg.warp_capacity,
+        "image_size": cfg.image_size,
+        "frames": cfg.frames,
         "algorithm": spec.algorithm,
         "observe": spec.observe,
         "hint_use": spec.hint_use,

@@ -27,6 +27,7 @@ from hintsjax.settings.fields import setting
 from hintsjax.settings.hint_sources import PROGRAMMATIC, check_matches, hinted_env, hinted_params
 
 MAX_IMAGE_SIZE = 256  # image_size's largest: 4x the default's 64, already 16x its pixels
+MAX_FRAMES = 8  # frames' largest: each one more picture in every step a rollout keeps
 
 
 def env_params(env: str, variant: str | None) -> Any:
@@ -93,6 +94,12 @@ class RunConfig:
         "the pictures' side in pixels, 36 to 256 (null: the env's own, 64; the car's 96)",
         saved_may_lack=True,
     )
+    frames: int = setting(
+        1,
+        f"pictures the agent sees at once, 1 to {MAX_FRAMES}: the last ones side by side along the "
+        "channels (1: the paper's one picture; Playground's vision PPO stacks 3)",
+        saved_may_lack=True,
+    )
     ppo: PPOConfig = field(default_factory=PPOConfig)
     dagger: DaggerConfig = field(default_factory=DaggerConfig)
     gail: GailConfig = field(default_factory=GailConfig)
@@ -130,6 +137,7 @@ class RunConfig:
             self.effective_hint if hint is None else hint,
             observe,
             self.hint_source_for(deploy),
+            frames=self.frames,
             physics=self.physics,
             warp_capacity=self.warp_capacity,
             image_size=self.image_size,
@@ -179,6 +187,7 @@ class RunConfig:
                 f"warp_capacity must be a number of at least 1, got {self.warp_capacity}"
             )
         self._check_image_size()
+        self._check_frames()
         for v in (self.variant, *self.eval_variants):
             env_params(self.env, v)
         self._check_hint_sources()
@@ -216,6 +225,24 @@ class RunConfig:
             envs.check_hint_shapes(hint, state, params)
         except envs.HintFileError as e:
             raise UsageError(f"hints_from={self.hints_from}: {e}") from None
+
+    def _check_frames(self) -> None:
+        """UsageError where `frames` is no count of pictures, or more than one for an agent that
+        sees none."""
+        if (
+            isinstance(self.frames, bool)
+            or not isinstance(self.frames, int)
+            or not 1 <= self.frames <= MAX_FRAMES
+        ):
+            raise UsageError(
+                f"frames must be a whole number of pictures from 1 to {MAX_FRAMES}, got "
+                f"{self.frames!r}"
+            )
+        if self.frames > 1 and not self.agent_spec.pixels:
+            raise UsageError(
+                f"frames={self.frames} stacks pictures, and agent={self.agent} sees none; leave "
+                "frames at 1, or pick an agent that sees pictures"
+            )
 
     def _check_image_size(self) -> None:
         """UsageError where `image_size` is no side the encoder takes, or one the env cannot

@@ -27,6 +27,7 @@ from flax import struct
 
 from hintsjax import envs
 from hintsjax.envs.core import Env, Step
+from hintsjax.envs.frames import FramedState, FrameStack, framed_start, framed_step
 from hintsjax.system.checkpoint import on_this_device, require_same_arrays
 from hintsjax.system.errors import UsageError
 from hintsjax.models.networks import Encoder, MLP, scale_pixels
@@ -95,26 +96,11 @@ class Generator:
 
 
 @struct.dataclass
-class FramedState:
-    """The wrapped env's state and its last k pictures (oldest first; a new episode repeats its
-    first picture); `t` mirrors the wrapped state's step count."""
-
-    env_state: Any
-    frames: jax.Array  # uint8[k, S, S, 3]
-    t: jax.Array
-
-
-@struct.dataclass
 class GeneratedParams:
     """The wrapped env's params (a variant's) and the generator's."""
 
     task: Any
     generator: GeneratorParams
-
-
-def push_frame(frames: jax.Array, frame: jax.Array) -> jax.Array:
-    """The last k pictures after `frame`: [k, ...] -> [k, ...]."""
-    return jnp.concatenate([frames[1:], frame[None]], axis=0)
 
 
 @dataclass(frozen=True)
@@ -141,10 +127,7 @@ class GeneratedHintEnv(Env):
 
     def initial_state(self, key: jax.Array, params: GeneratedParams) -> FramedState:
         state = self.inner.initial_state(key, params.task)
-        frame = self.inner._render(state, params.task)
-        return FramedState(
-            state, jnp.repeat(frame[None], self.hint.generator.frames, axis=0), state.t
-        )
+        return framed_start(self.inner, state, params.task, self.hint.generator.frames)
 
     def action_range(self, params: GeneratedParams) -> tuple[jax.Array, jax.Array]:
         return self.inner.action_range(params.task)
@@ -152,11 +135,7 @@ class GeneratedHintEnv(Env):
     def transition(
         self, key: jax.Array, state: FramedState, action: jax.Array, params: GeneratedParams
     ) -> Step:
-        out = self.inner.transition(key, state.env_state, action, params.task)
-        # as Env.step advances the wrapped env's count
-        inner = out.state.replace(t=state.env_state.t + 1)
-        frames = push_frame(state.frames, self.inner._render(inner, params.task))
-        return Step(FramedState(inner, frames, state.t), out.reward, out.terminated)
+        return framed_step(self.inner, key, state, action, params.task)
 
     def render(self, state: FramedState, params: GeneratedParams) -> jax.Array:
         return state.frames[-1]
@@ -253,13 +232,18 @@ def load(folder: str | Path, seed: int = 0) -> tuple[Generator, GeneratorParams]
     return generator, jax.tree.map(lambda x: x[seed], params)
 
 
-def hinted_env(env: str, hint: str, observe: tuple[str, ...], source: str, **physics: Any) -> Env:
-    """`env` with `hint` from `source`: the programmatic hint, or a generator folder's; `physics`
-    (physics, warp_capacity, image_size) as `envs.make` takes them."""
+def hinted_env(
+    env: str, hint: str, observe: tuple[str, ...], source: str, frames: int = 1, **physics: Any
+) -> Env:
+    """`env` with `hint` from `source`: the programmatic hint, or a generator folder's; its pixels
+    the last `frames` pictures (envs/frames.py); `physics` (physics, warp_capacity, image_size)
+    as `envs.make` takes them."""
     if source == PROGRAMMATIC or "hint" not in observe:
-        return envs.make(env, hint, observe, **physics)
-    generator, _ = load(source)
-    return GeneratedHintEnv(envs.make(env, hint, ("pixels",), **physics), generator, observe)
+        made = envs.make(env, hint, observe, **physics)
+    else:
+        generator, _ = load(source)
+        made = GeneratedHintEnv(envs.make(env, hint, ("pixels",), **physics), generator, observe)
+    return FrameStack(made, frames) if frames > 1 and "pixels" in observe else made
 
 
 def hinted_params(env: str, task_params: Any, observe: tuple[str, ...], source: str) -> Any:

@@ -47,10 +47,10 @@ def device_bytes(device: Any = None) -> int:
 
 
 def picture_bytes(cfg: Any) -> int:
-    """One observation's picture (uint8 [S, S, 3]), or 0 for an agent that sees none."""
+    """One observation's pictures (uint8 [S, S, 3 x frames]), or 0 for an agent that sees none."""
     if "pixels" not in cfg.agent_spec.observe:
         return 0
-    return 3 * (cfg.image_size or envs.REGISTRY[cfg.env].cls.image_size) ** 2
+    return 3 * cfg.frames * (cfg.image_size or envs.REGISTRY[cfg.env].cls.image_size) ** 2
 
 
 def transition_bytes(cfg: Any) -> int:
