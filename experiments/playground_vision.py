@@ -13,9 +13,12 @@ Playground's budget: 4 epochs of 31 training steps of 40,960, 5,079,040 a seed):
   them (an evaluation env of its own, its renderer built for `num_eval_envs` worlds), seeds one
   after another. Patched only where jax 0.11 needs it (`PATCHES`).
 - `mapped`: hintsjax's `ppo_rgb` on `playground:CartpoleBalance:vision` (the same physics, reward
-  and ends, envs/playground.py `VisionTask`; its own 64x64 RGB picture of the same camera) with
-  Playground's settings mapped onto hintsjax's (`mapped_values`), seeds vmapped in one program.
-- `defaults`: the same with hintsjax's defaults for the env.
+  and ends, envs/playground.py `VisionTask`; its own 64x64 RGB pictures of the same camera, the
+  last 3 side by side as Playground's agent sees its last 3, `frames=3`) with Playground's
+  settings mapped onto hintsjax's (`mapped_values`), seeds vmapped in one program.
+- `mapped_one`: the same with one picture at a time (`frames=1`, the paper's): the frame stack's
+  part in the difference, one knob.
+- `defaults`: hintsjax's defaults for the env (one picture).
 Each side's seconds run from its start (renderer build or trace) to the trained policies, with
 compile and renderer build given apart; each seed's final policy then plays `EVAL_EPISODES` fresh
 episodes, deterministic (mean action), in its own pipeline's evaluator on the same reward. The
@@ -41,12 +44,15 @@ from playground import mend_brax_for_this_jax, record_side, steps_per_update  # 
 
 TASK = "CartpoleBalance"
 ENV = f"playground:{TASK}:vision"
-SIDES = ("playground", "mapped", "defaults")
+SIDES = ("playground", "mapped", "mapped_one", "defaults")
 TRAINERS = {
     "playground": "Playground + brax.training vision PPO",
     "mapped": "hintsjax ppo_rgb, Playground's settings",
+    "mapped_one": "hintsjax ppo_rgb, Playground's settings, one picture",
     "defaults": "hintsjax ppo_rgb, its defaults",
 }
+# Playground's vision cartpole shows its agent its last 3 frames (cartpole.py's `frame_stack`)
+PLAYGROUND_FRAMES = 3
 EVAL_EPISODES = 128
 RECORD = "versus_vision.json"  # under the runs folder
 # The playground side's finished seeds, a row each (under the runs folder): its 5 seeds take longer
@@ -84,16 +90,17 @@ def brax_updates(s: dict) -> int:
     return epochs * math.ceil(s["num_timesteps"] / (epochs * steps_per_update(s)))
 
 
-def mapped_values(s: dict, seeds: int, smoke: bool) -> dict:
+def mapped_values(s: dict, seeds: int, smoke: bool, frames: int = PLAYGROUND_FRAMES) -> dict:
     """hintsjax's run config with Playground's vision settings where hintsjax has the knob: an
     update of num_envs rollouts of batch_size x num_minibatches x unroll_length / num_envs steps,
     num_updates_per_batch epochs of num_minibatches minibatches; GAE over each unroll (Brax's),
     the discount, one learning rate for encoder, actor and critic, the entropy cost, the ratio
     clip, clipping of the whole gradient, Brax's tanh-squashed Gaussian, Adam's epsilon (optax's
-    default), the MLPs' widths. Left at hintsjax's: the encoder (its three VALID convolutions,
-    32 8x8/4, 64 4x4/2, 64 3x3/1, ReLU, shared by actor and critic, beside Brax's two SAME ones,
-    16 5x5/2 and 32 3x3/2 with 2x2 max-pools and ELU, one per network), its inits, the value
-    loss's weight and the picture (one RGB frame, not three grey ones)."""
+    default), the MLPs' widths, the last `frames` pictures side by side (Playground's 3, or one
+    for `mapped_one`). Left at hintsjax's: the encoder (its three VALID convolutions, 32 8x8/4,
+    64 4x4/2, 64 3x3/1, ReLU, shared by actor and critic, beside Brax's two SAME ones, 16 5x5/2
+    and 32 3x3/2 with 2x2 max-pools and ELU, one per network), its inits, the value loss's weight
+    and the pictures' colour (RGB, where Playground's are grey)."""
     batch = steps_per_update(s)
     rate = s["learning_rate"]
     ppo = {
@@ -116,7 +123,7 @@ def mapped_values(s: dict, seeds: int, smoke: bool) -> dict:
         "reward_scale": s["reward_scaling"],
         "hidden": list(s["network_factory"]["policy_hidden_layer_sizes"]),
     }
-    return {**common_values(seeds, smoke), "ppo": ppo}
+    return {**common_values(seeds, smoke), "frames": frames, "ppo": ppo}
 
 
 def default_values(s: dict, seeds: int, smoke: bool) -> dict:
@@ -341,7 +348,11 @@ def train_side(side: str, runs: Path, seeds: int, smoke: bool) -> None:
         runs.mkdir(parents=True, exist_ok=True)
         result = train_playground(s, seeds, episodes, runs / SEEDS_DONE, budget)
     else:
-        make = mapped_values if side == "mapped" else default_values
+        make = {
+            "mapped": mapped_values,
+            "mapped_one": functools.partial(mapped_values, frames=1),
+            "defaults": default_values,
+        }[side]
         result = train_hintsjax(make(s, seeds, smoke), episodes, TRAINERS[side])
     entry = {"trainer": TRAINERS[side], **result, "memory": watch.result()}
     record_side(
@@ -456,7 +467,7 @@ def section_lines(runs: Path) -> list[str]:
                 "compile, so its wall-clock is the sum of its seeds', and its peak memory is the "
                 "last process's.",
             ]
-    for side in ("mapped", "defaults"):
+    for side in SIDES[1:]:
         if side in results and "playground" in results:
             lines.append(
                 f"- {side}: "
@@ -481,7 +492,7 @@ def plot(runs: Path, out: Path) -> None:
 
     record = json.loads((runs / RECORD).read_text())
     fig, ax = plt.subplots(figsize=(7, 4))
-    for side, colour in zip(SIDES, ("tab:gray", "tab:blue", "tab:orange")):
+    for side, colour in zip(SIDES, ("tab:gray", "tab:blue", "tab:green", "tab:orange")):
         r = record["results"].get(side)
         if r is None:
             continue

@@ -24,7 +24,11 @@ def test_both_sides_take_brax_s_own_env_steps_with_playground_s_settings_mapped(
     s = pv.vision_settings(smoke=False)
     assert (s["num_timesteps"], s["num_evals"], s["num_resets_per_eval"]) == (5_000_000, 5, 0)
     assert pv.steps_per_update(s) == 40_960 and pv.brax_updates(s) == 4 * 31 == 124
-    mapped = run_config(pv.mapped_values(s, seeds=5, smoke=False)).ppo
+    mapped_cfg = run_config(pv.mapped_values(s, seeds=5, smoke=False))
+    mapped = mapped_cfg.ppo
+    # Playground's agent sees its last 3 frames; mapped_one sees one, as the paper's agents do
+    assert mapped_cfg.frames == 3 == pv.PLAYGROUND_FRAMES
+    assert run_config(pv.mapped_values(s, seeds=5, smoke=False, frames=1)).frames == 1
     assert (mapped.num_envs, mapped.rollout_length, mapped.minibatch_size, mapped.epochs) == (
         1024,
         40,
@@ -99,6 +103,7 @@ def test_the_section_gives_each_side_its_cells_and_hintsjax_against_playground(t
     assert "| 20.0 21.0 22.0 | 50 | 20 | 20 | 2100 / 900 |" in text  # 200 steps in 10 s
     assert (
         "| hintsjax ppo_rgb, its defaults | - |" in text
+        and "| hintsjax ppo_rgb, Playground's settings, one picture | - |" in text
         and "Patches to Playground's side: one patch" in text
     )
     assert (
