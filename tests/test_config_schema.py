@@ -187,7 +187,10 @@ def test_hyper_holds_every_traced_ppo_setting_and_reads_its_value():
         assert float(getattr(Hyper.of(changed), name)) == pytest.approx(other), name
 
 
-ALSO = {"kl_adaptive_lr": {"target_kl": 0.05}}  # a setting that needs another to be valid
+ALSO = {  # a setting that needs another to be valid
+    "kl_adaptive_lr": {"target_kl": 0.05},
+    "squashed_entropy": {"action_head": "tanh"},
+}
 
 
 @pytest.mark.parametrize("name", fields.names(PPOConfig))

@@ -10,13 +10,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from scipy import stats
+from scipy import integrate, stats
 
 from hintsjax.algorithms.ppo_math import (
     clipped_surrogate_loss,
     gae,
     gaussian_entropy,
     gaussian_log_prob,
+    squashed_entropy,
 )
 
 GAMMA, LAM = 0.5, 0.5  # gamma * lam = 0.25
@@ -243,3 +244,34 @@ def test_gaussian_entropy_matches_scipy(log_std):
     want = stats.norm.entropy(scale=np.exp(log_std)).sum()
     assert got.shape == ()
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize(("mean", "log_std"), [(0.0, -1.0), (0.7, 0.3), (-1.5, 1.0)])
+def test_squashed_entropy_matches_the_integral(mean, log_std):
+    """H(tanh u) = H(u) + E[log(1 - tanh(u)^2)], the expectation integrated by scipy's quad."""
+    density = stats.norm(mean, np.exp(log_std)).pdf
+    log_det = lambda u: 2 * (np.log(2) - u - np.logaddexp(0, -2 * u))  # noqa: E731
+    expected = integrate.quad(lambda u: log_det(u) * density(u), -np.inf, np.inf)[0]
+    want = stats.norm.entropy(scale=np.exp(log_std)) + expected
+    got = squashed_entropy(jnp.full((3, 1), mean), jnp.array([log_std]))
+    assert got.shape == (3,)
+    np.testing.assert_allclose(got, want, atol=2e-3)
+
+
+def test_squashed_entropy_is_the_gaussian_s_moved_by_the_slope_for_a_narrow_policy():
+    """A std far below tanh's scale: the squash is locally linear, slope 1 - tanh(mean)^2."""
+    mean, log_std = jnp.array([[0.0, 0.8]]), jnp.array([-6.0, -6.0])
+    want = gaussian_entropy(log_std) + np.log(1 - np.tanh(0.8) ** 2)
+    np.testing.assert_allclose(squashed_entropy(mean, log_std), [want], rtol=1e-5)
+
+
+def test_squashed_entropy_is_bounded_where_the_gaussian_s_grows():
+    """Past tanh's scale a wider Gaussian squashes onto the ends: the squashed entropy stays under
+    log 2 (the uniform on [-1, 1]) and falls, so its bonus no longer pays for a wider std."""
+    log_stds = jnp.linspace(-1.0, 3.0, 9)
+    at = lambda ls: squashed_entropy(jnp.zeros((1, 1)), jnp.array([ls]))[0]  # noqa: E731
+    squashed = np.asarray(jax.vmap(at)(log_stds))
+    assert np.all(squashed < np.log(2.0))
+    assert np.all(np.diff(np.asarray(jax.vmap(gaussian_entropy)(log_stds[:, None]))) > 0)
+    assert jax.grad(at)(2.0) < 0 < jax.grad(lambda ls: gaussian_entropy(jnp.array([ls])))(2.0)
+    assert squashed[-1] < squashed.max() - 0.5

@@ -35,6 +35,7 @@ from hintsjax.algorithms.ppo_math import (
     clipped_surrogate_loss,
     gae,
     gaussian_entropy,
+    squashed_entropy,
     gaussian_log_prob,
     gaussian_sample,
 )
@@ -360,7 +361,9 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
             advantage,
             value,
             batch.target,
-            gaussian_entropy(log_std),
+            squashed_entropy(mean, log_std).mean()
+            if ppo.squashed_entropy
+            else gaussian_entropy(log_std),
             hyper.clip_eps,
             hyper.vf_coef,
             hyper.ent_coef,

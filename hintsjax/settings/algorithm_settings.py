@@ -16,8 +16,8 @@ from hintsjax.settings.fields import check_choices, setting
 #   gaussian: N(mean, std), mean linear in the features, std learnt and state-independent; the env
 #             clips the action into its range (so on the car half the gas and brake draws are 0);
 #   tanh:     the same Gaussian, its draw squashed into the env's action range
-#             (envs.SquashedActions); the entropy bonus stays the Gaussian's, before the squash
-#             (no closed form after it);
+#             (envs.SquashedActions); the entropy bonus is the Gaussian's, before the squash,
+#             unless ppo.squashed_entropy (the squashed action's, as Brax's);
 #   sigmoid:  the authors' head: mean = 2 sigmoid(x) - 1 in [-1, 1], std floored at 0.01; clipped
 #             as gaussian.
 ACTION_HEADS = ("gaussian", "tanh", "sigmoid")
@@ -81,6 +81,14 @@ class PPOConfig:
         "the policy's action distribution: gaussian (clipped by the env), tanh "
         "(squashed into the action range) or sigmoid (the authors')",
         choices=ACTION_HEADS,
+    )
+    # An entropy bonus on the Gaussian before the squash grows with the std without bound, the
+    # squashed action's is at most log 2 a dimension (hintsjax.algorithms.ppo_math).
+    squashed_entropy: bool = setting(
+        False,
+        "action_head=tanh: the entropy bonus is the squashed action's (bounded, as Brax's), "
+        "not the Gaussian's before the squash",
+        saved_may_lack=True,
     )
     grad_clip: str = setting(
         "global",
@@ -232,6 +240,12 @@ class PPOConfig:
         if self.target_kl is not None and not self.target_kl > 0:
             raise UsageError(
                 f"ppo.target_kl ({self.target_kl}) must be positive, or null for no KL early stop"
+            )
+        if self.squashed_entropy and self.action_head != "tanh":
+            raise UsageError(
+                f"ppo.squashed_entropy is the entropy of ppo.action_head=tanh's squashed action; "
+                f"ppo.action_head={self.action_head} squashes nothing: set ppo.action_head=tanh, "
+                "or ppo.squashed_entropy=false"
             )
         if self.kl_adaptive_lr and self.target_kl is None:
             raise UsageError(
