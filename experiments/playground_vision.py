@@ -17,7 +17,8 @@ Playground's budget: 4 epochs of 31 training steps of 40,960, 5,079,040 a seed):
   last 3 side by side as Playground's agent sees its last 3, `frames=3`) with Playground's
   settings mapped onto hintsjax's (`mapped_values`), seeds vmapped in one program.
 - `mapped_one`: the same with one picture at a time (`frames=1`, the paper's): the frame stack's
-  part in the difference, one knob.
+  part in the difference, one knob; `mapped_first`: the mapping as first built, one picture and
+  the entropy bonus of the Gaussian before the squash (`ppo.squashed_entropy=false`).
 - `defaults`: hintsjax's defaults for the env (one picture).
 Each side's seconds run from its start (renderer build or trace) to the trained policies, with
 compile and renderer build given apart; each seed's final policy then plays `EVAL_EPISODES` fresh
@@ -44,11 +45,12 @@ from playground import mend_brax_for_this_jax, record_side, steps_per_update  # 
 
 TASK = "CartpoleBalance"
 ENV = f"playground:{TASK}:vision"
-SIDES = ("playground", "mapped", "mapped_one", "defaults")
+SIDES = ("playground", "mapped", "mapped_one", "mapped_first", "defaults")
 TRAINERS = {
     "playground": "Playground + brax.training vision PPO",
     "mapped": "hintsjax ppo_rgb, Playground's settings",
     "mapped_one": "hintsjax ppo_rgb, Playground's settings, one picture",
+    "mapped_first": "hintsjax ppo_rgb, Playground's settings, one picture, the Gaussian's entropy",
     "defaults": "hintsjax ppo_rgb, its defaults",
 }
 # Playground's vision cartpole shows its agent its last 3 frames (cartpole.py's `frame_stack`)
@@ -90,12 +92,15 @@ def brax_updates(s: dict) -> int:
     return epochs * math.ceil(s["num_timesteps"] / (epochs * steps_per_update(s)))
 
 
-def mapped_values(s: dict, seeds: int, smoke: bool, frames: int = PLAYGROUND_FRAMES) -> dict:
+def mapped_values(
+    s: dict, seeds: int, smoke: bool, frames: int = PLAYGROUND_FRAMES, squashed: bool = True
+) -> dict:
     """hintsjax's run config with Playground's vision settings where hintsjax has the knob: an
     update of num_envs rollouts of batch_size x num_minibatches x unroll_length / num_envs steps,
     num_updates_per_batch epochs of num_minibatches minibatches; GAE over each unroll (Brax's),
     the discount, one learning rate for encoder, actor and critic, the entropy cost, the ratio
-    clip, clipping of the whole gradient, Brax's tanh-squashed Gaussian, Adam's epsilon (optax's
+    clip, clipping of the whole gradient, Brax's tanh-squashed Gaussian and its entropy bonus (the
+    squashed action's), Adam's epsilon (optax's
     default), the MLPs' widths, the last `frames` pictures side by side (Playground's 3, or one
     for `mapped_one`). Left at hintsjax's: the encoder (its three VALID convolutions, 32 8x8/4,
     64 4x4/2, 64 3x3/1, ReLU, shared by actor and critic, beside Brax's two SAME ones, 16 5x5/2
@@ -119,6 +124,7 @@ def mapped_values(s: dict, seeds: int, smoke: bool, frames: int = PLAYGROUND_FRA
         "max_grad_norm": s["max_grad_norm"],
         "grad_clip": "global",
         "action_head": "tanh",
+        "squashed_entropy": squashed,  # Brax's tanh-normal bonus: the squashed action's entropy
         "adam_eps": 1e-8,
         "reward_scale": s["reward_scaling"],
         "hidden": list(s["network_factory"]["policy_hidden_layer_sizes"]),
@@ -351,6 +357,7 @@ def train_side(side: str, runs: Path, seeds: int, smoke: bool) -> None:
         make = {
             "mapped": mapped_values,
             "mapped_one": functools.partial(mapped_values, frames=1),
+            "mapped_first": functools.partial(mapped_values, frames=1, squashed=False),
             "defaults": default_values,
         }[side]
         result = train_hintsjax(make(s, seeds, smoke), episodes, TRAINERS[side])
@@ -492,7 +499,8 @@ def plot(runs: Path, out: Path) -> None:
 
     record = json.loads((runs / RECORD).read_text())
     fig, ax = plt.subplots(figsize=(7, 4))
-    for side, colour in zip(SIDES, ("tab:gray", "tab:blue", "tab:green", "tab:orange")):
+    colours = ("tab:gray", "tab:blue", "tab:green", "tab:olive", "tab:orange")
+    for side, colour in zip(SIDES, colours):
         r = record["results"].get(side)
         if r is None:
             continue
@@ -524,6 +532,9 @@ def main() -> None:
     parser.add_argument("--runs", type=Path, default=Path(DEFAULT_RUNS))
     parser.add_argument("--smoke", action="store_true", help="tiny budgets: the plumbing")
     parser.add_argument("--report", action="store_true", help="archive the record, plot it")
+    parser.add_argument(
+        "--force", action="store_true", help="--report: rewrite playground.md though rows go"
+    )
     args = parser.parse_args()
     if args.seeds < 1:
         parser.error(f"--seeds must be 1 or more, got {args.seeds}")
@@ -542,7 +553,7 @@ def main() -> None:
         plot(args.runs, RESULTS / CURVES)
         import playground
 
-        playground.report(args.runs)
+        playground.report(args.runs, force=args.force)
         return
     if args.side:
         train_side(args.side, args.runs, args.seeds, args.smoke)
