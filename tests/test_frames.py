@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import flash_env
+from test_learning import LEARN_PPO  # the cue task's budget: 12 updates of 256 steps
 from hintsjax import envs
 from hintsjax.algorithms import group, ppo
 from hintsjax.envs.frames import FrameStack
@@ -97,18 +98,6 @@ def test_a_runs_frames_reach_its_env_memory_bound_and_group():
     one = run_config({"env": "pendulum", "agent": "ppo_rgb", "image_size": 40})
     with pytest.raises(UsageError, match="frames"):
         group.check_group([cfg, one])
-
-
-# 12 updates of 256 transitions (tests/test_learning.py's budget for the one-step cue task)
-LEARN_PPO = dict(
-    num_envs=64,
-    batch_size=256,
-    minibatch_size=64,
-    epochs=4,
-    total_env_steps=3072,
-    hidden=[64, 64],
-    actor_lr=1e-2,
-)
 
 
 @pytest.mark.parametrize("frames", [1, 2])
