@@ -215,6 +215,32 @@ def hint_error(prediction: jax.Array, hint: jax.Array, keep: jax.Array) -> jax.A
 
 
 # folded into a rollout's key for its per-rollout starts (leaves the step keys as they were)
+# The truncated episodes' final observations go through the network this many at a time
+# (`values_where`): a step pays a fraction of a pass for its few truncations, not a whole one.
+TRUNCATED_CHUNKS = 8
+
+
+def values_where(
+    value: Callable[[Any], jax.Array], obs: Any, where: jax.Array, chunk: int
+) -> jax.Array:
+    """[N] `value` of each row of the batched `obs` where `where` holds, 0 elsewhere: `value`
+    (rows [K, ...] -> [K]) runs on `chunk` rows at a time (N a multiple of it), the asked rows
+    first, and only for as many chunks as there are asked rows: none at a step where no episode
+    was truncated, all of them (one pass's worth) where every one was."""
+    n = where.shape[0]
+    order = jnp.argsort(~where, stable=True)  # the asked rows first
+    count = where.sum()
+
+    def one(carry):
+        i, out = carry
+        rows = jax.lax.dynamic_slice_in_dim(order, i * chunk, chunk)
+        got = value(jax.tree.map(lambda x: x[rows], obs))
+        return i + 1, out.at[rows].set(jnp.where(where[rows], got, 0.0))
+
+    start = (jnp.zeros((), jnp.int32), jnp.zeros((n,), jnp.float32))
+    return jax.lax.while_loop(lambda c: c[0] * chunk < count, one, start)[1]
+
+
 STARTS_TAG = 0x57A7
 RESET_TAG = 0x5E7A  # folded into a rollout's key for its fresh episodes (ppo.reset_every_update)
 
@@ -295,6 +321,7 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
     network = make_network(cfg, env)
     T, N = ppo.rollout_length, ppo.num_envs
     drop = ppo.hint_dropout if spec.drops_hint else None
+    truncated_chunk = N // TRUNCATED_CHUNKS if N % TRUNCATED_CHUNKS == 0 else N
 
     def init(key: jax.Array) -> RunnerState:
         hyper = Hyper.of(cfg)
@@ -328,9 +355,13 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
             ts = jax.vmap(env.step, in_axes=(0, 0, 0, None, 0))(
                 jax.random.split(k_env, N), env_state, action, env_params, starts
             )
-            final_value = network.apply(
-                state.params, observe(ts.final_obs, k_final, state.hyper, drop)
-            )[2]
+            # GAE reads it where an episode was truncated only (a terminated one bootstraps from 0)
+            final_value = values_where(
+                lambda rows: network.apply(state.params, rows)[2],
+                observe(ts.final_obs, k_final, state.hyper, drop),
+                ts.truncated,
+                truncated_chunk,
+            )
             transition = Transition(
                 seen,
                 action,
