@@ -247,10 +247,15 @@ def bench_train(
 
 def update_parts(cfg, state) -> dict:
     """Seconds of one seed-vmapped PPO update's parts: the rollout (env steps with pictures and
-    the policy's actions), the learning (GAE and the epochs of minibatch steps), and the rollout's
-    env steps under random actions as `bench_env` times them, with their pictures and without
-    (physics, reward and hint): the rollout less the first is the policy's share, the first less
-    the second the pictures'. Every part steps with the run's physics (`cfg.physics`)."""
+    the policy's actions), the learning (GAE and the epochs of minibatch steps), the rollout's env
+    steps under random actions as `bench_env` times them (with their pictures and a fresh start
+    drawn each step, as the rollout's AutoReset draws them; without pictures; without pictures or
+    starts), and the policy's network once a step on the rollout's observations. So: physics is
+    the last env steps' time, the starts' share the difference of the two before it, the
+    pictures' (each step's and its fresh start's) the difference of the first two, and the
+    rollout less the first is the policy's (its action and its value of the final observation:
+    two passes of the network a step, one of which `policy_forwards` times). Every part steps with
+    the run's physics (`cfg.physics`)."""
     from hintsjax.algorithms.ppo import make_ppo
 
     parts = make_ppo(cfg)
@@ -258,17 +263,29 @@ def update_parts(cfg, state) -> dict:
     rollout = jax.jit(jax.vmap(parts.rollout))
     _, traj, last = rollout(state, key)
     learn = jax.jit(jax.vmap(parts.learn))
+    network = parts.network
+
+    def forwards(s, obs):  # one pass of the network on each of the rollout's [T, N] observations
+        def one(total, o):
+            mean, _, value = network.apply(s.params, o)[:3]
+            return total + mean.sum() + value.sum(), None
+
+        return jax.lax.scan(one, jnp.zeros(()), obs)[0]
+
     # every seed's envs side by side
     width, steps = cfg.seeds * cfg.ppo.num_envs, cfg.ppo.rollout_length
+
+    def env_steps(**kw) -> float:  # the seconds of the rollout's env steps, as bench_env steps them
+        rate = bench_env(cfg.env, width, steps, physics=cfg.physics, **kw)["env_steps_per_s"]
+        return width * steps / rate
+
     return {
         "rollout": best_time(lambda s, k: rollout(s, k)[2], state, key),
         "learn": best_time(lambda s: learn(s, traj, last, traj.reward, key)[1]["approx_kl"], state),
-        "env_steps_with_pictures": width
-        * steps
-        / bench_env(cfg.env, width, steps, physics=cfg.physics)["env_steps_per_s"],
-        "env_steps_only": width
-        * steps
-        / bench_env(cfg.env, width, steps, pixels=False, physics=cfg.physics)["env_steps_per_s"],
+        "env_steps_with_pictures": env_steps(),
+        "env_steps_only": env_steps(pixels=False),
+        "env_steps_no_starts": env_steps(pixels=False, reset="none"),
+        "policy_forwards": best_time(jax.jit(jax.vmap(forwards)), state, traj.obs),
     }
 
 
