@@ -327,7 +327,7 @@ def train_hintsjax(values: dict, episodes: int, label: str) -> dict:
         "progress": progress,
         "deterministic": [float(x) for x in summary["seed_means"]],
         "env_steps_per_seed": updates * cfg.ppo.batch_size,
-        "settings": to_dict(cfg)["ppo"],
+        "settings": {"frames": cfg.frames, "image_size": cfg.image_size, **to_dict(cfg)["ppo"]},
     }
 
 
