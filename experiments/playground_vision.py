@@ -100,12 +100,12 @@ def mapped_values(
     num_updates_per_batch epochs of num_minibatches minibatches; GAE over each unroll (Brax's),
     the discount, one learning rate for encoder, actor and critic, the entropy cost, the ratio
     clip, clipping of the whole gradient, Brax's tanh-squashed Gaussian and its entropy bonus (the
-    squashed action's), Adam's epsilon (optax's
-    default), the MLPs' widths, the last `frames` pictures side by side (Playground's 3, or one
-    for `mapped_one`). Left at hintsjax's: the encoder (its three VALID convolutions, 32 8x8/4,
-    64 4x4/2, 64 3x3/1, ReLU, shared by actor and critic, beside Brax's two SAME ones, 16 5x5/2
-    and 32 3x3/2 with 2x2 max-pools and ELU, one per network), its inits, the value loss's weight
-    and the pictures' colour (RGB, where Playground's are grey)."""
+    squashed action's), Adam's epsilon (optax's default), the MLPs' widths, the last `frames`
+    pictures side by side (Playground's 3, or one for `mapped_one`). Left at hintsjax's: the
+    encoder (its three VALID convolutions, 32 8x8/4, 64 4x4/2, 64 3x3/1, ReLU, shared by actor
+    and critic, beside Brax's two SAME ones, 16 5x5/2 and 32 3x3/2 with 2x2 max-pools and ELU,
+    one per network), its inits, the value loss's weight and the pictures' colour (RGB, where
+    Playground's are grey)."""
     batch = steps_per_update(s)
     rate = s["learning_rate"]
     ppo = {

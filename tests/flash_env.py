@@ -17,16 +17,12 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from cue_env import CueParams  # the same action limit
 from hintsjax import envs
 from hintsjax.envs.core import Env, Step
 
 NAME = "flash"
 GREY = 128
-
-
-@struct.dataclass
-class FlashParams:
-    action_limit: float = 2.0
 
 
 @struct.dataclass
@@ -41,27 +37,25 @@ class FlashEnv(Env):
     action_size = 1
     image_size = 36  # the encoder's smallest
 
-    def default_params(self) -> FlashParams:
-        return FlashParams()
+    def default_params(self) -> CueParams:
+        return CueParams()
 
-    def initial_state(self, key: jax.Array, params: FlashParams) -> FlashState:
+    def initial_state(self, key: jax.Array, params: CueParams) -> FlashState:
         cue = jnp.where(jax.random.bernoulli(key), 1.0, -1.0).astype(jnp.float32)
         return FlashState(cue=cue, t=jnp.zeros((), jnp.int32))
 
-    def transition(self, key, state: FlashState, action, params: FlashParams) -> Step:
+    def transition(self, key, state: FlashState, action, params: CueParams) -> Step:
         a = jnp.clip(jnp.reshape(action, ()), -params.action_limit, params.action_limit)
         reward = jnp.where(state.t == 1, -((a - state.cue) ** 2), 0.0)
         return Step(state, reward, jnp.zeros((), bool))
 
-    def render(self, state: FlashState, params: FlashParams) -> jax.Array:
+    def render(self, state: FlashState, params: CueParams) -> jax.Array:
         shown = jnp.where(state.cue > 0, 255, 0).astype(jnp.uint8)
         level = jnp.where(state.t == 0, shown, jnp.uint8(GREY))
         return jnp.full((self.image_size, self.image_size, 3), level, jnp.uint8)
 
-    def state_obs(self, state: FlashState, params: FlashParams) -> jax.Array:
+    def state_obs(self, state: FlashState, params: CueParams) -> jax.Array:
         return jnp.zeros((1,), jnp.float32)
 
 
-envs.REGISTRY[NAME] = envs.EnvEntry(
-    FlashEnv, {"default": FlashParams()}, training=dict(hint="none")
-)
+envs.REGISTRY[NAME] = envs.EnvEntry(FlashEnv, {"default": CueParams()}, training=dict(hint="none"))

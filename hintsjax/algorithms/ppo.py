@@ -35,9 +35,9 @@ from hintsjax.algorithms.ppo_math import (
     clipped_surrogate_loss,
     gae,
     gaussian_entropy,
-    squashed_entropy,
     gaussian_log_prob,
     gaussian_sample,
+    squashed_entropy,
 )
 from hintsjax.algorithms import kl_rate
 from hintsjax.algorithms.trainer import Trainer, episode_metrics, program_identity
@@ -214,7 +214,6 @@ def hint_error(prediction: jax.Array, hint: jax.Array, keep: jax.Array) -> jax.A
     return squared.sum() / (prediction.shape[0] * jnp.maximum(keep.sum(), 1))
 
 
-# folded into a rollout's key for its per-rollout starts (leaves the step keys as they were)
 # The truncated episodes' final observations go through the network this many at a time
 # (`values_where`): a step pays a fraction of a pass for its few truncations, not a whole one.
 TRUNCATED_CHUNKS = 8
@@ -241,6 +240,7 @@ def values_where(
     return jax.lax.while_loop(lambda c: c[0] * chunk < count, one, start)[1]
 
 
+# folded into a rollout's key for its per-rollout starts (leaves the step keys as they were)
 STARTS_TAG = 0x57A7
 RESET_TAG = 0x5E7A  # folded into a rollout's key for its fresh episodes (ppo.reset_every_update)
 
