@@ -74,8 +74,8 @@ def vision_settings(smoke: bool) -> dict:
     """Playground's published vision PPO settings for the task (tiny with `smoke`)."""
     from mujoco_playground.config import dm_control_suite_params
 
-    settings = dict(dm_control_suite_params.brax_vision_ppo_config(TASK))
-    settings["network_factory"] = dict(settings["network_factory"])
+    # plain dicts all the way down: the record holds them (its init kwargs are ConfigDicts too)
+    settings = dm_control_suite_params.brax_vision_ppo_config(TASK).to_dict()
     if smoke:
         settings.update(
             num_timesteps=2048, num_evals=2, num_envs=16, batch_size=16, num_minibatches=2,

@@ -22,6 +22,9 @@ def test_both_sides_take_brax_s_own_env_steps_with_playground_s_settings_mapped(
     """Playground's 5 M env steps are 4 epochs of ceil(5 M / (4 x 40,960)) = 31 Brax training steps
     of 256 x 8 x 20: 124 updates, 5,079,040 env steps, which both hintsjax sides take exactly."""
     s = pv.vision_settings(smoke=False)
+    assert json.loads(json.dumps(s))["network_factory"]["cnn_kernel_init_kwargs"] == {
+        "scale": 1.41421356
+    }  # the record holds them
     assert (s["num_timesteps"], s["num_evals"], s["num_resets_per_eval"]) == (5_000_000, 5, 0)
     assert pv.steps_per_update(s) == 40_960 and pv.brax_updates(s) == 4 * 31 == 124
     mapped_cfg = run_config(pv.mapped_values(s, seeds=5, smoke=False))
