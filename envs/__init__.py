@@ -30,6 +30,7 @@ from hintsjax.envs.core import (
     Step,
     Timestep,
     fresh_episodes,
+    rows_where,
 )
 from hintsjax.envs.errors import ChoiceError, choose
 from hintsjax.envs.hints import (
@@ -256,6 +257,7 @@ __all__ = [
     "choose",
     "env_names",
     "fresh_episodes",
+    "rows_where",
     "hint_names",
     "make",
     "make_hint",

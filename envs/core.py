@@ -167,6 +167,34 @@ def fresh_episodes(key: jax.Array, env: Any, params: Any, n: int) -> Timestep:
     return jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(key, n), params)
 
 
+def rows_where(fn: Callable[[Any], Any], xs: Any, where: jax.Array, chunk: int) -> Any:
+    """`fn` (batched rows [K, ...] -> a pytree of [K, ...]) of the rows of `xs` ([N, ...]) where
+    `where` (bool[N]) holds, zeros elsewhere: `fn` runs on `chunk` rows at a time (N a multiple of
+    it), the asked rows first, and only for as many chunks as there are asked rows: none where no
+    row is asked, N / chunk (one whole batch's worth) where every one is. What a step pays for the
+    few envs it needs something of (a truncated episode's value, an ended one's fresh start)."""
+    n = where.shape[0]
+    order = jnp.argsort(~where, stable=True)  # the asked rows first
+    count = where.sum()
+    shapes = jax.eval_shape(fn, jax.tree.map(lambda x: x[:chunk], xs))
+    zeros = jax.tree.map(lambda s: jnp.zeros((n, *s.shape[1:]), s.dtype), shapes)
+
+    def one(carry):
+        i, out = carry
+        rows = jax.lax.dynamic_slice_in_dim(order, i * chunk, chunk)
+        got = fn(jax.tree.map(lambda x: x[rows], xs))
+        asked = where[rows]
+
+        def put(o: jax.Array, g: jax.Array) -> jax.Array:
+            kept = jnp.where(asked.reshape(-1, *(1,) * (g.ndim - 1)), g, jnp.zeros_like(g))
+            return o.at[rows].set(kept)
+
+        return i + 1, jax.tree.map(put, out, got)
+
+    start = (jnp.zeros((), jnp.int32), zeros)
+    return jax.lax.while_loop(lambda c: c[0] * chunk < count, one, start)[1]
+
+
 @struct.dataclass
 class EpisodeState:
     """AutoReset's state: the env's state plus the running episode statistics."""
@@ -213,16 +241,41 @@ class AutoReset:
         """One step; where the episode ends, the next one starts from `fresh` (a `fresh_start`).
 
         Without `fresh` a start is drawn here, on every step: vmapped code computes it whether or
-        not an episode ended, a whole reset (and picture) per step. A rollout may instead draw
-        one start per env up front and pass it to each of its steps (an env whose episodes end
+        not an episode ended, a whole reset (and picture) per step; `step_ended` is the same
+        step of a batch drawing only the ended envs' starts. A rollout may instead draw one
+        start per env up front and pass it to each of its steps (an env whose episodes end
         twice in one rollout then starts both from it).
         """
         step_key, reset_key = jax.random.split(key)
         ts = self.env.step(step_key, state.env_state, action, params)
+        fresh = self.env.reset(reset_key, params) if fresh is None else fresh
+        return self.go_on(state, ts, fresh)
+
+    def step_ended(
+        self, keys: jax.Array, state: EpisodeState, action: jax.Array, params: Any, chunk: int
+    ) -> Timestep:
+        """`step` vmapped over N envs (keys, state and action batched, no `fresh`), with each
+        ended episode's start drawn as `step` draws it (same key, same start) but only for the
+        envs whose episodes ended, `chunk` of them at a time (`rows_where`): a step where none
+        ended draws no start, where a vmapped `step` draws (and pictures) N."""
+        keys = jax.vmap(jax.random.split)(keys)
+        ts = jax.vmap(self.env.step, in_axes=(0, 0, 0, None))(
+            keys[:, 0], state.env_state, action, params
+        )
+        fresh = rows_where(
+            lambda k: jax.vmap(self.env.reset, in_axes=(0, None))(k, params),
+            keys[:, 1],
+            ts.terminated | ts.truncated,
+            chunk,
+        )
+        return jax.vmap(self.go_on)(state, ts, fresh)
+
+    def go_on(self, state: EpisodeState, ts: Timestep, fresh: Timestep) -> Timestep:
+        """The step `ts` from `state` with its episode statistics, going on from `fresh` where
+        its episode ended."""
         done = ts.terminated | ts.truncated
         episode_return = state.episode_return + ts.reward
         episode_length = state.episode_length + 1
-        fresh = self.env.reset(reset_key, params) if fresh is None else fresh
         pick = lambda a, b: jax.tree.map(lambda x, y: jnp.where(done, x, y), a, b)  # noqa: E731
         next_state = EpisodeState(
             pick(fresh.state, ts.state),

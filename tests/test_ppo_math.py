@@ -275,25 +275,3 @@ def test_squashed_entropy_is_bounded_where_the_gaussian_s_grows():
     assert np.all(np.diff(np.asarray(jax.vmap(gaussian_entropy)(log_stds[:, None]))) > 0)
     assert jax.grad(at)(2.0) < 0 < jax.grad(lambda ls: gaussian_entropy(jnp.array([ls])))(2.0)
     assert squashed[-1] < squashed.max() - 0.5
-
-
-@pytest.mark.parametrize("asked", [[], [5], [0, 3, 7], list(range(12)), [1, 2, 4, 6, 8, 9, 10, 11]])
-def test_values_where_passes_only_the_asked_rows_and_in_as_few_chunks(asked):
-    """values_where (the rollout's values of truncated episodes' final observations) equals the
-    whole batch's pass where asked and 0 elsewhere, with the pass run on chunks of 3 rows: as many
-    chunks as the asked rows fill (none for none), each row's value its own."""
-    from hintsjax.algorithms.ppo import values_where
-
-    obs = {"x": jnp.arange(12 * 2, dtype=jnp.float32).reshape(12, 2) ** 1.5, "y": jnp.ones(12)}
-    where = jnp.zeros(12, bool).at[jnp.asarray(asked, jnp.int32)].set(True)
-    value = lambda rows: rows["x"][:, 0] - 2.0 * rows["x"][:, 1] + rows["y"]  # noqa: E731
-    calls = []
-
-    def counted(rows):
-        jax.debug.callback(lambda: calls.append(1))
-        return value(rows)
-
-    got = jax.jit(lambda o, w: values_where(counted, o, w, 3))(obs, where)
-    jax.effects_barrier()
-    np.testing.assert_array_equal(got, jnp.where(where, value(obs), 0.0))
-    assert len(calls) == -(-len(asked) // 3)

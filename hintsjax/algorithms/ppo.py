@@ -214,30 +214,14 @@ def hint_error(prediction: jax.Array, hint: jax.Array, keep: jax.Array) -> jax.A
     return squared.sum() / (prediction.shape[0] * jnp.maximum(keep.sum(), 1))
 
 
-# The truncated episodes' final observations go through the network this many at a time
-# (`values_where`): a step pays a fraction of a pass for its few truncations, not a whole one.
-TRUNCATED_CHUNKS = 8
-
-
-def values_where(
-    value: Callable[[Any], jax.Array], obs: Any, where: jax.Array, chunk: int
-) -> jax.Array:
-    """[N] `value` of each row of the batched `obs` where `where` holds, 0 elsewhere: `value`
-    (rows [K, ...] -> [K]) runs on `chunk` rows at a time (N a multiple of it), the asked rows
-    first, and only for as many chunks as there are asked rows: none at a step where no episode
-    was truncated, all of them (one pass's worth) where every one was."""
-    n = where.shape[0]
-    order = jnp.argsort(~where, stable=True)  # the asked rows first
-    count = where.sum()
-
-    def one(carry):
-        i, out = carry
-        rows = jax.lax.dynamic_slice_in_dim(order, i * chunk, chunk)
-        got = value(jax.tree.map(lambda x: x[rows], obs))
-        return i + 1, out.at[rows].set(jnp.where(where[rows], got, 0.0))
-
-    start = (jnp.zeros((), jnp.int32), jnp.zeros((n,), jnp.float32))
-    return jax.lax.while_loop(lambda c: c[0] * chunk < count, one, start)[1]
+# What a step needs of a few envs only (a truncated episode's final value, an ended one's fresh
+# start) is computed this many at a time (`envs.rows_where`): a step pays a fraction of a pass
+# for its few truncations and ends, not a whole one.
+ROW_CHUNKS = 8
+# The physics whose rollouts draw the ended envs' starts alone (`AutoReset.step_ended`); under
+# MJX-Warp a chunk is another batch shape for its kernels, and they draw every env's start each
+# step until that is measured on a GPU.
+ENDED_STARTS_PHYSICS = frozenset({envs.JAX})
 
 
 # folded into a rollout's key for its per-rollout starts (leaves the step keys as they were)
@@ -321,7 +305,8 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
     network = make_network(cfg, env)
     T, N = ppo.rollout_length, ppo.num_envs
     drop = ppo.hint_dropout if spec.drops_hint else None
-    truncated_chunk = N // TRUNCATED_CHUNKS if N % TRUNCATED_CHUNKS == 0 else N
+    chunk = N // ROW_CHUNKS if N % ROW_CHUNKS == 0 else N
+    starts_ended = envs.resolve_physics(cfg.env, cfg.physics) in ENDED_STARTS_PHYSICS
 
     def init(key: jax.Array) -> RunnerState:
         hyper = Hyper.of(cfg)
@@ -352,15 +337,19 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
             seen = observe(obs, k_noise, state.hyper, drop)
             mean, log_std, value = network.apply(state.params, seen)
             action = gaussian_sample(k_act, mean, log_std)
-            ts = jax.vmap(env.step, in_axes=(0, 0, 0, None, 0))(
-                jax.random.split(k_env, N), env_state, action, env_params, starts
-            )
+            k_envs = jax.random.split(k_env, N)
+            if starts is None and starts_ended:
+                ts = env.step_ended(k_envs, env_state, action, env_params, chunk)
+            else:
+                ts = jax.vmap(env.step, in_axes=(0, 0, 0, None, 0))(
+                    k_envs, env_state, action, env_params, starts
+                )
             # GAE reads it where an episode was truncated only (a terminated one bootstraps from 0)
-            final_value = values_where(
+            final_value = envs.rows_where(
                 lambda rows: network.apply(state.params, rows)[2],
                 observe(ts.final_obs, k_final, state.hyper, drop),
                 ts.truncated,
-                truncated_chunk,
+                chunk,
             )
             transition = Transition(
                 seen,

@@ -190,6 +190,76 @@ def test_autoreset_swingup_fresh_goal_is_upright(auto, params):
     assert len({float(o.state.env_state.theta) for o in outs}) == 3
 
 
+class CountedStarts:
+    """An env whose every start (reset) adds its batch's rows to `rows` as it runs."""
+
+    def __init__(self, env):
+        self.env, self.rows = env, []
+
+    def __getattr__(self, name):
+        return getattr(self.env, name)
+
+    def reset(self, key, params):
+        jax.debug.callback(lambda k: self.rows.append(max(1, np.size(k) // 2)), key)
+        return self.env.reset(key, params)
+
+
+@pytest.mark.parametrize("ending", [(), (1,), (0, 3, 4, 6, 7), tuple(range(8))])
+def test_step_ended_is_a_vmapped_step_drawing_only_the_ended_starts(env, swingto_params, ending):
+    """AutoReset.step_ended equals `step` vmapped over 8 envs, leaf for leaf (each ended env
+    starts where its own key puts it), while drawing starts in chunks of 2 envs only for as
+    many chunks as episodes ended (none where none ended)."""
+    counted = CountedStarts(env)
+    auto = envs.AutoReset(counted)
+    t = np.full(8, 50)
+    t[list(ending)] = 199
+    states = jax.vmap(lambda ti, g: EpisodeState(S(0.3, 0.5, goal=g, t=ti), 1.0, ti))(
+        jnp.asarray(t), jnp.linspace(-1.0, 1.0, 8)
+    )
+    keys = jax.random.split(jax.random.key(5), 8)
+    action = jnp.linspace(-2.0, 2.0, 8)[:, None]
+    want = jax.jit(jax.vmap(auto.step, in_axes=(0, 0, 0, None)))(
+        keys, states, action, swingto_params
+    )
+    jax.effects_barrier()
+    counted.rows.clear()
+    got = jax.jit(lambda *a: auto.step_ended(*a, swingto_params, 2))(keys, states, action)
+    jax.effects_barrier()
+    assert sum(counted.rows) == 2 * -(-len(ending) // 2)
+    assert jax.tree.structure(got) == jax.tree.structure(want)
+    for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(want)):  # two programs: float ulps
+        assert a.dtype == b.dtype and a.shape == b.shape
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-6, atol=1e-6)
+    assert np.array_equal(np.asarray(got.truncated), t == 199)
+
+
+@pytest.mark.parametrize("asked", [(), (4,), (0, 5, 11), (1, 2, 3, 6, 7, 8, 9), tuple(range(12))])
+def test_rows_where_runs_only_the_asked_rows_and_in_as_few_chunks(asked):
+    """rows_where equals the whole batch's `fn` where asked and zeros elsewhere, every leaf of
+    its output, with `fn` run on chunks of 3 rows: as many chunks as the asked rows fill (none
+    for none), each row's result its own."""
+    xs = {"x": jnp.arange(12 * 2, dtype=jnp.float32).reshape(12, 2) ** 1.5, "y": jnp.ones(12)}
+    where = jnp.zeros(12, bool).at[jnp.asarray(asked, jnp.int32)].set(True)
+
+    def fn(rows):
+        value = rows["x"][:, 0] - 2.0 * rows["x"][:, 1] + rows["y"]
+        return {"value": value, "pair": jnp.stack([value, -value], 1).astype(jnp.int32)}
+
+    calls = []
+
+    def counted(rows):
+        jax.debug.callback(lambda: calls.append(1))
+        return fn(rows)
+
+    got = jax.jit(lambda o, w: envs.rows_where(counted, o, w, 3))(xs, where)
+    jax.effects_barrier()
+    whole = fn(xs)
+    np.testing.assert_array_equal(got["value"], jnp.where(where, whole["value"], 0.0))
+    np.testing.assert_array_equal(got["pair"], jnp.where(where[:, None], whole["pair"], 0))
+    assert got["pair"].dtype == jnp.int32
+    assert len(calls) == -(-len(asked) // 3)
+
+
 # -- registry and observation keys -------------------------------------------------------------
 
 
