@@ -249,8 +249,9 @@ def update_parts(cfg, state) -> dict:
     """Seconds of one seed-vmapped PPO update's parts: the rollout (env steps with pictures and
     the policy's actions), the learning (GAE and the epochs of minibatch steps), the rollout's env
     steps under random actions as `bench_env` times them (with their pictures and a fresh start
-    drawn each step, as the rollout's AutoReset draws them; without pictures; without pictures or
-    starts), and the policy's network once a step on the rollout's observations. So: physics is
+    drawn each step, as vmapped AutoReset draws them: the rollout draws only the ended envs'
+    under JAX physics, `AutoReset.step_ended`; without pictures; without pictures or starts), and
+    the policy's network once a step on the rollout's observations. So: physics is
     the last env steps' time, the starts' share the difference of the two before it, the
     pictures' (each step's and its fresh start's) the difference of the first two, and the
     rollout less the first is the policy's (its action and its value of the final observation:

@@ -13,12 +13,12 @@ Playground's budget: 4 epochs of 31 training steps of 40,960, 5,079,040 a seed):
   them (an evaluation env of its own, its renderer built for `num_eval_envs` worlds), seeds one
   after another. Patched only where jax 0.11 needs it (`PATCHES`).
 - `mapped`: hintsjax's `ppo_rgb` on `playground:CartpoleBalance:vision` (the same physics, reward
-  and ends, envs/playground.py `VisionTask`; its own 64x64 RGB pictures of the same camera, the
-  last 3 side by side as Playground's agent sees its last 3, `frames=3`) with Playground's
-  settings mapped onto hintsjax's (`mapped_values`), seeds vmapped in one program.
-- `mapped_one`: the same with one picture at a time (`frames=1`, the paper's): the frame stack's
-  part in the difference, one knob; `mapped_first`: the mapping as first built, one picture and
-  the entropy bonus of the Gaussian before the squash (`ppo.squashed_entropy=false`).
+  and ends, envs/playground.py `VisionTask`; its own 64x64 pictures of the same camera, grey and
+  the last 3 side by side as Playground's agent sees its last 3, `frames=3 colour=grey`) with
+  Playground's settings mapped onto hintsjax's (`mapped_values`), seeds vmapped in one program.
+- `mapped_one`: the same with one picture at a time (`frames=1`): the frame stack's part in the
+  difference, one knob; `mapped_first`: the mapping as first built, one RGB picture and the
+  entropy bonus of the Gaussian before the squash (`ppo.squashed_entropy=false`).
 - `defaults`: hintsjax's defaults for the env (one picture).
 Each side's seconds run from its start (renderer build or trace) to the trained policies, with
 compile and renderer build given apart; each seed's final policy then plays `EVAL_EPISODES` fresh
@@ -93,7 +93,12 @@ def brax_updates(s: dict) -> int:
 
 
 def mapped_values(
-    s: dict, seeds: int, smoke: bool, frames: int = PLAYGROUND_FRAMES, squashed: bool = True
+    s: dict,
+    seeds: int,
+    smoke: bool,
+    frames: int = PLAYGROUND_FRAMES,
+    squashed: bool = True,
+    colour: str = "grey",
 ) -> dict:
     """hintsjax's run config with Playground's vision settings where hintsjax has the knob: an
     update of num_envs rollouts of batch_size x num_minibatches x unroll_length / num_envs steps,
@@ -101,11 +106,10 @@ def mapped_values(
     the discount, one learning rate for encoder, actor and critic, the entropy cost, the ratio
     clip, clipping of the whole gradient, Brax's tanh-squashed Gaussian and its entropy bonus (the
     squashed action's), Adam's epsilon (optax's default), the MLPs' widths, the last `frames`
-    pictures side by side (Playground's 3, or one for `mapped_one`). Left at hintsjax's: the
-    encoder (its three VALID convolutions, 32 8x8/4, 64 4x4/2, 64 3x3/1, ReLU, shared by actor
-    and critic, beside Brax's two SAME ones, 16 5x5/2 and 32 3x3/2 with 2x2 max-pools and ELU,
-    one per network), its inits, the value loss's weight and the pictures' colour (RGB, where
-    Playground's are grey)."""
+    pictures side by side (Playground's 3, or one for `mapped_one`) in `colour` (Playground's
+    grey). Left at hintsjax's: the encoder (its three VALID convolutions, 32 8x8/4, 64 4x4/2, 64
+    3x3/1, ReLU, shared by actor and critic, beside Brax's two SAME ones, 16 5x5/2 and 32 3x3/2
+    with 2x2 max-pools and ELU, one per network), its inits and the value loss's weight."""
     batch = steps_per_update(s)
     rate = s["learning_rate"]
     ppo = {
@@ -129,7 +133,7 @@ def mapped_values(
         "reward_scale": s["reward_scaling"],
         "hidden": list(s["network_factory"]["policy_hidden_layer_sizes"]),
     }
-    return {**common_values(seeds, smoke), "frames": frames, "ppo": ppo}
+    return {**common_values(seeds, smoke), "frames": frames, "colour": colour, "ppo": ppo}
 
 
 def default_values(s: dict, seeds: int, smoke: bool) -> dict:
@@ -327,7 +331,12 @@ def train_hintsjax(values: dict, episodes: int, label: str) -> dict:
         "progress": progress,
         "deterministic": [float(x) for x in summary["seed_means"]],
         "env_steps_per_seed": updates * cfg.ppo.batch_size,
-        "settings": {"frames": cfg.frames, "image_size": cfg.image_size, **to_dict(cfg)["ppo"]},
+        "settings": {
+            "frames": cfg.frames,
+            "colour": cfg.colour,
+            "image_size": cfg.image_size,
+            **to_dict(cfg)["ppo"],
+        },
     }
 
 
@@ -357,7 +366,9 @@ def train_side(side: str, runs: Path, seeds: int, smoke: bool) -> None:
         make = {
             "mapped": mapped_values,
             "mapped_one": functools.partial(mapped_values, frames=1),
-            "mapped_first": functools.partial(mapped_values, frames=1, squashed=False),
+            "mapped_first": functools.partial(
+                mapped_values, frames=1, squashed=False, colour="rgb"
+            ),
             "defaults": default_values,
         }[side]
         result = train_hintsjax(make(s, seeds, smoke), episodes, TRAINERS[side])

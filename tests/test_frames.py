@@ -13,7 +13,7 @@ import flash_env
 from test_learning import LEARN_PPO  # the cue task's budget: 12 updates of 256 steps
 from hintsjax import envs
 from hintsjax.algorithms import group, ppo
-from hintsjax.envs.frames import FrameStack
+from hintsjax.envs.frames import FrameStack, grey
 from hintsjax.settings.layers import run_config
 from hintsjax.system import memory
 from hintsjax.system.errors import UsageError
@@ -51,6 +51,38 @@ def test_the_stack_holds_the_last_pictures_oldest_first(pendulum):
         assert int(ts.state.t) == int(ref.state.t) == i + 1
         np.testing.assert_array_equal(stacked.render(ts.state, params), pictures[-1])
     assert len({p.tobytes() for p in pictures}) > 1  # the pendulum moved: the check can tell
+
+
+def test_grey_is_the_mean_of_the_channels_rounded():
+    rgb = jnp.array([[[10, 20, 33], [0, 0, 1], [255, 255, 254], [200, 0, 100]]], jnp.uint8)
+    out = grey(rgb)
+    assert out.shape == (1, 4, 1) and out.dtype == jnp.uint8
+    np.testing.assert_array_equal(out[0, :, 0], [21, 0, 255, 100])
+
+
+@pytest.mark.parametrize("k", [1, 3])
+def test_a_grey_stack_holds_one_channel_a_picture(pendulum, k):
+    """colour=grey: the last k pictures, each its channels' mean, oldest first; a video still
+    gets an RGB picture (grey in each channel)."""
+    inner, _, params = pendulum
+    stacked = FrameStack(inner, k, "grey")
+    key = jax.random.key(4)
+    ts, ref = stacked.reset(key, params), inner.reset(key, params)
+    pictures = [np.asarray(grey(ref.obs["pixels"]))]
+    for i in range(3):
+        k_step = jax.random.fold_in(key, i)
+        ts = stacked.step(k_step, ts.state, jnp.array([1.5]), params)
+        ref = inner.step(k_step, ref.state, jnp.array([1.5]), params)
+        pictures.append(np.asarray(grey(ref.obs["pixels"])))
+        shown = np.asarray(ts.obs["pixels"])
+        assert shown.shape == (36, 36, k) and shown.dtype == np.uint8
+        for j in range(k):  # channel j: the picture k - 1 - j steps ago
+            back = k - 1 - j
+            np.testing.assert_array_equal(shown[..., j : j + 1], pictures[max(0, i + 1 - back)])
+        video = np.asarray(stacked.render(ts.state, params))
+        assert video.shape == (36, 36, 3)
+        np.testing.assert_array_equal(video, np.repeat(pictures[-1], 3, axis=-1))
+    assert len({p.tobytes() for p in pictures}) > 1
 
 
 def test_a_new_episode_starts_from_its_first_picture_repeated():
@@ -98,11 +130,22 @@ def test_a_runs_frames_reach_its_env_memory_bound_and_group():
     one = run_config({"env": "pendulum", "agent": "ppo_rgb", "image_size": 40})
     with pytest.raises(UsageError, match="frames"):
         group.check_group([cfg, one])
+    grey_cfg = run_config(
+        {"env": "pendulum", "agent": "ppo_rgb", "frames": 3, "image_size": 40, "colour": "grey"}
+    )
+    env = grey_cfg.make_env()
+    assert isinstance(env, FrameStack) and (env.k, env.colour) == (3, "grey")
+    assert memory.picture_bytes(grey_cfg) == 3 * 40 * 40
+    pixels = env.reset(jax.random.key(0), grey_cfg.task_params(None)).obs["pixels"]
+    assert pixels.shape == (40, 40, 3)
+    with pytest.raises(UsageError, match="colour"):
+        group.check_group([cfg, grey_cfg])
 
 
-@pytest.mark.parametrize("frames", [1, 2])
-def test_two_pictures_show_what_one_cannot(frames):
-    cfg = run_config(dict(env="flash", agent="ppo_rgb", seeds=1, frames=frames, ppo=LEARN_PPO))
+@pytest.mark.parametrize("frames, colour", [(1, "rgb"), (2, "rgb"), (2, "grey")])
+def test_two_pictures_show_what_one_cannot(frames, colour):
+    values = dict(env="flash", agent="ppo_rgb", seeds=1, frames=frames, colour=colour)
+    cfg = run_config({**values, "ppo": LEARN_PPO})
     _, metrics = jax.jit(ppo.make_trainer(cfg).train)(jax.random.key(0))
     final = float(np.asarray(metrics["episode_return"])[-3:].mean())
     if frames == 1:  # blind to the cue when it acts on it: E[-(a - c)^2] <= -1

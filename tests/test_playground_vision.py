@@ -32,6 +32,9 @@ def test_both_sides_take_brax_s_own_env_steps_with_playground_s_settings_mapped(
     # Playground's agent sees its last 3 frames; mapped_one sees one, as the paper's agents do
     assert mapped_cfg.frames == 3 == pv.PLAYGROUND_FRAMES
     assert run_config(pv.mapped_values(s, seeds=5, smoke=False, frames=1)).frames == 1
+    # grey, as Playground's; mapped_first (archived) saw one RGB picture
+    assert mapped_cfg.colour == "grey"
+    assert run_config(pv.mapped_values(s, 5, False, 1, False, "rgb")).colour == "rgb"
     # and the entropy bonus of Brax's tanh-normal, the squashed action's
     assert mapped.squashed_entropy
     assert not run_config(pv.mapped_values(s, 5, False, 1, squashed=False)).ppo.squashed_entropy

@@ -53,6 +53,7 @@ def signature(cfg: RunConfig) -> dict[str, Any]:
         "warp_capacity": cfg.warp_capacity,
         "image_size": cfg.image_size,
         "frames": cfg.frames,
+        "colour": cfg.colour,
         "algorithm": spec.algorithm,
         "observe": spec.observe,
         "hint_use": spec.hint_use,

@@ -16,6 +16,7 @@ import jax.numpy as jnp
 
 from hintsjax import envs
 from hintsjax.envs.errors import ChoiceError, choose
+from hintsjax.envs.frames import COLOURS, RGB
 from hintsjax.system.checks import INT_MAX, require_positive
 from hintsjax.system.errors import UsageError
 from hintsjax.models.agents import AGENTS, AgentSpec, EXPERT_AGENT
@@ -100,6 +101,12 @@ class RunConfig:
         "channels (1: the paper's one picture; Playground's vision PPO stacks 3)",
         saved_may_lack=True,
     )
+    colour: str = setting(
+        "rgb",
+        "the pictures the agent sees: rgb, or grey (one channel a picture, the mean of the three, "
+        "as Playground's vision PPO sees them)",
+        saved_may_lack=True,
+    )
     ppo: PPOConfig = field(default_factory=PPOConfig)
     dagger: DaggerConfig = field(default_factory=DaggerConfig)
     gail: GailConfig = field(default_factory=GailConfig)
@@ -138,6 +145,7 @@ class RunConfig:
             observe,
             self.hint_source_for(deploy),
             frames=self.frames,
+            colour=self.colour,
             physics=self.physics,
             warp_capacity=self.warp_capacity,
             image_size=self.image_size,
@@ -227,8 +235,8 @@ class RunConfig:
             raise UsageError(f"hints_from={self.hints_from}: {e}") from None
 
     def _check_frames(self) -> None:
-        """UsageError where `frames` is no count of pictures, or more than one for an agent that
-        sees none."""
+        """UsageError where `frames` is no count of pictures or `colour` no colour, or either is
+        not the default for an agent that sees no pictures."""
         if (
             isinstance(self.frames, bool)
             or not isinstance(self.frames, int)
@@ -242,6 +250,15 @@ class RunConfig:
             raise UsageError(
                 f"frames={self.frames} stacks pictures, and agent={self.agent} sees none; leave "
                 "frames at 1, or pick an agent that sees pictures"
+            )
+        try:
+            choose("colour", self.colour, dict.fromkeys(COLOURS))
+        except ChoiceError as e:
+            raise UsageError(str(e)) from None
+        if self.colour != RGB and not self.agent_spec.pixels:
+            raise UsageError(
+                f"colour={self.colour} is the pictures' colour, and agent={self.agent} sees none; "
+                f"leave colour at {RGB}, or pick an agent that sees pictures"
             )
 
     def _check_image_size(self) -> None:

@@ -27,7 +27,7 @@ from flax import struct
 
 from hintsjax import envs
 from hintsjax.envs.core import Env, Step
-from hintsjax.envs.frames import FramedState, FrameStack, framed_start, framed_step
+from hintsjax.envs.frames import RGB, FramedState, FrameStack, framed_start, framed_step
 from hintsjax.system.checkpoint import on_this_device, require_same_arrays
 from hintsjax.system.errors import UsageError
 from hintsjax.models.networks import Encoder, MLP, scale_pixels
@@ -233,17 +233,24 @@ def load(folder: str | Path, seed: int = 0) -> tuple[Generator, GeneratorParams]
 
 
 def hinted_env(
-    env: str, hint: str, observe: tuple[str, ...], source: str, frames: int = 1, **physics: Any
+    env: str,
+    hint: str,
+    observe: tuple[str, ...],
+    source: str,
+    frames: int = 1,
+    colour: str = RGB,
+    **physics: Any,
 ) -> Env:
     """`env` with `hint` from `source`: the programmatic hint, or a generator folder's; its pixels
-    the last `frames` pictures (envs/frames.py); `physics` (physics, warp_capacity, image_size)
-    as `envs.make` takes them."""
+    the last `frames` pictures in `colour` (envs/frames.py; a generator reads the env's own);
+    `physics` (physics, warp_capacity, image_size) as `envs.make` takes them."""
     if source == PROGRAMMATIC or "hint" not in observe:
         made = envs.make(env, hint, observe, **physics)
     else:
         generator, _ = load(source)
         made = GeneratedHintEnv(envs.make(env, hint, ("pixels",), **physics), generator, observe)
-    return FrameStack(made, frames) if frames > 1 and "pixels" in observe else made
+    stacked = (frames > 1 or colour != RGB) and "pixels" in observe
+    return FrameStack(made, frames, colour) if stacked else made
 
 
 def hinted_params(env: str, task_params: Any, observe: tuple[str, ...], source: str) -> Any:

@@ -22,6 +22,7 @@ from typing import Any, Callable
 import jax
 
 from hintsjax import envs
+from hintsjax.envs.frames import GREY
 from hintsjax.system.errors import UsageError
 
 
@@ -47,10 +48,12 @@ def device_bytes(device: Any = None) -> int:
 
 
 def picture_bytes(cfg: Any) -> int:
-    """One observation's pictures (uint8 [S, S, 3 x frames]), or 0 for an agent that sees none."""
+    """One observation's pictures (uint8 [S, S, C x frames], C 3 or 1 grey), or 0 for an agent
+    that sees none."""
     if "pixels" not in cfg.agent_spec.observe:
         return 0
-    return 3 * cfg.frames * (cfg.image_size or envs.REGISTRY[cfg.env].cls.image_size) ** 2
+    channels = 1 if cfg.colour == GREY else 3
+    return channels * cfg.frames * (cfg.image_size or envs.REGISTRY[cfg.env].cls.image_size) ** 2
 
 
 def transition_bytes(cfg: Any) -> int:
