@@ -245,7 +245,11 @@ def bench_train(
     }
 
 
-def update_parts(cfg, state) -> dict:
+# --rollout-starts: make_ppo's `ended_starts`
+ROLLOUT_STARTS = {"run": None, "every_env": False, "ended": True}
+
+
+def update_parts(cfg, state, ended_starts: bool | None = None) -> dict:
     """Seconds of one seed-vmapped PPO update's parts: the rollout (env steps with pictures and
     the policy's actions), the learning (GAE and the epochs of minibatch steps), the rollout's env
     steps under random actions as `bench_env` times them (with their pictures and a fresh start
@@ -256,10 +260,11 @@ def update_parts(cfg, state) -> dict:
     pictures' (each step's and its fresh start's) the difference of the first two, and the
     rollout less the first is the policy's (its action and its value of the final observation:
     two passes of the network a step, one of which `policy_forwards` times). Every part steps with
-    the run's physics (`cfg.physics`)."""
+    the run's physics (`cfg.physics`); the rollout draws its starts as `make_ppo`'s
+    `ended_starts` says (None: as a run does)."""
     from hintsjax.algorithms.ppo import make_ppo
 
-    parts = make_ppo(cfg)
+    parts = make_ppo(cfg, ended_starts=ended_starts)
     key = jax.random.split(jax.random.key(1), cfg.seeds)
     rollout = jax.jit(jax.vmap(parts.rollout))
     _, traj, last = rollout(state, key)
@@ -325,6 +330,13 @@ def main() -> None:
         default="float32",
         help="with --parts: the pixel encoder's arithmetic (ppo.encoder_dtype)",
     )
+    parser.add_argument(
+        "--rollout-starts",
+        choices=tuple(ROLLOUT_STARTS),
+        default="run",
+        help="with --parts: the rollout's fresh starts as a run draws them (the ended envs' alone "
+        "under JAX physics, every env's each step under Warp), every env's, or the ended envs'",
+    )
     parser.add_argument("--quick", action="store_true", help="small sizes (a CPU smoke run)")
     parser.add_argument(
         "--model-option",
@@ -371,10 +383,11 @@ def main() -> None:
                 }
             )
             state = jax.jit(jax.vmap(make_trainer(cfg).init))(cfg.seed_keys())
-            parts = update_parts(cfg, state)
+            parts = update_parts(cfg, state, ROLLOUT_STARTS[args.rollout_starts])
             print(
                 f"update  {name:>9} 5 seeds {cfg.ppo.num_envs} envs x "
-                f"{cfg.ppo.rollout_length} steps, {cfg.physics}, {args.encoder_dtype} encoder: "
+                f"{cfg.ppo.rollout_length} steps, {cfg.physics}, {args.encoder_dtype} encoder, "
+                f"starts {args.rollout_starts}: "
                 + ", ".join(f"{k} {1e3 * v:.1f} ms" for k, v in parts.items()),
                 flush=True,
             )

@@ -251,6 +251,42 @@ def test_starts_per_rollout_draw_one_start_per_env_and_rollout(per_rollout):
         assert not constant.any(), cues
 
 
+def test_a_rollout_drawing_only_the_ended_starts_is_the_rollout_drawing_every_one():
+    """Countdown episodes end after 1 to 10 steps, a few envs a step: the rollout that draws the
+    ended envs' starts alone (AutoReset.step_ended) takes the same T x N transitions and ends in
+    the same state as the one drawing every env's start each step (vmapped AutoReset.step)."""
+    import countdown_env  # registers the env
+
+    cfg = layers.run_config(
+        dict(
+            env=countdown_env.NAME,
+            agent="ppo_state",
+            seeds=1,
+            ppo={
+                **SMALL_PPO,
+                "num_envs": 16,
+                "batch_size": 16 * 24,  # 24 steps: episodes terminated and truncated (at 10)
+                "minibatch_size": 64,
+                "total_env_steps": 16 * 24,
+            },
+        )
+    )
+    outs = []
+    for ended in (True, False):
+        parts = ppo.make_ppo(cfg, ended_starts=ended)
+        state = jax.jit(parts.init)(jax.random.key(0))
+        outs.append(jax.jit(parts.rollout)(state, jax.random.key(1)))
+    (a_state, a_traj, a_last), (b_state, b_traj, b_last) = outs
+    ends = np.asarray(a_traj.terminated | a_traj.truncated)
+    assert np.asarray(a_traj.truncated).any() and np.asarray(a_traj.terminated).any()
+    assert ends.sum() > 4 and ends.sum(axis=1).max() < 16  # some steps end a few, never all
+    for a, b in zip(
+        jax.tree.leaves((a_traj, a_last, a_state.env_state)),
+        jax.tree.leaves((b_traj, b_last, b_state.env_state)),
+    ):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-6, atol=1e-6)
+
+
 def adam_counts(opt_state) -> list[int]:
     """The step count of every Adam state in an optimiser state."""
     import optax

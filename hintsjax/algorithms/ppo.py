@@ -294,11 +294,12 @@ class PPO:
     ]
 
 
-def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
+def make_ppo(cfg: RunConfig, hint: str | None = None, ended_starts: bool | None = None) -> PPO:
     """PPO's pieces for a validated RunConfig. Every number a table varies is read from the
     state's `Hyper`, so the pieces serve any configuration of the same shapes; `hint` is the
     env's hint (default: cfg's; a group's env computes every member's, see
-    hintsjax.algorithms.group)."""
+    hintsjax.algorithms.group); `ended_starts` whether the rollout draws the ended envs' starts
+    alone (None: where the physics is in ENDED_STARTS_PHYSICS; a bench compares both)."""
     ppo, spec = cfg.ppo, cfg.agent_spec
     env = envs.AutoReset(cfg.make_env(hint=hint))
     env_params = cfg.task_params(cfg.variant)
@@ -306,7 +307,8 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
     T, N = ppo.rollout_length, ppo.num_envs
     drop = ppo.hint_dropout if spec.drops_hint else None
     chunk = N // ROW_CHUNKS if N % ROW_CHUNKS == 0 else N
-    starts_ended = envs.resolve_physics(cfg.env, cfg.physics) in ENDED_STARTS_PHYSICS
+    if ended_starts is None:
+        ended_starts = envs.resolve_physics(cfg.env, cfg.physics) in ENDED_STARTS_PHYSICS
 
     def init(key: jax.Array) -> RunnerState:
         hyper = Hyper.of(cfg)
@@ -338,7 +340,7 @@ def make_ppo(cfg: RunConfig, hint: str | None = None) -> PPO:
             mean, log_std, value = network.apply(state.params, seen)
             action = gaussian_sample(k_act, mean, log_std)
             k_envs = jax.random.split(k_env, N)
-            if starts is None and starts_ended:
+            if starts is None and ended_starts:
                 ts = env.step_ended(k_envs, env_state, action, env_params, chunk)
             else:
                 ts = jax.vmap(env.step, in_axes=(0, 0, 0, None, 0))(
