@@ -560,7 +560,9 @@ def main() -> None:
             print("\n".join(section_lines(args.runs)))
             return
         (ARCHIVE / args.runs.name).mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(path, ARCHIVE / args.runs.name / RECORD)
+        for name in (RECORD, SEEDS_DONE):  # the record, and the playground side's seed rows
+            if (args.runs / name).exists():
+                shutil.copyfile(args.runs / name, ARCHIVE / args.runs.name / name)
         plot(args.runs, RESULTS / CURVES)
         import playground
 
