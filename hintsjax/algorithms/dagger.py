@@ -25,7 +25,13 @@ from hintsjax import envs
 from hintsjax.models import normalization
 from hintsjax.settings.config import RunConfig
 from hintsjax.algorithms import experts
-from hintsjax.algorithms.ppo import Hyper, RunnerState, make_network, start_runner
+from hintsjax.algorithms.ppo import (
+    Hyper,
+    RunnerState,
+    batch_step,
+    make_network,
+    start_runner,
+)
 from hintsjax.algorithms.trainer import Trainer, episode_metrics
 
 
@@ -97,6 +103,7 @@ def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
         optax.clip_by_global_norm(ppo.max_grad_norm), optax.adam(dagger.lr, eps=1e-5)
     )
     T, N = ppo.rollout_length, ppo.num_envs
+    step_envs = batch_step(env, cfg)
 
     def init(key: jax.Array) -> DaggerState:
         runner = start_runner(key, env, env_params, network, N, optimizer.init, Hyper.of(cfg))
@@ -118,9 +125,7 @@ def make_trainer(cfg: RunConfig, expert: Any = None) -> Trainer:
             label = expert.mean(obs["state"])
             by_expert = jax.random.uniform(k_mix, (N, 1)) < beta
             action = jnp.where(by_expert, label, student(state.params, obs))
-            ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
-                jax.random.split(k_env, N), env_state, action, env_params
-            )
+            ts = step_envs(jax.random.split(k_env, N), env_state, action, env_params)
             visited = (
                 obs["state"],
                 label,

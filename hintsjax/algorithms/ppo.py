@@ -224,6 +224,26 @@ ROW_CHUNKS = 8
 ENDED_STARTS_PHYSICS = frozenset({envs.JAX})
 
 
+def row_chunk(n: int) -> int:
+    """The rows `envs.rows_where` takes at a time of a batch of n: an eighth, or all of them where
+    n is no multiple of 8."""
+    return n // ROW_CHUNKS if n % ROW_CHUNKS == 0 else n
+
+
+def batch_step(
+    env: envs.AutoReset, cfg: RunConfig, ended_starts: bool | None = None
+) -> Callable[..., envs.Timestep]:
+    """(keys, states, actions, params) -> `env.step` of cfg's `ppo.num_envs` envs at once: drawing
+    the ended envs' starts alone (`AutoReset.step_ended`) where `ended_starts` says (None: where
+    cfg's physics is in ENDED_STARTS_PHYSICS), else every env's (vmapped `step`)."""
+    if ended_starts is None:
+        ended_starts = envs.resolve_physics(cfg.env, cfg.physics) in ENDED_STARTS_PHYSICS
+    if not ended_starts:
+        return jax.vmap(env.step, in_axes=(0, 0, 0, None))
+    chunk = row_chunk(cfg.ppo.num_envs)
+    return lambda keys, state, action, params: env.step_ended(keys, state, action, params, chunk)
+
+
 # folded into a rollout's key for its per-rollout starts (leaves the step keys as they were)
 STARTS_TAG = 0x57A7
 RESET_TAG = 0x5E7A  # folded into a rollout's key for its fresh episodes (ppo.reset_every_update)
@@ -306,9 +326,8 @@ def make_ppo(cfg: RunConfig, hint: str | None = None, ended_starts: bool | None 
     network = make_network(cfg, env)
     T, N = ppo.rollout_length, ppo.num_envs
     drop = ppo.hint_dropout if spec.drops_hint else None
-    chunk = N // ROW_CHUNKS if N % ROW_CHUNKS == 0 else N
-    if ended_starts is None:
-        ended_starts = envs.resolve_physics(cfg.env, cfg.physics) in ENDED_STARTS_PHYSICS
+    chunk = row_chunk(N)
+    step_envs = batch_step(env, cfg, ended_starts)
 
     def init(key: jax.Array) -> RunnerState:
         hyper = Hyper.of(cfg)
@@ -340,9 +359,9 @@ def make_ppo(cfg: RunConfig, hint: str | None = None, ended_starts: bool | None 
             mean, log_std, value = network.apply(state.params, seen)
             action = gaussian_sample(k_act, mean, log_std)
             k_envs = jax.random.split(k_env, N)
-            if starts is None and ended_starts:
-                ts = env.step_ended(k_envs, env_state, action, env_params, chunk)
-            else:
+            if starts is None:
+                ts = step_envs(k_envs, env_state, action, env_params)
+            else:  # every env's next episode from the rollout's one start
                 ts = jax.vmap(env.step, in_axes=(0, 0, 0, None, 0))(
                     k_envs, env_state, action, env_params, starts
                 )
