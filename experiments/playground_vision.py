@@ -428,7 +428,7 @@ def section_lines(runs: Path) -> list[str]:
     episodes = max((r["eval_episodes"] for r in results.values()), default=EVAL_EPISODES)
     for side in SIDES:
         if side not in results:
-            rows.append([TRAINERS[side], *["-"] * 7, "not run yet"])
+            rows.append([TRAINERS[side], *["-"] * 8, "not run yet"])
             continue
         r = results[side]
         apart = r.get("renderer_build_seconds", 0.0) + r.get("compile_seconds", 0.0)
@@ -436,6 +436,7 @@ def section_lines(runs: Path) -> list[str]:
         rows.append(
             [
                 r["trainer"],
+                pictures(r, side),
                 f"{r['env_steps_per_seed']:,}",
                 stats.iqm_cell(r["deterministic"]),
                 " ".join(f"{x:.1f}" for x in r["deterministic"]),
@@ -460,6 +461,7 @@ def section_lines(runs: Path) -> list[str]:
     lines += markdown_table(
         [
             "side",
+            "pictures a step",
             "env steps a seed",
             "final return: IQM [95% CI]",
             "per seed",
@@ -485,19 +487,57 @@ def section_lines(runs: Path) -> list[str]:
                 "compile, so its wall-clock is the sum of its seeds', and its peak memory is the "
                 "last process's.",
             ]
+    if "playground" not in results:
+        lines += waiting_seeds(runs, record)
+    if "playground" in results:
+        theirs = results["playground"]
+        lines += ["", "Each hintsjax side against Playground's:"]
     for side in SIDES[1:]:
         if side in results and "playground" in results:
+            ours, seeds = results[side], len(results[side]["deterministic"])
+            ordering = stats.ordering_text(
+                TRAINERS[side],
+                TRAINERS["playground"],
+                stats.poi_ci(ours["deterministic"], theirs["deterministic"]),
+            )
+            rate, their_rate = steady_rate(ours, side) * seeds, steady_rate(theirs, "playground")
             lines.append(
-                f"- {side}: "
-                + stats.ordering_text(
-                    TRAINERS[side],
-                    TRAINERS["playground"],
-                    stats.poi_ci(
-                        results[side]["deterministic"], results["playground"]["deterministic"]
-                    ),
-                )
+                f"- {side}: {ordering}; its {seeds} seeds in {ours['seconds']:.0f} s against "
+                f"{theirs['seconds']:.0f} s ({theirs['seconds'] / ours['seconds']:.1f}x faster), "
+                f"training {rate:,.0f} env steps/s over its seeds at once against "
+                f"{their_rate:,.0f} ({rate / their_rate:.1f}x)"
             )
     return lines + [""]
+
+
+def waiting_seeds(runs: Path, record: dict) -> list[str]:
+    """Lines on the playground side's seeds finished at the record's budget whose entry is not
+    written yet (SEEDS_DONE's rows, under `runs` or archived): their returns and seconds."""
+    from hintsjax.reproduce.archive import ARCHIVE
+
+    path = runs / SEEDS_DONE
+    path = path if path.exists() else ARCHIVE / runs.name / SEEDS_DONE
+    budget = {k: record[k] for k in ("task", "seeds", "env_steps_per_seed", "smoke")}
+    done = finished_seeds(path, budget)
+    if not done:
+        return []
+    rows = [done[seed] for seed in sorted(done)]
+    returns = " ".join(f"{row['deterministic']:.1f}" for row in rows)
+    where = ", ".join(sorted({f"{row['device']}, {row['date'][:10]}" for row in rows}))
+    return [
+        "",
+        f"Playground's side has {len(rows)} of {record['seeds']} seeds finished, its entry not "
+        f"written yet ({SEEDS_DONE}; the peak memory is measured by the process that writes it): "
+        f"final returns {returns}, {sum(row['seconds'] for row in rows):.0f} s in all ({where}).",
+    ]
+
+
+def pictures(result: dict, side: str) -> str:
+    """What a side's agent sees a step: its frames and colour (Playground's: 3 grey)."""
+    if side == "playground":
+        return f"{PLAYGROUND_FRAMES} grey"
+    settings = result.get("settings", {})
+    return f"{settings.get('frames', 1)} {settings.get('colour', 'rgb')}"
 
 
 def plot(runs: Path, out: Path) -> None:

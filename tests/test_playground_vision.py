@@ -101,15 +101,20 @@ def test_the_section_gives_each_side_its_cells_and_hintsjax_against_playground(t
                 "deterministic": [20.0, 21.0, 22.0],
                 "env_steps_per_seed": 300,
                 "progress": [{"step": 100, "seconds": 30.0}, {"step": 300, "seconds": 40.0}],
+                "settings": {"frames": 3, "colour": "grey"},
             },
         },  # fmt: skip
     }
     (tmp_path / pv.RECORD).write_text(json.dumps(record))
     text = "\n".join(pv.section_lines(tmp_path))
     assert "3 seeds x 300 env steps a seed on every side" in text
-    assert "| Playground + brax.training vision PPO | 300 | 11.0 [" in text
+    assert "| Playground + brax.training vision PPO | 3 grey | 300 | 11.0 [" in text
     assert "| 10.0 11.0 12.0 | 300 | 6 (renderer) | 50 | 2100 / 900 |" in text
     assert "| 20.0 21.0 22.0 | 50 | 20 | 20 | 2100 / 900 |" in text  # 200 steps in 10 s
+    assert f"| {pv.TRAINERS['mapped']} | 3 grey | 300 |" in text
+    # 3 seeds in 50 s against 300 s; 3 x 20 env steps/s at once against Playground's 50
+    assert "its 3 seeds in 50 s against 300 s (6.0x faster), training 60 env steps/s" in text
+    assert "at once against 50 (1.2x)" in text
     assert (
         "| hintsjax ppo_rgb, its defaults | - |" in text
         and "| hintsjax ppo_rgb, Playground's settings, one picture | - |" in text
@@ -125,6 +130,22 @@ def test_the_section_gives_each_side_its_cells_and_hintsjax_against_playground(t
     (tmp_path / pv.RECORD).write_text(json.dumps(record))
     text = "\n".join(pv.section_lines(tmp_path))
     assert "Playground's seeds were trained in 2 processes, one a GPU lease" in text
+    # Playground's seeds finished, its entry not yet written: their rows say what they got
+    del record["results"]["playground"]
+    (tmp_path / pv.RECORD).write_text(json.dumps(record))
+    budget = {k: record[k] for k in ("task", "seeds", "env_steps_per_seed", "smoke")}
+    rows = [
+        {"seed": i, "budget": budget, "seconds": 100.0 + i, "deterministic": 24.0 + i / 10,
+         "device": "NVIDIA H200", "date": "2026-12-04 03:55"}
+        for i in range(2)
+    ] + [{"seed": 2, "budget": {**budget, "seeds": 9}, "seconds": 1.0, "deterministic": 0.0,
+          "device": "NVIDIA H100", "date": "2026-12-01 00:00"}]  # fmt: skip
+    (tmp_path / pv.SEEDS_DONE).write_text("\n".join(map(json.dumps, rows)))
+    text = "\n".join(pv.section_lines(tmp_path))
+    assert (
+        "Playground's side has 2 of 3 seeds finished, its entry not written yet" in text
+        and "final returns 24.0 24.1, 201 s in all (NVIDIA H200, 2026-12-04)." in text
+    )
 
 
 @pytest.mark.slow
