@@ -41,17 +41,23 @@ def trainer():
 
 
 def test_a_masked_chunk_equals_its_first_updates_and_skips_the_rest(trainer):
-    """3 of 5 updates in one program give the state of 3 plain updates, bit for bit; the 2
-    skipped ones leave the state alone and log NaN (0 for integer metrics)."""
+    """3 of 5 updates in one program give the state of 3 plain updates; the 2 skipped ones leave
+    the state alone and log NaN (0 for integer metrics). Equal to float32 rounding, not bit for
+    bit: at the test tier's -O0 the two programs compile the rollout's while loop (the ended
+    envs' fresh starts) apart and round a start's draw differently; one more update would be a
+    change of 1e-3, not 1e-9 (a resumed run, which runs the same programs, is bit for bit:
+    tests/test_cli.py)."""
     state = trainer.init(jax.random.key(3))
     plain, plain_metrics = jax.jit(trainer.run, static_argnums=1)(state, 3)
     masked, metrics = jax.jit(trainer.run_chunk, static_argnums=2)(state, np.int32(3), 5)
     for a, b in zip(
         jax.tree.leaves(jax.tree.map(_data, plain)), jax.tree.leaves(jax.tree.map(_data, masked))
     ):
-        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-6, atol=1e-7)
     assert int(masked.update) == 3
-    np.testing.assert_array_equal(metrics["policy_loss"][:3], plain_metrics["policy_loss"])
+    np.testing.assert_allclose(
+        metrics["policy_loss"][:3], plain_metrics["policy_loss"], rtol=1e-5, atol=1e-7
+    )
     assert np.all(np.isnan(metrics["policy_loss"][3:])) and np.all(
         np.asarray(metrics["episodes"][3:]) == 0
     )
