@@ -81,8 +81,8 @@ class FrameStack(Env):
     def __init__(self, inner: Env, k: int, colour: str = RGB):
         if colour not in COLOURS:
             raise ValueError(f"colour must be one of {', '.join(COLOURS)}, got {colour!r}")
-        if k < 2 and colour == RGB:
-            raise ValueError(f"a frame stack of RGB pictures holds 2 or more, got {k}")
+        if k < 1 or (k < 2 and colour == RGB):
+            raise ValueError(f"a frame stack holds 1 grey picture or 2 or more, got {k} {colour}")
         self.inner, self.k, self.colour = inner, int(k), colour
         self.name, self.max_steps = inner.name, inner.max_steps
         self.action_size, self.image_size = inner.action_size, inner.image_size

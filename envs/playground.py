@@ -53,9 +53,10 @@ FALLBACK = TaskDefaults(ppo=PIXEL_PPO)
 DEFAULTS: dict[str, TaskDefaults] = {
     "CartpoleSwingup": TaskDefaults("fixed", "pole_angle", PIXEL_PPO),
     # The cheetah's reset settles it with 200 physics steps (130.8 ms for 16 envs on 2 CPU cores,
-    # a step 1.6 ms), and an env's next start is drawn at every step unless drawn once a rollout:
-    # an adapted step took 178.8 ms with it, 13.2 ms without (+ one draw a rollout of 8 steps);
-    # drawn every step, a CheetahRun update took several times as long on a GPU (docs/playground.md)
+    # a step 1.6 ms). Drawn for every env at every step (before the rollout drew the ended envs'
+    # alone, AutoReset.step_ended) an adapted step took 178.8 ms, 13.2 ms with one draw a rollout
+    # of 8 steps, and a CheetahRun update several times as long on a GPU (docs/playground.md);
+    # its 1000-step episodes end together, so step_ended may serve as well: to be measured.
     "CheetahRun": TaskDefaults(TRACK, "torso_velocity", {**PIXEL_PPO, "starts_per_rollout": True}),
     "WalkerWalk": TaskDefaults(TRACK, "torso_height_velocity", PIXEL_PPO),
     "ReacherEasy": TaskDefaults("fixed", "fingertip_to_target", PIXEL_PPO),

@@ -252,16 +252,17 @@ ROLLOUT_STARTS = {"run": None, "every_env": False, "ended": True}
 def update_parts(cfg, state, ended_starts: bool | None = None) -> dict:
     """Seconds of one seed-vmapped PPO update's parts: the rollout (env steps with pictures and
     the policy's actions), the learning (GAE and the epochs of minibatch steps), the rollout's env
-    steps under random actions as `bench_env` times them (with their pictures and a fresh start
-    drawn each step, as vmapped AutoReset draws them: the rollout draws only the ended envs'
-    under JAX physics, `AutoReset.step_ended`; without pictures; without pictures or starts), and
-    the policy's network once a step on the rollout's observations. So: physics is
-    the last env steps' time, the starts' share the difference of the two before it, the
-    pictures' (each step's and its fresh start's) the difference of the first two, and the
-    rollout less the first is the policy's (its action and its value of the final observation:
-    two passes of the network a step, one of which `policy_forwards` times). Every part steps with
-    the run's physics (`cfg.physics`); the rollout draws its starts as `make_ppo`'s
-    `ended_starts` says (None: as a run does)."""
+    steps under random actions as `bench_env` times them (with their pictures and every env's
+    fresh start drawn each step, as vmapped AutoReset draws them; without pictures; without
+    pictures or starts), and the policy's network once a step on the rollout's observations.
+    So: physics is the last env steps' time, the starts' share the difference of the two before
+    it, the pictures' (each step's and its fresh start's) the difference of the first two; and
+    where the rollout draws every env's start too (`ended_starts` False, `--rollout-starts
+    every_env`), the rollout less the first is the policy's (its action and its value of the
+    final observation: two passes of the network a step, one of which `policy_forwards` times).
+    A rollout that draws the ended envs' starts alone (`ended_starts` True; None: as a run
+    draws them, make_ppo) saves some of the starts' share. Every part steps with the run's
+    physics (`cfg.physics`)."""
     from hintsjax.algorithms.ppo import make_ppo
 
     parts = make_ppo(cfg, ended_starts=ended_starts)
@@ -334,8 +335,8 @@ def main() -> None:
         "--rollout-starts",
         choices=tuple(ROLLOUT_STARTS),
         default="run",
-        help="with --parts: the rollout's fresh starts as a run draws them (the ended envs' alone "
-        "under JAX physics, every env's each step under Warp), every env's, or the ended envs'",
+        help="with --parts: the rollout's fresh starts as a run draws them "
+        "(hintsjax.algorithms.ppo.batch_step), every env's each step, or the ended envs' alone",
     )
     parser.add_argument("--quick", action="store_true", help="small sizes (a CPU smoke run)")
     parser.add_argument(

@@ -53,8 +53,9 @@ TRAINERS = {
     "mapped_first": "hintsjax ppo_rgb, Playground's settings, one picture, the Gaussian's entropy",
     "defaults": "hintsjax ppo_rgb, its defaults",
 }
-# Playground's vision cartpole shows its agent its last 3 frames (cartpole.py's `frame_stack`)
-PLAYGROUND_FRAMES = 3
+# Playground's vision cartpole shows its agent its last 3 frames (cartpole.py's `frame_stack`),
+# each grey (the mean of its RGB channels)
+PLAYGROUND_FRAMES, PLAYGROUND_COLOUR = 3, "grey"
 EVAL_EPISODES = 128
 RECORD = "versus_vision.json"  # under the runs folder
 # The playground side's finished seeds, a row each (under the runs folder): its 5 seeds take longer
@@ -98,7 +99,7 @@ def mapped_values(
     smoke: bool,
     frames: int = PLAYGROUND_FRAMES,
     squashed: bool = True,
-    colour: str = "grey",
+    colour: str = PLAYGROUND_COLOUR,
 ) -> dict:
     """hintsjax's run config with Playground's vision settings where hintsjax has the knob: an
     update of num_envs rollouts of batch_size x num_minibatches x unroll_length / num_envs steps,
@@ -172,13 +173,24 @@ class MemoryWatch:
             used = max(int(x) for x in out.stdout.split())
             self.smi_mib = max(self.smi_mib or 0, used)
 
-    def result(self) -> dict:
+    def peek(self) -> dict:
+        """The peaks so far (the watch goes on)."""
         import jax
 
-        self._stop.set()
         stats = jax.devices()[0].memory_stats() or {}
         peak = stats.get("peak_bytes_in_use")
         return {"xla_peak_mib": peak and round(peak / 2**20), "nvidia_smi_peak_mib": self.smi_mib}
+
+    def result(self) -> dict:
+        """The peaks, the watch stopped."""
+        self._stop.set()
+        return self.peek()
+
+
+def largest(memories: list[dict]) -> dict:
+    """Each peak's largest over `memories` (None where none measured it)."""
+    keys = ("xla_peak_mib", "nvidia_smi_peak_mib")
+    return {k: max((m[k] for m in memories if m.get(k) is not None), default=None) for k in keys}
 
 
 def finished_seeds(path: Path, budget: dict) -> dict[int, dict]:
@@ -190,12 +202,31 @@ def finished_seeds(path: Path, budget: dict) -> dict[int, dict]:
     return {row["seed"]: row for row in rows if row["budget"] == budget}
 
 
-def train_playground(s: dict, seeds: int, episodes: int, done_path: Path, budget: dict) -> dict:
+def seeds_path(runs: Path) -> Path:
+    """The playground side's seed rows: under `runs` where they are, else their archived copy
+    (what --report archives), so a fresh checkout goes on from the archived seeds."""
+    from hintsjax.reproduce.archive import ARCHIVE
+
+    path = runs / SEEDS_DONE
+    archived = ARCHIVE / runs.name / SEEDS_DONE
+    return path if path.exists() or not archived.exists() else archived
+
+
+def train_playground(
+    s: dict,
+    seeds: int,
+    episodes: int,
+    done_path: Path,
+    budget: dict,
+    watch: MemoryWatch | None = None,
+) -> dict:
     """Playground's side, as its vision notebook trains it: per seed, the env (its renderer built
     for num_envs worlds) and an evaluation env (for num_eval_envs), then Brax's `train`; Brax's
     progress calls (its own evaluations) timed from the seed's start. Then the seed's policy on
     `episodes` fresh episodes, deterministic, by Brax's Evaluator on an env rendering as many
-    (built once), and the seed's row appended to `done_path`; seeds found there are skipped."""
+    (built once), and the seed's row (with the process's memory peaks so far, `watch`'s)
+    appended to `done_path`; seeds found there are skipped. The side's memory is the largest of
+    its rows'."""
     import jax
     from brax.training import acting
     from brax.training.agents.ppo import networks_vision
@@ -268,6 +299,7 @@ def train_playground(s: dict, seeds: int, episodes: int, done_path: Path, budget
             "device": jax.devices()[0].device_kind,
             "date": time.strftime("%Y-%m-%d %H:%M"),
             "process": process,
+            "memory": watch.peek() if watch else {},
         }
         with done_path.open("a") as f:
             f.write(json.dumps(done[seed]) + "\n")
@@ -286,6 +318,7 @@ def train_playground(s: dict, seeds: int, episodes: int, done_path: Path, budget
         "env_steps_per_seed": seeds_out[0]["progress"][-1]["step"],
         "settings": {**s, "num_timesteps_taken": brax_updates(s) * steps_per_update(s)},
         "patches": list(PATCHES),
+        "memory": largest([done[seed].get("memory", {}) for seed in range(seeds)]),
     }
 
 
@@ -361,7 +394,10 @@ def train_side(side: str, runs: Path, seeds: int, smoke: bool) -> None:
     watch = MemoryWatch()
     if side == "playground":
         runs.mkdir(parents=True, exist_ok=True)
-        result = train_playground(s, seeds, episodes, runs / SEEDS_DONE, budget)
+        done = runs / SEEDS_DONE
+        if not done.exists() and seeds_path(runs) != done:  # go on from the archived seeds
+            shutil.copyfile(seeds_path(runs), done)
+        result = train_playground(s, seeds, episodes, done, budget, watch)
     else:
         make = {
             "mapped": mapped_values,
@@ -372,7 +408,7 @@ def train_side(side: str, runs: Path, seeds: int, smoke: bool) -> None:
             "defaults": default_values,
         }[side]
         result = train_hintsjax(make(s, seeds, smoke), episodes, TRAINERS[side])
-    entry = {"trainer": TRAINERS[side], **result, "memory": watch.result()}
+    entry = {"trainer": TRAINERS[side], "memory": watch.result(), **result}
     record_side(
         runs / RECORD, budget, side, {**entry, "eval_episodes": episodes, "versions": versions()}
     )
@@ -485,40 +521,46 @@ def section_lines(runs: Path) -> list[str]:
                 f"Playground's seeds were trained in {len(processes)} processes, one a GPU lease "
                 "(versus_vision_playground_seeds.jsonl): each process's first seed paid its "
                 "compile, so its wall-clock is the sum of its seeds', and its peak memory is the "
-                "last process's.",
+                "largest its seeds' rows measured (the first rows, of 2026-12-04, measured none).",
             ]
     if "playground" not in results:
         lines += waiting_seeds(runs, record)
-    if "playground" in results:
-        theirs = results["playground"]
+    ours = [side for side in SIDES[1:] if side in results]
+    if "playground" in results and ours:
         lines += ["", "Each hintsjax side against Playground's:"]
-    for side in SIDES[1:]:
-        if side in results and "playground" in results:
-            ours, seeds = results[side], len(results[side]["deterministic"])
-            ordering = stats.ordering_text(
-                TRAINERS[side],
-                TRAINERS["playground"],
-                stats.poi_ci(ours["deterministic"], theirs["deterministic"]),
-            )
-            rate, their_rate = steady_rate(ours, side) * seeds, steady_rate(theirs, "playground")
-            lines.append(
-                f"- {side}: {ordering}; its {seeds} seeds in {ours['seconds']:.0f} s against "
-                f"{theirs['seconds']:.0f} s ({theirs['seconds'] / ours['seconds']:.1f}x faster), "
-                f"training {rate:,.0f} env steps/s over its seeds at once against "
-                f"{their_rate:,.0f} ({rate / their_rate:.1f}x)"
-            )
+        lines += [against_playground(results, side) for side in ours]
     return lines + [""]
+
+
+def against_playground(results: dict, side: str) -> str:
+    """A hintsjax side's line against Playground's: the ordering of their final returns, the
+    wall-clock of their seeds, and their training rates (hintsjax's seeds at once, Playground's
+    one after another)."""
+    from hintsjax.reproduce import stats
+
+    ours, theirs = results[side], results["playground"]
+    seeds = len(ours["deterministic"])
+    ordering = stats.ordering_text(
+        TRAINERS[side],
+        TRAINERS["playground"],
+        stats.poi_ci(ours["deterministic"], theirs["deterministic"]),
+    )
+    times = theirs["seconds"] / ours["seconds"]
+    rate, their_rate = steady_rate(ours, side) * seeds, steady_rate(theirs, "playground")
+    rates = f" ({rate / their_rate:.1f}x)" if their_rate > 0 else ""
+    return (
+        f"- {side}: {ordering}; its {seeds} seeds in {ours['seconds']:.0f} s against "
+        f"{theirs['seconds']:.0f} s ({max(times, 1 / times):.1f}x "
+        f"{'faster' if times >= 1 else 'slower'}), training {rate:,.0f} env steps/s over its "
+        f"seeds at once against {their_rate:,.0f}{rates}"
+    )
 
 
 def waiting_seeds(runs: Path, record: dict) -> list[str]:
     """Lines on the playground side's seeds finished at the record's budget whose entry is not
     written yet (SEEDS_DONE's rows, under `runs` or archived): their returns and seconds."""
-    from hintsjax.reproduce.archive import ARCHIVE
-
-    path = runs / SEEDS_DONE
-    path = path if path.exists() else ARCHIVE / runs.name / SEEDS_DONE
     budget = {k: record[k] for k in ("task", "seeds", "env_steps_per_seed", "smoke")}
-    done = finished_seeds(path, budget)
+    done = finished_seeds(seeds_path(runs), budget)
     if not done:
         return []
     rows = [done[seed] for seed in sorted(done)]
@@ -535,7 +577,7 @@ def waiting_seeds(runs: Path, record: dict) -> list[str]:
 def pictures(result: dict, side: str) -> str:
     """What a side's agent sees a step: its frames and colour (Playground's: 3 grey)."""
     if side == "playground":
-        return f"{PLAYGROUND_FRAMES} grey"
+        return f"{PLAYGROUND_FRAMES} {PLAYGROUND_COLOUR}"
     settings = result.get("settings", {})
     return f"{settings.get('frames', 1)} {settings.get('colour', 'rgb')}"
 

@@ -130,16 +130,16 @@ def test_a_runs_frames_reach_its_env_memory_bound_and_group():
     one = run_config({"env": "pendulum", "agent": "ppo_rgb", "image_size": 40})
     with pytest.raises(UsageError, match="frames"):
         group.check_group([cfg, one])
-    grey_cfg = run_config(
-        {"env": "pendulum", "agent": "ppo_rgb", "frames": 3, "image_size": 40, "colour": "grey"}
-    )
-    env = grey_cfg.make_env()
-    assert isinstance(env, FrameStack) and (env.k, env.colour) == (3, "grey")
-    assert memory.picture_bytes(grey_cfg) == 3 * 40 * 40
-    pixels = env.reset(jax.random.key(0), grey_cfg.task_params(None)).obs["pixels"]
-    assert pixels.shape == (40, 40, 3)
+    for k in (1, 2):  # grey: one channel a picture, one picture too
+        values = {"env": "pendulum", "agent": "ppo_rgb", "frames": k, "image_size": 40}
+        grey_cfg = run_config({**values, "colour": "grey"})
+        env = grey_cfg.make_env()
+        assert isinstance(env, FrameStack) and (env.k, env.colour) == (k, "grey")
+        assert memory.picture_bytes(grey_cfg) == k * 40 * 40
+        pixels = env.reset(jax.random.key(0), grey_cfg.task_params(None)).obs["pixels"]
+        assert pixels.shape == (40, 40, k)
     with pytest.raises(UsageError, match="colour"):
-        group.check_group([cfg, grey_cfg])
+        group.check_group([run_config(values), grey_cfg])
 
 
 @pytest.mark.parametrize("frames, colour", [(1, "rgb"), (2, "rgb"), (2, "grey")])

@@ -17,6 +17,7 @@ import pytest
 # registers the "cue" env, its hint and its defaults (tests/ is on pytest's path: its rootdir
 # conftest)
 import cue_env
+from hintsjax import envs
 from hintsjax.system.errors import UsageError
 from hintsjax.settings import layers
 from hintsjax.algorithms import ppo
@@ -285,6 +286,25 @@ def test_a_rollout_drawing_only_the_ended_starts_is_the_rollout_drawing_every_on
         jax.tree.leaves((b_traj, b_last, b_state.env_state)),
     ):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-6, atol=1e-6)
+
+
+def test_a_batch_of_envs_steps_through_the_ended_starts_where_its_physics_allows(monkeypatch):
+    """ppo.batch_step: the ended envs' starts alone (AutoReset.step_ended, with an eighth of the
+    envs a chunk) where the run's physics is in ENDED_STARTS_PHYSICS, else the vmapped step."""
+    import countdown_env  # registers the env
+
+    cfg = layers.run_config(
+        dict(env=countdown_env.NAME, agent="ppo_state", ppo={**SMALL_PPO, "num_envs": 16})
+    )
+    env = envs.AutoReset(cfg.make_env())
+    chunks = []
+    monkeypatch.setattr(env, "step_ended", lambda *args: chunks.append(args[-1]) or "ended")
+    ts = envs.fresh_episodes(jax.random.key(0), env, cfg.task_params(None), 16)
+    args = (jax.random.split(jax.random.key(1), 16), ts.state, jnp.zeros((16, 1)))
+    assert ppo.batch_step(env, cfg)(*args, cfg.task_params(None)) == "ended" and chunks == [2]
+    monkeypatch.setattr(ppo, "ENDED_STARTS_PHYSICS", frozenset())
+    stepped = ppo.batch_step(env, cfg)(*args, cfg.task_params(None))
+    assert stepped.reward.shape == (16,) and chunks == [2]
 
 
 def adam_counts(opt_state) -> list[int]:

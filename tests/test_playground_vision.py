@@ -177,3 +177,22 @@ def test_playground_s_side_trains_and_evaluates_with_its_renderer_blank(monkeypa
     assert again["seeds_run"] == out["seeds_run"]
     with pytest.raises(AssertionError, match="trained again"):
         pv.train_playground(s, 1, 4, done_path=done, budget={**budget, "env_steps_per_seed": 1})
+
+
+def test_the_playground_side_s_memory_is_the_largest_its_seed_rows_measured():
+    """Seeds trained in several processes keep each process's peaks in their rows; a row of
+    before (no memory) counts for none, and a side with none measured says so (None)."""
+    rows = [{"xla_peak_mib": 5, "nvidia_smi_peak_mib": None}, {}, {"xla_peak_mib": 3,
+            "nvidia_smi_peak_mib": 7}]  # fmt: skip
+    assert pv.largest(rows) == {"xla_peak_mib": 5, "nvidia_smi_peak_mib": 7}
+    assert pv.largest([{}, {}]) == {"xla_peak_mib": None, "nvidia_smi_peak_mib": None}
+
+
+def test_a_slower_hintsjax_side_reads_slower():
+    playground = {"seconds": 300.0, "deterministic": [1.0, 2.0, 3.0],
+                  "seeds_run": [{"progress": [{}, {}, {"training/sps": 50.0}]}]}  # fmt: skip
+    progress = [{"step": 0, "seconds": 0.0}, {"step": 100, "seconds": 10.0}]
+    mapped = {"seconds": 600.0, "deterministic": [1.0, 2.0, 3.0], "progress": progress}
+    line = pv.against_playground({"playground": playground, "mapped": mapped}, "mapped")
+    assert "in 600 s against 300 s (2.0x slower), training 30 env steps/s" in line, line
+    assert "against 50 (0.6x)" in line

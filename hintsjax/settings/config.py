@@ -102,7 +102,7 @@ class RunConfig:
         saved_may_lack=True,
     )
     colour: str = setting(
-        "rgb",
+        RGB,
         "the pictures the agent sees: rgb, or grey (one channel a picture, the mean of the three, "
         "as Playground's vision PPO sees them)",
         saved_may_lack=True,
