@@ -569,7 +569,7 @@ def waiting_seeds(runs: Path, record: dict) -> list[str]:
     return [
         "",
         f"Playground's side has {len(rows)} of {record['seeds']} seeds finished, its entry not "
-        f"written yet ({SEEDS_DONE}; the peak memory is measured by the process that writes it): "
+        f"written yet ({SEEDS_DONE}; its peak memory is the largest its rows measured): "
         f"final returns {returns}, {sum(row['seconds'] for row in rows):.0f} s in all ({where}).",
     ]
 
