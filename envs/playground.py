@@ -96,7 +96,8 @@ class VisionTask:
     and the vision reward's terms as its metrics. Its physics steps 0.01 s a control step, as
     Playground's does: its vision branch sets the config's ctrl_dt to 0.02 after the env has read
     it. The picture is the adapter's (render3d, the `fixed` camera); Playground's agent sees three
-    stacked grey frames of its own renderer instead."""
+    stacked grey frames of its own renderer instead (`frames=3 colour=grey` shows hintsjax's
+    agent the same of its own pictures)."""
 
     TERMS = ("alive", "pole_pos_penalty", "cart_pos_penalty", "cart_vel_penalty",
              "pole_vel_penalty", "action_penalty")  # fmt: skip
