@@ -4,7 +4,7 @@
     python experiments/playground_vision.py --report    # archived, plotted, results/playground.md
     python experiments/playground_vision.py --smoke --runs /tmp/pv --side mapped  # plumbing, a CPU
 
-Three sides, each in a process of its own (the script starts one per side unless `--side` names
+The sides, each in a process of its own (the script starts one per side unless `--side` names
 one), one after another on one GPU, every seed at the same env steps (Brax's own count for
 Playground's budget: 4 epochs of 31 training steps of 40,960, 5,079,040 a seed):
 - `playground`: Brax's `ppo.train` on Playground's CartpoleBalance with `vision=True` (MuJoCo
@@ -529,7 +529,37 @@ def section_lines(runs: Path) -> list[str]:
     if "playground" in results and ours:
         lines += ["", "Each hintsjax side against Playground's:"]
         lines += [against_playground(results, side) for side in ours]
+    knobs = knob_lines(results)
+    if knobs:
+        lines += ["", "Knob by knob, from hintsjax's defaults to Playground's settings:", *knobs]
     return lines + [""]
+
+
+# hintsjax's sides in the order their knobs take them towards Playground's, and each step's knobs
+KNOB_STEPS = (
+    ("defaults", "mapped_first", "Playground's settings mapped (`mapped_values`)"),
+    ("mapped_first", "mapped_one", "grey pictures and the squashed action's entropy bonus"),
+    ("mapped_one", "mapped", "its 3 pictures a step, not 1"),
+    ("mapped", "playground", "what is left: the encoder, its inits, the value loss, the renderer"),
+)
+
+
+def knob_lines(results: dict) -> list[str]:
+    """A line per step of KNOB_STEPS whose two sides are in the record: the step's knobs, the
+    IQMs before and after and the ordering of the two sides' final returns."""
+    from hintsjax.reproduce import stats
+
+    lines = []
+    for before, after, knobs in KNOB_STEPS:
+        if before not in results or after not in results:
+            continue
+        x, y = results[after]["deterministic"], results[before]["deterministic"]
+        ordering = stats.ordering_text(after, before, stats.poi_ci(x, y))
+        lines.append(
+            f"- {before} -> {after}, {knobs}: IQM {stats.iqm_cell(y)} -> {stats.iqm_cell(x)}; "
+            f"{ordering}"
+        )
+    return lines
 
 
 def against_playground(results: dict, side: str) -> str:

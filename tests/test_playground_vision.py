@@ -196,3 +196,21 @@ def test_a_slower_hintsjax_side_reads_slower():
     line = pv.against_playground({"playground": playground, "mapped": mapped}, "mapped")
     assert "in 600 s against 300 s (2.0x slower), training 30 env steps/s" in line, line
     assert "against 50 (0.6x)" in line
+
+
+def test_the_knob_steps_name_the_sides_in_the_record_and_order_their_returns():
+    """A step is written only where both its sides ran; each says its IQMs, before then after,
+    and which side's seeds return more (hand-picked returns: every mapped seed above every
+    mapped_one seed, so P = 1.00, decided)."""
+    results = {
+        "mapped_one": {"deterministic": [10.0, 11.0, 12.0, 13.0]},
+        "mapped": {"deterministic": [20.0, 21.0, 22.0, 23.0]},
+    }
+    lines = pv.knob_lines(results)
+    assert len(lines) == 1, lines
+    assert lines[0].startswith("- mapped_one -> mapped, its 3 pictures a step, not 1: IQM 11.5 [")
+    assert (
+        "-> 21.5 [" in lines[0]
+        and "P(mapped > mapped_one) = 1.00 [1.00, 1.00]: decided" in lines[0]
+    )
+    assert pv.knob_lines({"defaults": results["mapped"]}) == []
