@@ -336,6 +336,20 @@ def test_an_env_that_sets_a_setting_the_command_line_gives_a_value_is_refused(mo
         dict.pop(ENV_DEFAULTS, "pendulum_seeds", None)  # added when first looked up
 
 
+def test_ppo_encoder_picks_the_pixel_encoder_and_names_its_choices():
+    """ppo.encoder=brax_vision gives the network Brax's two convolutions (16 5x5, then 32 3x3) in
+    place of the paper's three; an unknown encoder is one line naming the valid ones."""
+    from hintsjax.algorithms import ppo
+
+    cfg = run_config({"agent": "ppo_rgb", "ppo": {"encoder": "brax_vision"}})
+    obs = {"pixels": jax.numpy.zeros((1, 64, 64, 3), jax.numpy.uint8)}
+    params = ppo.make_network(cfg, cfg.make_env()).init(jax.random.key(0), obs)
+    params = params["params"]["encoder"]
+    assert [p["kernel"].shape for p in params.values()] == [(5, 5, 3, 16), (3, 3, 16, 32)]
+    with pytest.raises(UsageError, match="ppo.encoder 'resnet'; valid: nature, brax_vision"):
+        run_config({"ppo": {"encoder": "resnet"}})
+
+
 def test_the_network_takes_its_ppo_settings_by_name():
     """The network's fields named as PPO settings take their values (ppo.make_network names none of
     them); renaming one side alone would drop the setting, so the known ones are listed."""
@@ -347,6 +361,8 @@ def test_the_network_takes_its_ppo_settings_by_name():
         "normalize_state",
         "action_head",
         "critic_trains_encoder",
+        "encoder",
+        "encoder_dtype",
     } <= set(ppo.NETWORK_SETTINGS)
     cfg = run_config(
         {

@@ -13,6 +13,7 @@ from hintsjax.models.agents import AGENTS
 from hintsjax.models.conditioning import SCHEMES
 from hintsjax.models.networks import (
     ActorCritic,
+    BraxVisionEncoder,
     Encoder,
     PatchConv,
     blocked_conv,
@@ -87,6 +88,33 @@ def test_a_bfloat16_encoder_keeps_float32_params_and_features_near_float32s():
     assert half.dtype == jnp.float32 and half.shape == full.shape
     scale = float(jnp.abs(full).max())
     assert 0 < float(jnp.abs(half - full).max()) <= 0.05 * scale
+
+
+class BraxCNN(nn.Module):
+    """Brax's `networks.CNN` as Playground's vision config builds it (brax 0.14.2: nn.Conv with
+    SAME padding, ELU, nn.max_pool 2x2/2 SAME), flattened: the reference the encoder matches."""
+
+    @nn.compact
+    def __call__(self, x):
+        for features, kernel in ((16, 5), (32, 3)):
+            x = nn.elu(nn.Conv(features, (kernel, kernel), strides=(2, 2), padding="SAME")(x))
+            x = nn.max_pool(x, window_shape=(2, 2), strides=(2, 2), padding="SAME")
+        return x.reshape(x.shape[:-3] + (-1,))
+
+
+@pytest.mark.parametrize("size,channels", [(64, 3), (64, 9), (37, 1)])
+def test_the_brax_vision_encoder_equals_brax_s_cnn_with_the_same_params(size, channels):
+    """ppo.encoder=brax_vision: Brax's layers, its SAME paddings (an odd side's odd pixel after)
+    and max-pools (an odd side's last window of one) included; 64x64 gives Brax's 4x4x32."""
+    x = jax.random.normal(jax.random.key(1), (2, size, size, channels))
+    params = BraxVisionEncoder().init(jax.random.key(0), x)
+    # the same kernels and biases, under Brax's layer names
+    names = {"PatchConv_0": "Conv_0", "PatchConv_1": "Conv_1"}
+    theirs = {"params": {names[k]: v for k, v in params["params"].items()}}
+    ours = BraxVisionEncoder().apply(params, x)
+    np.testing.assert_allclose(ours, BraxCNN().apply(theirs, x), rtol=1e-5, atol=1e-5)
+    if size == 64:
+        assert ours.shape == (2, 512)
 
 
 def test_scale_pixels_maps_to_minus_one_one():

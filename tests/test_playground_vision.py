@@ -214,3 +214,8 @@ def test_the_knob_steps_name_the_sides_in_the_record_and_order_their_returns():
         and "P(mapped > mapped_one) = 1.00 [1.00, 1.00]: decided" in lines[0]
     )
     assert pv.knob_lines({"defaults": results["mapped"]}) == []
+    # a side not run (mapped_cnn) passes its knobs on to the next step
+    results["playground"] = {"deterministic": [1.0, 2.0, 3.0, 4.0]}
+    line = pv.knob_lines(results)[1]
+    assert line.startswith("- mapped -> playground, Brax's CNN (`ppo.encoder=brax_vision`), one ")
+    assert "; what is left: " in line and "P(playground > mapped) = 0.00 [0.00, 0.00]" in line

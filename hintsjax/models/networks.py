@@ -125,6 +125,49 @@ class Encoder(nn.Module):
         return x.reshape(x.shape[:-3] + (-1,)).astype(jnp.float32)
 
 
+def same_padding(x: jax.Array, kernel: int, stride: int) -> jax.Array:
+    """[B, H, W, C] zero-padded so that a VALID convolution of it is `nn.Conv`'s SAME one: the
+    output's side ceil(H / s), the padding's odd pixel after (XLA's and TensorFlow's rule)."""
+    pads = []
+    for side in x.shape[-3:-1]:
+        total = max((-(-side // stride) - 1) * stride + kernel - side, 0)
+        pads.append((total // 2, total - total // 2))
+    return jnp.pad(x, [(0, 0)] * (x.ndim - 3) + pads + [(0, 0)])
+
+
+def max_pool_2x2(x: jax.Array) -> jax.Array:
+    """[B, H, W, C] -> [B, ceil(H/2), ceil(W/2), C]: `nn.max_pool` with 2x2 windows, stride 2, SAME
+    (an odd side's last window holds one row or column)."""
+    h, w = x.shape[-3], x.shape[-2]
+    pad = [(0, 0)] * (x.ndim - 3) + [(0, h % 2), (0, w % 2), (0, 0)]
+    x = jnp.pad(x, pad, constant_values=-jnp.inf)
+    batch, c = x.shape[:-3], x.shape[-1]
+    x = x.reshape(*batch, (h + 1) // 2, 2, (w + 1) // 2, 2, c)
+    return x.max(axis=(-4, -2))
+
+
+class BraxVisionEncoder(nn.Module):
+    """The CNN of Brax's vision PPO as MuJoCo Playground tunes it for its cartpoles
+    (`dm_control_suite_params.brax_vision_ppo_config`): two SAME convolutions (16 5x5/2, 32 3x3/2),
+    each followed by ELU and a 2x2 max-pool, flattened: [B, 64, 64, C] -> [B, 512]. The same
+    layers as Brax's `networks.CNN` computed as PatchConv's matmuls; He inits, not Brax's
+    orthogonal ones (he_init says why). Computed in `dtype`, returned as float32."""
+
+    dtype: Any = None
+
+    @nn.compact
+    def __call__(self, x: jax.Array) -> jax.Array:
+        for features, kernel, stride in ((16, 5, 2), (32, 3, 2)):
+            x = same_padding(x, kernel, stride)
+            x = max_pool_2x2(nn.elu(PatchConv(features, kernel, stride, dtype=self.dtype)(x)))
+        return x.reshape(x.shape[:-3] + (-1,)).astype(jnp.float32)
+
+
+# The pixel encoders (`ppo.encoder`): "nature", the paper's (Mnih et al. 2015's layers), and
+# "brax_vision", Brax's vision PPO's as Playground tunes it (experiments/playground_vision.py).
+ENCODERS = {"nature": Encoder, "brax_vision": BraxVisionEncoder}
+
+
 class MLP(nn.Module):
     """Hidden ReLU layers then a linear output: [B, n] -> [B, features[-1]]."""
 
@@ -167,11 +210,13 @@ class ActorCritic(nn.Module):
     action_head: str = "gaussian"
     critic_trains_encoder: bool = True
     min_log_std: float | None = None  # a floor on the log std, after the head's own (None: none)
+    encoder: str = "nature"  # the pixel encoder, an ENCODERS key
     encoder_dtype: str = "float32"  # the pixel encoder's arithmetic
 
     def features(self, obs: dict[str, jax.Array]) -> jax.Array:
         agent = self.agent
-        encoder = lambda: Encoder(jnp.dtype(self.encoder_dtype), name="encoder")  # noqa: E731
+        make = ENCODERS[self.encoder]
+        encoder = lambda: make(jnp.dtype(self.encoder_dtype), name="encoder")  # noqa: E731
         if agent.conditioned:
             cond = SCHEMES[self.scheme](self.hint_width, name="conditioning")
             return cond(encoder(), scale_pixels(obs["pixels"]), obs["hint"])

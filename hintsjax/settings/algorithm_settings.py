@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from hintsjax.models.networks import ENCODERS
 from hintsjax.system.checks import require_positive, require_range
 from hintsjax.system.errors import UsageError
 from hintsjax.settings.fields import check_choices, setting
@@ -143,6 +144,13 @@ class PPOConfig:
         None,
         "a floor on the policy's log std (Brax's networks floor the std at "
         "0.001, log -6.9); null: none",
+        saved_may_lack=True,
+    )
+    encoder: str = setting(
+        "nature",
+        "the pixel encoder: nature (the paper's three convolutions) or brax_vision (Brax's "
+        "vision PPO's, as Playground tunes it)",
+        choices=tuple(ENCODERS),
         saved_may_lack=True,
     )
     encoder_dtype: str = setting(
