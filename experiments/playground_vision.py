@@ -16,6 +16,7 @@ Playground's budget: 4 epochs of 31 training steps of 40,960, 5,079,040 a seed):
   and ends, envs/playground.py `VisionTask`; its own 64x64 pictures of the same camera, grey and
   the last 3 side by side as Playground's agent sees its last 3, `frames=3 colour=grey`) with
   Playground's settings mapped onto hintsjax's (`mapped_values`), seeds vmapped in one program.
+- `mapped_cnn`: the same with Brax's CNN (`ppo.encoder=brax_vision`): the encoder's part;
 - `mapped_one`: the same with one picture at a time (`frames=1`): the frame stack's part in the
   difference, one knob; `mapped_first`: the mapping as first built, one RGB picture and the
   entropy bonus of the Gaussian before the squash (`ppo.squashed_entropy=false`).
@@ -45,10 +46,11 @@ from playground import mend_brax_for_this_jax, record_side, steps_per_update  # 
 
 TASK = "CartpoleBalance"
 ENV = f"playground:{TASK}:vision"
-SIDES = ("playground", "mapped", "mapped_one", "mapped_first", "defaults")
+SIDES = ("playground", "mapped", "mapped_cnn", "mapped_one", "mapped_first", "defaults")
 TRAINERS = {
     "playground": "Playground + brax.training vision PPO",
     "mapped": "hintsjax ppo_rgb, Playground's settings",
+    "mapped_cnn": "hintsjax ppo_rgb, Playground's settings, Brax's CNN",
     "mapped_one": "hintsjax ppo_rgb, Playground's settings, one picture",
     "mapped_first": "hintsjax ppo_rgb, Playground's settings, one picture, the Gaussian's entropy",
     "defaults": "hintsjax ppo_rgb, its defaults",
@@ -100,6 +102,7 @@ def mapped_values(
     frames: int = PLAYGROUND_FRAMES,
     squashed: bool = True,
     colour: str = PLAYGROUND_COLOUR,
+    encoder: str = "nature",
 ) -> dict:
     """hintsjax's run config with Playground's vision settings where hintsjax has the knob: an
     update of num_envs rollouts of batch_size x num_minibatches x unroll_length / num_envs steps,
@@ -108,9 +111,10 @@ def mapped_values(
     clip, clipping of the whole gradient, Brax's tanh-squashed Gaussian and its entropy bonus (the
     squashed action's), Adam's epsilon (optax's default), the MLPs' widths, the last `frames`
     pictures side by side (Playground's 3, or one for `mapped_one`) in `colour` (Playground's
-    grey). Left at hintsjax's: the encoder (its three VALID convolutions, 32 8x8/4, 64 4x4/2, 64
-    3x3/1, ReLU, shared by actor and critic, beside Brax's two SAME ones, 16 5x5/2 and 32 3x3/2
-    with 2x2 max-pools and ELU, one per network), its inits and the value loss's weight."""
+    grey), and the `encoder`: hintsjax's (its three VALID convolutions, 32 8x8/4, 64 4x4/2, 64
+    3x3/1, ReLU) or Brax's (`brax_vision` for `mapped_cnn`: two SAME ones, 16 5x5/2 and 32 3x3/2
+    with 2x2 max-pools and ELU). Left at hintsjax's: one encoder shared by actor and critic
+    (Brax's networks have one each), its inits and the value loss's weight."""
     batch = steps_per_update(s)
     rate = s["learning_rate"]
     ppo = {
@@ -133,6 +137,7 @@ def mapped_values(
         "adam_eps": 1e-8,
         "reward_scale": s["reward_scaling"],
         "hidden": list(s["network_factory"]["policy_hidden_layer_sizes"]),
+        "encoder": encoder,
     }
     return {**common_values(seeds, smoke), "frames": frames, "colour": colour, "ppo": ppo}
 
@@ -401,6 +406,7 @@ def train_side(side: str, runs: Path, seeds: int, smoke: bool) -> None:
     else:
         make = {
             "mapped": mapped_values,
+            "mapped_cnn": functools.partial(mapped_values, encoder="brax_vision"),
             "mapped_one": functools.partial(mapped_values, frames=1),
             "mapped_first": functools.partial(
                 mapped_values, frames=1, squashed=False, colour="rgb"
@@ -535,30 +541,37 @@ def section_lines(runs: Path) -> list[str]:
     return lines + [""]
 
 
-# hintsjax's sides in the order their knobs take them towards Playground's, and each step's knobs
+# The sides in the order their knobs take hintsjax's defaults towards Playground's, each with the
+# knobs it turns beyond the side before it
 KNOB_STEPS = (
-    ("defaults", "mapped_first", "Playground's settings mapped (`mapped_values`)"),
-    ("mapped_first", "mapped_one", "grey pictures and the squashed action's entropy bonus"),
-    ("mapped_one", "mapped", "its 3 pictures a step, not 1"),
-    ("mapped", "playground", "what is left: the encoder, its inits, the value loss, the renderer"),
+    ("defaults", ""),
+    ("mapped_first", "Playground's settings mapped (`mapped_values`)"),
+    ("mapped_one", "grey pictures and the squashed action's entropy bonus"),
+    ("mapped", "its 3 pictures a step, not 1"),
+    ("mapped_cnn", "Brax's CNN (`ppo.encoder=brax_vision`), one for actor and critic"),
+    ("playground", "what is left: a CNN a network, their inits, the value loss, the renderer"),
 )
 
 
 def knob_lines(results: dict) -> list[str]:
-    """A line per step of KNOB_STEPS whose two sides are in the record: the step's knobs, the
-    IQMs before and after and the ordering of the two sides' final returns."""
+    """A line for each two sides in the record next in KNOB_STEPS's order: the knobs between them
+    (a side not run passes its knobs on to the next), the IQMs before and after and the ordering
+    of the two sides' final returns."""
     from hintsjax.reproduce import stats
 
-    lines = []
-    for before, after, knobs in KNOB_STEPS:
-        if before not in results or after not in results:
+    lines, before, knobs = [], None, []
+    for side, turns in KNOB_STEPS:
+        knobs += [turns] if turns else []
+        if side not in results:
             continue
-        x, y = results[after]["deterministic"], results[before]["deterministic"]
-        ordering = stats.ordering_text(after, before, stats.poi_ci(x, y))
-        lines.append(
-            f"- {before} -> {after}, {knobs}: IQM {stats.iqm_cell(y)} -> {stats.iqm_cell(x)}; "
-            f"{ordering}"
-        )
+        if before is not None:
+            x, y = results[side]["deterministic"], results[before]["deterministic"]
+            ordering = stats.ordering_text(side, before, stats.poi_ci(x, y))
+            lines.append(
+                f"- {before} -> {side}, {'; '.join(knobs)}: IQM {stats.iqm_cell(y)} -> "
+                f"{stats.iqm_cell(x)}; {ordering}"
+            )
+        before, knobs = side, []
     return lines
 
 
@@ -622,7 +635,7 @@ def plot(runs: Path, out: Path) -> None:
 
     record = json.loads((runs / RECORD).read_text())
     fig, ax = plt.subplots(figsize=(7, 4))
-    colours = ("tab:gray", "tab:blue", "tab:green", "tab:olive", "tab:orange")
+    colours = ("tab:gray", "tab:blue", "tab:purple", "tab:green", "tab:olive", "tab:orange")
     for side, colour in zip(SIDES, colours):
         r = record["results"].get(side)
         if r is None:
