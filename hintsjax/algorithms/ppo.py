@@ -218,10 +218,10 @@ def hint_error(prediction: jax.Array, hint: jax.Array, keep: jax.Array) -> jax.A
 # start) is computed this many at a time (`envs.rows_where`): a step pays a fraction of a pass
 # for its few truncations and ends, not a whole one.
 ROW_CHUNKS = 8
-# The physics whose rollouts draw the ended envs' starts alone (`AutoReset.step_ended`): both.
-# Under MJX-Warp a chunk is another batch shape for its kernels, and the ant's and humanoid's
-# rollouts were measured faster so all the same (docs/throughput.md).
-ENDED_STARTS_PHYSICS = frozenset({envs.JAX, envs.WARP})
+# The physics whose rollouts draw the ended envs' starts alone (`AutoReset.step_ended`); under
+# MJX-Warp a chunk is another batch shape for its kernels, and they draw every env's start each
+# step until a run whose envs end has been measured (and run) so on a GPU (docs/throughput.md).
+ENDED_STARTS_PHYSICS = frozenset({envs.JAX})
 
 
 def row_chunk(n: int) -> int:
