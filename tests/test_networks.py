@@ -115,6 +115,20 @@ def test_the_brax_vision_encoder_equals_brax_s_cnn_with_the_same_params(size, ch
     np.testing.assert_allclose(ours, BraxCNN().apply(theirs, x), rtol=1e-5, atol=1e-5)
     if size == 64:
         assert ours.shape == (2, 512)
+    # in bfloat16: float32 features within bfloat16's 8 bits of mantissa of the float32 ones
+    half = BraxVisionEncoder(jnp.bfloat16).apply(params, x)
+    assert half.dtype == jnp.float32
+    assert float(jnp.abs(half - ours).max()) <= 0.05 * float(jnp.abs(ours).max())
+    try:  # and Brax's own module, where brax is installed (the playground extra)
+        from brax.training import networks as brax_networks
+    except ImportError:
+        return
+    cnn = brax_networks.CNN(
+        num_filters=(16, 32), kernel_sizes=((5, 5), (3, 3)), strides=((2, 2), (2, 2)),
+        activation=nn.elu, max_pool=True, padding="SAME",
+    )  # fmt: skip
+    brax_out = cnn.apply(theirs, x).reshape(2, -1)
+    np.testing.assert_allclose(ours, brax_out, rtol=1e-5, atol=1e-5)
 
 
 def test_scale_pixels_maps_to_minus_one_one():

@@ -147,7 +147,7 @@ def max_pool_2x2(x: jax.Array) -> jax.Array:
 
 
 class BraxVisionEncoder(nn.Module):
-    """The CNN of Brax's vision PPO as MuJoCo Playground tunes it for its cartpoles
+    """The CNN of Brax's vision PPO as MuJoCo Playground tunes it for CartpoleBalance
     (`dm_control_suite_params.brax_vision_ppo_config`): two SAME convolutions (16 5x5/2, 32 3x3/2),
     each followed by ELU and a 2x2 max-pool, flattened: [B, 64, 64, C] -> [B, 512]. The same
     layers as Brax's `networks.CNN` computed as PatchConv's matmuls; He inits, not Brax's

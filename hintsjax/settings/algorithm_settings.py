@@ -148,8 +148,8 @@ class PPOConfig:
     )
     encoder: str = setting(
         "nature",
-        "the pixel encoder: nature (the paper's three convolutions) or brax_vision (Brax's "
-        "vision PPO's, as Playground tunes it)",
+        "the policy's pixel encoder: nature (the paper's three convolutions) or brax_vision "
+        "(Brax's vision PPO's, as Playground tunes it)",
         choices=tuple(ENCODERS),
         saved_may_lack=True,
     )
