@@ -114,7 +114,8 @@ def mapped_values(
     grey), and the `encoder`: hintsjax's (its three VALID convolutions, 32 8x8/4, 64 4x4/2, 64
     3x3/1, ReLU) or Brax's (`brax_vision` for `mapped_cnn`: two SAME ones, 16 5x5/2 and 32 3x3/2
     with 2x2 max-pools and ELU). Left at hintsjax's: one encoder shared by actor and critic
-    (Brax's networks have one each), its inits and the value loss's weight."""
+    (Brax's networks have one each), its inits, the value loss's weight and the pictures' scale
+    (hintsjax's bytes in [-1, 1], Playground's grey in [-0.5, 0.5])."""
     batch = steps_per_update(s)
     rate = s["learning_rate"]
     ppo = {
@@ -546,10 +547,17 @@ def section_lines(runs: Path) -> list[str]:
 KNOB_STEPS = (
     ("defaults", ""),
     ("mapped_first", "Playground's settings mapped (`mapped_values`)"),
-    ("mapped_one", "grey pictures and the squashed action's entropy bonus"),
+    (
+        "mapped_one",
+        "grey pictures and the squashed action's entropy bonus (mapped_first ran at an earlier "
+        "commit)",
+    ),
     ("mapped", "its 3 pictures a step, not 1"),
     ("mapped_cnn", "Brax's CNN (`ppo.encoder=brax_vision`), one for actor and critic"),
-    ("playground", "what is left: a CNN a network, their inits, the value loss, the renderer"),
+    (
+        "playground",
+        "what is left: a CNN a network, inits, the value loss, the pictures and their scale",
+    ),
 )
 
 
