@@ -86,7 +86,7 @@ poll)
     date; nvidia-smi --query-gpu=index,utilization.gpu,memory.used --format=csv,noheader || true
     for f in /tmp/logs/*.log; do
         [ -e "$f" ] || continue
-        echo "== $f"; tail -c 1500 "$f" | tr '\r' '\n' | grep -v '^\s*$' | tail -5
+        echo "== $f"; tail -c 1500 "$f" | tr '\r' '\n' | { grep -v '^\s*$' || true; } | tail -5  # an empty log too
     done
     if [ -d /tmp/r ]; then
         (cd /tmp && find r logs -type f -size -20M \( -name '*.csv' -o -name '*.json' -o -name '*.jsonl' -o -name '*.yaml' -o -name '*.log' \) \
