@@ -249,6 +249,23 @@ def bench_train(
 ROLLOUT_STARTS = {"run": None, "every_env": False, "ended": True}
 
 
+def warmed(cfg, state, rollouts: int, ended_starts: bool | None = None) -> tuple[object, float]:
+    """`state` after `rollouts` rollouts of its untrained policy (no learning), so that its envs'
+    episodes are under way and some end in the next rollout, as in a run (`update_parts` times
+    from the state it is given: a fresh one ends almost none); and the envs ended a step in the
+    last of them (terminated or truncated, summed over seeds; NaN for no rollouts)."""
+    from hintsjax.algorithms.ppo import make_ppo
+
+    rollout = jax.jit(jax.vmap(make_ppo(cfg, ended_starts=ended_starts).rollout))
+    ended = float("nan")
+    for i in range(rollouts):
+        keys = jax.random.split(jax.random.fold_in(jax.random.key(2), i), cfg.seeds)
+        state, traj, _ = rollout(state, keys)
+        done = jnp.logical_or(traj.terminated, traj.truncated)  # [seeds, T, N]
+        ended = float(done.sum()) / done.shape[1]
+    return state, ended
+
+
 def update_parts(cfg, state, ended_starts: bool | None = None) -> dict:
     """Seconds of one seed-vmapped PPO update's parts: the rollout (env steps with pictures and
     the policy's actions), the learning (GAE and the epochs of minibatch steps), the rollout's env
@@ -338,6 +355,13 @@ def main() -> None:
         help="with --parts: the rollout's fresh starts as a run draws them "
         "(hintsjax.algorithms.ppo.batch_step), every env's each step, or the ended envs' alone",
     )
+    parser.add_argument(
+        "--warm-rollouts",
+        type=int,
+        default=0,
+        help="with --parts: rollouts of the untrained policy first, so that episodes are under "
+        "way and some end while the parts are timed (0: from fresh starts, where almost none end)",
+    )
     parser.add_argument("--quick", action="store_true", help="small sizes (a CPU smoke run)")
     parser.add_argument(
         "--model-option",
@@ -370,6 +394,8 @@ def main() -> None:
         parser.exit(2, f"error: {e}\n")
     if options and not set(names) <= set(mjx_envs):
         parser.exit(2, f"error: --model-option applies to MJX envs only: {', '.join(mjx_envs)}\n")
+    if args.warm_rollouts < 0:
+        parser.exit(2, f"error: --warm-rollouts must be 0 or more, got {args.warm_rollouts}\n")
     q = args.quick
     if args.parts:
         for name in names:
@@ -384,11 +410,14 @@ def main() -> None:
                 }
             )
             state = jax.jit(jax.vmap(make_trainer(cfg).init))(cfg.seed_keys())
-            parts = update_parts(cfg, state, ROLLOUT_STARTS[args.rollout_starts])
+            starts = ROLLOUT_STARTS[args.rollout_starts]
+            state, ended = warmed(cfg, state, args.warm_rollouts, starts)
+            parts = update_parts(cfg, state, starts)
             print(
                 f"update  {name:>9} 5 seeds {cfg.ppo.num_envs} envs x "
                 f"{cfg.ppo.rollout_length} steps, {cfg.physics}, {args.encoder_dtype} encoder, "
-                f"starts {args.rollout_starts}: "
+                f"starts {args.rollout_starts}, after {args.warm_rollouts} rollouts "
+                f"({ended:.1f} envs ended a step): "
                 + ", ".join(f"{k} {1e3 * v:.1f} ms" for k, v in parts.items()),
                 flush=True,
             )

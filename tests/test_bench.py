@@ -31,6 +31,28 @@ def test_bad_model_options_name_the_valid_ones(item, names):
         bench.model_options([item])
 
 
+def test_warmed_parts_start_where_episodes_end_as_in_a_run():
+    """--warm-rollouts: the state rolled on by the untrained policy, and the envs ended a step in
+    the last rollout. The pendulum's episodes are truncated at 200 steps: with rollouts of 100,
+    none ends in the first, each of 2 seeds x 2 envs once in the second (4 over 100 steps)."""
+    import jax
+    import numpy as np
+
+    from hintsjax.algorithms.registry import make_trainer
+    from hintsjax.settings.layers import run_config
+
+    ppo = {"num_envs": 2, "batch_size": 200, "minibatch_size": 100}
+    cfg = run_config({"env": "pendulum", "agent": "ppo_state", "seeds": 2, "ppo": ppo})
+    state = jax.jit(jax.vmap(make_trainer(cfg).init))(cfg.seed_keys())
+    assert bench.warmed(cfg, state, 0)[0] is state
+    assert bench.warmed(cfg, state, 1)[1] == 0.0
+    after, ended = bench.warmed(cfg, state, 2)
+    assert ended == 4 / 100
+    # the envs rolled on, the policy untouched
+    assert not np.array_equal(after.obs["state"], state.obs["state"])
+    assert all(map(np.array_equal, jax.tree.leaves(after.params), jax.tree.leaves(state.params)))
+
+
 @pytest.mark.slow
 def test_a_training_row_says_which_physics_the_run_got():
     """bench_train end to end on CPU, at a toy size: its row records the physics that `auto`
