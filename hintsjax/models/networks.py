@@ -125,27 +125,6 @@ class Encoder(nn.Module):
         return x.reshape(x.shape[:-3] + (-1,)).astype(jnp.float32)
 
 
-def same_padding(x: jax.Array, kernel: int, stride: int) -> jax.Array:
-    """[B, H, W, C] zero-padded so that a VALID convolution of it is `nn.Conv`'s SAME one: the
-    output's side ceil(H / s), the padding's odd pixel after (XLA's and TensorFlow's rule)."""
-    pads = []
-    for side in x.shape[-3:-1]:
-        total = max((-(-side // stride) - 1) * stride + kernel - side, 0)
-        pads.append((total // 2, total - total // 2))
-    return jnp.pad(x, [(0, 0)] * (x.ndim - 3) + pads + [(0, 0)])
-
-
-def max_pool_2x2(x: jax.Array) -> jax.Array:
-    """[B, H, W, C] -> [B, ceil(H/2), ceil(W/2), C]: `nn.max_pool` with 2x2 windows, stride 2, SAME
-    (an odd side's last window holds one row or column)."""
-    h, w = x.shape[-3], x.shape[-2]
-    pad = [(0, 0)] * (x.ndim - 3) + [(0, h % 2), (0, w % 2), (0, 0)]
-    x = jnp.pad(x, pad, constant_values=-jnp.inf)
-    batch, c = x.shape[:-3], x.shape[-1]
-    x = x.reshape(*batch, (h + 1) // 2, 2, (w + 1) // 2, 2, c)
-    return x.max(axis=(-4, -2))
-
-
 class BraxVisionEncoder(nn.Module):
     """The CNN of Brax's vision PPO as MuJoCo Playground tunes it for CartpoleBalance
     (`dm_control_suite_params.brax_vision_ppo_config`): two SAME convolutions (16 5x5/2, 32 3x3/2),
@@ -158,8 +137,11 @@ class BraxVisionEncoder(nn.Module):
     @nn.compact
     def __call__(self, x: jax.Array) -> jax.Array:
         for features, kernel, stride in ((16, 5, 2), (32, 3, 2)):
-            x = same_padding(x, kernel, stride)
-            x = max_pool_2x2(nn.elu(PatchConv(features, kernel, stride, dtype=self.dtype)(x)))
+            # zero-padded so that PatchConv's VALID convolution is nn.Conv's SAME one
+            pads = jax.lax.padtype_to_pads(x.shape[-3:-1], (kernel,) * 2, (stride,) * 2, "SAME")
+            x = jnp.pad(x, [(0, 0)] * (x.ndim - 3) + list(pads) + [(0, 0)])
+            x = nn.elu(PatchConv(features, kernel, stride, dtype=self.dtype)(x))
+            x = nn.max_pool(x, (2, 2), strides=(2, 2), padding="SAME")
         return x.reshape(x.shape[:-3] + (-1,)).astype(jnp.float32)
 
 
