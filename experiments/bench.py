@@ -241,7 +241,7 @@ def bench_train(
         "grad_samples_per_s": results["train_env_steps_per_s"] * cfg.ppo.epochs,
         "compile_s": results["compile_seconds"],
         "scan_env_steps_per_s": env_steps / seconds,
-        "update_parts_s": update_parts(cfg, state),
+        "update_parts_s": update_parts(cfg, state)[0],
     }
 
 
@@ -249,24 +249,25 @@ def bench_train(
 ROLLOUT_STARTS = {"run": None, "every_env": False, "ended": True}
 
 
-def warmed(cfg, state, rollouts: int, ended_starts: bool | None = None) -> tuple[object, float]:
-    """`state` after `rollouts` rollouts of its untrained policy (no learning), so that its envs'
-    episodes are under way and some end in the next rollout, as in a run (`update_parts` times
-    from the state it is given: a fresh one ends almost none); and the envs ended a step in the
-    last of them (terminated or truncated, summed over seeds; NaN for no rollouts)."""
-    from hintsjax.algorithms.ppo import make_ppo
-
-    rollout = jax.jit(jax.vmap(make_ppo(cfg, ended_starts=ended_starts).rollout))
-    ended = float("nan")
+def warmed(rollout, state, rollouts: int, seeds: int) -> tuple[object, float]:
+    """`state` after `rollouts` of `rollout` (its untrained policy's, jitted and seed-vmapped; no
+    learning), so that its envs' episodes are under way and some end in the next rollout, as in
+    a run (a fresh state ends almost none); and the envs ended a step in the last of them
+    (terminated or truncated, summed over seeds; NaN for no rollouts)."""
+    traj = None
     for i in range(rollouts):
-        keys = jax.random.split(jax.random.fold_in(jax.random.key(2), i), cfg.seeds)
-        state, traj, _ = rollout(state, keys)
-        done = jnp.logical_or(traj.terminated, traj.truncated)  # [seeds, T, N]
-        ended = float(done.sum()) / done.shape[1]
-    return state, ended
+        state, traj, _ = rollout(
+            state, jax.random.split(jax.random.fold_in(jax.random.key(2), i), seeds)
+        )
+    if traj is None:
+        return state, float("nan")
+    done = jnp.logical_or(traj.terminated, traj.truncated)  # [seeds, T, N]
+    return state, float(done.sum()) / done.shape[1]
 
 
-def update_parts(cfg, state, ended_starts: bool | None = None) -> dict:
+def update_parts(
+    cfg, state, ended_starts: bool | None = None, warm_rollouts: int = 0
+) -> tuple[dict, float]:
     """Seconds of one seed-vmapped PPO update's parts: the rollout (env steps with pictures and
     the policy's actions), the learning (GAE and the epochs of minibatch steps), the rollout's env
     steps under random actions as `bench_env` times them (with their pictures and every env's
@@ -279,12 +280,14 @@ def update_parts(cfg, state, ended_starts: bool | None = None) -> dict:
     final observation: two passes of the network a step, one of which `policy_forwards` times).
     A rollout that draws the ended envs' starts alone (`ended_starts` True; None: as a run
     draws them, make_ppo) saves some of the starts' share. Every part steps with the run's
-    physics (`cfg.physics`)."""
+    physics (`cfg.physics`). All from `state` after `warm_rollouts` rollouts (`warmed`); returned
+    with the envs ended a step in the last of those."""
     from hintsjax.algorithms.ppo import make_ppo
 
     parts = make_ppo(cfg, ended_starts=ended_starts)
     key = jax.random.split(jax.random.key(1), cfg.seeds)
     rollout = jax.jit(jax.vmap(parts.rollout))
+    state, ended = warmed(rollout, state, warm_rollouts, cfg.seeds)
     _, traj, last = rollout(state, key)
     learn = jax.jit(jax.vmap(parts.learn))
     network = parts.network
@@ -303,7 +306,7 @@ def update_parts(cfg, state, ended_starts: bool | None = None) -> dict:
         rate = bench_env(cfg.env, width, steps, physics=cfg.physics, **kw)["env_steps_per_s"]
         return width * steps / rate
 
-    return {
+    seconds = {
         "rollout": best_time(lambda s, k: rollout(s, k)[2], state, key),
         "learn": best_time(lambda s: learn(s, traj, last, traj.reward, key)[1]["approx_kl"], state),
         "env_steps_with_pictures": env_steps(),
@@ -311,6 +314,7 @@ def update_parts(cfg, state, ended_starts: bool | None = None) -> dict:
         "env_steps_no_starts": env_steps(pixels=False, reset="none"),
         "policy_forwards": best_time(jax.jit(jax.vmap(forwards)), state, traj.obs),
     }
+    return seconds, ended
 
 
 def main() -> None:
@@ -411,8 +415,7 @@ def main() -> None:
             )
             state = jax.jit(jax.vmap(make_trainer(cfg).init))(cfg.seed_keys())
             starts = ROLLOUT_STARTS[args.rollout_starts]
-            state, ended = warmed(cfg, state, args.warm_rollouts, starts)
-            parts = update_parts(cfg, state, starts)
+            parts, ended = update_parts(cfg, state, starts, args.warm_rollouts)
             print(
                 f"update  {name:>9} 5 seeds {cfg.ppo.num_envs} envs x "
                 f"{cfg.ppo.rollout_length} steps, {cfg.physics}, {args.encoder_dtype} encoder, "

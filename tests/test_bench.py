@@ -38,15 +38,17 @@ def test_warmed_parts_start_where_episodes_end_as_in_a_run():
     import jax
     import numpy as np
 
+    from hintsjax.algorithms.ppo import make_ppo
     from hintsjax.algorithms.registry import make_trainer
     from hintsjax.settings.layers import run_config
 
     ppo = {"num_envs": 2, "batch_size": 200, "minibatch_size": 100}
     cfg = run_config({"env": "pendulum", "agent": "ppo_state", "seeds": 2, "ppo": ppo})
     state = jax.jit(jax.vmap(make_trainer(cfg).init))(cfg.seed_keys())
-    assert bench.warmed(cfg, state, 0)[0] is state
-    assert bench.warmed(cfg, state, 1)[1] == 0.0
-    after, ended = bench.warmed(cfg, state, 2)
+    rollout = jax.jit(jax.vmap(make_ppo(cfg).rollout))
+    assert bench.warmed(rollout, state, 0, 2)[0] is state
+    assert bench.warmed(rollout, state, 1, 2)[1] == 0.0
+    after, ended = bench.warmed(rollout, state, 2, 2)
     assert ended == 4 / 100
     # the envs rolled on, the policy untouched
     assert not np.array_equal(after.obs["state"], state.obs["state"])
