@@ -586,7 +586,7 @@ def knob_lines(results: dict) -> list[str]:
 def against_playground(results: dict, side: str) -> str:
     """A hintsjax side's line against Playground's: the ordering of their final returns, the
     wall-clock of their seeds, and their training rates (hintsjax's seeds at once, Playground's
-    one after another)."""
+    one after another); the times only where both sides ran on the same kind of GPU."""
     from hintsjax.reproduce import stats
 
     ours, theirs = results[side], results["playground"]
@@ -596,6 +596,11 @@ def against_playground(results: dict, side: str) -> str:
         TRAINERS["playground"],
         stats.poi_ci(ours["deterministic"], theirs["deterministic"]),
     )
+    if ours.get("device") != theirs.get("device"):
+        return (
+            f"- {side}: {ordering}; its times are not set against Playground's: it ran on "
+            f"{ours.get('device')}, Playground on {theirs.get('device')}"
+        )
     times = theirs["seconds"] / ours["seconds"]
     rate, their_rate = steady_rate(ours, side) * seeds, steady_rate(theirs, "playground")
     rates = f" ({rate / their_rate:.1f}x)" if their_rate > 0 else ""

@@ -198,6 +198,14 @@ def test_a_slower_hintsjax_side_reads_slower():
     assert "against 50 (0.6x)" in line
 
 
+def test_sides_on_other_gpus_are_not_timed_against_each_other():
+    playground = {"seconds": 300.0, "deterministic": [1.0, 2.0, 3.0], "device": "NVIDIA H200"}
+    mapped = {"seconds": 600.0, "deterministic": [1.0, 2.0, 3.0], "device": "NVIDIA H100"}
+    line = pv.against_playground({"playground": playground, "mapped": mapped}, "mapped")
+    assert "not set against Playground's: it ran on NVIDIA H100, Playground on NVIDIA H200" in line
+    assert " s against " not in line and "x faster" not in line, line
+
+
 def test_the_knob_steps_name_the_sides_in_the_record_and_order_their_returns():
     """A step is written only where both its sides ran; each says its IQMs, before then after,
     and which side's seeds return more (hand-picked returns: every mapped seed above every
