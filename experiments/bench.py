@@ -17,7 +17,9 @@ Measures, in one process on whatever device JAX sees:
            same updates as one bare jitted scan: env steps/s, and gradient samples/s = env steps/s x
            epochs, as a fraction of the ceiling (1.0 would mean the GPU did nothing but full-batch
            updates); and the milliseconds of one update's rollout, learning and env steps alone
-Each timing is the best of a few repetitions after a compile-and-warm-up call.
+Each timing is the best of a few repetitions after a compile-and-warm-up call. Where every env
+steps with MuJoCo Warp (`--physics warp`, or auto where it gives Warp) the process runs without
+deterministic GPU ops, as the command does (hintsjax/run.py); elsewhere with them.
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ import numpy as np
 import optax
 
 from hintsjax import envs
-from hintsjax.system import compilation_cache
+from hintsjax.system import compilation_cache, xla_flags
 from hintsjax.settings.algorithm_settings import ENCODER_DTYPES
 from hintsjax.settings.env_defaults import ENV_DEFAULTS
 from hintsjax.settings.layers import run_config
@@ -317,6 +319,14 @@ def update_parts(
     return seconds, ended
 
 
+def all_warp(names: list[str], physics: str) -> bool:
+    """Whether every env of `names` steps with MuJoCo Warp under `physics` (auto: as the command
+    would decide it on this machine), read without starting JAX's backend."""
+    return all(
+        physics == envs.WARP or (physics == envs.AUTO and envs.auto_likely_warp(n)) for n in names
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -391,6 +401,10 @@ def main() -> None:
     except ValueError as e:
         parser.exit(2, f"error: {e}\n")
     mjx_envs = envs.mjx_env_names()
+    if all_warp(names, args.physics):
+        # as the command under MuJoCo Warp (hintsjax/run.py): no deterministic GPU ops, which
+        # cost the learner a third (docs/throughput.md); said before JAX's backend starts
+        xla_flags.drop_determinism()
     try:
         for name in names:
             envs.resolve_physics(name, args.physics)
@@ -419,6 +433,7 @@ def main() -> None:
             print(
                 f"update  {name:>9} 5 seeds {cfg.ppo.num_envs} envs x "
                 f"{cfg.ppo.rollout_length} steps, {cfg.physics}, {args.encoder_dtype} encoder, "
+                f"deterministic ops {'on' if xla_flags.deterministic_gpu_ops() else 'off'}, "
                 f"starts {args.rollout_starts}, after {args.warm_rollouts} rollouts "
                 f"({ended:.1f} envs ended a step): "
                 + ", ".join(f"{k} {1e3 * v:.1f} ms" for k, v in parts.items()),

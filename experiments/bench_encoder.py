@@ -2,10 +2,13 @@
 (PatchConv's strided layers, hintsjax.models.networks.blocked_conv) and as nn.Conv, f32 and bf16.
 
     python experiments/bench_encoder.py [--batch 8192] [--seeds 5] [--convs patches,blocks,conv]
+                                        [--deterministic-ops on|off]
 
 For each variant: samples/s of forward+backward+Adam for the pixel encoder plus a 256-256 head,
 once at one batch and once vmapped over `--seeds` weight copies (the seed-vmapped training case)
-with the same total batch. Informs the choice of `hintsjax.models.networks.PatchConv`.
+with the same total batch. Informs the choice of `hintsjax.models.networks.PatchConv`. Deterministic
+GPU ops on, as hintsjax sets them, unless `--deterministic-ops off` (what a run under MuJoCo Warp
+learns with): they slow the learner by about a third (docs/throughput.md).
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import jax.numpy as jnp
 import optax
 
 from hintsjax.models.networks import MLP, PatchConv
+from hintsjax.system import xla_flags
 
 CONVS = ("patches", "blocks", "conv")
 
@@ -63,11 +67,17 @@ def main() -> None:
     parser.add_argument("--batch", type=int, default=8192)
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--convs", default=",".join(CONVS), help=f"of {', '.join(CONVS)}")
+    parser.add_argument("--deterministic-ops", choices=("on", "off"), default="on")
     args = parser.parse_args()
+    if args.deterministic_ops == "off":  # before JAX's backend starts: it reads XLA_FLAGS once
+        xla_flags.drop_determinism()
     convs = args.convs.split(",")
     if unknown := [c for c in convs if c not in CONVS]:
         parser.error(f"unknown --convs {', '.join(unknown)}; valid: {', '.join(CONVS)}")
-    print(f"device: {jax.devices()[0].device_kind}")
+    print(
+        f"device: {jax.devices()[0].device_kind}, deterministic ops "
+        f"{'on' if xla_flags.deterministic_gpu_ops() else 'off'}"
+    )
     for conv in convs:
         for dtype in (jnp.float32, jnp.bfloat16):
             for seeds in (1, args.seeds):
