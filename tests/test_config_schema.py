@@ -363,6 +363,7 @@ def test_the_network_takes_its_ppo_settings_by_name():
         "critic_trains_encoder",
         "encoder",
         "encoder_dtype",
+        "critic_encoder",
     } <= set(ppo.NETWORK_SETTINGS)
     cfg = run_config(
         {

@@ -222,6 +222,42 @@ def test_a_critic_that_does_not_train_the_encoder_leaves_the_shared_features_to_
     jax.tree.map(np.testing.assert_array_equal, grads(own, 2)["critic"], grads(shared, 2)["critic"])
 
 
+@pytest.mark.parametrize("agent", ["hints", "ppo_rgb", "asym_ac"])
+def test_a_critic_with_its_own_encoder_and_the_actor_train_apart(agent):
+    """critic_encoder="own" (ppo.critic_encoder): the critic reads an encoder (and, for a
+    conditioned agent, a conditioning) of its own, at the encoders' learning rate. The value's
+    gradient reaches those and none of the actor's; the action's gradient reaches the actor's and
+    none of the critic's. The actor's outputs are the shared network's given the same actor's
+    parameters; the value is the critic's own encoder's (its parameters swapped for the actor's
+    encoder's, it is the shared network's value)."""
+    spec = AGENTS[agent]
+    obs = {k: OBS[k] for k in spec.observe}
+    net, shared = ActorCritic(spec, "fc", 2, critic_encoder="own"), ActorCritic(spec, "fc", 2)
+    params = net.init(jax.random.key(0), obs)["params"]
+    mine = [p for p in ("encoder", "conditioning") if p in params]
+    assert mine == (["encoder", "conditioning"] if spec.conditioned else ["encoder"])
+    theirs = [f"critic_{p}" for p in mine]
+    assert set(theirs) <= set(params)
+    labels = lr_labels({"params": params})["params"]
+    assert all(set(jax.tree.leaves(labels[p])) == {"encoder"} for p in theirs)
+
+    def grads(output):
+        return jax.grad(lambda p: net.apply({"params": p}, obs)[output].sum())(params)
+
+    nonzero = lambda tree: any(bool(np.any(x)) for x in jax.tree.leaves(tree))  # noqa: E731
+    value, action = grads(2), grads(0)
+    for a, c in zip(mine, theirs):
+        assert nonzero(value[c]) and not nonzero(value[a]), a
+        assert nonzero(action[a]) and not nonzero(action[c]), a
+    as_shared = {k: v for k, v in params.items() if k not in theirs}
+    out, ref = net.apply({"params": params}, obs), shared.apply({"params": as_shared}, obs)
+    np.testing.assert_array_equal(out[0], ref[0])
+    np.testing.assert_array_equal(out[1], ref[1])
+    assert not np.allclose(out[2], ref[2])  # the critic's own encoder is another draw
+    swapped = {**params, **{c: params[a] for a, c in zip(mine, theirs)}}
+    np.testing.assert_allclose(net.apply({"params": swapped}, obs)[2], ref[2], rtol=1e-6)
+
+
 def test_a_log_std_floor_holds_the_std_up_and_leaves_it_alone_above():
     """min_log_std (ppo.min_log_std): a log std below the floor is the floor, and its gradient is 0
     there; one above is as learnt. Without a floor nothing changes."""

@@ -175,7 +175,8 @@ class ActorCritic(nn.Module):
     `action_head` "sigmoid" (the authors' head) its mean is 2 sigmoid(x) - 1 and its std at least
     SIGMOID_MIN_STD; "gaussian" and "tanh" leave both as they are (tanh squashes in the env:
     envs.SquashedActions). Without `critic_trains_encoder` the critic reads z' through a
-    stop-gradient: its loss trains the critic's MLP alone.
+    stop-gradient: its loss trains the critic's MLP alone. With `critic_encoder` "own" the critic
+    reads features of its own, from an encoder (and conditioning) that its loss alone trains.
     The hint's role is the agent's `hint_use`: the features' input (conditioned by the scheme), the
     critic's alone (embedded beside z', "critic_hint"), or a target that z' predicts ("hint_head",
     given by `predict_hint`). Top-level parameter names are the optimiser's learning-rate groups.
@@ -194,13 +195,16 @@ class ActorCritic(nn.Module):
     min_log_std: float | None = None  # a floor on the log std, after the head's own (None: none)
     encoder: str = "nature"  # the pixel encoder, an ENCODERS key
     encoder_dtype: str = "float32"  # the pixel encoder's arithmetic
+    critic_encoder: str = "shared"  # "own": the critic's features from an encoder of its own
 
-    def features(self, obs: dict[str, jax.Array]) -> jax.Array:
+    def features(self, obs: dict[str, jax.Array], owner: str = "") -> jax.Array:
+        """z' from the agent's inputs; `owner` "critic_" builds the critic's own encoder and
+        conditioning (modules critic_encoder and critic_conditioning)."""
         agent = self.agent
         make = ENCODERS[self.encoder]
-        encoder = lambda: make(jnp.dtype(self.encoder_dtype), name="encoder")  # noqa: E731
+        encoder = lambda: make(jnp.dtype(self.encoder_dtype), name=f"{owner}encoder")  # noqa: E731
         if agent.conditioned:
-            cond = SCHEMES[self.scheme](self.hint_width, name="conditioning")
+            cond = SCHEMES[self.scheme](self.hint_width, name=f"{owner}conditioning")
             return cond(encoder(), scale_pixels(obs["pixels"]), obs["hint"])
         if agent.pixels:
             return encoder()(scale_pixels(obs["pixels"]))
@@ -226,7 +230,10 @@ class ActorCritic(nn.Module):
             )
         if self.min_log_std is not None:
             log_std = jnp.maximum(log_std, self.min_log_std)
-        critic_in = z if self.critic_trains_encoder else jax.lax.stop_gradient(z)
+        if self.critic_encoder == "own":
+            critic_in = self.features(obs, owner="critic_")
+        else:
+            critic_in = z if self.critic_trains_encoder else jax.lax.stop_gradient(z)
         # the privileged hint beside the features, the critic's alone
         if self.agent.hint_use == "critic":
             critic_in = jnp.concatenate(
@@ -247,6 +254,8 @@ class ActorCritic(nn.Module):
 LR_GROUPS = {
     "encoder": "encoder",
     "conditioning": "encoder",
+    "critic_encoder": "encoder",  # ppo.critic_encoder=own: a pixel encoder, at the encoders' rate
+    "critic_conditioning": "encoder",
     "actor": "actor",
     "log_std": "actor",
     "critic": "critic",

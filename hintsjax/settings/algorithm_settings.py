@@ -29,6 +29,10 @@ GRAD_CLIPS = ("global", "per_part")
 # The pixel encoder's arithmetic (`ppo.encoder_dtype`): its convolutions' inputs, weights and
 # products; the parameters, the heads and the losses stay float32.
 ENCODER_DTYPES = ("float32", "bfloat16")
+# Whose encoder the critic reads (`ppo.critic_encoder`): "shared", the actor's (the paper's, and
+# CleanRL's and Stable-Baselines3's default), or "own", one of its own that the critic's loss
+# alone trains (Brax's vision PPO: a CNN in the policy network and one in the value network).
+CRITIC_ENCODERS = ("shared", "own")
 
 
 @dataclass(frozen=True)
@@ -159,6 +163,13 @@ class PPOConfig:
         choices=ENCODER_DTYPES,
         saved_may_lack=True,
     )
+    critic_encoder: str = setting(
+        "shared",
+        "pixel agents: shared, the critic reads the actor's encoder; own, an encoder (and "
+        "hint conditioning) of its own, trained by the critic's loss alone at ppo.encoder_lr",
+        choices=CRITIC_ENCODERS,
+        saved_may_lack=True,
+    )
     # The privileged-signal baselines (hintsjax/models/agents.py). Shapes, not traced: a Hyper leaf
     # more would keep the checkpoints saved before it from restoring.
     hint_dropout: float = setting(
@@ -254,6 +265,11 @@ class PPOConfig:
                 f"ppo.squashed_entropy is the entropy of ppo.action_head=tanh's squashed action; "
                 f"ppo.action_head={self.action_head} squashes nothing: set ppo.action_head=tanh, "
                 "or ppo.squashed_entropy=false"
+            )
+        if self.critic_encoder == "own" and not self.critic_trains_encoder:
+            raise UsageError(
+                "ppo.critic_encoder=own gives the critic an encoder that its loss alone trains; "
+                "ppo.critic_trains_encoder=false would leave it untrained: drop one of the two"
             )
         if self.kl_adaptive_lr and self.target_kl is None:
             raise UsageError(

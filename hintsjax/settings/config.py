@@ -209,6 +209,12 @@ class RunConfig:
             raise UsageError(f"checkpoint_seconds must be 0 or more, got {self.checkpoint_seconds}")
         for section in SECTIONS:
             getattr(self, section).validate()
+        if self.ppo.critic_encoder != "shared" and not self.agent_spec.pixels:
+            pixel_agents = ", ".join(name for name, spec in AGENTS.items() if spec.pixels)
+            raise UsageError(
+                f"ppo.critic_encoder={self.ppo.critic_encoder} gives the critic a pixel encoder "
+                f"of its own; agent={self.agent} sees no pictures (pixel agents: {pixel_agents})"
+            )
         if self.ppo.action_head != "gaussian" and (
             self.agent_spec.imitates or self.agent == EXPERT_AGENT
         ):
