@@ -17,6 +17,8 @@ Playground's budget: 4 epochs of 31 training steps of 40,960, 5,079,040 a seed):
   the last 3 side by side as Playground's agent sees its last 3, `frames=3 colour=grey`) with
   Playground's settings mapped onto hintsjax's (`mapped_values`), seeds vmapped in one program.
 - `mapped_cnn`: the same with Brax's CNN (`ppo.encoder=brax_vision`): the encoder's part;
+- `mapped_nets`: Brax's CNN and one for the critic of its own (`ppo.critic_encoder=own`), as
+  Brax's policy and value networks each have one;
 - `mapped_one`: the same with one picture at a time (`frames=1`): the frame stack's part in the
   difference, one knob; `mapped_first`: the mapping as first built, one RGB picture and the
   entropy bonus of the Gaussian before the squash (`ppo.squashed_entropy=false`).
@@ -46,11 +48,20 @@ from playground import mend_brax_for_this_jax, record_side, steps_per_update  # 
 
 TASK = "CartpoleBalance"
 ENV = f"playground:{TASK}:vision"
-SIDES = ("playground", "mapped", "mapped_cnn", "mapped_one", "mapped_first", "defaults")
+SIDES = (
+    "playground",
+    "mapped",
+    "mapped_cnn",
+    "mapped_nets",
+    "mapped_one",
+    "mapped_first",
+    "defaults",
+)
 TRAINERS = {
     "playground": "Playground + brax.training vision PPO",
     "mapped": "hintsjax ppo_rgb, Playground's settings",
     "mapped_cnn": "hintsjax ppo_rgb, Playground's settings, Brax's CNN",
+    "mapped_nets": "hintsjax ppo_rgb, Playground's settings, Brax's CNN, one a network",
     "mapped_one": "hintsjax ppo_rgb, Playground's settings, one picture",
     "mapped_first": "hintsjax ppo_rgb, Playground's settings, one picture, the Gaussian's entropy",
     "defaults": "hintsjax ppo_rgb, its defaults",
@@ -103,6 +114,7 @@ def mapped_values(
     squashed: bool = True,
     colour: str = PLAYGROUND_COLOUR,
     encoder: str = "nature",
+    critic_encoder: str = "shared",
 ) -> dict:
     """hintsjax's run config with Playground's vision settings where hintsjax has the knob: an
     update of num_envs rollouts of batch_size x num_minibatches x unroll_length / num_envs steps,
@@ -113,9 +125,10 @@ def mapped_values(
     pictures side by side (Playground's 3, or one for `mapped_one`) in `colour` (Playground's
     grey), and the `encoder`: hintsjax's (its three VALID convolutions, 32 8x8/4, 64 4x4/2, 64
     3x3/1, ReLU) or Brax's (`brax_vision` for `mapped_cnn`: two SAME ones, 16 5x5/2 and 32 3x3/2
-    with 2x2 max-pools and ELU). Left at hintsjax's: one encoder shared by actor and critic
-    (Brax's networks have one each), its inits, the value loss's weight and the pictures' scale
-    (hintsjax's bytes in [-1, 1], Playground's grey in [-0.5, 0.5])."""
+    with 2x2 max-pools and ELU), shared by actor and critic or, `critic_encoder` "own" (for
+    `mapped_nets`), one each as Brax's networks have. Left at hintsjax's: its inits, the value
+    loss's weight and the pictures' scale (hintsjax's bytes in [-1, 1], Playground's grey in
+    [-0.5, 0.5])."""
     batch = steps_per_update(s)
     rate = s["learning_rate"]
     ppo = {
@@ -139,6 +152,7 @@ def mapped_values(
         "reward_scale": s["reward_scaling"],
         "hidden": list(s["network_factory"]["policy_hidden_layer_sizes"]),
         "encoder": encoder,
+        "critic_encoder": critic_encoder,
     }
     return {**common_values(seeds, smoke), "frames": frames, "colour": colour, "ppo": ppo}
 
@@ -408,6 +422,9 @@ def train_side(side: str, runs: Path, seeds: int, smoke: bool) -> None:
         make = {
             "mapped": mapped_values,
             "mapped_cnn": functools.partial(mapped_values, encoder="brax_vision"),
+            "mapped_nets": functools.partial(
+                mapped_values, encoder="brax_vision", critic_encoder="own"
+            ),
             "mapped_one": functools.partial(mapped_values, frames=1),
             "mapped_first": functools.partial(
                 mapped_values, frames=1, squashed=False, colour="rgb"
@@ -554,10 +571,8 @@ KNOB_STEPS = (
     ),
     ("mapped", "its 3 pictures a step, not 1"),
     ("mapped_cnn", "Brax's CNN (`ppo.encoder=brax_vision`), one for actor and critic"),
-    (
-        "playground",
-        "what is left: a CNN a network, inits, the value loss, the pictures and their scale",
-    ),
+    ("mapped_nets", "a CNN of the critic's own (`ppo.critic_encoder=own`), as Brax's value net"),
+    ("playground", "what is left: inits, the value loss, the pictures and their scale"),
 )
 
 

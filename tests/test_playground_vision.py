@@ -53,6 +53,10 @@ def test_both_sides_take_brax_s_own_env_steps_with_playground_s_settings_mapped(
     )
     assert mapped.action_head == "tanh" and mapped.hidden == (128, 64)
     assert mapped.encoder_lr == mapped.actor_lr == mapped.critic_lr == 1e-3
+    # Brax's CNN shared by actor and critic (mapped_cnn), then one a network as Brax's (mapped_nets)
+    assert (mapped.encoder, mapped.critic_encoder) == ("nature", "shared")
+    nets = run_config(pv.mapped_values(s, 5, False, encoder="brax_vision", critic_encoder="own"))
+    assert (nets.ppo.encoder, nets.ppo.critic_encoder) == ("brax_vision", "own")
     defaults = run_config(pv.default_values(s, seeds=5, smoke=False))
     assert (
         defaults.env == pv.ENV and defaults.ppo.num_updates * defaults.ppo.batch_size == 5_079_040
@@ -222,8 +226,9 @@ def test_the_knob_steps_name_the_sides_in_the_record_and_order_their_returns():
         and "P(mapped > mapped_one) = 1.00 [1.00, 1.00]: decided" in lines[0]
     )
     assert pv.knob_lines({"defaults": results["mapped"]}) == []
-    # a side not run (mapped_cnn) passes its knobs on to the next step
+    # sides not run (mapped_cnn, mapped_nets) pass their knobs on to the next step
     results["playground"] = {"deterministic": [1.0, 2.0, 3.0, 4.0]}
     line = pv.knob_lines(results)[1]
     assert line.startswith("- mapped -> playground, Brax's CNN (`ppo.encoder=brax_vision`), one ")
+    assert "; a CNN of the critic's own (`ppo.critic_encoder=own`)" in line
     assert "; what is left: " in line and "P(playground > mapped) = 0.00 [0.00, 0.00]" in line
