@@ -106,6 +106,29 @@ def test_hints_agent_learns_the_cue(scheme):
     assert low < 0.0 < high and high - low > 1.0, (low, high)
 
 
+def test_a_critic_with_its_own_encoder_trains_it_beside_the_actors():
+    """ppo.critic_encoder=own through the trainer: two updates move the actor's encoder and the
+    critic's own (the optimiser gives it the encoders' rate, not the frozen group's)."""
+    cfg = layers.run_config(
+        dict(
+            env="cue",
+            agent="ppo_rgb",
+            seeds=1,
+            ppo={**LEARN_PPO, "total_env_steps": 512, "critic_encoder": "own"},
+        )
+    )
+    trainer = ppo.make_trainer(cfg)
+    key = jax.random.key(0)
+    before = jax.jit(trainer.init)(key).params["params"]
+    after = jax.jit(trainer.train)(key)[0].params["params"]
+    for part in ("encoder", "critic_encoder"):
+        moved = [
+            float(np.abs(np.asarray(a) - np.asarray(b)).max())
+            for a, b in zip(jax.tree.leaves(after[part]), jax.tree.leaves(before[part]))
+        ]
+        assert min(moved) > 0.0 and np.all(np.isfinite(moved)), (part, moved)
+
+
 def test_rgb_agent_cannot_beat_the_best_constant_action():
     trainer, state, metrics = learn("ppo_rgb")
     returns = metrics["episode_return"]
