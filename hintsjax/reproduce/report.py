@@ -111,6 +111,7 @@ def ppo_text(ppo) -> str:
         + (f", KL early stop at {ppo.target_kl:g}" if ppo.target_kl else "")
         + (" with the learning rates adapted to the KL" if ppo.kl_adaptive_lr else "")
         + (", the encoder trained by the actor alone" if not ppo.critic_trains_encoder else "")
+        + (", the critic's own encoder" if ppo.critic_encoder == "own" else "")
         + (f", rewards x {ppo.reward_scale:g}" if ppo.reward_scale != 1.0 else "")
         + (", the state normalised" if ppo.normalize_state else "")
     )
