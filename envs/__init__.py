@@ -198,6 +198,13 @@ def resolve_physics(name: str, physics: str = AUTO) -> str:
     return _physics.resolve(physics, jax.default_backend(), cls.warp_by_default, jax.device_count())
 
 
+def likely_warp(name: str, physics: str) -> bool:
+    """Whether `physics` (warp, or auto as `auto_likely_warp` reads it) steps env `name` with
+    MJX-Warp on this machine, read without starting JAX: what a command, a sweep's worker and the
+    bench decide their XLA flags by."""
+    return physics == WARP or (physics == AUTO and auto_likely_warp(name))
+
+
 def auto_likely_warp(name: str) -> bool:
     """Whether physics=auto will step env `name` with MJX-Warp on this machine, read without
     starting JAX (`gpu_likely`): what a command decides its XLA flags by. An adapted env

@@ -319,14 +319,6 @@ def update_parts(
     return seconds, ended
 
 
-def all_warp(names: list[str], physics: str) -> bool:
-    """Whether every env of `names` steps with MuJoCo Warp under `physics` (auto: as the command
-    would decide it on this machine), read without starting JAX's backend."""
-    return all(
-        physics == envs.WARP or (physics == envs.AUTO and envs.auto_likely_warp(n)) for n in names
-    )
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -401,7 +393,7 @@ def main() -> None:
     except ValueError as e:
         parser.exit(2, f"error: {e}\n")
     mjx_envs = envs.mjx_env_names()
-    if all_warp(names, args.physics):
+    if all(envs.likely_warp(name, args.physics) for name in names):
         # as the command under MuJoCo Warp (hintsjax/run.py): no deterministic GPU ops, which
         # cost the learner a third (docs/throughput.md); said before JAX's backend starts
         xla_flags.drop_determinism()

@@ -32,15 +32,19 @@ def test_bad_model_options_name_the_valid_ones(item, names):
 
 
 def test_the_bench_drops_deterministic_ops_where_the_command_would(monkeypatch):
-    """As run.py decides it: every env under MuJoCo Warp (asked, or auto where the machine would
-    give it), not where one env steps with MJX's JAX solver."""
+    """As run.py decides it (envs.likely_warp, which the bench asks of every env): under MuJoCo
+    Warp where asked, or auto where the machine would give it; not where an env steps with MJX's
+    JAX solver."""
     from hintsjax import envs
 
-    assert bench.all_warp(["ant", "humanoid"], envs.WARP)
-    assert not bench.all_warp(["ant"], envs.JAX)
+    def all_warp(names, physics):
+        return all(envs.likely_warp(name, physics) for name in names)
+
+    assert all_warp(["ant", "humanoid"], envs.WARP)
+    assert not all_warp(["ant"], envs.JAX)
     monkeypatch.setattr(envs, "auto_likely_warp", lambda name: name == "ant")
-    assert bench.all_warp(["ant"], envs.AUTO)
-    assert not bench.all_warp(["ant", "pendulum"], envs.AUTO)
+    assert all_warp(["ant"], envs.AUTO)
+    assert not all_warp(["ant", "pendulum"], envs.AUTO)
 
 
 def test_warmed_parts_start_where_episodes_end_as_in_a_run():

@@ -1452,15 +1452,6 @@ def test_a_config_saved_before_the_brax_knobs_resumes_under_their_defaults(tmp_p
     assert layers.missing_keys(values) == ["ppo.clip_eps"]
 
 
-def test_a_report_states_a_critic_with_its_own_encoder():
-    from hintsjax.reproduce.report import ppo_text
-
-    cfg = layers.run_config({"agent": "ppo_rgb"})
-    assert "own encoder" not in ppo_text(cfg.ppo)
-    own = layers.run_config({"agent": "ppo_rgb", "ppo": {"critic_encoder": "own"}})
-    assert ppo_text(own.ppo).endswith("critic 0.001, the critic's own encoder, rewards x 0.1")
-
-
 def test_a_ctrl_c_while_the_command_still_imports_stops_it_before_anything_is_written(tmp_path):
     """A command's process keeps a Ctrl-C that comes while its modules import (hintsjax/__init__.py
     under `python -m`) and its boundary raises it as the command begins: one line, exit 130, no

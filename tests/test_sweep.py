@@ -341,6 +341,17 @@ def test_locomotion_report_states_the_settings_each_row_was_trained_with(tmp_pat
     ]
 
 
+def test_a_report_states_a_critic_with_its_own_encoder():
+    from hintsjax.settings.layers import run_config
+
+    cfg = run_config({"agent": "ppo_rgb"})
+    assert "own encoder" not in report.ppo_text(cfg.ppo)
+    own = run_config({"agent": "ppo_rgb", "ppo": {"critic_encoder": "own"}})
+    assert report.ppo_text(own.ppo).endswith(
+        "critic 0.001, the critic's own encoder, rewards x 0.1"
+    )
+
+
 def test_kl_cell_is_the_share_of_blown_up_updates(tmp_path):
     folder = tmp_path / "ant" / "hints-fc-speed"
     folder.mkdir(parents=True)

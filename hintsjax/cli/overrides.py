@@ -238,9 +238,8 @@ def asks_only_for_warp(argv: list[str]) -> bool:
 
     def physics(values: dict[str, Any]) -> Any:
         if values.get("resume") is None:
-            if values.get("physics") == "auto" and envs.auto_likely_warp(str(values.get("env"))):
-                return "warp"
-            return values.get("physics")
+            physics = values.get("physics")
+            return envs.WARP if envs.likely_warp(str(values.get("env")), physics) else physics
         try:
             return yaml.safe_load((Path(str(values["resume"])) / "config.yaml").read_text()).get(
                 "physics"

@@ -38,12 +38,6 @@ def parsed_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -
     return settings
 
 
-def _auto_warp(env: str) -> bool:
-    from hintsjax import envs  # jax imported, its backend not started
-
-    return envs.auto_likely_warp(env)
-
-
 def check_settings(parser: argparse.ArgumentParser, settings: dict) -> dict:
     """`settings`, or exit 2 in one line on one that RunConfig refuses (this starts JAX's backend:
     resolving the physics asks it for the platform)."""
@@ -67,10 +61,12 @@ def worker_settings(parser: argparse.ArgumentParser, args: argparse.Namespace) -
     (physics=warp, or auto for envs that prefer Warp on this machine's NVIDIA GPU) it trains without
     deterministic GPU ops (nothing repeats bit for bit under Warp's atomics), which it must say
     before the check starts JAX's backend."""
+    from hintsjax import envs  # jax imported, its backend not started
+
     settings = parsed_settings(parser, args)
-    physics = settings.get("physics", "auto")
+    physics = settings.get("physics", envs.AUTO)
     env_names = [run.split("/")[0] for run in getattr(args, "one", "").split(",") if run]
-    if physics == "warp" or (physics == "auto" and env_names and all(map(_auto_warp, env_names))):
+    if physics == envs.WARP or (env_names and all(envs.likely_warp(n, physics) for n in env_names)):
         from hintsjax.system import xla_flags
 
         xla_flags.drop_determinism()
