@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# The GPU runs the open issues still wait for (82: the ant's update and command; 83: Playground's
+# side by side), in the order they matter, as one detached job for one lease of one GPU. Set up
+# with experiments/offline_gpu.sh (its ten calls: MJX-Warp, then Playground's wheels); in the tenth:
+#
+#   bash experiments/offline_gpu.sh install .whl3 && bash experiments/gpu_queue.sh start
+#                                                # start: copies the repo to /tmp/repo, runs detached
+#   bash experiments/offline_gpu.sh poll 240 queue_done   # again and again: keep a call in flight
+#
+# Each run writes into /tmp/r (which poll packs into $OUT/runs.tgz) and logs into /tmp/logs. A lease
+# holds a machine for 30 minutes; the setup takes 2 to 3, so the queue runs in priority order and
+# whatever it reached comes back (estimates from one H200: each knob side about 5 minutes, the
+# profile 1.5, the bench pair 4, the typed command 8.5). Once a run is back, take it off here.
+set -u
+case "${1:-}" in
+start)
+    rm -rf /tmp/repo && cp -r . /tmp/repo
+    (setsid nohup bash /tmp/repo/experiments/gpu_queue.sh run > /tmp/queue.out 2>&1 < /dev/null &)
+    echo "queue started: /tmp/queue.out, /tmp/logs" ;;
+run)
+    export PYTHONPATH=/tmp/site PYTHONUNBUFFERED=1
+    R=/tmp/repo L=/tmp/logs
+    mkdir -p $L /tmp/r/runs/playground /tmp/r/bench /tmp/r/typed
+    # 83: the two knob sides between the mapped side and Playground's (5 seeds each); --report here
+    # merges them into the archived record
+    cp $R/experiments/results/runs/playground/versus_vision.json /tmp/r/runs/playground/
+    for side in mapped_cnn mapped_nets; do
+        (cd /tmp/r && python3 $R/experiments/playground_vision.py --side $side --seeds 5 \
+            --runs runs/playground) > $L/$side.log 2>&1
+    done
+    # 82: the ant's learner without deterministic ops (as its Warp run trains), by XLA op
+    (cd /tmp/r && python3 $R/experiments/profile_update.py --part learn --env ant --physics jax \
+        --variants nodet --updates 10 --seeds 5 --top 40 --out /tmp/r/profile) > $L/profile.log 2>&1
+    # 82: an update's parts under Warp, the rollout's starts drawn for every env or the ended ones
+    # (hintsjax.algorithms.ppo.ENDED_STARTS_PHYSICS holds JAX alone until this says otherwise)
+    for s in every_env ended; do
+        (cd /tmp/r/bench && python3 $R/experiments/bench.py --parts --envs ant --physics warp \
+            --rollout-starts $s --warm-rollouts 249 --out /tmp/r/bench/$s.json) > $L/bench_$s.log 2>&1
+    done
+    # 82: the design's command as a new user types it, caches empty (run_path.json's row)
+    rm -rf ~/.cache/hintsjax ~/.cache/warp
+    (cd /tmp/r/typed && /usr/bin/time -v python3 -m hintsjax.run env=ant hint=speed scheme=fc) \
+        > $L/typed.log 2>&1
+    touch /tmp/queue_done ;;
+*)
+    sed -n '2,13p' "$0"; exit 2 ;;
+esac
