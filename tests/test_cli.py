@@ -1071,6 +1071,7 @@ def test_a_config_that_lacks_a_setting_is_not_resumed(cut, cut_resumes):
     assert layers.load_run_config(copy).env == "pendulum"  # reports still read it
 
 
+@pytest.mark.slow  # 19 s; tests/test_devices.py's slow tests shard over four devices in-process
 def test_seeds_sharded_over_two_devices_give_the_single_device_result(finished_run, tmp_path):
     env = {**os.environ, "XLA_FLAGS": with_xla_flag("--xla_force_host_platform_device_count=2")}
     args = [*TINY, "out_dir=runs", "name=sharded"]

@@ -197,7 +197,7 @@ def test_warp_ant_parity_as_shipped(warp_ant):
 
 
 # slow tier (75 s on 2 cores, most of it compiling Warp's kernels and both physics' programs); the
-# default tier keeps Warp's kernels loaded and stepped in a process of its own (the test below)
+# default tier keeps Warp's kernels compiled and stepped by its overflow check (below)
 @warp_lang
 @pytest.mark.slow
 def test_warp_equals_jax_and_its_nested_vmap_equals_a_loop():
@@ -251,6 +251,7 @@ print("stepped", bool(jnp.isfinite(out.qpos).all()))
 )
 
 
+@pytest.mark.slow  # 35 s of the default tier's 10 minutes on a clean clone (2026-12-07)
 @warp_lang
 def test_warp_prints_no_banner_or_module_lines_unless_debugging():
     """Warp's init banner and its line per kernel module ("Module ... load on device 'cuda:0'
