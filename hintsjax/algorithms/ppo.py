@@ -219,8 +219,9 @@ def hint_error(prediction: jax.Array, hint: jax.Array, keep: jax.Array) -> jax.A
 # for its few truncations and ends, not a whole one.
 ROW_CHUNKS = 8
 # The physics whose rollouts draw the ended envs' starts alone (`AutoReset.step_ended`); under
-# MJX-Warp a chunk is another batch shape for its kernels, and they draw every env's start each
-# step until a run whose envs end has been measured (and run) so on a GPU (docs/throughput.md).
+# MJX-Warp a chunk is another batch shape for its kernels: it steps as every env's start does on a
+# CPU (tests/envs/test_physics.py, slow tier), but its speed on a GPU is not yet measured
+# (experiments/gpu_queue.sh), so Warp's rollouts draw every env's start each step.
 ENDED_STARTS_PHYSICS = frozenset({envs.JAX})
 
 

@@ -301,6 +301,41 @@ def test_a_warp_overflow_poisons_the_world_and_is_reported():
     assert np.isfinite(np.asarray(fine.qpos)).all() and physics.overflow_seen() is None
 
 
+@pytest.mark.slow  # 30 s on 2 cores
+@warp_lang
+def test_under_warp_drawing_only_the_ended_starts_steps_as_every_envs_start():
+    """AutoReset.step_ended under MJX-Warp: 16 ants under actions of +-1e6 for 40 steps, the ended
+    envs' starts drawn 2 at a time (another batch shape for Warp's kernels than the step's 16),
+    take the same rewards, ends, observations and states as the vmapped step that draws every
+    env's start each step (measured: 14 ends, every value equal). What PPO's rollout under Warp
+    needs before hintsjax.algorithms.ppo.ENDED_STARTS_PHYSICS may name it; its speed is GPU work."""
+    n, steps = 16, 40
+    env = envs.AutoReset(envs.make("ant", envs.NO_HINT, ("state",), physics=envs.WARP))
+    params = envs.make_params("ant")
+    start = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(KEY, n), params).state
+    extremes = jnp.array([1e6, -1e6, 0.0])
+
+    def roll(ended: bool):
+        def step(state, key):
+            k_act, k_env = jax.random.split(key)
+            action = jax.random.choice(k_act, extremes, (n, env.action_size))
+            keys = jax.random.split(k_env, n)
+            if ended:
+                ts = env.step_ended(keys, state, action, params, 2)
+            else:
+                ts = jax.vmap(env.step, in_axes=(0, 0, 0, None))(keys, state, action, params)
+            return ts.state, (ts.reward, ts.terminated | ts.truncated, ts.obs)
+
+        keys = jax.random.split(jax.random.key(1), steps)
+        return jax.jit(lambda s: jax.lax.scan(step, s, keys))(start)
+
+    chosen, every = roll(True), roll(False)
+    ends = np.asarray(chosen[1][1])
+    assert 0 < ends.sum() and ends.sum(axis=1).max() < n, ends.sum(axis=1)  # some, never all
+    for a, b in zip(jax.tree.leaves(chosen), jax.tree.leaves(every)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
 @pytest.mark.slow  # as the halfcheetah's: 40 s on 2 cores
 @warp_lang
 def test_warp_humanoid_parity():
