@@ -10,7 +10,8 @@
 # Each run writes into /tmp/r (which poll packs into $OUT/runs.tgz) and logs into /tmp/logs. A lease
 # holds a machine for 30 minutes; the setup takes 2 to 3, so the queue runs in priority order and
 # whatever it reached comes back (estimates from one H200: each knob side about 5 minutes, the
-# profile 1.5, the bench pair 4, the typed command 8.5). Once a run is back, take it off here.
+# bench pair 4, the profile 1.5, the typed command 8.5: about 30 in all, so the typed command may
+# be left for the next lease). Once a run is back, take it off here.
 set -u
 case "${1:-}" in
 start)
@@ -21,22 +22,23 @@ run)
     export PYTHONPATH=/tmp/site PYTHONUNBUFFERED=1
     R=/tmp/repo L=/tmp/logs
     mkdir -p $L /tmp/r/runs/playground /tmp/r/bench /tmp/r/typed
-    # 83: the two knob sides between the mapped side and Playground's (5 seeds each); --report here
-    # merges them into the archived record
+    # 83: the three knob sides between the mapped side and Playground's (5 seeds each); back here,
+    # the record replaces the archived one and `playground_vision.py --report --runs
+    # experiments/results/runs/playground` writes the section
     cp $R/experiments/results/runs/playground/versus_vision.json /tmp/r/runs/playground/
-    for side in mapped_cnn mapped_nets; do
+    for side in mapped_cnn mapped_nets mapped_scale; do
         (cd /tmp/r && python3 $R/experiments/playground_vision.py --side $side --seeds 5 \
             --runs runs/playground) > $L/$side.log 2>&1
     done
-    # 82: the ant's learner without deterministic ops (as its Warp run trains), by XLA op
-    (cd /tmp/r && python3 $R/experiments/profile_update.py --part learn --env ant --physics jax \
-        --variants nodet --updates 10 --seeds 5 --top 40 --out /tmp/r/profile) > $L/profile.log 2>&1
     # 82: an update's parts under Warp, the rollout's starts drawn for every env or the ended ones
     # (hintsjax.algorithms.ppo.ENDED_STARTS_PHYSICS holds JAX alone until this says otherwise)
     for s in every_env ended; do
         (cd /tmp/r/bench && python3 $R/experiments/bench.py --parts --envs ant --physics warp \
             --rollout-starts $s --warm-rollouts 249 --out /tmp/r/bench/$s.json) > $L/bench_$s.log 2>&1
     done
+    # 82: the ant's learner without deterministic ops (as its Warp run trains), by XLA op
+    (cd /tmp/r && python3 $R/experiments/profile_update.py --part learn --env ant --physics jax \
+        --variants nodet --updates 10 --seeds 5 --top 40 --out /tmp/r/profile) > $L/profile.log 2>&1
     # 82: the design's command as a new user types it, caches empty (run_path.json's row)
     rm -rf ~/.cache/hintsjax ~/.cache/warp
     (cd /tmp/r/typed && /usr/bin/time -v python3 -m hintsjax.run env=ant hint=speed scheme=fc) \

@@ -378,9 +378,9 @@ def versus_record(runs: Path, keep: bool = False) -> Path:
     (experiments/results/runs/<runs' name>/); `keep` archives the first (the report does, not a
     smoke run's)."""
     path, archived = runs / VERSUS_JSON, ARCHIVE / runs.name / VERSUS_JSON
-    if keep and path.exists():
+    if keep and path.exists() and not (archived.exists() and archived.samefile(path)):
         archived.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(path, archived)
+        shutil.copyfile(path, archived)  # not onto itself: runs may be the archive
     return path if path.exists() else archived
 
 

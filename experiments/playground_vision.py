@@ -19,6 +19,7 @@ Playground's budget: 4 epochs of 31 training steps of 40,960, 5,079,040 a seed):
 - `mapped_cnn`: the same with Brax's CNN (`ppo.encoder=brax_vision`): the encoder's part;
 - `mapped_nets`: Brax's CNN and one for the critic of its own (`ppo.critic_encoder=own`), as
   Brax's policy and value networks each have one;
+- `mapped_scale`: those, with the pictures in Playground's range, [-0.5, 0.5] (`ppo.pixel_scale`);
 - `mapped_one`: the same with one picture at a time (`frames=1`): the frame stack's part in the
   difference, one knob; `mapped_first`: the mapping as first built, one RGB picture and the
   entropy bonus of the Gaussian before the squash (`ppo.squashed_entropy=false`).
@@ -53,6 +54,7 @@ SIDES = (
     "mapped",
     "mapped_cnn",
     "mapped_nets",
+    "mapped_scale",
     "mapped_one",
     "mapped_first",
     "defaults",
@@ -62,6 +64,8 @@ TRAINERS = {
     "mapped": "hintsjax ppo_rgb, Playground's settings",
     "mapped_cnn": "hintsjax ppo_rgb, Playground's settings, Brax's CNN",
     "mapped_nets": "hintsjax ppo_rgb, Playground's settings, Brax's CNN, one a network",
+    "mapped_scale": "hintsjax ppo_rgb, Playground's settings, Brax's CNN, one a network, "
+    "Playground's pixel range",
     "mapped_one": "hintsjax ppo_rgb, Playground's settings, one picture",
     "mapped_first": "hintsjax ppo_rgb, Playground's settings, one picture, the Gaussian's entropy",
     "defaults": "hintsjax ppo_rgb, its defaults",
@@ -115,6 +119,7 @@ def mapped_values(
     colour: str = PLAYGROUND_COLOUR,
     encoder: str = "nature",
     critic_encoder: str = "shared",
+    pixel_scale: float = 1.0,
 ) -> dict:
     """hintsjax's run config with Playground's vision settings where hintsjax has the knob: an
     update of num_envs rollouts of batch_size x num_minibatches x unroll_length / num_envs steps,
@@ -126,9 +131,9 @@ def mapped_values(
     grey), and the `encoder`: hintsjax's (its three VALID convolutions, 32 8x8/4, 64 4x4/2, 64
     3x3/1, ReLU) or Brax's (`brax_vision` for `mapped_cnn`: two SAME ones, 16 5x5/2 and 32 3x3/2
     with 2x2 max-pools and ELU), shared by actor and critic or, `critic_encoder` "own" (for
-    `mapped_nets`), one each as Brax's networks have. Left at hintsjax's: its inits, the value
-    loss's weight and the pictures' scale (hintsjax's bytes in [-1, 1], Playground's grey in
-    [-0.5, 0.5])."""
+    `mapped_nets`), one each as Brax's networks have, and the pictures' range: hintsjax's bytes
+    in [-1, 1], or Playground's grey in [-0.5, 0.5] (`pixel_scale` 0.5, for `mapped_scale`). Left
+    at hintsjax's: its inits and the value loss's weight."""
     batch = steps_per_update(s)
     rate = s["learning_rate"]
     ppo = {
@@ -153,6 +158,7 @@ def mapped_values(
         "hidden": list(s["network_factory"]["policy_hidden_layer_sizes"]),
         "encoder": encoder,
         "critic_encoder": critic_encoder,
+        "pixel_scale": pixel_scale,
     }
     return {**common_values(seeds, smoke), "frames": frames, "colour": colour, "ppo": ppo}
 
@@ -425,6 +431,9 @@ def train_side(side: str, runs: Path, seeds: int, smoke: bool) -> None:
             "mapped_nets": functools.partial(
                 mapped_values, encoder="brax_vision", critic_encoder="own"
             ),
+            "mapped_scale": functools.partial(
+                mapped_values, encoder="brax_vision", critic_encoder="own", pixel_scale=0.5
+            ),
             "mapped_one": functools.partial(mapped_values, frames=1),
             "mapped_first": functools.partial(
                 mapped_values, frames=1, squashed=False, colour="rgb"
@@ -572,7 +581,8 @@ KNOB_STEPS = (
     ("mapped", "its 3 pictures a step, not 1"),
     ("mapped_cnn", "Brax's CNN (`ppo.encoder=brax_vision`), one for actor and critic"),
     ("mapped_nets", "a CNN of the critic's own (`ppo.critic_encoder=own`), as Brax's value net"),
-    ("playground", "what is left: inits, the value loss, the pictures and their scale"),
+    ("mapped_scale", "the pictures in [-0.5, 0.5] (`ppo.pixel_scale=0.5`), as Playground's"),
+    ("playground", "what is left: inits, the value loss, the pictures' renderer"),
 )
 
 
@@ -663,7 +673,9 @@ def plot(runs: Path, out: Path) -> None:
 
     record = json.loads((runs / RECORD).read_text())
     fig, ax = plt.subplots(figsize=(7, 4))
-    colours = ("tab:gray", "tab:blue", "tab:purple", "tab:green", "tab:olive", "tab:orange")
+    colours = ("tab:gray", "tab:blue", "tab:cyan", "tab:brown", "tab:red", "tab:purple",
+               "tab:green", "tab:olive", "tab:orange")  # fmt: skip
+    assert len(colours) >= len(SIDES), "a colour for each side"
     for side, colour in zip(SIDES, colours):
         r = record["results"].get(side)
         if r is None:
@@ -714,8 +726,9 @@ def main() -> None:
             return
         (ARCHIVE / args.runs.name).mkdir(parents=True, exist_ok=True)
         for name in (RECORD, SEEDS_DONE):  # the record, and the playground side's seed rows
-            if (args.runs / name).exists():
-                shutil.copyfile(args.runs / name, ARCHIVE / args.runs.name / name)
+            source, archived = args.runs / name, ARCHIVE / args.runs.name / name
+            if source.exists() and not (archived.exists() and archived.samefile(source)):
+                shutil.copyfile(source, archived)  # not onto itself: --runs may be the archive
         plot(args.runs, RESULTS / CURVES)
         import playground
 

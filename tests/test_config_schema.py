@@ -364,6 +364,7 @@ def test_the_network_takes_its_ppo_settings_by_name():
         "encoder",
         "encoder_dtype",
         "critic_encoder",
+        "pixel_scale",
     } <= set(ppo.NETWORK_SETTINGS)
     cfg = run_config(
         {

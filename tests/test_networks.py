@@ -273,3 +273,31 @@ def test_a_log_std_floor_holds_the_std_up_and_leaves_it_alone_above():
     np.testing.assert_array_equal(floored.apply(params, obs)[1], [-1.0, 0.5])
     grad = jax.grad(lambda p: floored.apply(p, obs)[1].sum())(params)["params"]["log_std"]
     np.testing.assert_array_equal(grad, [0.0, 1.0])
+
+
+@pytest.mark.parametrize("agent", ["hints", "ppo_rgb"])
+def test_pixel_scale_sets_the_range_the_encoder_sees(agent):
+    """ppo.pixel_scale: bytes 0 and 255 enter the encoder as -s and s (Playground's vision tasks'
+    grey in [-0.5, 0.5] is s = 0.5), and the network's features are the encoder's (conditioned
+    for HINTS) of those values; s = 1 is the range as it was."""
+    bytes_ = jnp.array([0, 255], jnp.uint8)
+    np.testing.assert_allclose(scale_pixels(bytes_, 0.5), [-0.5, 0.5])
+    np.testing.assert_allclose(scale_pixels(bytes_), [-1.0, 1.0])
+    spec = AGENTS[agent]
+    obs = {k: OBS[k] for k in spec.observe}
+    half, whole = ActorCritic(spec, "fc", 2, pixel_scale=0.5), ActorCritic(spec, "fc", 2)
+    params = whole.init(jax.random.key(0), obs)
+    seen = {}
+
+    def encoder_input(module, *args):  # record what the encoder is called with
+        if isinstance(module, Encoder):
+            seen.setdefault(module.scope.path, args[0])
+        return None
+
+    with nn.intercept_methods(
+        lambda f, args, kwargs, ctx: encoder_input(ctx.module, *args) or f(*args, **kwargs)
+    ):
+        half.apply(params, obs)
+    (x,) = seen.values()
+    np.testing.assert_allclose(x, scale_pixels(obs["pixels"]) * 0.5, rtol=1e-6)
+    assert not np.allclose(half.apply(params, obs)[2], whole.apply(params, obs)[2])

@@ -57,6 +57,9 @@ def test_both_sides_take_brax_s_own_env_steps_with_playground_s_settings_mapped(
     assert (mapped.encoder, mapped.critic_encoder) == ("nature", "shared")
     nets = run_config(pv.mapped_values(s, 5, False, encoder="brax_vision", critic_encoder="own"))
     assert (nets.ppo.encoder, nets.ppo.critic_encoder) == ("brax_vision", "own")
+    assert mapped.pixel_scale == nets.ppo.pixel_scale == 1.0
+    # and Playground's pixel range (mapped_scale)
+    assert run_config(pv.mapped_values(s, 5, False, pixel_scale=0.5)).ppo.pixel_scale == 0.5
     defaults = run_config(pv.default_values(s, seeds=5, smoke=False))
     assert (
         defaults.env == pv.ENV and defaults.ppo.num_updates * defaults.ppo.batch_size == 5_079_040

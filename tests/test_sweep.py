@@ -341,14 +341,16 @@ def test_locomotion_report_states_the_settings_each_row_was_trained_with(tmp_pat
     ]
 
 
-def test_a_report_states_a_critic_with_its_own_encoder():
+def test_a_report_states_a_critic_with_its_own_encoder_and_the_pictures_scale():
     from hintsjax.settings.layers import run_config
 
     cfg = run_config({"agent": "ppo_rgb"})
-    assert "own encoder" not in report.ppo_text(cfg.ppo)
-    own = run_config({"agent": "ppo_rgb", "ppo": {"critic_encoder": "own"}})
+    assert "own encoder" not in report.ppo_text(cfg.ppo) and "pictures" not in report.ppo_text(
+        cfg.ppo
+    )
+    own = run_config({"agent": "ppo_rgb", "ppo": {"critic_encoder": "own", "pixel_scale": 0.5}})
     assert report.ppo_text(own.ppo).endswith(
-        "critic 0.001, the critic's own encoder, rewards x 0.1"
+        "critic 0.001, the critic's own encoder, pictures in [-0.5, 0.5], rewards x 0.1"
     )
 
 

@@ -23,9 +23,10 @@ def he_init(gain: float = 1.0) -> nn.initializers.Initializer:
     return nn.initializers.variance_scaling(2.0 * gain, "fan_in", "truncated_normal")
 
 
-def scale_pixels(pixels: jax.Array) -> jax.Array:
-    """uint8[..., H, W, C] -> float32 in [-1, 1]."""
-    return pixels.astype(jnp.float32) / 127.5 - 1.0
+def scale_pixels(pixels: jax.Array, scale: float = 1.0) -> jax.Array:
+    """uint8[..., H, W, C] -> float32 in [-scale, scale]."""
+    x = pixels.astype(jnp.float32) / 127.5 - 1.0
+    return x if scale == 1.0 else x * scale
 
 
 def image_patches(x: jax.Array, kernel: int, stride: int) -> jax.Array:
@@ -196,6 +197,7 @@ class ActorCritic(nn.Module):
     encoder: str = "nature"  # the pixel encoder, an ENCODERS key
     encoder_dtype: str = "float32"  # the pixel encoder's arithmetic
     critic_encoder: str = "shared"  # "own": the critic's features from an encoder of its own
+    pixel_scale: float = 1.0  # the pictures enter the encoder in [-pixel_scale, pixel_scale]
 
     def features(self, obs: dict[str, jax.Array], owner: str = "") -> jax.Array:
         """z' from the agent's inputs; `owner` "critic_" builds the critic's own encoder and
@@ -205,9 +207,9 @@ class ActorCritic(nn.Module):
         encoder = lambda: make(jnp.dtype(self.encoder_dtype), name=f"{owner}encoder")  # noqa: E731
         if agent.conditioned:
             cond = SCHEMES[self.scheme](self.hint_width, name=f"{owner}conditioning")
-            return cond(encoder(), scale_pixels(obs["pixels"]), obs["hint"])
+            return cond(encoder(), scale_pixels(obs["pixels"], self.pixel_scale), obs["hint"])
         if agent.pixels:
-            return encoder()(scale_pixels(obs["pixels"]))
+            return encoder()(scale_pixels(obs["pixels"], self.pixel_scale))
         if agent.hint and agent.hint_use == "input":
             return HintEmbedding(self.hint_width, name="conditioning")(obs["hint"])
         return (

@@ -112,6 +112,11 @@ def ppo_text(ppo) -> str:
         + (" with the learning rates adapted to the KL" if ppo.kl_adaptive_lr else "")
         + (", the encoder trained by the actor alone" if not ppo.critic_trains_encoder else "")
         + (", the critic's own encoder" if ppo.critic_encoder == "own" else "")
+        + (
+            f", pictures in [-{ppo.pixel_scale:g}, {ppo.pixel_scale:g}]"
+            if ppo.pixel_scale != 1.0
+            else ""
+        )
         + (f", rewards x {ppo.reward_scale:g}" if ppo.reward_scale != 1.0 else "")
         + (", the state normalised" if ppo.normalize_state else "")
     )

@@ -170,6 +170,12 @@ class PPOConfig:
         choices=CRITIC_ENCODERS,
         saved_may_lack=True,
     )
+    pixel_scale: float = setting(
+        1.0,
+        "pixel agents: the pictures enter the encoder in [-pixel_scale, pixel_scale] (bytes / "
+        "127.5 - 1, times it; Playground's vision tasks show grey in [-0.5, 0.5])",
+        saved_may_lack=True,
+    )
     # The privileged-signal baselines (hintsjax/models/agents.py). Shapes, not traced: a Hyper leaf
     # more would keep the checkpoints saved before it from restoring.
     hint_dropout: float = setting(
@@ -250,6 +256,10 @@ class PPOConfig:
             raise UsageError(
                 f"ppo.gae_segment ({self.gae_segment}) must be 0 or divide the rollout length "
                 f"({self.rollout_length} = batch_size / num_envs)"
+            )
+        if not (math.isfinite(self.pixel_scale) and self.pixel_scale > 0):
+            raise UsageError(
+                f"ppo.pixel_scale must be a positive finite number, got {self.pixel_scale}"
             )
         if self.min_log_std is not None and not math.isfinite(self.min_log_std):
             raise UsageError(

@@ -209,12 +209,7 @@ class RunConfig:
             raise UsageError(f"checkpoint_seconds must be 0 or more, got {self.checkpoint_seconds}")
         for section in SECTIONS:
             getattr(self, section).validate()
-        if self.ppo.critic_encoder != "shared" and not self.agent_spec.pixels:
-            pixel_agents = ", ".join(name for name, spec in AGENTS.items() if spec.pixels)
-            raise UsageError(
-                f"ppo.critic_encoder={self.ppo.critic_encoder} gives the critic a pixel encoder "
-                f"of its own; agent={self.agent} sees no pictures (pixel agents: {pixel_agents})"
-            )
+        self._check_pixel_settings()
         if self.ppo.action_head != "gaussian" and (
             self.agent_spec.imitates or self.agent == EXPERT_AGENT
         ):
@@ -228,6 +223,23 @@ class RunConfig:
                 f"ppo.batch_size ({self.ppo.batch_size})"
             )
         return self
+
+    def _check_pixel_settings(self) -> None:
+        """UsageError where a PPO setting of the pixel encoder is set for an agent without
+        pictures: it would change nothing."""
+        if self.agent_spec.pixels:
+            return
+        pixel_agents = ", ".join(name for name, spec in AGENTS.items() if spec.pixels)
+        if self.ppo.critic_encoder != "shared":
+            raise UsageError(
+                f"ppo.critic_encoder={self.ppo.critic_encoder} gives the critic a pixel encoder "
+                f"of its own; agent={self.agent} sees no pictures (pixel agents: {pixel_agents})"
+            )
+        if self.ppo.pixel_scale != 1.0:
+            raise UsageError(
+                f"ppo.pixel_scale={self.ppo.pixel_scale} scales the pictures; agent={self.agent} "
+                f"sees none (pixel agents: {pixel_agents})"
+            )
 
     def _check_hint_widths(self, hint: envs.Hint) -> None:
         """UsageError naming a hint (of a hint file) that returns another width than it
