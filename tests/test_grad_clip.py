@@ -68,6 +68,39 @@ def test_global_clipping_lets_the_critic_shrink_the_actor_step():
     assert abs(actor_step("global", 1e4)[0]) < 0.01 * LR
 
 
+def test_per_part_clipping_keeps_a_critic_s_own_encoder_apart_from_the_actor_s():
+    """ppo.critic_encoder=own: the critic's encoder is a part of its own under per_part clipping,
+    trained at the encoders' rate. A critic's gradient of 1e4 on it (and on the critic) leaves the
+    actor's encoder's step what it is under a gradient of 1e-3 (in the encoders' group, the
+    critic's encoder shrank that step 40x), and the critic's encoder steps at ppo.encoder_lr."""
+    cfg = layers.run_config(
+        {
+            "agent": "ppo_rgb",
+            "ppo": {"grad_clip": "per_part", "critic_encoder": "own", "max_grad_norm": 0.5},
+        }
+    )
+    params = {
+        "params": {
+            name: {"w": jnp.zeros(4)} for name in ("encoder", "critic_encoder", "actor", "critic")
+        }
+    }
+    optimizer = make_optimizer(Hyper.of(cfg), params, cfg.ppo)
+
+    def steps(critic_gradient: float) -> dict:
+        grads = jax.tree.map(lambda x: jnp.full_like(x, 1e-3), params)
+        for name in ("critic_encoder", "critic"):
+            grads["params"][name]["w"] = jnp.full(4, critic_gradient)
+        updates, _ = optimizer.update(grads, optimizer.init(params), params)
+        return {k: np.asarray(v["w"]) for k, v in updates["params"].items()}
+
+    small, large = steps(1e-3), steps(1e4)
+    rate = cfg.ppo.encoder_lr
+    np.testing.assert_allclose(small["encoder"], -rate * 1e-3 / (1e-3 + 1e-5), rtol=1e-5)
+    np.testing.assert_array_equal(small["encoder"], large["encoder"])
+    # the critic's encoder: its own clip, then Adam's first step of about -lr per element
+    np.testing.assert_allclose(large["critic_encoder"], -rate * np.ones(4), rtol=1e-4)
+
+
 def test_grad_clip_and_adam_eps_are_checked():
     with pytest.raises(UsageError, match="grad_clip"):
         layers.run_config({"env": "pendulum", "ppo": {"grad_clip": "sometimes"}})

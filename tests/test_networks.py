@@ -239,7 +239,7 @@ def test_a_critic_with_its_own_encoder_and_the_actor_train_apart(agent):
     theirs = [f"critic_{p}" for p in mine]
     assert set(theirs) <= set(params)
     labels = lr_labels({"params": params})["params"]
-    assert all(set(jax.tree.leaves(labels[p])) == {"encoder"} for p in theirs)
+    assert all(set(jax.tree.leaves(labels[p])) == {"critic_encoder"} for p in theirs)
 
     def grads(output):
         return jax.grad(lambda p: net.apply({"params": p}, obs)[output].sum())(params)

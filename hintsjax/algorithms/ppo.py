@@ -149,9 +149,14 @@ def make_optimizer(hyper: Hyper, params: Any, ppo: PPOConfig) -> optax.GradientT
     normaliser's statistics, if any, are not trained). The rates may be traced arrays; the static
     choices come from `ppo`: `grad_clip` "global" clips the norm of all parts' gradients together,
     so a large critic loss shrinks the actor's step too, "per_part" clips each part's (encoder,
-    actor, critic) alone; `adam_eps` is Adam's epsilon; `kl_adaptive_lr` scales every rate by the
-    KL of the steps (hintsjax/algorithms/kl_rate.py), its scale kept in the optimiser's state."""
+    actor, critic, and the critic's own encoder where it has one) alone; `adam_eps` is Adam's
+    epsilon; `kl_adaptive_lr` scales every rate by the KL of the steps
+    (hintsjax/algorithms/kl_rate.py), its scale kept in the optimiser's state."""
     rates = {"encoder": hyper.encoder_lr, "actor": hyper.actor_lr, "critic": hyper.critic_lr}
+    labels = lr_labels(params)
+    # only where there is one (ppo.critic_encoder=own): other runs' optimiser states keep a shape
+    if "critic_encoder" in jax.tree.leaves(labels):
+        rates["critic_encoder"] = hyper.encoder_lr
     per_part = ppo.grad_clip == "per_part"
 
     def part(lr):
@@ -164,7 +169,7 @@ def make_optimizer(hyper: Hyper, params: Any, ppo: PPOConfig) -> optax.GradientT
     # only then: older checkpoints keep their optimiser state's shape
     if normalization.COLLECTION in params:
         groups["frozen"] = optax.set_to_zero()
-    parts = optax.multi_transform(groups, lr_labels(params))
+    parts = optax.multi_transform(groups, labels)
     optimizer = (
         parts if per_part else optax.chain(optax.clip_by_global_norm(hyper.max_grad_norm), parts)
     )

@@ -256,8 +256,10 @@ class ActorCritic(nn.Module):
 LR_GROUPS = {
     "encoder": "encoder",
     "conditioning": "encoder",
-    "critic_encoder": "encoder",  # ppo.critic_encoder=own: a pixel encoder, at the encoders' rate
-    "critic_conditioning": "encoder",
+    # ppo.critic_encoder=own: a group of its own (clipped apart under ppo.grad_clip=per_part, so
+    # the critic's loss never shrinks the actor's encoder's step), at the encoders' rate
+    "critic_encoder": "critic_encoder",
+    "critic_conditioning": "critic_encoder",
     "actor": "actor",
     "log_std": "actor",
     "critic": "critic",
@@ -268,7 +270,8 @@ LR_GROUPS = {
 
 
 def lr_labels(params) -> dict:
-    """The learning-rate group ('encoder', 'actor' or 'critic') of every parameter leaf."""
+    """The learning-rate group ('encoder', 'actor', 'critic', 'critic_encoder' or 'frozen') of
+    every parameter leaf."""
     return {
         col: {name: jax.tree.map(lambda _, g=LR_GROUPS[name]: g, sub) for name, sub in tree.items()}
         for col, tree in params.items()

@@ -24,7 +24,8 @@ from hintsjax.settings.fields import check_choices, setting
 ACTION_HEADS = ("gaussian", "tanh", "sigmoid")
 # How max_grad_norm clips (hintsjax.algorithms.ppo.make_optimizer): "global", the norm of every
 # part's gradient together (a large critic loss then shrinks the actor's step as well); "per_part",
-# the encoder's, the actor's and the critic's each alone.
+# the encoder's, the actor's and the critic's each alone (and a critic's own encoder's,
+# ppo.critic_encoder=own).
 GRAD_CLIPS = ("global", "per_part")
 # The pixel encoder's arithmetic (`ppo.encoder_dtype`): its convolutions' inputs, weights and
 # products; the parameters, the heads and the losses stay float32.
@@ -98,7 +99,7 @@ class PPOConfig:
     grad_clip: str = setting(
         "global",
         "global: max_grad_norm over every part's gradient together; per_part: the "
-        "encoder's, actor's and critic's each alone",
+        "encoder's, actor's and critic's (and a critic's own encoder's) each alone",
         choices=GRAD_CLIPS,
         saved_may_lack=True,
     )
