@@ -621,10 +621,13 @@ def against_playground(results: dict, side: str) -> str:
         TRAINERS["playground"],
         stats.poi_ci(ours["deterministic"], theirs["deterministic"]),
     )
-    if ours.get("device") != theirs.get("device"):
+    # Playground's seeds may finish over several processes, each on the machine of its day
+    their_devices = {theirs.get("device")} | {r.get("device") for r in theirs.get("seeds_run", [])}
+    their_devices.discard(None)
+    if their_devices != {ours.get("device")}:
         return (
             f"- {side}: {ordering}; its times are not set against Playground's: it ran on "
-            f"{ours.get('device')}, Playground on {theirs.get('device')}"
+            f"{ours.get('device')}, Playground on {' and '.join(sorted(their_devices)) or None}"
         )
     times = theirs["seconds"] / ours["seconds"]
     rate, their_rate = steady_rate(ours, side) * seeds, steady_rate(theirs, "playground")

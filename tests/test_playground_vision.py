@@ -196,10 +196,12 @@ def test_the_playground_side_s_memory_is_the_largest_its_seed_rows_measured():
 
 
 def test_a_slower_hintsjax_side_reads_slower():
-    playground = {"seconds": 300.0, "deterministic": [1.0, 2.0, 3.0],
-                  "seeds_run": [{"progress": [{}, {}, {"training/sps": 50.0}]}]}  # fmt: skip
+    playground = {"seconds": 300.0, "deterministic": [1.0, 2.0, 3.0], "device": "NVIDIA H200",
+                  "seeds_run": [{"progress": [{}, {}, {"training/sps": 50.0}],
+                                 "device": "NVIDIA H200"}]}  # fmt: skip
     progress = [{"step": 0, "seconds": 0.0}, {"step": 100, "seconds": 10.0}]
-    mapped = {"seconds": 600.0, "deterministic": [1.0, 2.0, 3.0], "progress": progress}
+    mapped = {"seconds": 600.0, "deterministic": [1.0, 2.0, 3.0], "progress": progress,
+              "device": "NVIDIA H200"}  # fmt: skip
     line = pv.against_playground({"playground": playground, "mapped": mapped}, "mapped")
     assert "in 600 s against 300 s (2.0x slower), training 30 env steps/s" in line, line
     assert "against 50 (0.6x)" in line
@@ -211,6 +213,13 @@ def test_sides_on_other_gpus_are_not_timed_against_each_other():
     line = pv.against_playground({"playground": playground, "mapped": mapped}, "mapped")
     assert "not set against Playground's: it ran on NVIDIA H100, Playground on NVIDIA H200" in line
     assert " s against " not in line and "x faster" not in line, line
+    # Playground's seeds finished over two processes on two kinds of GPU: the side's entry names
+    # the last one's, its seeds both
+    playground["device"] = "NVIDIA H100"
+    playground["seeds_run"] = [{"device": "NVIDIA H200"}, {"device": "NVIDIA H100"}]
+    line = pv.against_playground({"playground": playground, "mapped": mapped}, "mapped")
+    assert "it ran on NVIDIA H100, Playground on NVIDIA H100 and NVIDIA H200" in line, line
+    assert " s against " not in line, line
 
 
 def test_the_knob_steps_name_the_sides_in_the_record_and_order_their_returns():
