@@ -319,6 +319,12 @@ def update_parts(
     return seconds, ended
 
 
+def drops_determinism(names: list[str], physics: str) -> bool:
+    """Whether the bench drops deterministic GPU ops: where every env steps with MuJoCo Warp, as
+    the command does then (hintsjax/run.py; they cost the learner a third, docs/throughput.md)."""
+    return all(envs.likely_warp(name, physics) for name in names)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -393,9 +399,7 @@ def main() -> None:
     except ValueError as e:
         parser.exit(2, f"error: {e}\n")
     mjx_envs = envs.mjx_env_names()
-    if all(envs.likely_warp(name, args.physics) for name in names):
-        # as the command under MuJoCo Warp (hintsjax/run.py): no deterministic GPU ops, which
-        # cost the learner a third (docs/throughput.md); said before JAX's backend starts
+    if drops_determinism(names, args.physics):  # said before JAX's backend starts
         xla_flags.drop_determinism()
     try:
         for name in names:

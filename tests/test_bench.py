@@ -3,6 +3,7 @@ row at a toy size on CPU (its measured timings run on the GPU)."""
 
 from __future__ import annotations
 
+import sys
 
 import mujoco
 import pytest
@@ -34,17 +35,31 @@ def test_bad_model_options_name_the_valid_ones(item, names):
 def test_the_bench_drops_deterministic_ops_where_the_command_would(monkeypatch):
     """As run.py decides it (envs.likely_warp, which the bench asks of every env): under MuJoCo
     Warp where asked, or auto where the machine would give it; not where an env steps with MJX's
-    JAX solver."""
+    JAX solver. bench.main drops them when bench.drops_determinism says so, before anything
+    runs."""
     from hintsjax import envs
 
-    def all_warp(names, physics):
-        return all(envs.likely_warp(name, physics) for name in names)
-
-    assert all_warp(["ant", "humanoid"], envs.WARP)
-    assert not all_warp(["ant"], envs.JAX)
+    assert bench.drops_determinism(["ant", "humanoid"], envs.WARP)
+    assert not bench.drops_determinism(["ant"], envs.JAX)
     monkeypatch.setattr(envs, "auto_likely_warp", lambda name: name == "ant")
-    assert all_warp(["ant"], envs.AUTO)
-    assert not all_warp(["ant", "pendulum"], envs.AUTO)
+    assert bench.drops_determinism(["ant"], envs.AUTO)
+    assert not bench.drops_determinism(["ant", "pendulum"], envs.AUTO)
+
+    class Stop(Exception):
+        """Raised where main would drop the flags, or go on past the point where it would."""
+
+    def stop(*_):
+        raise Stop
+
+    dropped = []
+    monkeypatch.setattr(bench.xla_flags, "drop_determinism", lambda: dropped.append(1) or stop())
+    monkeypatch.setattr(bench.envs, "resolve_physics", stop)  # the step after the flags
+    for physics, expected in ((envs.JAX, []), (envs.WARP, [1])):
+        dropped.clear()
+        monkeypatch.setattr(sys, "argv", ["bench.py", "--envs", "ant", "--physics", physics])
+        with pytest.raises(Stop):
+            bench.main()
+        assert dropped == expected, physics
 
 
 def test_warmed_parts_start_where_episodes_end_as_in_a_run():
