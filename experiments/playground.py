@@ -38,7 +38,7 @@ import time
 from pathlib import Path
 
 from hintsjax.reproduce.archive import ARCHIVE, about_lines, read_about
-from hintsjax.reproduce.markdown import markdown_table, write_report
+from hintsjax.reproduce.markdown import generated_sections, markdown_table, write_report
 from hintsjax.reproduce.report import footer, iqm_cell, load, ordering, sweep_hardware, wall_clock
 from hintsjax.reproduce.sweep import hints_run
 from hintsjax.reproduce.table_script import TableScript, chosen_envs, table_main
@@ -451,13 +451,6 @@ def versus_lines(runs: Path) -> list[str]:
     return lines + [""]
 
 
-def vision_lines(runs: Path) -> list[str]:
-    """The section of experiments/playground_vision.py (issue 83), which writes its own record."""
-    import playground_vision
-
-    return playground_vision.section_lines(runs)
-
-
 def report(runs: Path, force: bool = False, out: Path | None = None) -> None:
     versus_record(runs, keep=out is None)
     hardware = sweep_hardware(runs, TABLE, run_ids(ENVS))
@@ -505,11 +498,13 @@ def report(runs: Path, force: bool = False, out: Path | None = None) -> None:
     lines += [
         "",
         *versus_lines(runs),
-        *vision_lines(runs),
         *about_lines(read_about(ARCHIVE / runs.name)),
         footer(runs, TABLE, run_ids(ENVS)),
     ]
-    write_report(out or RESULTS / REPORT, lines, force)
+    path = out or RESULTS / REPORT
+    # below: the sections other scripts write (experiments/playground_vision.py's), kept
+    kept = generated_sections(path)
+    write_report(path, [*lines, *([""] + kept if kept else [])], force)
 
 
 def extra_arguments(parser: argparse.ArgumentParser) -> None:

@@ -1,7 +1,8 @@
 """hintsjax's pixel PPO beside MuJoCo Playground's vision PPO on CartpoleBalance (issue 83).
 
     python experiments/playground_vision.py [--seeds 5] [--side playground|mapped|defaults]
-    python experiments/playground_vision.py --report    # archived, plotted, results/playground.md
+    python experiments/playground_vision.py --report    # archived, plotted, its section of
+                                                        # results/playground.md (the last one)
     python experiments/playground_vision.py --smoke --runs /tmp/pv --side mapped  # plumbing, a CPU
 
 The sides, each in a process of its own (the script starts one per side unless `--side` names
@@ -47,6 +48,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from playground import mend_brax_for_this_jax, record_side, steps_per_update  # noqa: E402
 
+from hintsjax.reproduce.markdown import generated_marker  # noqa: E402
+
 TASK = "CartpoleBalance"
 ENV = f"playground:{TASK}:vision"
 SIDES = (
@@ -81,6 +84,8 @@ SEEDS_DONE = "versus_vision_playground_seeds.jsonl"
 DEFAULT_RUNS = "runs/playground"
 RESULTS = Path(__file__).resolve().parent / "results"
 CURVES = "playground_vision_curves.png"  # under RESULTS
+REPORT = "playground.md"  # under RESULTS: this script's section, below experiments/playground.py's
+SECTION = generated_marker(Path(__file__).name, "--report")
 CHUNK_STEPS = 2**17
 PATCHES = (
     "jax.device_put_replicated put back (jax 0.10 removed it; brax 0.14.2 calls it once, to "
@@ -717,7 +722,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.seeds < 1:
         parser.error(f"--seeds must be 1 or more, got {args.seeds}")
-    if args.report:  # the record archived and plotted, results/playground.md rewritten
+    if args.report:  # the record archived and plotted, its section of results/playground.md
         from hintsjax.reproduce.archive import ARCHIVE
 
         path = args.runs / RECORD
@@ -733,9 +738,9 @@ def main() -> None:
             if source.exists() and not (archived.exists() and archived.samefile(source)):
                 shutil.copyfile(source, archived)  # not onto itself: --runs may be the archive
         plot(args.runs, RESULTS / CURVES)
-        import playground
+        from hintsjax.reproduce.markdown import write_section
 
-        playground.report(args.runs, force=args.force)
+        write_section(RESULTS / REPORT, SECTION, section_lines(args.runs), force=args.force)
         return
     if args.side:
         train_side(args.side, args.runs, args.seeds, args.smoke)

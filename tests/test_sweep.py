@@ -1129,6 +1129,15 @@ def test_the_playground_side_by_side_gives_hintsjax_brax_s_settings_and_the_repo
         and "| 300.0 [" in row
         and "P(HINTS > PPO-RGB) = 1.00 [1.00, 1.00]: decided" in row
     )
+    # playground_vision.py's section below it stays when the report is written again
+    section = markdown.generated_marker("playground_vision.py", "--report")
+    markdown.write_section(out, section, ["## Pixel PPO", "", "its cells"])
+    before = out.read_text()
+    assert before.count(section) == 1 and before.endswith(
+        f"{section}\n\n## Pixel PPO\n\nits cells\n"
+    )
+    playground.report(runs, True, out)
+    assert out.read_text() == before
 
 
 def test_the_side_by_side_holds_brax_to_the_same_updates_and_reports_both_sides(tmp_path):
