@@ -219,6 +219,34 @@ def test_parts_that_cannot_be_one_row_are_one_line(parts, capsys, change, messag
     assert not archive.ARCHIVE.exists()  # nothing written, the parts' archives neither
 
 
+@pytest.mark.parametrize("later", ["default", "other"])
+def test_a_part_saved_before_a_setting_existed_pools_where_the_other_has_its_default(
+    parts, capsys, later
+):
+    """The archived part (seeds 0-3) was saved before `frames`, `colour` and `ppo.pixel_scale`
+    existed; the later part wrote them. At their defaults the parts are one row (as the
+    humanoid's archived 10 seeds and 10 trained since, table3_seeds20.md); a part that set one
+    otherwise is not."""
+    old = parts / "part0" / RUN / "config.yaml"
+    values = yaml.safe_load(old.read_text())
+    del values["frames"], values["colour"], values["ppo"]["pixel_scale"]
+    old.write_text(yaml.safe_dump(values))
+    if later == "other":
+        new = parts / "part4" / RUN / "config.yaml"
+        values = yaml.safe_load(new.read_text())
+        values["ppo"]["pixel_scale"] = 0.5
+        new.write_text(yaml.safe_dump(values))
+        status, err = pool_refused(parts, capsys)
+        assert status == 2 and "other settings than" in err and err.endswith(": ppo\n"), err
+        return
+    pool_command(
+        ["--pool", f"{parts / 'part0'},{parts / 'part4'}", "--runs", str(parts / "pooled")]
+    )
+    assert capsys.readouterr().out.startswith("pooled 1 run(s)")
+    pooled = yaml.safe_load((archive.ARCHIVE / "pooled" / RUN / "config.yaml").read_text())
+    assert pooled["seeds"] == SEEDS and "pixel_scale" not in pooled["ppo"]  # the first part's
+
+
 def pool_refused(parts: Path, capsys) -> tuple[int, str]:
     """Pooling part0 and part4 into `pooled`, which must refuse (SystemExit): its exit status and
     what it printed on stderr."""

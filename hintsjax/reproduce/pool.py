@@ -9,10 +9,11 @@ another --runs folder, as `archive_run` would have kept the whole row: eval.json
 evaluation's statistics worked out again over all the seeds, from the episodes' returns),
 config.yaml (`seed` the first part's, `seeds` the sum), the binned metrics.csv with each part's
 seeds numbered after the parts before it, and summary.json. Every report then reads it as a row
-trained whole. The parts' other settings must be the same and their seeds must follow on without
-gap or overlap; a pooled eval.json lists its parts (folder, seeds, device, seconds), and its
-`train_seconds` and `wall_seconds` are the parts' sums, its `device` theirs joined by " + ", its
-per-seed lists (`kl_storms`) theirs joined in seed order.
+trained whole. The parts' other settings must be the same (as a run reads them: a part saved
+before a setting existed has its default) and their seeds must follow on without gap or overlap;
+a pooled eval.json lists its parts (folder, seeds, device, seconds), and its `train_seconds` and
+`wall_seconds` are the parts' sums, its `device` theirs joined by " + ", its per-seed lists
+(`kl_storms`) theirs joined in seed order.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import yaml
 from hintsjax.evaluation.evaluator import return_summary
 from hintsjax.reproduce import archive
 from hintsjax.reproduce.archive import SUMMARY_JSON, archive_runs, unique_lines
+from hintsjax.settings import layers
 from hintsjax.settings.layers import CONFIG_YAML
 from hintsjax.system.errors import UsageError, described
 
@@ -176,11 +178,13 @@ def pool_run(folders: list[Path]) -> dict[str, str]:
     order = sorted(range(len(folders)), key=lambda i: configs[i]["seed"])
     folders, configs = [folders[i] for i in order], [configs[i] for i in order]
     first = configs[0]
-    for folder, cfg in zip(folders[1:], configs[1:]):
+    # compared as a run reads them: a part saved before a setting existed has its default
+    settings = [_settings(f) for f in folders]
+    for folder, cfg in zip(folders[1:], settings[1:]):
         other = sorted(
             k
-            for k in set(cfg) | set(first)
-            if k not in ("seed", "seeds") and cfg.get(k) != first.get(k)
+            for k in set(cfg) | set(settings[0])
+            if k not in ("seed", "seeds") and cfg.get(k) != settings[0].get(k)
         )
         if other:
             raise PoolError(
@@ -209,6 +213,15 @@ def pool_run(folders: list[Path]) -> dict[str, str]:
     if any(m.exists() for m in metrics):
         files["metrics.csv"] = pooled_metrics(metrics, seeds)
     return files
+
+
+def _settings(folder: Path) -> dict:
+    """A part's settings as a run reads them (layers.load_run_config): its config.yaml, with the
+    defaults of settings added since it was saved; PoolError where they cannot be read."""
+    try:
+        return layers.to_dict(layers.load_run_config(folder))
+    except UsageError as e:
+        raise PoolError(f"{folder / CONFIG_YAML}: {e}") from None
 
 
 def pooled_eval(results: list[dict], folders: list[Path], configs: list[dict]) -> dict:
