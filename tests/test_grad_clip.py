@@ -101,6 +101,27 @@ def test_per_part_clipping_keeps_a_critic_s_own_encoder_apart_from_the_actor_s()
     np.testing.assert_allclose(large["critic_encoder"], -rate * np.ones(4), rtol=1e-4)
 
 
+@pytest.mark.parametrize("grad_clip", ["global", "per_part"])
+def test_a_critic_s_own_encoder_is_a_part_of_its_own_only_where_parts_are_clipped_apart(grad_clip):
+    """Under global clipping the critic's own encoder steps in the encoders' group (Adam is
+    element by element: the same steps), so the optimiser state keeps the shape that runs with
+    ppo.critic_encoder=own saved before the group existed (101 arrays, not 102: they could not
+    resume)."""
+    cfg = layers.run_config(
+        {"agent": "ppo_rgb", "ppo": {"critic_encoder": "own", "grad_clip": grad_clip}}
+    )
+    params = {
+        "params": {n: {"w": jnp.zeros(2)} for n in ("encoder", "critic_encoder", "actor", "critic")}
+    }
+    state = make_optimizer(Hyper.of(cfg), params, cfg.ppo).init(params)
+    partition = next(
+        x for x in jax.tree.leaves(state, is_leaf=lambda x: hasattr(x, "inner_states"))
+        if hasattr(x, "inner_states")
+    )  # fmt: skip
+    own = {"critic_encoder"} if grad_clip == "per_part" else set()
+    assert set(partition.inner_states) == {"encoder", "actor", "critic"} | own
+
+
 def test_grad_clip_and_adam_eps_are_checked():
     with pytest.raises(UsageError, match="grad_clip"):
         layers.run_config({"env": "pendulum", "ppo": {"grad_clip": "sometimes"}})

@@ -153,11 +153,16 @@ def make_optimizer(hyper: Hyper, params: Any, ppo: PPOConfig) -> optax.GradientT
     epsilon; `kl_adaptive_lr` scales every rate by the KL of the steps
     (hintsjax/algorithms/kl_rate.py), its scale kept in the optimiser's state."""
     rates = {"encoder": hyper.encoder_lr, "actor": hyper.actor_lr, "critic": hyper.critic_lr}
-    labels = lr_labels(params)
-    # only where there is one (ppo.critic_encoder=own): other runs' optimiser states keep a shape
-    if "critic_encoder" in jax.tree.leaves(labels):
-        rates["critic_encoder"] = hyper.encoder_lr
     per_part = ppo.grad_clip == "per_part"
+    labels = lr_labels(params)
+    # A critic's own encoder (ppo.critic_encoder=own) is a part of its own only where parts are
+    # clipped apart; else it steps with the encoders' group (the same Adam, element by element),
+    # and every other run's optimiser state keeps the shape its checkpoints were saved with.
+    if "critic_encoder" in jax.tree.leaves(labels):
+        if per_part:
+            rates["critic_encoder"] = hyper.encoder_lr
+        else:
+            labels = jax.tree.map(lambda g: "encoder" if g == "critic_encoder" else g, labels)
 
     def part(lr):
         adam = optax.adam(lr, eps=ppo.adam_eps)
