@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import platform
 import time
@@ -319,6 +320,24 @@ def update_parts(
     return seconds, ended
 
 
+def parts_row(cfg, args: argparse.Namespace, parts: dict, ended: float) -> dict:
+    """--parts' record of one env (--out): its settings, the envs ended a step (null where no
+    rollout ran first) and each part's milliseconds."""
+    return {
+        "env": cfg.env,
+        "seeds": cfg.seeds,
+        "num_envs": cfg.ppo.num_envs,
+        "rollout_length": cfg.ppo.rollout_length,
+        "physics": cfg.physics,
+        "encoder_dtype": cfg.ppo.encoder_dtype,
+        "deterministic_ops": xla_flags.deterministic_gpu_ops(),
+        "rollout_starts": args.rollout_starts,
+        "warm_rollouts": args.warm_rollouts,
+        "ended_a_step": None if math.isnan(ended) else ended,
+        "parts_ms": {k: 1e3 * v for k, v in parts.items()},
+    }
+
+
 def drops_determinism(names: list[str], physics: str) -> bool:
     """Whether the bench drops deterministic GPU ops: where every env steps with MuJoCo Warp, as
     the command does then (hintsjax/run.py; they cost the learner a third, docs/throughput.md)."""
@@ -412,6 +431,7 @@ def main() -> None:
         parser.exit(2, f"error: --warm-rollouts must be 0 or more, got {args.warm_rollouts}\n")
     q = args.quick
     if args.parts:
+        rows = []
         for name in names:
             cfg = run_config(
                 {
@@ -435,6 +455,11 @@ def main() -> None:
                 + ", ".join(f"{k} {1e3 * v:.1f} ms" for k, v in parts.items()),
                 flush=True,
             )
+            rows.append(parts_row(cfg, args, parts, ended))
+        if args.out:
+            device = str(jax.devices()[0].device_kind)
+            with open(args.out, "w") as f:
+                json.dump({"device": device, "jax": jax.__version__, "parts": rows}, f, indent=1)
         return
     # as the command line: a second bench compiles little
     compilation_cache.enable(compilation_cache.folder(True))

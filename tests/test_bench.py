@@ -62,6 +62,23 @@ def test_the_bench_drops_deterministic_ops_where_the_command_would(monkeypatch):
         assert dropped == expected, physics
 
 
+def test_the_parts_record_names_its_settings_and_writes_no_nan():
+    """--parts --out: a row an env, its parts in ms; no ended-a-step count (no rollout first) is
+    null, not NaN, which JSON readers refuse."""
+    import argparse
+    import json
+
+    from hintsjax.settings.layers import run_config
+
+    cfg = run_config({"env": "pendulum", "agent": "hints", "scheme": "fc", "seeds": 5})
+    args = argparse.Namespace(rollout_starts="ended", warm_rollouts=0)
+    row = bench.parts_row(cfg, args, {"rollout": 0.0125, "learn": 0.5}, float("nan"))
+    assert row["ended_a_step"] is None and row["parts_ms"] == {"rollout": 12.5, "learn": 500.0}
+    assert (row["env"], row["seeds"], row["encoder_dtype"]) == ("pendulum", 5, "float32")
+    json.loads(json.dumps(row, allow_nan=False))
+    assert bench.parts_row(cfg, args, {}, 2.5)["ended_a_step"] == 2.5
+
+
 def test_warmed_parts_start_where_episodes_end_as_in_a_run():
     """--warm-rollouts: the state rolled on by the untrained policy, and the envs ended a step in
     the last rollout. The pendulum's episodes are truncated at 200 steps: with rollouts of 100,
