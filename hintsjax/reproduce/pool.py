@@ -9,11 +9,10 @@ another --runs folder, as `archive_run` would have kept the whole row: eval.json
 evaluation's statistics worked out again over all the seeds, from the episodes' returns),
 config.yaml (`seed` the first part's, `seeds` the sum), the binned metrics.csv with each part's
 seeds numbered after the parts before it, and summary.json. Every report then reads it as a row
-trained whole. The parts' other settings must be the same (as a run reads them: a part saved
-before a setting existed has its default) and their seeds must follow on without gap or overlap;
-a pooled eval.json lists its parts (folder, seeds, device, seconds), and its `train_seconds` and
-`wall_seconds` are the parts' sums, its `device` theirs joined by " + ", its per-seed lists
-(`kl_storms`) theirs joined in seed order.
+trained whole. The parts' other settings must be the same (as a run reads them, defaults
+filled in) and their seeds must follow on without gap or overlap; a pooled eval.json lists its
+parts (folder, seeds, device, seconds), its `train_seconds` and `wall_seconds` the parts' sums,
+its `device` theirs joined by " + ", its per-seed lists (`kl_storms`) theirs in seed order.
 """
 
 from __future__ import annotations
