@@ -378,10 +378,17 @@ def versus_record(runs: Path, keep: bool = False) -> Path:
     (experiments/results/runs/<runs' name>/); `keep` archives the first (the report does, not a
     smoke run's)."""
     path, archived = runs / VERSUS_JSON, ARCHIVE / runs.name / VERSUS_JSON
-    if keep and path.exists() and not (archived.exists() and archived.samefile(path)):
-        archived.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(path, archived)  # not onto itself: runs may be the archive
+    if keep:
+        archive_file(path, archived)
     return path if path.exists() else archived
+
+
+def archive_file(path: Path, archived: Path) -> None:
+    """Copy a record that exists to its archived copy, unless it is that copy (the runs folder
+    given may be the archive's own)."""
+    if path.exists() and not (archived.exists() and archived.samefile(path)):
+        archived.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(path, archived)
 
 
 def versus_lines(runs: Path) -> list[str]:

@@ -46,7 +46,12 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from playground import mend_brax_for_this_jax, record_side, steps_per_update  # noqa: E402
+from playground import (  # noqa: E402
+    archive_file,
+    mend_brax_for_this_jax,
+    record_side,
+    steps_per_update,
+)
 
 from hintsjax.reproduce.markdown import generated_marker  # noqa: E402
 
@@ -732,11 +737,8 @@ def main() -> None:
             plot(args.runs, args.runs / CURVES)
             print("\n".join(section_lines(args.runs)))
             return
-        (ARCHIVE / args.runs.name).mkdir(parents=True, exist_ok=True)
         for name in (RECORD, SEEDS_DONE):  # the record, and the playground side's seed rows
-            source, archived = args.runs / name, ARCHIVE / args.runs.name / name
-            if source.exists() and not (archived.exists() and archived.samefile(source)):
-                shutil.copyfile(source, archived)  # not onto itself: --runs may be the archive
+            archive_file(args.runs / name, ARCHIVE / args.runs.name / name)
         plot(args.runs, RESULTS / CURVES)
         from hintsjax.reproduce.markdown import write_section
 
