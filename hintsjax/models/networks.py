@@ -25,8 +25,7 @@ def he_init(gain: float = 1.0) -> nn.initializers.Initializer:
 
 def scale_pixels(pixels: jax.Array, scale: float = 1.0) -> jax.Array:
     """uint8[..., H, W, C] -> float32 in [-scale, scale]."""
-    x = pixels.astype(jnp.float32) / 127.5 - 1.0
-    return x if scale == 1.0 else x * scale
+    return (pixels.astype(jnp.float32) / 127.5 - 1.0) * scale
 
 
 def image_patches(x: jax.Array, kernel: int, stride: int) -> jax.Array:
