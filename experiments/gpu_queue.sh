@@ -12,16 +12,21 @@
 # whatever it reached comes back (estimates from one H200: each knob side about 5 minutes, the
 # bench pair 4, the profile 1.5, the typed command 8.5: about 30 in all, so the typed command may
 # be left for the next lease). Once a run is back, take it off here.
+#
+# `start 83` runs issue 83's part alone, which needs no warp-lang (Playground's task with its
+# vision off, stepped by MJX's JAX physics): three setup calls (.whl, .whl2, .whl3), not ten.
 set -u
 case "${1:-}" in
 start)
     rm -rf /tmp/repo && cp -r . /tmp/repo
-    (setsid nohup bash /tmp/repo/experiments/gpu_queue.sh run > /tmp/queue.out 2>&1 < /dev/null &)
+    (setsid nohup bash /tmp/repo/experiments/gpu_queue.sh run "${2:-83 82}" > /tmp/queue.out 2>&1 < /dev/null &)
     echo "queue started: /tmp/queue.out, /tmp/logs" ;;
 run)
     export PYTHONPATH=/tmp/site PYTHONUNBUFFERED=1
     R=/tmp/repo L=/tmp/logs
     mkdir -p $L /tmp/r/runs/playground /tmp/r/bench /tmp/r/typed
+    for issue in ${2:-83 82}; do case $issue in
+    83)
     # 83: the three knob sides between the mapped side and Playground's (5 seeds each), all three
     # knobs first (a lease cut short still says how much of the gap they close); back here,
     # the record replaces the archived one and `playground_vision.py --report --runs
@@ -30,7 +35,8 @@ run)
     for side in mapped_scale mapped_cnn mapped_nets; do
         (cd /tmp/r && python3 $R/experiments/playground_vision.py --side $side --seeds 5 \
             --runs runs/playground) > $L/$side.log 2>&1
-    done
+    done ;;
+    82)
     # 82: an update's parts under Warp, the rollout's starts drawn for every env or the ended ones
     # (hintsjax.algorithms.ppo.ENDED_STARTS_PHYSICS holds JAX alone until this says otherwise)
     for s in every_env ended; do
@@ -43,8 +49,9 @@ run)
     # 82: the design's command as a new user types it, caches empty (run_path.json's row)
     rm -rf ~/.cache/hintsjax ~/.cache/warp
     (cd /tmp/r/typed && /usr/bin/time -v python3 -m hintsjax.run env=ant hint=speed scheme=fc) \
-        > $L/typed.log 2>&1
+        > $L/typed.log 2>&1 ;;
+    esac; done
     touch /tmp/queue_done ;;
 *)
-    sed -n '2,13p' "$0"; exit 2 ;;
+    sed -n '2,17p' "$0"; exit 2 ;;
 esac
