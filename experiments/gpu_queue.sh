@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # The GPU runs the open issues still wait for (82: the ant's update and command; 83: Playground's
 # side by side), in the order they matter, as one detached job for one lease of one GPU. Set up
-# with experiments/offline_gpu.sh (its ten calls: MJX-Warp, then Playground's wheels); in the tenth:
+# with experiments/offline_gpu.sh (its eight calls: MJX and Playground's wheels, then warp-lang's
+# parts); in the last:
 #
-#   bash experiments/offline_gpu.sh install .whl3 && bash experiments/gpu_queue.sh start
+#   bash experiments/offline_gpu.sh warp && bash experiments/gpu_queue.sh start
 #                                                # start: copies the repo to /tmp/repo, runs detached
 #   bash experiments/offline_gpu.sh poll 240 queue_done   # again and again: keep a call in flight
 #
@@ -14,7 +15,7 @@
 # be left for the next lease). Once a run is back, take it off here.
 #
 # `start 83` runs issue 83's part alone, which needs no warp-lang (Playground's task with its
-# vision off, stepped by MJX's JAX physics): three setup calls (.whl, .whl2, .whl3), not ten.
+# vision off, stepped by MJX's JAX physics): the first two setup calls, not eight.
 set -u
 case "${1:-}" in
 start)
@@ -53,5 +54,5 @@ run)
     esac; done
     touch /tmp/queue_done ;;
 *)
-    sed -n '2,17p' "$0"; exit 2 ;;
+    sed -n '2,18p' "$0"; exit 2 ;;
 esac

@@ -4,12 +4,12 @@
 # started detached. Python 3.12, x86-64 (the wheels' tags; change PY and PLATFORMS for others).
 #
 #   bash experiments/offline_gpu.sh wheels            # here, with internet: .whl/ (mujoco alone, 27 MB), .whl2/
-#                                                     #   (mjx, hydra, this project...), .wp/warp.part.0[0-7]
-#                                                     #   (warp-lang in 8 parts), .whl3/ (Playground and Brax, 14 MB)
+#                                                     #   (mjx, hydra, this project...), .whl3/ (Playground and
+#                                                     #   Brax, 14 MB), .wp/warp.part.0[0-5] (warp-lang in 6 parts)
 #   bash experiments/offline_gpu.sh calls             # here: the device calls that carry them, in order (each
 #                                                     #   checked against the 64 MiB a call takes with the tree)
-#   bash experiments/offline_gpu.sh install [DIR]     # there, in the repo root: DIR's wheels (.whl2) into /tmp/site;
-#                                                     #   for env=playground:* also `install .whl3` (its own call)
+#   bash experiments/offline_gpu.sh install [DIR]     # there, in the repo root: DIR's wheels (.whl2) into /tmp/site
+#                                                     #   (the calls' second installs .whl2's and .whl3's together)
 #   bash experiments/offline_gpu.sh warp              # there: keep the .wp parts carried so far; all 8 in: install
 #   bash experiments/offline_gpu.sh poll SECONDS MARK # there: wait up to SECONDS or until /tmp/MARK exists, show
 #                                                     #   the logs' last lines (/tmp/logs/*.log) and pack the runs'
@@ -26,7 +26,7 @@ PY=3.12
 PLATFORMS="manylinux_2_28_x86_64 manylinux_2_27_x86_64 manylinux_2_17_x86_64 manylinux2014_x86_64 manylinux1_x86_64 any"
 WARP=warp_lang-1.18.0-py3-none-manylinux_2_28_x86_64.whl
 WARP_MD5=47fc34ed07880e32d2964187ad4de4cd
-WARP_PARTS=8  # 19 MB each: one travels beside the working tree (33 MB) within a call's 64 MiB
+WARP_PARTS=6  # 25 MB each: one travels beside the working tree (35 MB) within a call's 64 MiB
 # What the GPU image lacks among the project's pins (pyproject.toml) and their needs
 CARRIED="mujoco==3.17.0 mujoco-mjx==3.17.0 hydra-core==1.3.2 omegaconf==2.3.0 tensorboardX==2.6.5 trimesh websockets>=13"
 # What env=playground:* and experiments/playground.py need beyond those (importing mujoco_playground and brax
@@ -64,9 +64,8 @@ calls)
         printf '%s MiB %s  carry [%s]  %s\n' "$((size / 1024 / 1024))" "$mark" "$(IFS=,; echo "${carried[*]}")" "$*"
     }
     plan .whl -- "mkdir -p /tmp/wheels && cp .whl/*.whl /tmp/wheels/"
-    plan .whl2 .wp/warp.part.00 -- "cp .whl2/*.whl /tmp/wheels/ && bash experiments/offline_gpu.sh install /tmp/wheels && bash experiments/offline_gpu.sh warp"
-    for part in .wp/warp.part.0[1-9]; do plan "$part" -- "bash experiments/offline_gpu.sh warp"; done
-    plan .whl3 -- "bash experiments/offline_gpu.sh install .whl3   # env=playground:* and experiments/playground*.py only"
+    plan .whl2 .whl3 -- "cp .whl2/*.whl .whl3/*.whl /tmp/wheels/ && bash experiments/offline_gpu.sh install /tmp/wheels"
+    for part in .wp/warp.part.0[0-9]; do plan "$part" -- "bash experiments/offline_gpu.sh warp   # physics=warp only"; done
     echo "then, in the last of them or the next: (setsid nohup bash SCRIPT > /tmp/lease.out 2>&1 < /dev/null &), and keep a poll in flight" ;;
 install)
     python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site "${2:-.whl2}"/*.whl
