@@ -11,11 +11,11 @@
 # Each run writes into /tmp/r (which poll packs into $OUT/runs.tgz) and logs into /tmp/logs. A lease
 # holds a machine for 30 minutes; the setup takes 2 to 3, so the queue runs in priority order and
 # whatever it reached comes back (estimates from one H200: each knob side about 5 minutes, the
-# bench pair 4, the profile 1.5, the typed command 8.5: about 30 in all, so the typed command may
-# be left for the next lease). Once a run is back, take it off here.
+# bench pair 4, the profile 1.5, the typed command 8.5: about 35 in all, so `start 83` is a lease
+# of its own). Once a run is back, take it off here.
 #
-# `start 83` runs issue 83's part alone, which needs no warp-lang (Playground's task with its
-# vision off, stepped by MJX's JAX physics): the first two setup calls, not eight.
+# `start 83` (or `start 82`) runs one issue's part: 83's needs no warp-lang (Playground's task with
+# its vision off, stepped by MJX's JAX physics), so only the first two setup calls, not eight.
 set -u
 case "${1:-}" in
 start)
@@ -28,12 +28,13 @@ run)
     mkdir -p $L /tmp/r/runs/playground /tmp/r/bench /tmp/r/typed
     for issue in ${2:-83 82}; do case $issue in
     83)
-    # 83: the three knob sides between the mapped side and Playground's (5 seeds each), all three
-    # knobs first (a lease cut short still says how much of the gap they close); back here,
-    # the record replaces the archived one and `playground_vision.py --report --runs
-    # experiments/results/runs/playground` writes the section
+    # 83: the four knob sides between the mapped side and Playground's (5 seeds each), the CNN,
+    # its critic's own and the pictures' range together first, then with Brax's value loss (a
+    # lease cut short still says how much of the gap they close); back here, the record replaces
+    # the archived one and `playground_vision.py --report --runs experiments/results/runs/playground`
+    # writes the section
     cp $R/experiments/results/runs/playground/versus_vision.json /tmp/r/runs/playground/
-    for side in mapped_scale mapped_cnn mapped_nets; do
+    for side in mapped_scale mapped_loss mapped_cnn mapped_nets; do
         (cd /tmp/r && python3 $R/experiments/playground_vision.py --side $side --seeds 5 \
             --runs runs/playground) > $L/$side.log 2>&1
     done ;;

@@ -21,6 +21,7 @@ Playground's budget: 4 epochs of 31 training steps of 40,960, 5,079,040 a seed):
 - `mapped_nets`: Brax's CNN and one for the critic of its own (`ppo.critic_encoder=own`), as
   Brax's policy and value networks each have one;
 - `mapped_scale`: those, with the pictures in Playground's range, [-0.5, 0.5] (`ppo.pixel_scale`);
+- `mapped_loss`: those, with the value loss weighted as Brax's (`ppo.vf_coef`, `BRAX_VALUE_WEIGHT`);
 - `mapped_one`: the same with one picture at a time (`frames=1`): the frame stack's part in the
   difference, one knob; `mapped_first`: the mapping as first built, one RGB picture and the
   entropy bonus of the Gaussian before the squash (`ppo.squashed_entropy=false`).
@@ -63,6 +64,7 @@ SIDES = (
     "mapped_cnn",
     "mapped_nets",
     "mapped_scale",
+    "mapped_loss",
     "mapped_one",
     "mapped_first",
     "defaults",
@@ -74,6 +76,8 @@ TRAINERS = {
     "mapped_nets": "hintsjax ppo_rgb, Playground's settings, Brax's CNN, one a network",
     "mapped_scale": "hintsjax ppo_rgb, Playground's settings, Brax's CNN, one a network, "
     "Playground's pixel range",
+    "mapped_loss": "hintsjax ppo_rgb, Playground's settings, Brax's CNN, one a network, "
+    "Playground's pixel range, Brax's value loss",
     "mapped_one": "hintsjax ppo_rgb, Playground's settings, one picture",
     "mapped_first": "hintsjax ppo_rgb, Playground's settings, one picture, the Gaussian's entropy",
     "defaults": "hintsjax ppo_rgb, its defaults",
@@ -81,6 +85,9 @@ TRAINERS = {
 # Playground's vision cartpole shows its agent its last 3 frames (cartpole.py's `frame_stack`),
 # each grey (the mean of its RGB channels)
 PLAYGROUND_FRAMES, PLAYGROUND_COLOUR = 3, "grey"
+# Brax's value loss is 0.5 x vf_loss_coefficient (its train()'s 0.5; Playground's config keeps it) x
+# the mean square error; hintsjax's is ppo.vf_coef x the mean square error
+BRAX_VALUE_WEIGHT = 0.5 * 0.5
 EVAL_EPISODES = 128
 RECORD = "versus_vision.json"  # under the runs folder
 # The playground side's finished seeds, a row each (under the runs folder): its 5 seeds take longer
@@ -130,6 +137,7 @@ def mapped_values(
     encoder: str = "nature",
     critic_encoder: str = "shared",
     pixel_scale: float = 1.0,
+    brax_value_loss: bool = False,
 ) -> dict:
     """hintsjax's run config with Playground's vision settings where hintsjax has the knob: an
     update of num_envs rollouts of batch_size x num_minibatches x unroll_length / num_envs steps,
@@ -142,8 +150,9 @@ def mapped_values(
     3x3/1, ReLU) or Brax's (`brax_vision` for `mapped_cnn`: two SAME ones, 16 5x5/2 and 32 3x3/2
     with 2x2 max-pools and ELU), shared by actor and critic or, `critic_encoder` "own" (for
     `mapped_nets`), one each as Brax's networks have, and the pictures' range: hintsjax's bytes
-    in [-1, 1], or Playground's grey in [-0.5, 0.5] (`pixel_scale` 0.5, for `mapped_scale`). Left
-    at hintsjax's: its inits and the value loss's weight."""
+    in [-1, 1], or Playground's grey in [-0.5, 0.5] (`pixel_scale` 0.5, for `mapped_scale`), and
+    the value loss's weight: hintsjax's 0.5, or Brax's (`brax_value_loss`, for `mapped_loss`).
+    Left at hintsjax's (`UNMAPPED`): its MLPs and inits and its policy's std."""
     batch = steps_per_update(s)
     rate = s["learning_rate"]
     ppo = {
@@ -169,6 +178,7 @@ def mapped_values(
         "encoder": encoder,
         "critic_encoder": critic_encoder,
         "pixel_scale": pixel_scale,
+        **({"vf_coef": BRAX_VALUE_WEIGHT} if brax_value_loss else {}),
     }
     return {**common_values(seeds, smoke), "frames": frames, "colour": colour, "ppo": ppo}
 
@@ -444,6 +454,13 @@ def train_side(side: str, runs: Path, seeds: int, smoke: bool) -> None:
             "mapped_scale": functools.partial(
                 mapped_values, encoder="brax_vision", critic_encoder="own", pixel_scale=0.5
             ),
+            "mapped_loss": functools.partial(
+                mapped_values,
+                encoder="brax_vision",
+                critic_encoder="own",
+                pixel_scale=0.5,
+                brax_value_loss=True,
+            ),
             "mapped_one": functools.partial(mapped_values, frames=1),
             "mapped_first": functools.partial(
                 mapped_values, frames=1, squashed=False, colour="rgb"
@@ -580,6 +597,14 @@ def section_lines(runs: Path) -> list[str]:
 
 # The sides in the order their knobs take hintsjax's defaults towards Playground's, each with the
 # knobs it turns beyond the side before it
+# What no hintsjax side maps of Brax's vision networks as Playground configures them (Brax 0.14.2's
+# make_ppo_networks_vision and Playground's brax_vision_ppo_config), and the pictures
+UNMAPPED = (
+    "the MLPs (Brax's swish, LeCun-uniform inits, the policy's output layer orthogonal at 0.2, "
+    "the CNNs orthogonal at sqrt 2; hintsjax's ReLU and He inits), the policy's std (Brax's "
+    "softplus of a network output, so it depends on the picture; hintsjax's one parameter a "
+    "dimension) and the pictures' renderer"
+)
 KNOB_STEPS = (
     ("defaults", ""),
     ("mapped_first", "Playground's settings mapped (`mapped_values`)"),
@@ -592,7 +617,8 @@ KNOB_STEPS = (
     ("mapped_cnn", "Brax's CNN (`ppo.encoder=brax_vision`), one for actor and critic"),
     ("mapped_nets", "a CNN of the critic's own (`ppo.critic_encoder=own`), as Brax's value net"),
     ("mapped_scale", "the pictures in [-0.5, 0.5] (`ppo.pixel_scale=0.5`), as Playground's"),
-    ("playground", "what is left: inits, the value loss, the pictures' renderer"),
+    ("mapped_loss", f"the value loss weighted as Brax's (`ppo.vf_coef={BRAX_VALUE_WEIGHT:g}`)"),
+    ("playground", "what is left: " + UNMAPPED),
 )
 
 

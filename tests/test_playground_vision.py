@@ -60,6 +60,9 @@ def test_both_sides_take_brax_s_own_env_steps_with_playground_s_settings_mapped(
     assert mapped.pixel_scale == nets.ppo.pixel_scale == 1.0
     # and Playground's pixel range (mapped_scale)
     assert run_config(pv.mapped_values(s, 5, False, pixel_scale=0.5)).ppo.pixel_scale == 0.5
+    # and Brax's value loss, 0.5 x its vf_loss_coefficient 0.5 x the mean square (mapped_loss)
+    assert mapped.vf_coef == 0.5
+    assert run_config(pv.mapped_values(s, 5, False, brax_value_loss=True)).ppo.vf_coef == 0.25
     defaults = run_config(pv.default_values(s, seeds=5, smoke=False))
     assert (
         defaults.env == pv.ENV and defaults.ppo.num_updates * defaults.ppo.batch_size == 5_079_040
