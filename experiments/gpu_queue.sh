@@ -1,32 +1,39 @@
 #!/usr/bin/env bash
 # The GPU runs the open issues still wait for (82: the ant's update and command; 83: Playground's
-# side by side), in the order they matter, as one detached job for one lease of one GPU. Set up
-# with experiments/offline_gpu.sh (its eight calls: MJX and Playground's wheels, then warp-lang's
-# parts); in the last:
+# side by side), each issue's in the order they matter, as one detached job a lease of one GPU.
+# Set up with experiments/offline_gpu.sh's calls (`calls` lists them): for 83's part the first
+# two, the second ending in `&& bash experiments/gpu_queue.sh start 83`; for 82's all eight, the
+# last ending in `&& bash experiments/gpu_queue.sh start 82`. Then:
 #
-#   bash experiments/offline_gpu.sh warp && bash experiments/gpu_queue.sh start
-#                                                # start: copies the repo to /tmp/repo, runs detached
 #   bash experiments/offline_gpu.sh poll 240 queue_done   # again and again: keep a call in flight
 #
-# Each run writes into /tmp/r (which poll packs into $OUT/runs.tgz) and logs into /tmp/logs. A lease
-# holds a machine for 30 minutes; the setup takes 2 to 3, so the queue runs in priority order and
-# whatever it reached comes back (estimates from one H200: each knob side about 5 minutes, the
-# bench pair 4, the profile 1.5, the typed command 8.5: about 35 in all, so `start 83` is a lease
-# of its own). Once a run is back, take it off here.
+# start copies the repo to /tmp/repo and runs detached. Each run writes into /tmp/r (which poll
+# packs into $OUT/runs.tgz) and logs into /tmp/logs. A lease holds a machine for 30 minutes, the
+# setup takes 1 to 3, and whatever the queue reached comes back (estimates from one H200: each knob
+# side about 5 minutes, so 83's part 20; the bench pair 4, the profile 1.5, the typed command 8.5,
+# so 82's 14). Once a run is back, take it off here.
 #
-# `start 83` (or `start 82`) runs one issue's part: 83's needs no warp-lang (Playground's task with
-# its vision off, stepped by MJX's JAX physics), so only the first two setup calls, not eight.
+# `start 83` (or `start 82`) runs one issue's part (`start` both, 83's first): 83's needs no
+# warp-lang (Playground's task with its vision off, stepped by MJX's JAX physics), so only the
+# first two setup calls, not eight.
 set -u
 case "${1:-}" in
 start)
+    shift
+    for issue in "$@"; do
+        case $issue in 83|82) ;; *) echo "no runs for issue $issue: 83, 82" >&2; exit 2 ;; esac
+    done
     rm -rf /tmp/repo && cp -r . /tmp/repo
-    (setsid nohup bash /tmp/repo/experiments/gpu_queue.sh run "${2:-83 82}" > /tmp/queue.out 2>&1 < /dev/null &)
+    (setsid nohup bash /tmp/repo/experiments/gpu_queue.sh run "$@" > /tmp/queue.out 2>&1 < /dev/null &)
     echo "queue started: /tmp/queue.out, /tmp/logs" ;;
 run)
     export PYTHONPATH=/tmp/site PYTHONUNBUFFERED=1
     R=/tmp/repo L=/tmp/logs
     mkdir -p $L /tmp/r/runs/playground /tmp/r/bench /tmp/r/typed
-    for issue in ${2:-83 82}; do case $issue in
+    shift
+    issues=("$@")
+    [ ${#issues[@]} -gt 0 ] || issues=(83 82)
+    for issue in "${issues[@]}"; do case $issue in
     83)
     # 83: the four knob sides between the mapped side and Playground's (5 seeds each), the CNN,
     # its critic's own and the pictures' range together first, then with Brax's value loss (a

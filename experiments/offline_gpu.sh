@@ -10,14 +10,14 @@
 #                                                     #   checked against the 64 MiB a call takes with the tree)
 #   bash experiments/offline_gpu.sh install [DIR]     # there, in the repo root: DIR's wheels (.whl2) into /tmp/site
 #                                                     #   (the calls' second installs .whl2's and .whl3's together)
-#   bash experiments/offline_gpu.sh warp              # there: keep the .wp parts carried so far; all 8 in: install
+#   bash experiments/offline_gpu.sh warp              # there: keep the .wp parts carried so far; all 6 in: install
 #   bash experiments/offline_gpu.sh poll SECONDS MARK # there: wait up to SECONDS or until /tmp/MARK exists, show
 #                                                     #   the logs' last lines (/tmp/logs/*.log) and pack the runs'
 #                                                     #   small files (/tmp/r: csv, json, jsonl, yaml) into $OUT/runs.tgz
 # Then run with PYTHONPATH=/tmp/site from a folder outside the repo (the installed hintsjax, not the source tree):
 #   cd /tmp && PYTHONPATH=/tmp/site python3 -m hintsjax.run env=ant hint=speed scheme=fc out_dir=/tmp/r/ant
-# Transfers of at most 64 MiB at a time, the working tree included, are why warp-lang (149 MB) travels in parts, Playground's wheels in
-# .whl3 and pyopengl not at all (mujoco imports its OpenGL parts only when asked to).
+# Transfers of at most 64 MiB at a time, the working tree included, are why warp-lang (149 MB) travels in parts, mujoco's
+# wheel alone and pyopengl not at all (mujoco imports its OpenGL parts only when asked to).
 # A poll's files come back only when it returns: keep SECONDS under the device time left (the lease's
 # budget_left_s, which a 1-GPU machine can count in full), or a cut call brings back nothing. And keep a
 # call in flight: a machine idle for idle_release_s (30 s, `status`) goes back, and its detached runs with it.
@@ -26,11 +26,12 @@ PY=3.12
 PLATFORMS="manylinux_2_28_x86_64 manylinux_2_27_x86_64 manylinux_2_17_x86_64 manylinux2014_x86_64 manylinux1_x86_64 any"
 WARP=warp_lang-1.18.0-py3-none-manylinux_2_28_x86_64.whl
 WARP_MD5=47fc34ed07880e32d2964187ad4de4cd
-WARP_PARTS=6  # 25 MB each: one travels beside the working tree (35 MB) within a call's 64 MiB
+WARP_PARTS=6  # 25 MB each: one travels beside the working tree (about 33 MiB) within a call's 64 MiB
 # What the GPU image lacks among the project's pins (pyproject.toml) and their needs
 CARRIED="mujoco==3.17.0 mujoco-mjx==3.17.0 hydra-core==1.3.2 omegaconf==2.3.0 tensorboardX==2.6.5 trimesh websockets>=13"
 # What env=playground:* and experiments/playground.py need beyond those (importing mujoco_playground and brax
-# worked with these on the GPU image, 2026-11-28; mujoco_playground also wants warp, carried as above)
+# worked with these on the GPU image, 2026-11-28; Playground's tasks with their vision off, as hintsjax steps
+# them, need no warp-lang: its import blocked, on a CPU, 2026-12-07)
 PLAYGROUND="playground==0.2.0 brax==0.14.2 jaxopt==0.8.5 ml_collections==1.1.0 mediapy==1.2.7 lxml==6.1.3 flask==3.1.3 flask-cors==6.0.5"
 
 download() {  # download DEST SPEC...: binary wheels for PY on PLATFORMS, without their dependencies

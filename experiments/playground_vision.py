@@ -1,6 +1,6 @@
 """hintsjax's pixel PPO beside MuJoCo Playground's vision PPO on CartpoleBalance (issue 83).
 
-    python experiments/playground_vision.py [--seeds 5] [--side playground|mapped|defaults]
+    python experiments/playground_vision.py [--seeds 5] [--side playground|mapped|...|defaults]
     python experiments/playground_vision.py --report    # archived, plotted, its section of
                                                         # results/playground.md (the last one)
     python experiments/playground_vision.py --smoke --runs /tmp/pv --side mapped  # plumbing, a CPU
@@ -22,7 +22,7 @@ Playground's budget: 4 epochs of 31 training steps of 40,960, 5,079,040 a seed):
   Brax's policy and value networks each have one;
 - `mapped_scale`: those, with the pictures in Playground's range, [-0.5, 0.5] (`ppo.pixel_scale`);
 - `mapped_loss`: those, with the value loss weighted as Brax's (`ppo.vf_coef`, `BRAX_VALUE_WEIGHT`);
-- `mapped_one`: the same with one picture at a time (`frames=1`): the frame stack's part in the
+- `mapped_one`: `mapped` with one picture at a time (`frames=1`): the frame stack's part in the
   difference, one knob; `mapped_first`: the mapping as first built, one RGB picture and the
   entropy bonus of the Gaussian before the squash (`ppo.squashed_entropy=false`).
 - `defaults`: hintsjax's defaults for the env (one picture).
@@ -77,7 +77,7 @@ TRAINERS = {
     "mapped_scale": "hintsjax ppo_rgb, Playground's settings, Brax's CNN, one a network, "
     "Playground's pixel range",
     "mapped_loss": "hintsjax ppo_rgb, Playground's settings, Brax's CNN, one a network, "
-    "Playground's pixel range, Brax's value loss",
+    "Playground's pixel range, Brax's value-loss weight",
     "mapped_one": "hintsjax ppo_rgb, Playground's settings, one picture",
     "mapped_first": "hintsjax ppo_rgb, Playground's settings, one picture, the Gaussian's entropy",
     "defaults": "hintsjax ppo_rgb, its defaults",
@@ -152,7 +152,7 @@ def mapped_values(
     `mapped_nets`), one each as Brax's networks have, and the pictures' range: hintsjax's bytes
     in [-1, 1], or Playground's grey in [-0.5, 0.5] (`pixel_scale` 0.5, for `mapped_scale`), and
     the value loss's weight: hintsjax's 0.5, or Brax's (`brax_value_loss`, for `mapped_loss`).
-    Left at hintsjax's (`UNMAPPED`): its MLPs and inits and its policy's std."""
+    Left at hintsjax's: what `UNMAPPED` lists."""
     batch = steps_per_update(s)
     rate = s["learning_rate"]
     ppo = {
@@ -592,19 +592,35 @@ def section_lines(runs: Path) -> list[str]:
     knobs = knob_lines(results)
     if knobs:
         lines += ["", "Knob by knob, from hintsjax's defaults to Playground's settings:", *knobs]
+        lines += ["", "What no side maps yet:", *(f"- {item}" for item in UNMAPPED)]
     return lines + [""]
 
 
+# What no hintsjax side maps of Playground's side, read from Brax 0.14.2 (ppo/losses.py, train.py,
+# networks.py, networks_vision.py, distribution.py) and Playground 0.2.0 (brax_vision_ppo_config,
+# wrapper.py's BraxAutoResetWrapper, cartpole.py)
+UNMAPPED = (
+    "the MLPs' activation: Brax's swish, hintsjax's ReLU",
+    "the inits: Brax's MLPs LeCun-uniform, its policy's output layer orthogonal at 0.2 and its "
+    "CNNs orthogonal at sqrt 2; hintsjax's He-normal, its output layers LeCun-normal, the "
+    "actor's x 0.01",
+    "the policy's std: Brax's a softplus of network outputs plus 0.001, so it depends on the "
+    "pictures and starts near 0.69; hintsjax's one parameter a dimension, starting at 1",
+    "the advantages: Brax computes GAE again in every minibatch with the critic as it stands, "
+    "minibatches of whole 20-step unrolls, and its advantage bootstraps from the next step's "
+    "lambda-return (r + gamma vs(t+1) - v(t)); hintsjax's GAE once an update from the rollout's "
+    "values, minibatches of single steps",
+    "the time limit: Brax (bootstrap_on_timeout off) gives a truncated step no advantage and its "
+    "own value as its target; hintsjax bootstraps it from its final picture's value",
+    "the resets: Playground's wrapper starts every episode of an env from that env's first start, "
+    "and its frame stack carries the ended episode's last 2 pictures into the next one's second "
+    "step; hintsjax draws a fresh start and repeats its first picture",
+    "the entropy bonus's estimate: Brax one sample of the tanh's log-Jacobian, hintsjax a "
+    "32-node quadrature",
+    "the pictures' renderer: MuJoCo Warp's ray tracer against hintsjax's ray caster, other shading",
+)
 # The sides in the order their knobs take hintsjax's defaults towards Playground's, each with the
 # knobs it turns beyond the side before it
-# What no hintsjax side maps of Brax's vision networks as Playground configures them (Brax 0.14.2's
-# make_ppo_networks_vision and Playground's brax_vision_ppo_config), and the pictures
-UNMAPPED = (
-    "the MLPs (Brax's swish, LeCun-uniform inits, the policy's output layer orthogonal at 0.2, "
-    "the CNNs orthogonal at sqrt 2; hintsjax's ReLU and He inits), the policy's std (Brax's "
-    "softplus of a network output, so it depends on the picture; hintsjax's one parameter a "
-    "dimension) and the pictures' renderer"
-)
 KNOB_STEPS = (
     ("defaults", ""),
     ("mapped_first", "Playground's settings mapped (`mapped_values`)"),
@@ -618,7 +634,7 @@ KNOB_STEPS = (
     ("mapped_nets", "a CNN of the critic's own (`ppo.critic_encoder=own`), as Brax's value net"),
     ("mapped_scale", "the pictures in [-0.5, 0.5] (`ppo.pixel_scale=0.5`), as Playground's"),
     ("mapped_loss", f"the value loss weighted as Brax's (`ppo.vf_coef={BRAX_VALUE_WEIGHT:g}`)"),
-    ("playground", "what is left: " + UNMAPPED),
+    ("playground", "what is left (below)"),
 )
 
 

@@ -135,6 +135,9 @@ def test_the_section_gives_each_side_its_cells_and_hintsjax_against_playground(t
         in text
     )
     assert "processes" not in text  # Playground's seeds in one process
+    # under the knob steps, what no side maps, one item a line
+    assert "\nWhat no side maps yet:\n- the MLPs' activation: Brax's swish" in text
+    assert text.count("\n- the ") >= len(pv.UNMAPPED)
     runs = [{**run, "process": p} for p in ("2026-12-03 10:00:00", "2026-12-04 09:00:00") * 2][:3]
     record["results"]["playground"]["seeds_run"] = runs
     (tmp_path / pv.RECORD).write_text(json.dumps(record))
@@ -246,4 +249,5 @@ def test_the_knob_steps_name_the_sides_in_the_record_and_order_their_returns():
     line = pv.knob_lines(results)[1]
     assert line.startswith("- mapped -> playground, Brax's CNN (`ppo.encoder=brax_vision`), one ")
     assert "; a CNN of the critic's own (`ppo.critic_encoder=own`)" in line
-    assert "; what is left: " in line and "P(playground > mapped) = 0.00 [0.00, 0.00]" in line
+    assert "; what is left (below): " in line
+    assert "P(playground > mapped) = 0.00 [0.00, 0.00]" in line
