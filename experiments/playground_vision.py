@@ -85,6 +85,20 @@ TRAINERS = {
 # Playground's vision cartpole shows its agent its last 3 frames (cartpole.py's `frame_stack`),
 # each grey (the mean of its RGB channels)
 PLAYGROUND_FRAMES, PLAYGROUND_COLOUR = 3, "grey"
+# Each mapped side's knobs (mapped_values' arguments): a knob step's are the step before it's and
+# its own, in KNOB_STEPS' order
+_CNN = {"encoder": "brax_vision"}
+_NETS = {**_CNN, "critic_encoder": "own"}
+_SCALE = {**_NETS, "pixel_scale": 0.5}
+MAPPED_KNOBS = {
+    "mapped": {},
+    "mapped_cnn": _CNN,
+    "mapped_nets": _NETS,
+    "mapped_scale": _SCALE,
+    "mapped_loss": {**_SCALE, "brax_value_loss": True},
+    "mapped_one": {"frames": 1},
+    "mapped_first": {"frames": 1, "squashed": False, "colour": "rgb"},
+}
 # Brax's value loss is 0.5 x vf_loss_coefficient (its train()'s 0.5; Playground's config keeps it) x
 # the mean square error; hintsjax's is ppo.vf_coef x the mean square error
 BRAX_VALUE_WEIGHT = 0.5 * 0.5
@@ -445,28 +459,11 @@ def train_side(side: str, runs: Path, seeds: int, smoke: bool) -> None:
             shutil.copyfile(seeds_path(runs), done)
         result = train_playground(s, seeds, episodes, done, budget, watch)
     else:
-        make = {
-            "mapped": mapped_values,
-            "mapped_cnn": functools.partial(mapped_values, encoder="brax_vision"),
-            "mapped_nets": functools.partial(
-                mapped_values, encoder="brax_vision", critic_encoder="own"
-            ),
-            "mapped_scale": functools.partial(
-                mapped_values, encoder="brax_vision", critic_encoder="own", pixel_scale=0.5
-            ),
-            "mapped_loss": functools.partial(
-                mapped_values,
-                encoder="brax_vision",
-                critic_encoder="own",
-                pixel_scale=0.5,
-                brax_value_loss=True,
-            ),
-            "mapped_one": functools.partial(mapped_values, frames=1),
-            "mapped_first": functools.partial(
-                mapped_values, frames=1, squashed=False, colour="rgb"
-            ),
-            "defaults": default_values,
-        }[side]
+        make = (
+            functools.partial(mapped_values, **MAPPED_KNOBS[side])
+            if side in MAPPED_KNOBS
+            else default_values
+        )
         result = train_hintsjax(make(s, seeds, smoke), episodes, TRAINERS[side])
     entry = {"trainer": TRAINERS[side], "memory": watch.result(), **result}
     record_side(

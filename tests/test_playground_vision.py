@@ -63,6 +63,15 @@ def test_both_sides_take_brax_s_own_env_steps_with_playground_s_settings_mapped(
     # and Brax's value loss, 0.5 x its vf_loss_coefficient 0.5 x the mean square (mapped_loss)
     assert mapped.vf_coef == 0.5
     assert run_config(pv.mapped_values(s, 5, False, brax_value_loss=True)).ppo.vf_coef == 0.25
+    # each knob side's settings are the side before it's and its own knob
+    loss = run_config(pv.mapped_values(s, 5, False, **pv.MAPPED_KNOBS["mapped_loss"])).ppo
+    assert (loss.encoder, loss.critic_encoder, loss.pixel_scale, loss.vf_coef) == (
+        "brax_vision",
+        "own",
+        0.5,
+        0.25,
+    )
+    assert set(pv.MAPPED_KNOBS) == {side for side in pv.SIDES if side.startswith("mapped")}
     defaults = run_config(pv.default_values(s, seeds=5, smoke=False))
     assert (
         defaults.env == pv.ENV and defaults.ppo.num_updates * defaults.ppo.batch_size == 5_079_040
@@ -137,7 +146,7 @@ def test_the_section_gives_each_side_its_cells_and_hintsjax_against_playground(t
     assert "processes" not in text  # Playground's seeds in one process
     # under the knob steps, what no side maps, one item a line
     assert "\nWhat no side maps yet:\n- the MLPs' activation: Brax's swish" in text
-    assert text.count("\n- the ") >= len(pv.UNMAPPED)
+    assert all(f"\n- {item}\n" in text for item in pv.UNMAPPED)
     runs = [{**run, "process": p} for p in ("2026-12-03 10:00:00", "2026-12-04 09:00:00") * 2][:3]
     record["results"]["playground"]["seeds_run"] = runs
     (tmp_path / pv.RECORD).write_text(json.dumps(record))
