@@ -365,6 +365,8 @@ def test_the_network_takes_its_ppo_settings_by_name():
         "encoder_dtype",
         "critic_encoder",
         "pixel_scale",
+        "activation",
+        "std_head",
     } <= set(ppo.NETWORK_SETTINGS)
     cfg = run_config(
         {

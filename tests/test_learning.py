@@ -129,6 +129,59 @@ def test_a_critic_with_its_own_encoder_trains_it_beside_the_actors():
         assert min(moved) > 0.0 and np.all(np.isfinite(moved)), (part, moved)
 
 
+def test_a_softplus_std_head_with_swish_mlps_learns_the_cue():
+    """ppo.std_head=softplus, ppo.activation=swish (Brax's policy): the std is the actor's, a
+    function of the input, and the agent learns the cue as with hintsjax's head (the same bar as
+    test_hints_agent_learns_the_cue)."""
+    cfg = layers.run_config(
+        dict(
+            env="cue",
+            agent="hints",
+            scheme="fc",
+            seeds=1,
+            ppo={**LEARN_PPO, "std_head": "softplus", "activation": "swish"},
+        )
+    )
+    trainer = ppo.make_trainer(cfg)
+    state, metrics = jax.jit(trainer.train)(jax.random.key(0))
+    assert "log_std" not in state.params["params"]
+    returns = np.asarray(metrics["episode_return"])
+    final = returns[-LAST:].mean()
+    assert final > -0.3 and final > returns[0] + 1.0, np.round(returns, 2)
+    low, high = policy_mean(trainer, state.params, [-1.0, 1.0])
+    assert low < 0.0 < high and high - low > 1.0, (low, high)
+
+
+def test_without_the_truncation_bootstrap_the_cue_s_one_step_episodes_teach_nothing():
+    """ppo.bootstrap_truncated=false reaches GAE: every cue episode is cut by its time limit after
+    one step, so every advantage is 0 and every target the critic's own value; the actor's mean
+    and the critic do not move at all (Adam's step of a zero gradient is zero), only the std
+    does (the entropy bonus). With the bootstrap (the default) the actor moves."""
+    moved = {}
+    for bootstrap in (False, True):
+        cfg = layers.run_config(
+            dict(
+                env="cue",
+                agent="ppo_state",
+                seeds=1,
+                ppo={**LEARN_PPO, "total_env_steps": 512, "bootstrap_truncated": bootstrap},
+            )
+        )
+        trainer = ppo.make_trainer(cfg)
+        key = jax.random.key(0)
+        before = jax.jit(trainer.init)(key).params["params"]
+        after = jax.jit(trainer.train)(key)[0].params["params"]
+        moved[bootstrap] = {
+            part: max(
+                float(np.abs(np.asarray(a) - np.asarray(b)).max())
+                for a, b in zip(jax.tree.leaves(after[part]), jax.tree.leaves(before[part]))
+            )
+            for part in ("actor", "critic", "log_std")
+        }
+    assert moved[False]["actor"] == moved[False]["critic"] == 0.0, moved
+    assert moved[False]["log_std"] > 0.0 and moved[True]["actor"] > 0.0, moved
+
+
 def test_rgb_agent_cannot_beat_the_best_constant_action():
     trainer, state, metrics = learn("ppo_rgb")
     returns = metrics["episode_return"]

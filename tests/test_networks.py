@@ -301,3 +301,32 @@ def test_pixel_scale_sets_the_range_the_encoder_sees(agent):
     (x,) = seen.values()
     np.testing.assert_allclose(x, scale_pixels(obs["pixels"]) * 0.5, rtol=1e-6)
     assert not np.allclose(half.apply(params, obs)[2], whole.apply(params, obs)[2])
+
+
+def test_swish_mlps_and_a_softplus_std_head_compute_brax_s_policy():
+    """ppo.activation=swish and ppo.std_head=softplus, by hand from the parameters: the actor's
+    hidden layer is swish(x W0 + b0) and its 2A outputs are the mean and the raw std, std =
+    softplus(raw) + 0.001 a row (so the log std is [B, A] and there is no log_std parameter); the
+    critic's hidden layer is swish too. Near init the std is near softplus(0) = 0.69 (Brax's)."""
+    spec = AGENTS["ppo_state"]
+    obs = {"state": OBS["state"]}
+    net = ActorCritic(spec, "fc", 2, hidden=(8,), activation="swish", std_head="softplus")
+    params = net.init(jax.random.key(0), obs)
+    p = params["params"]
+    assert "log_std" not in p and p["actor"]["Dense_1"]["kernel"].shape == (8, 4)
+
+    def mlp(q, x):
+        h = jax.nn.swish(x @ q["Dense_0"]["kernel"] + q["Dense_0"]["bias"])
+        return h @ q["Dense_1"]["kernel"] + q["Dense_1"]["bias"]
+
+    mean, log_std, value = net.apply(params, obs)
+    out = mlp(p["actor"], obs["state"])
+    np.testing.assert_allclose(mean, out[:, :2], rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(
+        log_std, np.log(jax.nn.softplus(out[:, 2:]) + 0.001), rtol=1e-5, atol=1e-6
+    )
+    np.testing.assert_allclose(value, mlp(p["critic"], obs["state"])[:, 0], rtol=1e-5, atol=1e-6)
+    assert log_std.shape == (4, 2) and np.all(np.abs(np.exp(log_std) - 0.694) < 0.05)
+    # the same parameters under ReLU give other values: the network reads the setting
+    relu = ActorCritic(spec, "fc", 2, hidden=(8,), std_head="softplus")
+    assert not np.allclose(relu.apply(params, obs)[2], value)

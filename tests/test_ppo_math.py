@@ -135,6 +135,40 @@ def test_gae_segments_cut_the_advantage_but_keep_the_bootstrap():
     np.testing.assert_allclose(np.asarray(whole), EXPECTED_ADVANTAGE, rtol=0, atol=1e-6)
 
 
+def test_without_the_truncation_bootstrap_a_cut_step_teaches_nothing_as_in_brax():
+    # bootstrap_truncated=False: column 1's truncated step (t=2) gets advantage 0, target v_2 = 2;
+    # nothing flowed back across it anyway, so A_1 = delta_1 = 1 and A_0 = -1.5 + 0.25 * 1.
+    advantage, target = gae(
+        REWARD,
+        VALUE,
+        TERMINATED,
+        TRUNCATED,
+        FINAL_VALUE,
+        LAST_VALUE,
+        GAMMA,
+        LAM,
+        bootstrap_truncated=False,
+    )
+    expected = EXPECTED_ADVANTAGE.copy()
+    expected[2, 1], expected[1, 1], expected[0, 1] = 0.0, 1.0, -1.25
+    np.testing.assert_allclose(np.asarray(advantage), expected, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(np.asarray(target), expected + VALUE, rtol=0, atol=1e-6)
+    # Brax 0.14.2's compute_gae (bootstrap_on_timeout off, its default): its value targets vs are
+    # these targets (its advantages are another quantity, r + gamma vs_{t+1} - v_t)
+    from brax.training.agents.ppo.losses import compute_gae
+
+    vs, _ = compute_gae(
+        jnp.asarray(TRUNCATED, jnp.float32),
+        jnp.asarray(TERMINATED, jnp.float32),
+        jnp.asarray(REWARD),
+        jnp.asarray(VALUE),
+        jnp.asarray(LAST_VALUE),
+        LAM,
+        GAMMA,
+    )
+    np.testing.assert_allclose(np.asarray(vs), np.asarray(target), rtol=0, atol=1e-6)
+
+
 # -- clipped surrogate --------------------------------------------------------------------------
 
 CLIP, VF, ENT = 0.2, 0.5, 0.01

@@ -352,6 +352,16 @@ def test_a_report_states_a_critic_with_its_own_encoder_and_the_pictures_scale():
     assert report.ppo_text(own.ppo).endswith(
         "critic 0.001, the critic's own encoder, pictures in [-0.5, 0.5], rewards x 0.1"
     )
+    brax = run_config(
+        {
+            "agent": "ppo_rgb",
+            "ppo": {"activation": "swish", "std_head": "softplus", "bootstrap_truncated": False},
+        }
+    )
+    assert report.ppo_text(brax.ppo).endswith(
+        "critic 0.001, swish MLPs, a softplus std head, no bootstrap at the time limit, "
+        "rewards x 0.1"
+    )
 
 
 def test_kl_cell_is_the_share_of_blown_up_updates(tmp_path):

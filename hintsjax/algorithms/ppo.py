@@ -415,7 +415,7 @@ def make_ppo(cfg: RunConfig, hint: str | None = None, ended_starts: bool | None 
             batch.target,
             squashed_entropy(mean, log_std).mean()
             if ppo.squashed_entropy
-            else gaussian_entropy(log_std),
+            else gaussian_entropy(log_std).mean(),  # a softplus std head's is [B]
             hyper.clip_eps,
             hyper.vf_coef,
             hyper.ent_coef,
@@ -445,6 +445,7 @@ def make_ppo(cfg: RunConfig, hint: str | None = None, ended_starts: bool | None 
             hyper.gamma,
             hyper.gae_lambda,
             ppo.gae_segment,
+            ppo.bootstrap_truncated,
         )
         flat = lambda x: x.reshape((T * N,) + x.shape[2:])  # noqa: E731
         batch = jax.tree.map(flat, Batch(traj.obs, traj.action, traj.log_prob, advantage, target))

@@ -63,12 +63,12 @@ _WEIGHTS = _WEIGHTS / _WEIGHTS.sum()
 
 
 def squashed_entropy(mean: jax.Array, log_std: jax.Array) -> jax.Array:
-    """Entropy of tanh(u), u ~ N(mean, exp(log_std)) per dimension, summed: [..., A], [A] ->
-    [...]. The Gaussian's entropy plus E[log(1 - tanh(u)^2)] (the squash's log Jacobian), the
-    expectation by 32-node Gauss-Hermite quadrature (within 0.002 of the integral for stds up
-    to e, 1 % of it beyond): deterministic, smooth in mean and log_std,
-    and bounded above by A log 2 (the uniform on [-1, 1]^A), where the Gaussian's grows with the
-    std without bound. Brax's tanh-squashed policies estimate the same from one draw."""
+    """Entropy of tanh(u), u ~ N(mean, exp(log_std)) per dimension, summed: [..., A], [A] or
+    [..., A] -> [...]. The Gaussian's entropy plus E[log(1 - tanh(u)^2)] (the squash's log
+    Jacobian), the expectation by 32-node Gauss-Hermite quadrature (within 0.002 of the integral
+    for stds up to e, 1 % of it beyond): deterministic, smooth in mean and log_std, and bounded
+    above by A log 2 (the uniform on [-1, 1]^A), where the Gaussian's grows with the std without
+    bound. Brax's tanh-squashed policies estimate the same from one draw."""
     u = mean[..., None] + jnp.exp(log_std)[..., None] * jnp.asarray(_NODES, jnp.float32)
     # log(1 - tanh(u)^2) = 2 (log 2 - u - softplus(-2u)), stable for large |u|
     log_det = 2.0 * (jnp.log(2.0) - u - jax.nn.softplus(-2.0 * u))
@@ -86,6 +86,7 @@ def gae(
     gamma: float,
     lam: float,
     segment: int = 0,
+    bootstrap_truncated: bool = True,
 ) -> tuple[jax.Array, jax.Array]:
     """Generalised advantage estimates and value targets, both [T, N].
 
@@ -94,12 +95,16 @@ def gae(
     ended at t: then the bootstrap is final_value[t] if it was truncated and 0 if terminated,
     and no advantage flows back across the boundary. With `segment` L > 0 (static, dividing T)
     the rollout is cut into runs of L steps, as Brax's unrolls: the last step of each is
-    bootstrapped from the next row's value and no advantage flows back across the cut.
+    bootstrapped from the next row's value and no advantage flows back across the cut. Without
+    `bootstrap_truncated` (Brax's bootstrap_on_timeout off) a truncated step's advantage is 0 and
+    its target its own value: it teaches neither head.
     """
     next_value = jnp.concatenate([value[1:], last_value[None]], axis=0)
     next_value = jnp.where(truncated, final_value, next_value)
     next_value = jnp.where(terminated, 0.0, next_value)
     delta = reward + gamma * next_value - value
+    if not bootstrap_truncated:
+        delta = jnp.where(truncated, 0.0, delta)
     carry_on = 1.0 - (terminated | truncated).astype(jnp.float32)
     if segment:
         cut = (jnp.arange(reward.shape[0]) % segment == segment - 1)[:, None]

@@ -67,7 +67,7 @@ def policy_action(
     mean, log_std, _ = network.apply(params, jax.tree.map(lambda x: x[None], obs))
     if key is None:
         return mean[0]
-    return gaussian_sample(key, mean[0], log_std)
+    return gaussian_sample(key, mean[0], jnp.broadcast_to(log_std, mean.shape)[0])
 
 
 def rollout(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from typing import Any, Sequence
 
 import jax
@@ -150,28 +151,43 @@ class BraxVisionEncoder(nn.Module):
 ENCODERS = {"nature": Encoder, "brax_vision": BraxVisionEncoder}
 
 
+# The MLPs' hidden activation (`ppo.activation`): hintsjax's ReLU, or swish (x sigmoid(x)), the
+# activation of Brax's PPO networks, vision ones included.
+ACTIVATIONS = {"relu": nn.relu, "swish": nn.swish}
+
+
 class MLP(nn.Module):
-    """Hidden ReLU layers then a linear output: [B, n] -> [B, features[-1]]."""
+    """Hidden layers (`activation`, an ACTIVATIONS key) then a linear output:
+    [B, n] -> [B, features[-1]]."""
 
     features: Sequence[int]
     out_scale: float = 1.0
+    activation: str = "relu"
 
     @nn.compact
     def __call__(self, x: jax.Array) -> jax.Array:
+        act = ACTIVATIONS[self.activation]
         for width in self.features[:-1]:
-            x = nn.relu(nn.Dense(width, kernel_init=he_init())(x))
+            x = act(nn.Dense(width, kernel_init=he_init())(x))
         return nn.Dense(self.features[-1], kernel_init=he_init(self.out_scale**2 / 2))(x)
 
 
 SIGMOID_MIN_STD = 0.01  # the sigmoid head's floor on the policy's std
+# The policy's std (`ppo.std_head`): "param", one learnt parameter a dimension whatever the input
+# (log std [A], starting at std 1); "softplus", Brax's: softplus of the actor's second A outputs
+# plus SOFTPLUS_MIN_STD, so it depends on the input (log std [B, A], starting near softplus(0),
+# 0.69).
+STD_HEADS = ("param", "softplus")
+SOFTPLUS_MIN_STD = 0.001
 
 
 class ActorCritic(nn.Module):
-    """obs dict (batched) -> (action mean [B, A], log std [A], value [B]).
+    """obs dict (batched) -> (action mean [B, A], log std [A] or [B, A], value [B]).
 
     The features z' come from the agent's inputs: pixels through the encoder (conditioned on
     the hint by the scheme), the state vector, or the embedded hint alone. Actor and critic are
-    three-layer MLPs on z'; the policy is a Gaussian with a learnt, state-independent std. With
+    three-layer MLPs on z' (their hidden activation `activation`); the policy is a Gaussian whose
+    std is a learnt parameter ([A]) or, with `std_head` "softplus", the actor's ([B, A]). With
     `action_head` "sigmoid" (the authors' head) its mean is 2 sigmoid(x) - 1 and its std at least
     SIGMOID_MIN_STD; "gaussian" and "tanh" leave both as they are (tanh squashes in the env:
     envs.SquashedActions). Without `critic_trains_encoder` the critic reads z' through a
@@ -197,6 +213,8 @@ class ActorCritic(nn.Module):
     encoder_dtype: str = "float32"  # the pixel encoder's arithmetic
     critic_encoder: str = "shared"  # "own": the critic's features from an encoder of its own
     pixel_scale: float = 1.0  # the pictures enter the encoder in [-pixel_scale, pixel_scale]
+    activation: str = "relu"  # the MLPs' hidden activation, an ACTIVATIONS key
+    std_head: str = "param"  # the policy's std, a STD_HEADS entry
 
     def features(self, obs: dict[str, jax.Array], owner: str = "") -> jax.Array:
         """z' from the agent's inputs; `owner` "critic_" builds the critic's own encoder and
@@ -222,8 +240,14 @@ class ActorCritic(nn.Module):
         self, obs: dict[str, jax.Array], predict_hint: bool = False
     ) -> tuple[jax.Array, ...]:
         z = self.features(obs)
-        mean = MLP((*self.hidden, self.action_size), out_scale=0.01, name="actor")(z)
-        log_std = self.param("log_std", nn.initializers.zeros, (self.action_size,))
+        mlp = functools.partial(MLP, activation=self.activation)
+        if self.std_head == "softplus":
+            out = mlp((*self.hidden, 2 * self.action_size), out_scale=0.01, name="actor")(z)
+            mean, raw = jnp.split(out, 2, axis=-1)
+            log_std = jnp.log(nn.softplus(raw) + SOFTPLUS_MIN_STD)
+        else:
+            mean = mlp((*self.hidden, self.action_size), out_scale=0.01, name="actor")(z)
+            log_std = self.param("log_std", nn.initializers.zeros, (self.action_size,))
         if self.action_head == "sigmoid":
             mean, log_std = (
                 2.0 * nn.sigmoid(mean) - 1.0,
@@ -240,12 +264,12 @@ class ActorCritic(nn.Module):
             critic_in = jnp.concatenate(
                 [critic_in, HintEmbedding(self.hint_width, name="critic_hint")(obs["hint"])], -1
             )
-        value = MLP((*self.hidden, 1), out_scale=1.0, name="critic")(critic_in)[..., 0]
+        value = mlp((*self.hidden, 1), out_scale=1.0, name="critic")(critic_in)[..., 0]
         if self.agent.hint_use != "target":
             return mean, log_std, value
         # Built at every call (init included), returned when asked: the loss's prediction of the
         # hint.
-        prediction = MLP((self.hidden[0], obs["hint"].shape[-1]), name="hint_head")(z)
+        prediction = mlp((self.hidden[0], obs["hint"].shape[-1]), name="hint_head")(z)
         return (mean, log_std, value, prediction) if predict_hint else (mean, log_std, value)
 
 

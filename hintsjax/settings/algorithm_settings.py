@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from hintsjax.models.networks import ENCODERS
+from hintsjax.models.networks import ACTIVATIONS, ENCODERS, STD_HEADS
 from hintsjax.system.checks import require_positive, require_range
 from hintsjax.system.errors import UsageError
 from hintsjax.settings.fields import check_choices, setting
@@ -175,6 +175,26 @@ class PPOConfig:
         1.0,
         "pixel agents: the pictures enter the encoder in [-pixel_scale, pixel_scale] (bytes / "
         "127.5 - 1, times it; Playground's vision tasks show grey in [-0.5, 0.5])",
+        saved_may_lack=True,
+    )
+    activation: str = setting(
+        "relu",
+        "the actor's and critic's hidden activation: relu, or swish (Brax's)",
+        choices=tuple(ACTIVATIONS),
+        saved_may_lack=True,
+    )
+    std_head: str = setting(
+        "param",
+        "the policy's std: param, a learnt parameter a dimension whatever the input; softplus, "
+        "Brax's: softplus of actor outputs + 0.001, so it depends on the input",
+        choices=STD_HEADS,
+        saved_may_lack=True,
+    )
+    # Brax's bootstrap_on_timeout (off in its train()'s defaults and Playground's configs).
+    bootstrap_truncated: bool = setting(
+        True,
+        "a step the time limit cut is bootstrapped from its final observation's value; false: "
+        "it gets no advantage and its own value as target (Brax's default)",
         saved_may_lack=True,
     )
     # The privileged-signal baselines (hintsjax/models/agents.py). Shapes, not traced: a Hyper leaf

@@ -29,6 +29,9 @@ from hintsjax.settings.hint_sources import PROGRAMMATIC, check_matches, hinted_e
 
 MAX_IMAGE_SIZE = 256  # image_size's largest: 4x the default's 64, already 16x its pixels
 MAX_FRAMES = 8  # frames' largest: each one more picture in every step a rollout keeps
+# The PPO settings an expert (and the imitators it trains) keeps: hintsjax.algorithms.experts.Expert
+# replays the policy as a ReLU MLP's Gaussian mean with a parameter's std.
+EXPERT_POLICY = {"action_head": "gaussian", "activation": "relu", "std_head": "param"}
 
 
 def env_params(env: str, variant: str | None) -> Any:
@@ -210,13 +213,16 @@ class RunConfig:
         for section in SECTIONS:
             getattr(self, section).validate()
         self._check_pixel_settings()
-        if self.ppo.action_head != "gaussian" and (
-            self.agent_spec.imitates or self.agent == EXPERT_AGENT
-        ):
-            raise UsageError(
-                f"ppo.action_head={self.ppo.action_head} is for PPO's learners; {self.agent} keeps "
-                "the gaussian head (an expert's policy drives dagger and gail as a Gaussian's mean)"
-            )
+        if self.agent_spec.imitates or self.agent == EXPERT_AGENT:
+            # an expert's policy drives dagger and gail as experts.Expert: a ReLU MLP's mean, a
+            # parameter's std
+            for name, kept in EXPERT_POLICY.items():
+                if getattr(self.ppo, name) != kept:
+                    raise UsageError(
+                        f"ppo.{name}={getattr(self.ppo, name)} is for PPO's learners; "
+                        f"{self.agent} keeps ppo.{name}={kept} (an expert's policy drives dagger "
+                        "and gail as a Gaussian's mean)"
+                    )
         if self.agent_spec.algorithm == "dagger" and self.dagger.buffer_size < self.ppo.batch_size:
             raise UsageError(
                 f"dagger.buffer_size ({self.dagger.buffer_size}) must hold one round, "
