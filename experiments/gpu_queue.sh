@@ -10,7 +10,7 @@
 # start copies the repo to /tmp/repo and runs detached. Each run writes into /tmp/r (which poll
 # packs into $OUT/runs.tgz) and logs into /tmp/logs. A lease holds a machine for 30 minutes, the
 # setup takes 1 to 3, and whatever the queue reached comes back (estimates from one H200: each knob
-# side about 5 minutes, so 83's part 20; the bench pair 4, the profile 1.5, the typed command 8.5,
+# side about 5 minutes, so 83's part 35, two leases; the bench pair 4, the profile 1.5, the typed command 8.5,
 # so 82's 14). Once a run is back, take it off here.
 #
 # `start 83` (or `start 82`) runs one issue's part (`start` both, 83's first): 83's needs no
@@ -35,13 +35,15 @@ run)
     [ ${#issues[@]} -gt 0 ] || issues=(83 82)
     for issue in "${issues[@]}"; do case $issue in
     83)
-    # 83: the four knob sides between the mapped side and Playground's (5 seeds each), the CNN,
-    # its critic's own and the pictures' range together first, then with Brax's value loss (a
-    # lease cut short still says how much of the gap they close); back here, the record replaces
-    # the archived one and `playground_vision.py --report --runs experiments/results/runs/playground`
-    # writes the section
+    # 83: the seven knob sides between the mapped side and Playground's (5 seeds each), every
+    # knob at once first, then the networks' three together, then the rest between them (a lease
+    # cut short still says how much of the gap the knobs close; the next lease goes on with the
+    # sides its record lacks); back here, the record replaces the archived one and
+    # `playground_vision.py --report --runs experiments/results/runs/playground` writes the section
     cp $R/experiments/results/runs/playground/versus_vision.json /tmp/r/runs/playground/
-    for side in mapped_scale mapped_loss mapped_cnn mapped_nets; do
+    for side in mapped_timeout mapped_scale mapped_std mapped_loss mapped_swish mapped_cnn \
+        mapped_nets; do
+        grep -q "\"$side\": {" /tmp/r/runs/playground/versus_vision.json && continue  # run before
         (cd /tmp/r && python3 $R/experiments/playground_vision.py --side $side --seeds 5 \
             --runs runs/playground) > $L/$side.log 2>&1
     done ;;

@@ -22,6 +22,9 @@ Playground's budget: 4 epochs of 31 training steps of 40,960, 5,079,040 a seed):
   Brax's policy and value networks each have one;
 - `mapped_scale`: those, with the pictures in Playground's range, [-0.5, 0.5] (`ppo.pixel_scale`);
 - `mapped_loss`: those, with the value loss weighted as Brax's (`ppo.vf_coef`, `BRAX_VALUE_WEIGHT`);
+- `mapped_swish`: those, with swish MLPs (`ppo.activation=swish`); `mapped_std`: and Brax's std
+  head, a softplus of the actor's outputs (`ppo.std_head=softplus`); `mapped_timeout`: and no
+  bootstrap at the time limit (`ppo.bootstrap_truncated=false`), Brax's defaults all three;
 - `mapped_one`: `mapped` with one picture at a time (`frames=1`): the frame stack's part in the
   difference, one knob; `mapped_first`: the mapping as first built, one RGB picture and the
   entropy bonus of the Gaussian before the squash (`ppo.squashed_entropy=false`).
@@ -65,6 +68,9 @@ SIDES = (
     "mapped_nets",
     "mapped_scale",
     "mapped_loss",
+    "mapped_swish",
+    "mapped_std",
+    "mapped_timeout",
     "mapped_one",
     "mapped_first",
     "defaults",
@@ -78,6 +84,12 @@ TRAINERS = {
     "Playground's pixel range",
     "mapped_loss": "hintsjax ppo_rgb, Playground's settings, Brax's CNN, one a network, "
     "Playground's pixel range, Brax's value-loss weight",
+    "mapped_swish": "hintsjax ppo_rgb, Playground's settings, Brax's CNN, one a network, "
+    "Playground's pixel range, Brax's value-loss weight, swish",
+    "mapped_std": "hintsjax ppo_rgb, Playground's settings, Brax's CNN, one a network, "
+    "Playground's pixel range, Brax's value-loss weight, swish, Brax's std",
+    "mapped_timeout": "hintsjax ppo_rgb, Playground's settings, Brax's CNN, one a network, "
+    "Playground's pixel range, Brax's value-loss weight, swish, Brax's std, no timeout bootstrap",
     "mapped_one": "hintsjax ppo_rgb, Playground's settings, one picture",
     "mapped_first": "hintsjax ppo_rgb, Playground's settings, one picture, the Gaussian's entropy",
     "defaults": "hintsjax ppo_rgb, its defaults",
@@ -85,23 +97,29 @@ TRAINERS = {
 # Playground's vision cartpole shows its agent its last 3 frames (cartpole.py's `frame_stack`),
 # each grey (the mean of its RGB channels)
 PLAYGROUND_FRAMES, PLAYGROUND_COLOUR = 3, "grey"
-# Each mapped side's knobs (mapped_values' arguments): a knob step's are the step before it's and
-# its own, in KNOB_STEPS' order
+# Brax's value loss is 0.5 x vf_loss_coefficient (its train()'s 0.5; Playground's config keeps it) x
+# the mean square error; hintsjax's is ppo.vf_coef x the mean square error
+BRAX_VALUE_WEIGHT = 0.5 * 0.5
+# Each mapped side's knobs (mapped_values' arguments: the pictures', then PPO settings by name): a
+# knob step's are the step before it's and its own, in KNOB_STEPS' order
 _CNN = {"encoder": "brax_vision"}
 _NETS = {**_CNN, "critic_encoder": "own"}
 _SCALE = {**_NETS, "pixel_scale": 0.5}
+_LOSS = {**_SCALE, "vf_coef": BRAX_VALUE_WEIGHT}
+_SWISH = {**_LOSS, "activation": "swish"}
+_STD = {**_SWISH, "std_head": "softplus"}
 MAPPED_KNOBS = {
     "mapped": {},
     "mapped_cnn": _CNN,
     "mapped_nets": _NETS,
     "mapped_scale": _SCALE,
-    "mapped_loss": {**_SCALE, "brax_value_loss": True},
+    "mapped_loss": _LOSS,
+    "mapped_swish": _SWISH,
+    "mapped_std": _STD,
+    "mapped_timeout": {**_STD, "bootstrap_truncated": False},
     "mapped_one": {"frames": 1},
     "mapped_first": {"frames": 1, "squashed": False, "colour": "rgb"},
 }
-# Brax's value loss is 0.5 x vf_loss_coefficient (its train()'s 0.5; Playground's config keeps it) x
-# the mean square error; hintsjax's is ppo.vf_coef x the mean square error
-BRAX_VALUE_WEIGHT = 0.5 * 0.5
 EVAL_EPISODES = 128
 RECORD = "versus_vision.json"  # under the runs folder
 # The playground side's finished seeds, a row each (under the runs folder): its 5 seeds take longer
@@ -148,10 +166,7 @@ def mapped_values(
     frames: int = PLAYGROUND_FRAMES,
     squashed: bool = True,
     colour: str = PLAYGROUND_COLOUR,
-    encoder: str = "nature",
-    critic_encoder: str = "shared",
-    pixel_scale: float = 1.0,
-    brax_value_loss: bool = False,
+    **knobs,
 ) -> dict:
     """hintsjax's run config with Playground's vision settings where hintsjax has the knob: an
     update of num_envs rollouts of batch_size x num_minibatches x unroll_length / num_envs steps,
@@ -160,12 +175,8 @@ def mapped_values(
     clip, clipping of the whole gradient, Brax's tanh-squashed Gaussian and its entropy bonus (the
     squashed action's), Adam's epsilon (optax's default), the MLPs' widths, the last `frames`
     pictures side by side (Playground's 3, or one for `mapped_one`) in `colour` (Playground's
-    grey), and the `encoder`: hintsjax's (its three VALID convolutions, 32 8x8/4, 64 4x4/2, 64
-    3x3/1, ReLU) or Brax's (`brax_vision` for `mapped_cnn`: two SAME ones, 16 5x5/2 and 32 3x3/2
-    with 2x2 max-pools and ELU), shared by actor and critic or, `critic_encoder` "own" (for
-    `mapped_nets`), one each as Brax's networks have, and the pictures' range: hintsjax's bytes
-    in [-1, 1], or Playground's grey in [-0.5, 0.5] (`pixel_scale` 0.5, for `mapped_scale`), and
-    the value loss's weight: hintsjax's 0.5, or Brax's (`brax_value_loss`, for `mapped_loss`).
+    grey). `knobs`, PPO settings by name over those (MAPPED_KNOBS holds each side's), map more:
+    Brax's CNN (`encoder`), one for the critic (`critic_encoder`), Playground's pixel range, ...
     Left at hintsjax's: what `UNMAPPED` lists."""
     batch = steps_per_update(s)
     rate = s["learning_rate"]
@@ -189,10 +200,7 @@ def mapped_values(
         "adam_eps": 1e-8,
         "reward_scale": s["reward_scaling"],
         "hidden": list(s["network_factory"]["policy_hidden_layer_sizes"]),
-        "encoder": encoder,
-        "critic_encoder": critic_encoder,
-        "pixel_scale": pixel_scale,
-        **({"vf_coef": BRAX_VALUE_WEIGHT} if brax_value_loss else {}),
+        **knobs,
     }
     return {**common_values(seeds, smoke), "frames": frames, "colour": colour, "ppo": ppo}
 
@@ -597,18 +605,13 @@ def section_lines(runs: Path) -> list[str]:
 # networks.py, networks_vision.py, distribution.py) and Playground 0.2.0 (brax_vision_ppo_config,
 # wrapper.py's BraxAutoResetWrapper, cartpole.py)
 UNMAPPED = (
-    "the MLPs' activation: Brax's swish, hintsjax's ReLU",
     "the inits: Brax's MLPs LeCun-uniform, its policy's output layer orthogonal at 0.2 and its "
     "CNNs orthogonal at sqrt 2; hintsjax's He-normal, its output layers LeCun-normal, the "
     "actor's x 0.01",
-    "the policy's std: Brax's a softplus of network outputs plus 0.001, so it depends on the "
-    "pictures and starts near 0.69; hintsjax's one parameter a dimension, starting at 1",
     "the advantages: Brax computes GAE again in every minibatch with the critic as it stands, "
     "minibatches of whole 20-step unrolls, and its advantage bootstraps from the next step's "
     "lambda-return (r + gamma vs(t+1) - v(t)); hintsjax's GAE once an update from the rollout's "
     "values, minibatches of single steps",
-    "the time limit: Brax (bootstrap_on_timeout off) gives a truncated step no advantage and its "
-    "own value as its target; hintsjax bootstraps it from its final picture's value",
     "the resets: Playground's wrapper starts every episode of an env from that env's first start, "
     "and its frame stack carries the ended episode's last 2 pictures into the next one's second "
     "step; hintsjax draws a fresh start and repeats its first picture",
@@ -631,6 +634,15 @@ KNOB_STEPS = (
     ("mapped_nets", "a CNN of the critic's own (`ppo.critic_encoder=own`), as Brax's value net"),
     ("mapped_scale", "the pictures in [-0.5, 0.5] (`ppo.pixel_scale=0.5`), as Playground's"),
     ("mapped_loss", f"the value loss weighted as Brax's (`ppo.vf_coef={BRAX_VALUE_WEIGHT:g}`)"),
+    ("mapped_swish", "swish MLPs (`ppo.activation=swish`), as Brax's"),
+    (
+        "mapped_std",
+        "Brax's std, softplus of the actor's outputs + 0.001 (`ppo.std_head=softplus`)",
+    ),
+    (
+        "mapped_timeout",
+        "no bootstrap at the time limit (`ppo.bootstrap_truncated=false`), as Brax's default",
+    ),
     ("playground", "what is left (below)"),
 )
 

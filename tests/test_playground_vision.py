@@ -61,16 +61,28 @@ def test_both_sides_take_brax_s_own_env_steps_with_playground_s_settings_mapped(
     # and Playground's pixel range (mapped_scale)
     assert run_config(pv.mapped_values(s, 5, False, pixel_scale=0.5)).ppo.pixel_scale == 0.5
     # and Brax's value loss, 0.5 x its vf_loss_coefficient 0.5 x the mean square (mapped_loss)
-    assert mapped.vf_coef == 0.5
-    assert run_config(pv.mapped_values(s, 5, False, brax_value_loss=True)).ppo.vf_coef == 0.25
-    # each knob side's settings are the side before it's and its own knob
-    loss = run_config(pv.mapped_values(s, 5, False, **pv.MAPPED_KNOBS["mapped_loss"])).ppo
-    assert (loss.encoder, loss.critic_encoder, loss.pixel_scale, loss.vf_coef) == (
+    assert mapped.vf_coef == 0.5 and pv.BRAX_VALUE_WEIGHT == 0.25
+    # each knob side's settings are the side before it's and its own knob; the last, every one
+    last = run_config(pv.mapped_values(s, 5, False, **pv.MAPPED_KNOBS["mapped_timeout"])).ppo
+    assert (last.encoder, last.critic_encoder, last.pixel_scale, last.vf_coef) == (
         "brax_vision",
         "own",
         0.5,
         0.25,
     )
+    assert (last.activation, last.std_head, last.bootstrap_truncated) == (
+        "swish",
+        "softplus",
+        False,
+    )
+    assert (mapped.activation, mapped.std_head, mapped.bootstrap_truncated) == (
+        "relu",
+        "param",
+        True,
+    )
+    chain = [side for side, _ in pv.KNOB_STEPS if side in pv.MAPPED_KNOBS][3:]  # from mapped on
+    for before, after in zip(chain, chain[1:]):
+        assert pv.MAPPED_KNOBS[before].items() < pv.MAPPED_KNOBS[after].items(), (before, after)
     assert set(pv.MAPPED_KNOBS) == {side for side in pv.SIDES if side.startswith("mapped")}
     defaults = run_config(pv.default_values(s, seeds=5, smoke=False))
     assert (
@@ -145,7 +157,7 @@ def test_the_section_gives_each_side_its_cells_and_hintsjax_against_playground(t
     )
     assert "processes" not in text  # Playground's seeds in one process
     # under the knob steps, what no side maps, one item a line
-    assert "\nWhat no side maps yet:\n- the MLPs' activation: Brax's swish" in text
+    assert "\nWhat no side maps yet:\n- the inits: Brax's MLPs LeCun-uniform" in text
     assert all(f"\n- {item}\n" in text for item in pv.UNMAPPED)
     runs = [{**run, "process": p} for p in ("2026-12-03 10:00:00", "2026-12-04 09:00:00") * 2][:3]
     record["results"]["playground"]["seeds_run"] = runs
