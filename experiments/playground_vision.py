@@ -737,8 +737,8 @@ def plot(runs: Path, out: Path) -> None:
 
     record = json.loads((runs / RECORD).read_text())
     fig, ax = plt.subplots(figsize=(7, 4))
-    colours = ("tab:gray", "tab:blue", "tab:cyan", "tab:brown", "tab:red", "tab:purple",
-               "tab:green", "tab:olive", "tab:orange")  # fmt: skip
+    tab20 = plt.get_cmap("tab20").colors
+    colours = tab20[::2] + tab20[1::2]  # the 10 dark ones, then their light twins
     assert len(colours) >= len(SIDES), "a colour for each side"
     for side, colour in zip(SIDES, colours):
         r = record["results"].get(side)
