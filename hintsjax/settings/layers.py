@@ -141,7 +141,7 @@ def _check_types(cfg: RunConfig) -> None:
             if kind is not None and (
                 not isinstance(value, kind) or (kind is int and isinstance(value, bool))
             ):
-                raise UsageError(f"{f.name} must be {f.type}, got {value!r}")
+                raise UsageError(f"{prefix}{f.name} must be {f.type}, got {value!r}")
             if str(f.type).startswith(("int", "tuple[int")):
                 require_int32(obj, (f.name,), prefix)
 
