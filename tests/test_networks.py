@@ -330,3 +330,19 @@ def test_swish_mlps_and_a_softplus_std_head_compute_brax_s_policy():
     # the same parameters under ReLU give other values: the network reads the setting
     relu = ActorCritic(spec, "fc", 2, hidden=(8,), std_head="softplus")
     assert not np.allclose(relu.apply(params, obs)[2], value)
+
+
+@pytest.mark.parametrize("shape", [(3, 8, 8, 4), (2, 5, 7, 3), (2, 1, 4, 6, 2)])
+def test_max_pool_2x2_equals_nn_max_pool_in_values_and_gradients_ties_included(shape):
+    """max_pool_2x2 (BraxVisionEncoder's pool, elementwise ops) is nn.max_pool's 2x2/2 SAME pool:
+    the same values, and the same gradient, all of it to each window's first maximum, where a
+    third of the inputs tie (a flat patch of picture) and on odd sides (SAME's short windows)."""
+    from hintsjax.models.networks import max_pool_2x2
+
+    x = jax.random.normal(jax.random.key(0), shape)
+    x = jnp.where(jax.random.uniform(jax.random.key(1), shape) < 0.33, 0.25, x)
+    ref = lambda v: nn.max_pool(v, (2, 2), strides=(2, 2), padding="SAME")  # noqa: E731
+    np.testing.assert_array_equal(max_pool_2x2(x), ref(x))
+    g = jax.random.normal(jax.random.key(2), ref(x).shape)
+    grads = [jax.grad(lambda v, f=f: (f(v) * g).sum())(x) for f in (max_pool_2x2, ref)]
+    np.testing.assert_array_equal(*grads)

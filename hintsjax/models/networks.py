@@ -126,12 +126,28 @@ class Encoder(nn.Module):
         return x.reshape(x.shape[:-3] + (-1,)).astype(jnp.float32)
 
 
+def max_pool_2x2(x: jax.Array) -> jax.Array:
+    """nn.max_pool(x, (2, 2), strides=(2, 2), padding="SAME") over [..., H, W, C], its values and
+    its gradient (all of it to each window's first maximum, row by row, as XLA's select-and-scatter
+    gives it) alike, ties included, but from elementwise ops: the select-and-scatter that
+    reduce_window's gradient is has no fast deterministic form on GPUs (XLA's deterministic ops
+    serialise it), and on a CPU it is slower too."""
+    h, w = x.shape[-3:-1]
+    pad = [(0, 0)] * (x.ndim - 3) + [(0, h % 2), (0, w % 2), (0, 0)]
+    x = jnp.pad(x, pad, constant_values=-jnp.inf)  # SAME: an odd side's last window is short
+    *lead, h, w, c = x.shape
+    windows = x.reshape(*lead, h // 2, 2, w // 2, 2, c)
+    windows = jnp.moveaxis(windows, (-4, -2), (-2, -1)).reshape(*lead, h // 2, w // 2, c, 4)
+    first = jnp.arange(4) == jnp.argmax(windows, axis=-1)[..., None]
+    return jnp.where(first, windows, 0.0).sum(axis=-1)
+
+
 class BraxVisionEncoder(nn.Module):
     """The CNN of Brax's vision PPO as MuJoCo Playground tunes it for CartpoleBalance
     (`dm_control_suite_params.brax_vision_ppo_config`): two SAME convolutions (16 5x5/2, 32 3x3/2),
     each followed by ELU and a 2x2 max-pool, flattened: [B, 64, 64, C] -> [B, 512]. The same
-    layers as Brax's `networks.CNN` computed as PatchConv's matmuls; He inits, not Brax's
-    orthogonal ones (he_init says why). Computed in `dtype`, returned as float32."""
+    layers as Brax's `networks.CNN` computed as PatchConv's matmuls and max_pool_2x2; He inits,
+    not Brax's orthogonal ones (he_init says why). Computed in `dtype`, returned as float32."""
 
     dtype: Any = None
 
@@ -142,7 +158,7 @@ class BraxVisionEncoder(nn.Module):
             pads = jax.lax.padtype_to_pads(x.shape[-3:-1], (kernel,) * 2, (stride,) * 2, "SAME")
             x = jnp.pad(x, [(0, 0)] * (x.ndim - 3) + list(pads) + [(0, 0)])
             x = nn.elu(PatchConv(features, kernel, stride, dtype=self.dtype)(x))
-            x = nn.max_pool(x, (2, 2), strides=(2, 2), padding="SAME")
+            x = max_pool_2x2(x)
         return x.reshape(x.shape[:-3] + (-1,)).astype(jnp.float32)
 
 
