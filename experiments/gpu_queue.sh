@@ -23,6 +23,17 @@ start)
     for issue in "$@"; do
         case $issue in 83|82) ;; *) echo "no runs for issue $issue: 83, 82" >&2; exit 2 ;; esac
     done
+    # the queue imports the installed project: refuse one built from another tree (its wheel is
+    # built here by `offline_gpu.sh wheels`, from the tree as it stood then)
+    stale=$(cd hintsjax && find . -name '*.py' | sed 's|^\./||' | while read -r f; do
+        cmp -s "$f" "/tmp/site/hintsjax/$f" || echo "hintsjax/$f"; done
+        cd ../envs && find . -name '*.py' | sed 's|^\./||' | while read -r f; do
+        cmp -s "$f" "/tmp/site/hintsjax/envs/$f" || echo "envs/$f"; done)
+    if [ -n "$stale" ]; then
+        echo "the installed hintsjax is not this tree's ($(echo $stale | cut -c1-200)): run" \
+            "'bash experiments/offline_gpu.sh wheels' here and the setup calls again" >&2
+        exit 2
+    fi
     rm -rf /tmp/repo && cp -r . /tmp/repo
     (setsid nohup bash /tmp/repo/experiments/gpu_queue.sh run "$@" > /tmp/queue.out 2>&1 < /dev/null &)
     echo "queue started: /tmp/queue.out, /tmp/logs" ;;
