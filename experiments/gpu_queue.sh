@@ -25,6 +25,7 @@ start)
     done
     # the queue imports the installed project: refuse one built from another tree (its wheel is
     # built here by `offline_gpu.sh wheels`, from the tree as it stood then)
+    [ -d hintsjax ] && [ -d envs ] || { echo "start runs from the repo's root" >&2; exit 2; }
     stale=$(cd hintsjax && find . -name '*.py' | sed 's|^\./||' | while read -r f; do
         cmp -s "$f" "/tmp/site/hintsjax/$f" || echo "hintsjax/$f"; done
         cd ../envs && find . -name '*.py' | sed 's|^\./||' | while read -r f; do
@@ -51,10 +52,13 @@ run)
     # cut short still says how much of the gap the knobs close; the next lease goes on with the
     # sides its record lacks); back here, the record replaces the archived one and
     # `playground_vision.py --report --runs experiments/results/runs/playground` writes the section
-    cp $R/experiments/results/runs/playground/versus_vision.json /tmp/r/runs/playground/
+    # (the archived record once: a second start on this machine goes on from its own)
+    [ -e /tmp/r/runs/playground/versus_vision.json ] ||
+        cp $R/experiments/results/runs/playground/versus_vision.json /tmp/r/runs/playground/
     for side in mapped_timeout mapped_scale mapped_std mapped_loss mapped_swish mapped_cnn \
         mapped_nets; do
-        grep -q "\"$side\": {" /tmp/r/runs/playground/versus_vision.json && continue  # run before
+        python3 -c 'import json, sys; sys.exit(sys.argv[1] not in json.load(open(sys.argv[2]))["results"])' \
+            $side /tmp/r/runs/playground/versus_vision.json && continue  # in the record already
         (cd /tmp/r && python3 $R/experiments/playground_vision.py --side $side --seeds 5 \
             --runs runs/playground) > $L/$side.log 2>&1
     done ;;

@@ -453,3 +453,20 @@ def test_gail_gradient_penalty_of_a_linear_discriminator_is_its_weight_norm():
         rtol=1e-4,
         atol=1e-6,
     )
+
+
+@pytest.mark.parametrize("setting", [("activation", "swish"), ("std_head", "softplus")])
+def test_a_state_run_whose_policy_an_expert_cannot_replay_is_not_exported(setting, tmp_path):
+    """An expert replays a ReLU mean and a parameter std (experts.Expert): a ppo_state run trained
+    with swish MLPs or a softplus std is refused in one line, before anything is read or written
+    (it crashed on the missing log_std, or exported a swish actor replayed as ReLU)."""
+    from hintsjax.algorithms import experts
+
+    name, value = setting
+    cfg = layers.run_config(dict(env="linear", agent="ppo_state", ppo={name: value}))
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    layers.save_run_config(run_dir, cfg)
+    with pytest.raises(UsageError, match=f"ppo.{name}={value}; an expert replays ppo.{name}="):
+        experts.export(run_dir, tmp_path / "out")
+    assert not (tmp_path / "out").exists()

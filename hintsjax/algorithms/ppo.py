@@ -376,12 +376,17 @@ def make_ppo(cfg: RunConfig, hint: str | None = None, ended_starts: bool | None 
                 ts = jax.vmap(env.step, in_axes=(0, 0, 0, None, 0))(
                     k_envs, env_state, action, env_params, starts
                 )
-            # GAE reads it where an episode was truncated only (a terminated one bootstraps from 0)
-            final_value = envs.rows_where(
-                lambda rows: network.apply(state.params, rows)[2],
-                observe(ts.final_obs, k_final, state.hyper, drop),
-                ts.truncated,
-                chunk,
+            # GAE reads it where an episode was truncated only (a terminated one bootstraps from 0),
+            # and not at all without the bootstrap
+            final_value = (
+                envs.rows_where(
+                    lambda rows: network.apply(state.params, rows)[2],
+                    observe(ts.final_obs, k_final, state.hyper, drop),
+                    ts.truncated,
+                    chunk,
+                )
+                if ppo.bootstrap_truncated
+                else jnp.zeros_like(value)
             )
             transition = Transition(
                 seen,

@@ -97,7 +97,8 @@ def gae(
     the rollout is cut into runs of L steps, as Brax's unrolls: the last step of each is
     bootstrapped from the next row's value and no advantage flows back across the cut. Without
     `bootstrap_truncated` (Brax's bootstrap_on_timeout off) a truncated step's advantage is 0 and
-    its target its own value: it teaches neither head.
+    its target its own value: the critic learns nothing there (the actor only what the
+    minibatch's normalisation makes of a 0, as in Brax).
     """
     next_value = jnp.concatenate([value[1:], last_value[None]], axis=0)
     next_value = jnp.where(truncated, final_value, next_value)

@@ -179,7 +179,8 @@ class PPOConfig:
     )
     activation: str = setting(
         "relu",
-        "the actor's and critic's hidden activation: relu, or swish (Brax's)",
+        "the MLPs' hidden activation (actor, critic, hint_aux's hint head): relu, or swish "
+        "(Brax's)",
         choices=tuple(ACTIVATIONS),
         saved_may_lack=True,
     )
@@ -194,7 +195,8 @@ class PPOConfig:
     bootstrap_truncated: bool = setting(
         True,
         "a step the time limit cut is bootstrapped from its final observation's value; false: "
-        "it gets no advantage and its own value as target (Brax's default)",
+        "its advantage is 0 (before the minibatch's normalisation) and its target its own value "
+        "(Brax's default)",
         saved_may_lack=True,
     )
     # The privileged-signal baselines (hintsjax/models/agents.py). Shapes, not traced: a Hyper leaf
