@@ -172,12 +172,11 @@ def kinds(rows: list[dict]) -> dict:
 
 
 def ppo_overrides(text: str) -> dict:
-    """'num_envs=1024,epochs=4' -> {'num_envs': 1024, 'epochs': 4} (numbers as int or float)."""
-    out = {}
-    for item in filter(None, text.split(",")):
-        k, v = item.split("=", 1)
-        out[k] = float(v) if "." in v or "e" in v else int(v)
-    return out
+    """'num_envs=1024,encoder=brax_vision' -> {'num_envs': 1024, 'encoder': 'brax_vision'}, each
+    value typed as the run command types it (Hydra's grammar)."""
+    from hintsjax.cli.overrides import parse
+
+    return {o.key_or_group: o.value() for o in parse(list(filter(None, text.split(","))))}
 
 
 def one_learn(args: argparse.Namespace, cfg) -> dict:
