@@ -10,7 +10,8 @@
 # start copies the repo to /tmp/repo and runs detached. Each run writes into /tmp/r (which poll
 # packs into $OUT/runs.tgz) and logs into /tmp/logs. A lease holds a machine for 30 minutes, the
 # setup takes 1 to 3, and whatever the queue reached comes back (estimates from one H200: each knob
-# side about 5 minutes, so 83's part 35, two leases; the bench pair 4, the profile 1.5, the typed command 8.5,
+# side about 5 minutes if Brax's CNN trains at hintsjax's CNN's rate, so 83's part 35 after its
+# 2-minute profile, two leases; the bench pair 4, the profile 1.5, the typed command 8.5,
 # so 82's 14). Once a run is back, take it off here.
 #
 # `start 83` (or `start 82`) runs one issue's part (`start` both, 83's first): 83's needs no
