@@ -27,10 +27,9 @@ start)
     # the queue imports the installed project: refuse one built from another tree (its wheel is
     # built here by `offline_gpu.sh wheels`, from the tree as it stood then)
     [ -d hintsjax ] && [ -d envs ] || { echo "start runs from the repo's root" >&2; exit 2; }
-    stale=$(cd hintsjax && find . -name '*.py' | sed 's|^\./||' | while read -r f; do
-        cmp -s "$f" "/tmp/site/hintsjax/$f" || echo "hintsjax/$f"; done
-        cd ../envs && find . -name '*.py' | sed 's|^\./||' | while read -r f; do
-        cmp -s "$f" "/tmp/site/hintsjax/envs/$f" || echo "envs/$f"; done)
+    stale=$(for pair in hintsjax:hintsjax envs:hintsjax/envs; do  # here:installed
+        find "${pair%%:*}" -name '*.py' | while read -r f; do
+            cmp -s "$f" "/tmp/site/${pair#*:}/${f#*/}" || echo "$f"; done; done)
     if [ -n "$stale" ]; then
         echo "the installed hintsjax is not this tree's ($(echo $stale | cut -c1-200)): run" \
             "'bash experiments/offline_gpu.sh wheels' here and the setup calls again" >&2

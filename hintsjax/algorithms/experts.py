@@ -27,7 +27,7 @@ from hintsjax.system.checkpoint import on_this_device, require_same_arrays
 from hintsjax.system.errors import UsageError
 from hintsjax.models import normalization
 from hintsjax.models.networks import MLP
-from hintsjax.settings.config import EXPERT_POLICY, RunConfig
+from hintsjax.settings.config import RunConfig, unreplayable
 from hintsjax.settings.layers import load_run_config, to_dict
 from hintsjax.algorithms import ppo
 
@@ -93,12 +93,13 @@ def export(run_dir: Path, out_dir: Path | None = None, force: bool = False) -> P
             f"{run_dir} trained {cfg.agent}; an expert comes from a state PPO run "
             "(agent=expert_ppo)"
         )
-    for name, kept in EXPERT_POLICY.items():  # what Expert replays
-        if getattr(cfg.ppo, name) != kept:
-            raise UsageError(
-                f"{run_dir} trained with ppo.{name}={getattr(cfg.ppo, name)}; an expert replays "
-                f"ppo.{name}={kept} (train it so, e.g. agent=expert_ppo)"
-            )
+    odd = unreplayable(cfg.ppo)  # what Expert cannot replay
+    if odd:
+        name, value, kept = odd
+        raise UsageError(
+            f"{run_dir} trained with ppo.{name}={value}; an expert replays ppo.{name}={kept} "
+            "(train it so, e.g. agent=expert_ppo)"
+        )
     eval_json = Path(run_dir) / "eval.json"
     if not eval_json.is_file():
         raise UsageError(

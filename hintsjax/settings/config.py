@@ -34,6 +34,15 @@ MAX_FRAMES = 8  # frames' largest: each one more picture in every step a rollout
 EXPERT_POLICY = {"action_head": "gaussian", "activation": "relu", "std_head": "param"}
 
 
+def unreplayable(ppo: PPOConfig) -> tuple[str, Any, Any] | None:
+    """(setting, its value, what an expert keeps) of the first EXPERT_POLICY setting `ppo` sets
+    otherwise; None when an expert can replay its policy."""
+    for name, kept in EXPERT_POLICY.items():
+        if getattr(ppo, name) != kept:
+            return name, getattr(ppo, name), kept
+    return None
+
+
 def env_params(env: str, variant: str | None) -> Any:
     """The params of `env`'s `variant` (None: its default); UsageError naming the valid variants."""
     try:
@@ -213,16 +222,15 @@ class RunConfig:
         for section in SECTIONS:
             getattr(self, section).validate()
         self._check_pixel_settings()
-        if self.agent_spec.imitates or self.agent == EXPERT_AGENT:
-            # an expert's policy drives dagger and gail as experts.Expert: a ReLU MLP's mean, a
-            # parameter's std
-            for name, kept in EXPERT_POLICY.items():
-                if getattr(self.ppo, name) != kept:
-                    raise UsageError(
-                        f"ppo.{name}={getattr(self.ppo, name)} is for PPO's learners; "
-                        f"{self.agent} keeps ppo.{name}={kept} (an expert's policy drives dagger "
-                        "and gail as a Gaussian's mean)"
-                    )
+        # an expert's policy drives dagger and gail as experts.Expert: a ReLU MLP's mean, a
+        # parameter's std
+        odd = unreplayable(self.ppo)
+        if odd and (self.agent_spec.imitates or self.agent == EXPERT_AGENT):
+            name, value, kept = odd
+            raise UsageError(
+                f"ppo.{name}={value} is for PPO's learners; {self.agent} keeps ppo.{name}={kept} "
+                "(an expert's policy drives dagger and gail as a Gaussian's mean)"
+            )
         if self.agent_spec.algorithm == "dagger" and self.dagger.buffer_size < self.ppo.batch_size:
             raise UsageError(
                 f"dagger.buffer_size ({self.dagger.buffer_size}) must hold one round, "
