@@ -8,6 +8,10 @@ no function inside a traced program (their repeated and resumed runs of one tiny
 the first traced; no other test writes or reads an entry). Subprocesses that the tests start
 inherit the setting.
 
+Ctrl-C is Python's own handler even where the suite was started in the background (`make test &`
+in a script): such a shell starts it with SIGINT ignored, which Python keeps and every process a
+test starts inherits, and the tests of the commands' Ctrl-C then saw no signal (one waited 300 s).
+
 HINTSJAX_DEBUG is on: a bug that a test meets raises with its traceback instead of the commands'
 one-line report (tests/test_cli.py turns it off to test that report).
 
@@ -35,6 +39,7 @@ Compiling is most of the suite's time on a CPU (the runs it trains are tiny), so
 
 import os
 import shutil
+import signal
 import subprocess
 import tempfile
 
@@ -43,6 +48,8 @@ import xla_tier  # tests/xla_tier.py
 
 from hintsjax.system import compilation_cache, errors, program_cache
 
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)  # reset to default on exec
 os.environ[program_cache.ENV_VAR] = "off"
 os.environ[errors.DEBUG] = "1"
 
