@@ -112,8 +112,9 @@ def full_state(state: LocomotionState, params) -> jax.Array:
 # steps: each update waits on 4 latency-bound MJX steps instead of 8). Its references follow
 # the ant's: the expert is PPO on the state for 20 M steps (2x the learners'), 1024 envs per
 # seed in batches of 8192, minibatches of 1024, 8 epochs; 50 M would take 3 h of GPU (5 seeds).
-# Every humanoid agent learns from rewards x 0.1 and normalises the state (its contact
-# forces run to thousands); GAIL's discriminator reads it standardised by the demonstrations'
+# Every humanoid agent learns from rewards x 0.1, and one that takes the state alone normalises
+# it (its contact forces run to thousands; a hint, the state hint too, enters as generated);
+# GAIL's discriminator reads it standardised by the demonstrations'
 # statistics (gail.normalize_state) and is held smooth by an R1 penalty of 10 on the expert's
 # pairs (gail.grad_penalty): without it D told the pairs apart perfectly within 200 updates, its
 # reward -log(1 - D) went flat near 0 and GAIL scored 447; with it, 7334 (5 seeds x 50

@@ -121,7 +121,7 @@ def ppo_text(ppo) -> str:
         + (f", a {ppo.std_head} std head" if ppo.std_head != "param" else "")
         + (", no bootstrap at the time limit" if not ppo.bootstrap_truncated else "")
         + (f", rewards x {ppo.reward_scale:g}" if ppo.reward_scale != 1.0 else "")
-        + (", the state normalised" if ppo.normalize_state else "")
+        + (", the state agents' state normalised" if ppo.normalize_state else "")
     )
 
 

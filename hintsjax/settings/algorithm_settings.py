@@ -80,7 +80,9 @@ class PPOConfig:
         traced=True,
     )
     normalize_state: bool = setting(
-        False, "state agents: normalise the state by its running mean and std"
+        False,
+        "state agents (the state alone as input): normalise the state by its running mean and "
+        "std; hints, the state hint too, enter as generated",
     )
     action_head: str = setting(
         "gaussian",
@@ -127,8 +129,8 @@ class PPOConfig:
         "through a stop-gradient, so only the policy's loss moves them",
         saved_may_lack=True,
     )
-    # hintsjax/algorithms/kl_rate.py: divided by 1.5 while a minibatch's approx. KL is above 2 x
-    # target_kl, multiplied by 1.5 (up to 1) while below 0.5 x.
+    # hintsjax/algorithms/kl_rate.py: divided by 1.5 while a minibatch's approx. KL is above 1.5 x
+    # target_kl (the KL stop's bound), multiplied by 1.5 (up to 1) while below 0.5 x.
     kl_adaptive_lr: bool = setting(
         False,
         "scale the learning rates by the steps' KL against target_kl (rsl_rl's "
