@@ -7,8 +7,8 @@
         # -> experiments/results/privileged_baselines.md
 
 Per env, with its privileged signal (`SIGNAL`: the composite hint on the classic envs, the state on
-the locomotion ones): PPO-RGB; the asymmetric actor-critic (`asym_ac`), privileged-information
-dropout (`pi_dropout`, FiLM) and the hint as an auxiliary target (`hint_aux`), which all act on
+the locomotion ones): PPO-RGB; the asymmetric actor-critic (`asym_ac`), the hint input
+dropped out (`pi_dropout`, FiLM) and the hint as an auxiliary target (`hint_aux`), which all act on
 pictures alone at deployment; and HINTS-FC, which needs the hint there. Every run at the env's
 budget (config.ENV_DEFAULTS), 50 evaluation episodes a seed. Beside them the report puts HINTS-FC
 on a learned generator's hints (read off pictures at deployment too) from learned_hints.py's
@@ -56,7 +56,7 @@ ROWS = {
     "ppo_rgb": ("PPO-RGB", "nothing", "pictures"),
     "asym_ac": ("asymmetric actor-critic", "the critic, beside the pictures", "pictures"),
     "pi_dropout": (
-        "PI dropout (FiLM)",
+        "hint input dropout (FiLM)",
         "the policy, dropped with p = ppo.hint_dropout",
         "pictures",
     ),
@@ -72,6 +72,8 @@ ROWS = {
         "pictures (the generator reads them)",
     ),
 }
+# the rows that see the signal in training only
+BASELINES = ("asym_ac", "pi_dropout", "hint_aux")
 
 
 def labels(env: str) -> list[str]:
@@ -154,6 +156,15 @@ def env_lines(runs: Path, env: str) -> list[str]:
             "The learned generator's row is learned_hints.py's archived "
             f"run {env}-{SIGNAL[env]}-learned-k{LEARNED_FRAMES} "
             "(experiments/results/learned_hints.md), trained apart from this sweep.",
+            "",
+            "P(learned generator > row), both on pictures alone at deployment: "
+            + "; ".join(
+                f"{ROWS[kind][0]} {poi(learned, result)}"
+                for kind, result in results
+                if kind in BASELINES and result is not None
+            )
+            + f". Its generator reads the last {LEARNED_FRAMES} pictures; every other row sees "
+            "one picture a step.",
             "",
         ]
     else:

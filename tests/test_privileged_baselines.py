@@ -141,6 +141,29 @@ def test_hint_aux_learns_to_predict_a_hint_that_the_picture_shows():
     assert errors[0.0][-LAST:].mean() > 0.05, np.round(errors[0.0], 3)
 
 
+def test_the_hint_loss_shapes_the_encoder_and_leaves_the_policy_alone():
+    """hint_aux: the hint's error reaches every layer of the encoder that the policy shares (what
+    makes it an auxiliary task, not a head fitted on fixed features), and none of the actor's or
+    the critic's own parameters."""
+    net = ActorCritic(AGENTS["hint_aux"], "fc", 3)
+    params = net.init(jax.random.key(0), OBS)
+
+    def error(p):
+        prediction = net.apply(p, OBS, predict_hint=True)[3]
+        return ppo.hint_error(prediction, OBS["hint"], jnp.ones(3, bool))
+
+    grads = jax.grad(error)(params)["params"]
+    norms = {
+        "/".join(str(getattr(k, "key", k)) for k in path): float(jnp.abs(g).sum())
+        for path, g in jax.tree_util.tree_leaves_with_path(grads)
+    }
+    encoder = {k: v for k, v in norms.items() if k.startswith("encoder/")}
+    assert encoder and all(v > 0 for v in encoder.values()), encoder
+    assert all(v > 0 for k, v in norms.items() if k.startswith("hint_head/")), norms
+    own = {k: v for k, v in norms.items() if k.split("/")[0] in ("actor", "critic", "log_std")}
+    assert own and all(v == 0 for v in own.values()), own
+
+
 def test_the_baselines_train_in_groups_of_their_own():
     """Same observations and scheme, other networks or views: HINTS, pi_dropout, asym_ac and
     hint_aux never share a group; two pi_dropout runs of other rates do not either (hint_dropout is

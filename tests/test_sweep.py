@@ -1596,9 +1596,12 @@ def test_the_privileged_baselines_report_sets_hints_fc_against_each_baseline(tmp
     )
     assert "| 0.50 [" in asym and asym.endswith("undecided | 1.00 [1.00, 1.00] decided for |")
     assert (
-        "| PI dropout (FiLM) | the policy, dropped with p = ppo.hint_dropout | pictures | - |"
-        in text
+        "| hint input dropout (FiLM) | the policy, dropped with p = ppo.hint_dropout | pictures "
+        "| - |" in text
     )
+    # the learned generator against the baselines with runs, not the blank row
+    learned = next(line for line in text.splitlines() if line.startswith("P(learned generator"))
+    assert "asymmetric actor-critic " in learned and "dropout" not in learned, learned
     hints_row = next(
         line
         for line in text.splitlines()

@@ -118,7 +118,9 @@ AGENTS: dict[str, AgentSpec] = {
         pixels=True,
         hint=True,
         drops_hint=True,
-        about="HINTS with the hint dropped (ppo.hint_dropout) in training, always at deploy",
+        # input dropout of the hint, not Kamienny et al.'s PI-Dropout (there the privileged
+        # signal sets multiplicative noise on the picture's features): docs/results.md
+        about="HINTS with its hint input zeroed (ppo.hint_dropout) in training, always at deploy",
     ),
     "hint_aux": AgentSpec(
         pixels=True,

@@ -29,8 +29,8 @@ ABOUT_JSON = "about.json"  # in an archive folder, beside its runs: how they wer
 SUMMARY_JSON = "summary.json"
 # metrics.csv columns an archived run keeps beside the return (binned as it), where the run logged
 # them: what a collapsed seed's policy did (its std, its steps' KL, the critic's loss, the reward,
-# and the adaptive rate's scale where ppo.kl_adaptive_lr chose one)
-DIAGNOSTICS = ("entropy", "approx_kl", "value_loss", "step_reward", "lr_scale")
+# the adaptive rate's scale where ppo.kl_adaptive_lr chose one) and hint_aux's prediction error
+DIAGNOSTICS = ("entropy", "approx_kl", "value_loss", "step_reward", "lr_scale", "hint_loss")
 # What reading a run's files raises when they are damaged (a file missing, cut or garbled), not
 # refused by the machine
 DAMAGED = (
