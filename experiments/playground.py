@@ -123,9 +123,10 @@ def hintsjax_values(brax: dict, seeds: int, steps: int, smoke: bool) -> dict:
     none unless its settings name a max_grad_norm (`NO_CLIP`; hintsjax's own 0.5 over the actor's
     and critic's gradients together made every seed collapse at 60 M, versus_brax_knobs.md). Left
     at hintsjax's: the networks ((256, 256) beside Brax's policy (32,)x4 and value (256,)x5), GAE
-    over the whole rollout (Brax's over each unroll), the ratio clip (0.2 beside Brax's 0.3) and
-    the episodes running on across updates (Brax resets every env after each:
-    ppo.reset_every_update)."""
+    over the whole rollout (Brax's over each unroll), the ratio clip (0.2 beside Brax's 0.3), the
+    value loss's weight (0.5 of the mean square beside Brax's 0.25; the critic's own Adam all but
+    undoes a constant weight) and the episodes running on across updates (Brax resets every env
+    after each: ppo.reset_every_update)."""
     batch = steps_per_update(brax)
     ppo = {
         "total_env_steps": steps,

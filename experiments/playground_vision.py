@@ -13,8 +13,9 @@ Playground's budget: 4 epochs of 31 training steps of 40,960, 5,079,040 a seed):
   `brax_vision_ppo_config` and `make_ppo_networks_vision`, as Playground's vision notebook calls
   them (an evaluation env of its own, its renderer built for `num_eval_envs` worlds), seeds one
   after another. Patched only where jax 0.11 needs it (`PATCHES`).
-- `mapped`: hintsjax's `ppo_rgb` on `playground:CartpoleBalance:vision` (the same physics, reward
-  and ends, envs/playground.py `VisionTask`; its own 64x64 pictures of the same camera, grey and
+- `mapped`: hintsjax's `ppo_rgb` on `playground:CartpoleBalance:vision` (the same model, reward
+  and ends, envs/playground.py `VisionTask`, stepped by MJX's JAX physics where Playground's uses
+  MuJoCo Warp's; its own 64x64 pictures of the same camera, grey and
   the last 3 side by side as Playground's agent sees its last 3, `frames=3 colour=grey`) with
   Playground's settings mapped onto hintsjax's (`mapped_values`), seeds vmapped in one program.
 - `mapped_cnn`: the same with Brax's CNN (`ppo.encoder=brax_vision`): the encoder's part;
@@ -496,14 +497,20 @@ def versions() -> dict:
 # -- the report ----------------------------------------------------------------------------------
 
 
+# Brax's progress rows of a seed: the evaluation before training, then one an epoch. Its first two
+# epochs compile (the second compiles the epoch's program again: the log's jit(_fun) in both, on
+# a CPU too), so its steady rate is from the epochs after them.
+COMPILING_EPOCHS = 2
+
+
 def steady_rate(result: dict, side: str) -> float:
     """Training env steps/s a seed, compile aside: Playground's from Brax's `training/sps` of its
-    epochs after the first (the first compiles), hintsjax's from its chunks after the first."""
+    epochs after the compiling ones, hintsjax's from its chunks after the first."""
     if side == "playground":
         rates = [
             row["training/sps"]
             for run in result["seeds_run"]
-            for row in run["progress"][2:]
+            for row in run["progress"][1 + COMPILING_EPOCHS :]
             if "training/sps" in row
         ]
         return sum(rates) / len(rates) if rates else float("nan")
@@ -511,6 +518,24 @@ def steady_rate(result: dict, side: str) -> float:
     if len(rows) < 2:
         return float("nan")
     return (rows[-1]["step"] - rows[0]["step"]) / (rows[-1]["seconds"] - rows[0]["seconds"])
+
+
+def playground_overheads(result: dict) -> dict[str, float]:
+    """Playground's seconds that are not steady training, summed over its seeds: `before` its
+    first epoch (the renderer build, the programs compiled before training, the evaluation at step
+    0), the `compiling` epochs' seconds beyond the steady rate, and its `evaluations` between
+    epochs (Brax's `training/walltime` counts training alone)."""
+    rate = steady_rate(result, "playground")
+    out = dict(before=0.0, compiling=0.0, evaluations=0.0)
+    for run in result["seeds_run"]:
+        rows = run["progress"]
+        out["before"] += rows[0]["seconds"]
+        walls = [0.0] + [row["training/walltime"] for row in rows[1:]]
+        steps = [row["step"] for row in rows]
+        for i in range(1, 1 + COMPILING_EPOCHS):
+            out["compiling"] += walls[i] - walls[i - 1] - (steps[i] - steps[i - 1]) / rate
+        out["evaluations"] += run["seconds"] - rows[0]["seconds"] - walls[-1]
+    return out
 
 
 def section_lines(runs: Path) -> list[str]:
@@ -532,7 +557,13 @@ def section_lines(runs: Path) -> list[str]:
             rows.append([TRAINERS[side], *["-"] * 8, "not run yet"])
             continue
         r = results[side]
-        apart = r.get("renderer_build_seconds", 0.0) + r.get("compile_seconds", 0.0)
+        if side == "playground":
+            o = playground_overheads(r)
+            apart = (
+                f"{o['before'] + o['compiling']:.0f} (renderer {r['renderer_build_seconds']:.0f})"
+            )
+        else:
+            apart = f"{r['compile_seconds']:.0f}"
         memory = r["memory"]
         rows.append(
             [
@@ -542,7 +573,7 @@ def section_lines(runs: Path) -> list[str]:
                 stats.iqm_cell(r["deterministic"]),
                 " ".join(f"{x:.1f}" for x in r["deterministic"]),
                 f"{r['seconds']:.0f}",
-                f"{apart:.0f}" if side != "playground" else f"{apart:.0f} (renderer)",
+                apart,
                 f"{steady_rate(r, side):,.0f}",
                 f"{memory['nvidia_smi_peak_mib'] or '-'} / {memory['xla_peak_mib'] or '-'}",
                 f"{r['device']}, {r['date']}: `{r['command']}`",
@@ -554,9 +585,14 @@ def section_lines(runs: Path) -> list[str]:
         f"{' (smoke: the numbers mean nothing)' if record['smoke'] else ''}. Final return: each "
         f"seed's final policy on {episodes} fresh episodes, deterministic, in its own pipeline's "
         "evaluator, on the vision task's reward (at most 250 steps). Wall-clock: from "
-        "the side's start to the trained policies, the renderer build (Playground) or the compile "
-        "(hintsjax) included and also given apart; Playground's seeds one after another, "
-        "hintsjax's vmapped in one program.",
+        "the side's start to the trained policies, Playground's seeds one after another, "
+        "hintsjax's vmapped in one program. Given apart: hintsjax's compile; Playground's "
+        "seconds before its first epoch (the renderer build, also given alone, its programs' "
+        "compiles, its evaluation at step 0) and those of its first "
+        f"{COMPILING_EPOCHS} epochs beyond its steady rate (Brax compiles its epoch's program in "
+        "each). Training env steps/s: the steady rate, Playground's from its later epochs, "
+        "hintsjax's from its chunks after the first. Physics: Playground's side steps with MuJoCo "
+        "Warp (its task's default), hintsjax's with MJX's JAX physics, the same model.",
         "",
     ]
     lines += markdown_table(
@@ -575,9 +611,15 @@ def section_lines(runs: Path) -> list[str]:
         rows,
     )
     if "playground" in results:
+        evaluations = playground_overheads(results["playground"])["evaluations"]
         lines += [
             "",
             "Patches to Playground's side: " + "; ".join(results["playground"]["patches"]),
+            "",
+            f"Playground's wall-clock holds {evaluations:.0f} s of Brax's evaluations between "
+            "its epochs (its seeds' seconds less those before the first epoch and its "
+            "`training/walltime`); hintsjax's sides evaluate only after training, outside "
+            "theirs.",
         ]
         processes = {run.get("process") for run in results["playground"]["seeds_run"]}
         if len(processes) > 1:
@@ -594,6 +636,13 @@ def section_lines(runs: Path) -> list[str]:
     if "playground" in results and ours:
         lines += ["", "Each hintsjax side against Playground's:"]
         lines += [against_playground(results, side) for side in ours]
+    lines += [
+        "",
+        f"![return against wall-clock, a line a seed]({CURVES}) Return against the seconds from "
+        "each side's start: Playground's from Brax's evaluations between epochs (stochastic, "
+        "each seed from its own start), hintsjax's from its training episodes (its seeds at "
+        "once); neither is the final deterministic return of the table.",
+    ]
     knobs = knob_lines(results)
     if knobs:
         lines += ["", "Knob by knob, from hintsjax's defaults to Playground's settings:", *knobs]
@@ -617,7 +666,10 @@ UNMAPPED = (
     "step; hintsjax draws a fresh start and repeats its first picture",
     "the entropy bonus's estimate: Brax one sample of the tanh's log-Jacobian, hintsjax a "
     "32-node quadrature",
-    "the pictures' renderer: MuJoCo Warp's ray tracer against hintsjax's ray caster, other shading",
+    "the pictures' renderer: MuJoCo Warp's ray tracer against hintsjax's ray caster, other "
+    "shading; hintsjax's grey pictures rounded to bytes, Playground's floats",
+    "the physics: Playground's CartpoleBalance steps with MuJoCo Warp (its default `impl`), "
+    "hintsjax's adapter with MJX's JAX physics (`impl=jax`), the same model and timestep",
 )
 # The sides in the order their knobs take hintsjax's defaults towards Playground's, each with the
 # knobs it turns beyond the side before it
@@ -759,7 +811,11 @@ def plot(runs: Path, out: Path) -> None:
                 alpha=0.7,
                 label=TRAINERS[side] if i == 0 else None,
             )
-    ax.set(xlabel="seconds from the side's start", ylabel="episode return")
+    ax.set(
+        xlabel="seconds from the side's start (Playground: the seed's)",
+        ylabel="episode return",
+        title="Playground: Brax's evaluations; hintsjax: its training episodes",
+    )
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(out, dpi=120)

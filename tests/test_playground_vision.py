@@ -92,20 +92,24 @@ def test_both_sides_take_brax_s_own_env_steps_with_playground_s_settings_mapped(
 
 
 def test_the_section_gives_each_side_its_cells_and_hintsjax_against_playground(tmp_path):
-    """Steady training rates leave the compiling first epoch (Brax) or chunk (hintsjax) out: Brax's
-    `training/sps` of its later epochs, averaged; hintsjax's steps over seconds between its first
-    and last chunk."""
+    """Steady training rates leave the compiling epochs (Brax's first two) or chunk (hintsjax's
+    first) out: Brax's `training/sps` of its later epochs, averaged; hintsjax's steps over seconds
+    between its first and last chunk. Playground's seconds given apart: before its first epoch,
+    and its compiling epochs' seconds beyond the steady rate; its evaluations between epochs are
+    what its seconds hold beyond those before the first epoch and its training's."""
     memory = {"xla_peak_mib": 900, "nvidia_smi_peak_mib": 2100}
     side = {"eval_episodes": 128, "device": "NVIDIA H200", "date": "2026-12-03 10:00",
             "command": "python x", "memory": memory}  # fmt: skip
     run = {
         "seconds": 100.0,
         "renderer_build_seconds": 2.0,
+        # 75 steps an epoch at a steady 25/s: 3 s; the first two compile (8 s, 3 s more)
         "progress": [
             {"step": 0, "seconds": 30.0, "eval/episode_reward": 1.0},
-            {"step": 100, "seconds": 60.0, "training/sps": 10.0},  # compiled in it
-            {"step": 200, "seconds": 70.0, "training/sps": 40.0},
-            {"step": 300, "seconds": 80.0, "training/sps": 60.0},
+            {"step": 75, "seconds": 50.0, "training/sps": 6.8, "training/walltime": 11.0},
+            {"step": 150, "seconds": 65.0, "training/sps": 12.5, "training/walltime": 17.0},
+            {"step": 225, "seconds": 80.0, "training/sps": 25.0, "training/walltime": 20.0},
+            {"step": 300, "seconds": 95.0, "training/sps": 25.0, "training/walltime": 23.0},
         ],
     }
     record = {
@@ -140,12 +144,15 @@ def test_the_section_gives_each_side_its_cells_and_hintsjax_against_playground(t
     text = "\n".join(pv.section_lines(tmp_path))
     assert "3 seeds x 300 env steps a seed on every side" in text
     assert "| Playground + brax.training vision PPO | 3 grey | 300 | 11.0 [" in text
-    assert "| 10.0 11.0 12.0 | 300 | 6 (renderer) | 50 | 2100 / 900 |" in text
+    # a seed: 30 s before its first epoch, 8 + 3 compiling; 3 seeds
+    assert "| 10.0 11.0 12.0 | 300 | 123 (renderer 6) | 25 | 2100 / 900 |" in text
+    # a seed's 100 s less 30 before training and 23 of training: 47 s of evaluations
+    assert "Playground's wall-clock holds 141 s of Brax's evaluations between its epochs" in text
     assert "| 20.0 21.0 22.0 | 50 | 20 | 20 | 2100 / 900 |" in text  # 200 steps in 10 s
     assert f"| {pv.TRAINERS['mapped']} | 3 grey | 300 |" in text
-    # 3 seeds in 50 s against 300 s; 3 x 20 env steps/s at once against Playground's 50
+    # 3 seeds in 50 s against 300 s; 3 x 20 env steps/s at once against Playground's 25
     assert "its 3 seeds in 50 s against 300 s (6.0x faster), training 60 env steps/s" in text
-    assert "at once against 50 (1.2x)" in text
+    assert "at once against 25 (2.4x)" in text
     assert (
         "| hintsjax ppo_rgb, its defaults | - |" in text
         and "| hintsjax ppo_rgb, Playground's settings, one picture | - |" in text
@@ -224,7 +231,7 @@ def test_the_playground_side_s_memory_is_the_largest_its_seed_rows_measured():
 
 def test_a_slower_hintsjax_side_reads_slower():
     playground = {"seconds": 300.0, "deterministic": [1.0, 2.0, 3.0], "device": "NVIDIA H200",
-                  "seeds_run": [{"progress": [{}, {}, {"training/sps": 50.0}],
+                  "seeds_run": [{"progress": [{}, {}, {}, {"training/sps": 50.0}],
                                  "device": "NVIDIA H200"}]}  # fmt: skip
     progress = [{"step": 0, "seconds": 0.0}, {"step": 100, "seconds": 10.0}]
     mapped = {"seconds": 600.0, "deterministic": [1.0, 2.0, 3.0], "progress": progress,
