@@ -52,9 +52,13 @@ run)
     # cut short still says how much of the gap the knobs close; the next lease goes on with the
     # sides its record lacks); back here, the record replaces the archived one and
     # `playground_vision.py --report --runs experiments/results/runs/playground` writes the section
-    # first the split of the learner with Brax's CNN, one a network, with and without XLA's
-    # deterministic ops (a lease ran mapped_scale at 3,413 env steps/s a seed against mapped's
-    # 22,395; the max-pool's gradient, select-and-scatter, was the suspect: max_pool_2x2 since)
+    # First where a seed of the mapped side spends its update (alone it ran at 0.88x
+    # Playground's seed: the record's section), a minute; then the split of the learner with
+    # Brax's CNN, one a network, with and without XLA's deterministic ops (a lease ran
+    # mapped_scale at 3,413 env steps/s a seed against mapped's 22,395; the max-pool's gradient,
+    # select-and-scatter, was the suspect: max_pool_2x2 since).
+    (cd /tmp/r && python3 $R/experiments/playground_vision.py --side mapped --seeds 5 \
+        --parts /tmp/r/parts_mapped.json) > $L/parts_mapped.log 2>&1
     (cd /tmp/r && python3 $R/experiments/profile_update.py --part learn \
         --env playground:CartpoleBalance:vision --ppo encoder=brax_vision,critic_encoder=own \
         --variants base,nodet --updates 5 --seeds 5 --top 25 --out /tmp/r/profile_brax_cnn) \

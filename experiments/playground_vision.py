@@ -4,6 +4,7 @@
     python experiments/playground_vision.py --report    # archived, plotted, its section of
                                                         # results/playground.md (the last one)
     python experiments/playground_vision.py --smoke --runs /tmp/pv --side mapped  # plumbing, a CPU
+    python experiments/playground_vision.py --side mapped --parts parts.json  # an update's parts
 
 The sides, each in a process of its own (the script starts one per side unless `--side` names
 one), one after another on one GPU, every seed at the same env steps (Brax's own count for
@@ -442,6 +443,44 @@ def train_hintsjax(values: dict, episodes: int, label: str) -> dict:
     }
 
 
+def side_values(side: str, s: dict, seeds: int, smoke: bool) -> dict:
+    """A hintsjax side's run config values: Playground's settings `s` mapped with its knobs, or
+    hintsjax's defaults."""
+    if side in MAPPED_KNOBS:
+        return mapped_values(s, seeds, smoke, **MAPPED_KNOBS[side])
+    return default_values(s, seeds, smoke)
+
+
+def side_parts(side: str, seeds: int, smoke: bool, out: Path | None) -> dict:
+    """One update of a hintsjax side split into its parts, ms (bench.py's `update_parts` on the
+    side's own config: the rollout, the learning, the env steps with and without pictures and
+    starts, the policy's passes): where a seed alone spends what Playground's spends faster
+    (the section). The env-step parts draw the env's own picture, one RGB, not the side's stack."""
+    import jax
+    from bench import update_parts  # experiments/bench.py, beside this script
+
+    from hintsjax.algorithms.registry import make_trainer
+    from hintsjax.settings.layers import run_config
+
+    cfg = run_config(side_values(side, vision_settings(smoke), seeds, smoke))
+    state = jax.jit(jax.vmap(make_trainer(cfg).init))(cfg.seed_keys())
+    parts, _ = update_parts(cfg, state)
+    row = {
+        "side": side,
+        "seeds": seeds,
+        "num_envs": cfg.ppo.num_envs,
+        "rollout_length": cfg.ppo.rollout_length,
+        "env_steps_per_update": seeds * cfg.ppo.batch_size,
+        "device": str(jax.devices()[0].device_kind),
+        "date": time.strftime("%Y-%m-%d %H:%M"),
+        "parts_ms": {k: round(1e3 * v, 2) for k, v in parts.items()},
+    }
+    print(f"{TRAINERS[side]}: " + ", ".join(f"{k} {v} ms" for k, v in row["parts_ms"].items()))
+    if out is not None:
+        out.write_text(json.dumps(row, indent=1) + "\n")
+    return row
+
+
 def train_side(side: str, runs: Path, seeds: int, smoke: bool) -> None:
     """One side in this process, into the record (re-read at the end, so other sides' entries
     stay; a record of another budget is started afresh)."""
@@ -468,12 +507,7 @@ def train_side(side: str, runs: Path, seeds: int, smoke: bool) -> None:
             shutil.copyfile(seeds_path(runs), done)
         result = train_playground(s, seeds, episodes, done, budget, watch)
     else:
-        make = (
-            functools.partial(mapped_values, **MAPPED_KNOBS[side])
-            if side in MAPPED_KNOBS
-            else default_values
-        )
-        result = train_hintsjax(make(s, seeds, smoke), episodes, TRAINERS[side])
+        result = train_hintsjax(side_values(side, s, seeds, smoke), episodes, TRAINERS[side])
     entry = {"trainer": TRAINERS[side], "memory": watch.result(), **result}
     record_side(
         runs / RECORD, budget, side, {**entry, "eval_episodes": episodes, "versions": versions()}
@@ -532,7 +566,7 @@ def playground_overheads(result: dict) -> dict[str, float]:
         out["before"] += rows[0]["seconds"]
         walls = [0.0] + [row["training/walltime"] for row in rows[1:]]
         steps = [row["step"] for row in rows]
-        for i in range(1, 1 + COMPILING_EPOCHS):
+        for i in range(1, min(1 + COMPILING_EPOCHS, len(rows))):  # a smoke run has one
             out["compiling"] += walls[i] - walls[i - 1] - (steps[i] - steps[i - 1]) / rate
         out["evaluations"] += run["seconds"] - rows[0]["seconds"] - walls[-1]
     return out
@@ -831,9 +865,21 @@ def main() -> None:
     parser.add_argument(
         "--force", action="store_true", help="--report: rewrite playground.md though rows go"
     )
+    parser.add_argument(
+        "--parts",
+        type=Path,
+        default=None,
+        metavar="JSON",
+        help="with --side (a hintsjax side): one update's parts, ms, into this file; no training",
+    )
     args = parser.parse_args()
     if args.seeds < 1:
         parser.error(f"--seeds must be 1 or more, got {args.seeds}")
+    if args.parts is not None:
+        if args.side in (None, "playground"):
+            parser.error("--parts needs --side naming a hintsjax side")
+        side_parts(args.side, args.seeds, args.smoke, args.parts)
+        return
     if args.report:  # the record archived and plotted, its section of results/playground.md
         from hintsjax.reproduce.archive import ARCHIVE
 

@@ -220,6 +220,30 @@ def test_playground_s_side_trains_and_evaluates_with_its_renderer_blank(monkeypa
         pv.train_playground(s, 1, 4, done_path=done, budget={**budget, "env_steps_per_seed": 1})
 
 
+def test_a_playground_seed_of_one_epoch_counts_it_as_compiling():
+    """A smoke budget's one epoch: its seconds beyond a steady rate are unknown (no later epoch),
+    not an error; the time before it and the evaluations still add up."""
+    first = {"step": 75, "seconds": 40.0, "training/sps": 3.0, "training/walltime": 25.0}
+    run = {"seconds": 50.0, "progress": [{"step": 0, "seconds": 10.0}, first]}
+    out = pv.playground_overheads({"seeds_run": [run, run]})
+    assert out["before"] == 20.0 and out["evaluations"] == 30.0 and math.isnan(out["compiling"])
+
+
+@pytest.mark.slow
+def test_a_sides_update_splits_into_its_parts(tmp_path):
+    """`--side mapped --parts FILE` (smoke budget, a CPU): one update's parts of the side's own
+    config, every one timed, into the file."""
+    out = tmp_path / "parts.json"
+    row = pv.side_parts("mapped", seeds=1, smoke=True, out=out)
+    assert json.loads(out.read_text()) == row
+    assert set(row["parts_ms"]) == {
+        *("rollout", "learn", "policy_forwards"),
+        *("env_steps_with_pictures", "env_steps_only", "env_steps_no_starts"),
+    }
+    assert all(v > 0 for v in row["parts_ms"].values()), row
+    assert row["env_steps_per_update"] == row["num_envs"] * row["rollout_length"]
+
+
 def test_the_playground_side_s_memory_is_the_largest_its_seed_rows_measured():
     """Seeds trained in several processes keep each process's peaks in their rows; a row of
     before (no memory) counts for none, and a side with none measured says so (None)."""
