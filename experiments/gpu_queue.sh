@@ -52,7 +52,7 @@ run)
     # cut short still says how much of the gap the knobs close; the next lease goes on with the
     # sides its record lacks); back here, the record replaces the archived one and
     # `playground_vision.py --report --runs experiments/results/runs/playground` writes the section
-    # First where a seed of the mapped side spends its update (alone it ran at 0.88x
+    # First where the mapped side spends its update (a seed's share of its rate was 0.88x
     # Playground's seed: the record's section), a minute; then the split of the learner with
     # Brax's CNN, one a network, with and without XLA's deterministic ops (a lease ran
     # mapped_scale at 3,413 env steps/s a seed against mapped's 22,395; the max-pool's gradient,

@@ -454,13 +454,14 @@ def side_values(side: str, s: dict, seeds: int, smoke: bool) -> dict:
 def side_parts(side: str, seeds: int, smoke: bool, out: Path | None) -> dict:
     """One update of a hintsjax side split into its parts, ms (bench.py's `update_parts` on the
     side's own config: the rollout, the learning, the env steps with and without pictures and
-    starts, the policy's passes): where a seed alone spends what Playground's spends faster
+    starts, the policy's passes): where its seeds spend what Playground's seed spends faster
     (the section). The env-step parts draw the env's own picture, one RGB, not the side's stack."""
     import jax
     from bench import update_parts  # experiments/bench.py, beside this script
 
     from hintsjax.algorithms.registry import make_trainer
     from hintsjax.settings.layers import run_config
+    from hintsjax.system import xla_flags
 
     cfg = run_config(side_values(side, vision_settings(smoke), seeds, smoke))
     state = jax.jit(jax.vmap(make_trainer(cfg).init))(cfg.seed_keys())
@@ -471,6 +472,8 @@ def side_parts(side: str, seeds: int, smoke: bool, out: Path | None) -> dict:
         "num_envs": cfg.ppo.num_envs,
         "rollout_length": cfg.ppo.rollout_length,
         "env_steps_per_update": seeds * cfg.ppo.batch_size,
+        "physics": cfg.physics,
+        "deterministic_ops": xla_flags.deterministic_gpu_ops(),
         "device": str(jax.devices()[0].device_kind),
         "date": time.strftime("%Y-%m-%d %H:%M"),
         "parts_ms": {k: round(1e3 * v, 2) for k, v in parts.items()},
@@ -532,8 +535,9 @@ def versions() -> dict:
 
 
 # Brax's progress rows of a seed: the evaluation before training, then one an epoch. Its first two
-# epochs compile (the second compiles the epoch's program again: the log's jit(_fun) in both, on
-# a CPU too), so its steady rate is from the epochs after them.
+# epochs compile (the record's second epoch is about 10 s slower than the later ones in every seed,
+# also where the process had compiled a seed before; a CPU run's log showed jit(_fun) compiling in
+# both), so its steady rate is from the epochs after them.
 COMPILING_EPOCHS = 2
 
 
@@ -650,10 +654,10 @@ def section_lines(runs: Path) -> list[str]:
             "",
             "Patches to Playground's side: " + "; ".join(results["playground"]["patches"]),
             "",
-            f"Playground's wall-clock holds {evaluations:.0f} s of Brax's evaluations between "
-            "its epochs (its seeds' seconds less those before the first epoch and its "
-            "`training/walltime`); hintsjax's sides evaluate only after training, outside "
-            "theirs.",
+            f"Playground's wall-clock holds at most {evaluations:.0f} s of Brax's evaluations "
+            "between its epochs (its seeds' seconds less those before the first epoch and its "
+            "`training/walltime`, so the seconds around them too); hintsjax's sides evaluate only "
+            "after training, outside theirs.",
         ]
         processes = {run.get("process") for run in results["playground"]["seeds_run"]}
         if len(processes) > 1:

@@ -157,16 +157,20 @@ def env_lines(runs: Path, env: str) -> list[str]:
             f"run {env}-{SIGNAL[env]}-learned-k{LEARNED_FRAMES} "
             "(experiments/results/learned_hints.md), trained apart from this sweep.",
             "",
-            "P(learned generator > row), both on pictures alone at deployment: "
-            + "; ".join(
-                f"{ROWS[kind][0]} {poi(learned, result)}"
-                for kind, result in results
-                if kind in BASELINES and result is not None
-            )
-            + f". Its generator reads the last {LEARNED_FRAMES} pictures; every other row sees "
-            "one picture a step.",
-            "",
         ]
+        against = [
+            f"{ROWS[kind][0]} {poi(learned, result)}"
+            for kind, result in results
+            if kind in BASELINES and result is not None
+        ]
+        if against:
+            lines += [
+                "P(learned generator > row), both on pictures alone at deployment: "
+                + "; ".join(against)
+                + f". Its generator reads the last {LEARNED_FRAMES} pictures; every other row "
+                "sees one picture a step.",
+                "",
+            ]
     else:
         lines += [
             f"No learned generator row: learned_hints.py trained none of the {SIGNAL[env]}.",

@@ -11,6 +11,7 @@ inherit the setting.
 Ctrl-C is Python's own handler even where the suite was started in the background (`make test &`
 in a script): such a shell starts it with SIGINT ignored, which Python keeps and every process a
 test starts inherits, and the tests of the commands' Ctrl-C then saw no signal (one waited 300 s).
+So a Ctrl-C at that shell's terminal now stops such a suite too.
 
 HINTSJAX_DEBUG is on: a bug that a test meets raises with its traceback instead of the commands'
 one-line report (tests/test_cli.py turns it off to test that report).
