@@ -589,6 +589,8 @@ def section_lines(runs: Path) -> list[str]:
         return lines + [f"Not run yet (`python experiments/{Path(__file__).name}`: {RECORD}).", ""]
     record = json.loads(path.read_text())
     results, rows = record["results"], []
+    # Playground's seconds that are not steady training (its row's cell, a line below the table)
+    overheads = playground_overheads(results["playground"]) if "playground" in results else None
     episodes = max((r["eval_episodes"] for r in results.values()), default=EVAL_EPISODES)
     for side in SIDES:
         if side not in results:
@@ -596,10 +598,8 @@ def section_lines(runs: Path) -> list[str]:
             continue
         r = results[side]
         if side == "playground":
-            o = playground_overheads(r)
-            apart = (
-                f"{o['before'] + o['compiling']:.0f} (renderer {r['renderer_build_seconds']:.0f})"
-            )
+            setting_up = overheads["before"] + overheads["compiling"]
+            apart = f"{setting_up:.0f} (renderer {r['renderer_build_seconds']:.0f})"
         else:
             apart = f"{r['compile_seconds']:.0f}"
         memory = r["memory"]
@@ -649,15 +649,14 @@ def section_lines(runs: Path) -> list[str]:
         rows,
     )
     if "playground" in results:
-        evaluations = playground_overheads(results["playground"])["evaluations"]
         lines += [
             "",
             "Patches to Playground's side: " + "; ".join(results["playground"]["patches"]),
             "",
-            f"Playground's wall-clock holds at most {evaluations:.0f} s of Brax's evaluations "
-            "between its epochs (its seeds' seconds less those before the first epoch and its "
-            "`training/walltime`, so the seconds around them too); hintsjax's sides evaluate only "
-            "after training, outside theirs.",
+            f"Playground's wall-clock holds at most {overheads['evaluations']:.0f} s of Brax's "
+            "evaluations between its epochs (its seeds' seconds less those before the first epoch "
+            "and its `training/walltime`, so the seconds around them too); hintsjax's sides "
+            "evaluate only after training, outside theirs.",
         ]
         processes = {run.get("process") for run in results["playground"]["seeds_run"]}
         if len(processes) > 1:

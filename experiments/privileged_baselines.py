@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hintsjax.models.agents import AGENTS
 from hintsjax.reproduce.archive import ARCHIVE, about_lines, read_about
 from hintsjax.reproduce.markdown import markdown_table, write_report
 from hintsjax.reproduce.report import (
@@ -72,8 +73,6 @@ ROWS = {
         "pictures (the generator reads them)",
     ),
 }
-# the rows that see the signal in training only
-BASELINES = ("asym_ac", "pi_dropout", "hint_aux")
 
 
 def labels(env: str) -> list[str]:
@@ -161,7 +160,7 @@ def env_lines(runs: Path, env: str) -> list[str]:
         against = [
             f"{ROWS[kind][0]} {poi(learned, result)}"
             for kind, result in results
-            if kind in BASELINES and result is not None
+            if kind in AGENTS and AGENTS[kind].privileged and result is not None
         ]
         if against:
             lines += [

@@ -23,8 +23,8 @@ HINT_USES = ("input", "critic", "target")
 class AgentSpec:
     """What an agent observes and what the hint is to it. `hint_override` fixes its hint (HINTS-x
     always sees the state); `drops_hint` replaces it by zeros with probability ppo.hint_dropout a
-    training step, and always at deployment (privileged-information dropout, Kamienny et al.
-    2020)."""
+    training step, and always at deployment (input dropout of the hint; not Kamienny et al.
+    2020's PI-Dropout, docs/results.md)."""
 
     pixels: bool = False
     state: bool = False
